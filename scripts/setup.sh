@@ -1,0 +1,141 @@
+#!/usr/bin/env bash
+# Sets up whatever is missing for the TLT stack, from this repository's own files only:
+#   1. Debian packages listed in requirements/apt.txt
+#   2. a virtual environment (.venv, or $TLT_VENV) with the pinned Python dependencies
+#   3. the wheels' CMake include paths rewritten for this interpreter (see docs/setup.md)
+#   4. msgs/ (tlt_interfaces) generated with rosidl and installed into the venv
+#   5. this project installed into the venv in editable mode
+# Each stage records a stamp (a hash of its inputs) only after it succeeded, and is skipped when
+# its stamp matches, so a second run that finds everything in place takes seconds and a run that
+# failed half-way is redone, never trusted.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${TLT_VENV:-$ROOT/.venv}"
+PYTHON="${TLT_PYTHON:-python3.11}"
+STAMPS="$VENV/.tlt-stamps"
+BUILD="$ROOT/build"
+
+say() { printf '[setup] %s\n' "$*"; }
+fail() { printf '[setup] FAILED: %s\n' "$*" >&2; exit 1; }
+
+# hash_of FILE... : one hash over the named files' contents and names.
+hash_of() { (cd "$ROOT" && sha256sum "$@" | sha256sum | cut -c1-16); }
+stamp_ok() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+stamp_set() { mkdir -p "$STAMPS" && printf '%s' "$2" >"$STAMPS/$1"; }
+
+# pip_install ARGS... : pip install into the venv; on failure show the end of pip's log.
+pip_install() {
+    local log="$VENV/.pip-install.log"
+    "$VENV/bin/python" -m pip install --disable-pip-version-check "$@" >"$log" 2>&1 || {
+        grep -v "^WARNING: Location 'file:" "$log" | tail -30 >&2
+        fail "pip install $* (full log: $log)"
+    }
+}
+
+# --- 1. Debian packages ----------------------------------------------------------------------
+apt_stage() {
+    local missing=()
+    local pkg
+    while read -r pkg; do
+        [ -z "$pkg" ] && continue
+        if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
+            missing+=("$pkg")
+        fi
+    done < <(sed -e 's/#.*//' -e 's/[[:space:]]//g' "$ROOT/requirements/apt.txt")
+    [ ${#missing[@]} -eq 0 ] && return 0
+    say "installing Debian packages: ${missing[*]}"
+    [ "$(id -u)" -eq 0 ] || fail "Debian packages missing (${missing[*]}) and not root to install them"
+    DEBIAN_FRONTEND=noninteractive apt-get update -qq >/dev/null \
+        || fail "apt-get update"
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null \
+        || fail "apt-get install ${missing[*]}"
+}
+
+# --- 2. virtual environment and pinned dependencies ------------------------------------------
+venv_stage() {
+    if [ ! -x "$VENV/bin/python" ] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
+        command -v "$PYTHON" >/dev/null || fail "$PYTHON not found (set TLT_PYTHON to a Python 3.11)"
+        "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' \
+            || fail "$PYTHON is not Python 3.11"
+        say "creating virtual environment $VENV"
+        rm -rf "$VENV"
+        "$PYTHON" -m venv "$VENV" || fail "python -m venv $VENV"
+    fi
+    local h
+    h=$(hash_of requirements/runtime.txt requirements/dev.txt)
+    stamp_ok pip "$h" && return 0
+    rm -f "$STAMPS/pip" "$STAMPS/cmake-paths" "$STAMPS/msgs" "$STAMPS/project"
+    say "installing pinned Python dependencies (first run: several minutes)"
+    pip_install -r "$ROOT/requirements/runtime.txt" -r "$ROOT/requirements/dev.txt"
+    "$VENV/bin/python" -m pip check >/dev/null 2>&1 || {
+        "$VENV/bin/python" -m pip check | head -20 >&2
+        fail "pip install -r requirements/runtime.txt -r requirements/dev.txt left broken dependencies"
+    }
+    "$VENV/bin/python" -c 'import rclpy, py_trees, serial, dynamixel_sdk, rtde_control, cv2, torch, \
+open3d, ompl, pinocchio, mujoco, spacepackets, PySide6, pytest' \
+        || fail "a pinned dependency does not import"
+    stamp_set pip "$h"
+}
+
+# --- 3. include-path rewrite -----------------------------------------------------------------
+cmake_paths_stage() {
+    local h
+    h=$(cat "$STAMPS/pip")
+    stamp_ok cmake-paths "$h" && return 0
+    local py_inc np_inc
+    py_inc=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+    np_inc=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
+    say "rewriting the wheels' CMake include paths for $py_inc"
+    # The wheels were built on another machine; their exported CMake files name its paths.
+    grep -rlE '/opt/python/cp311-cp311/' "$VENV/share" --include='*.cmake' 2>/dev/null \
+        | while read -r f; do
+            sed -i \
+                -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$np_inc#g" \
+                -e "s#/opt/python/cp311-cp311/include/python3.11#$py_inc#g" "$f"
+        done
+    stamp_set cmake-paths "$h"
+}
+
+# --- 4. tlt_interfaces ------------------------------------------------------------------------
+msgs_stage() {
+    local h
+    h=$(cd "$ROOT" && { cat "$STAMPS/pip"; find msgs -type f | sort | xargs sha256sum; } \
+        | sha256sum | cut -c1-16)
+    stamp_ok msgs "$h" && return 0
+    rm -f "$STAMPS/msgs"
+    say "building msgs/ (tlt_interfaces) into the venv"
+    rm -rf "$BUILD/msgs"
+    mkdir -p "$BUILD/msgs"
+    local log="$BUILD/msgs/build.log"
+    (
+        export PATH="$VENV/bin:$PATH"
+        export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+        cd "$BUILD/msgs"
+        cmake "$ROOT/msgs" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+            -DCMAKE_PREFIX_PATH="$VENV" -DCMAKE_INSTALL_PREFIX="$VENV" \
+            -DPython3_EXECUTABLE="$VENV/bin/python" \
+            && make -j"$(nproc)" install
+    ) >"$log" 2>&1 || { tail -30 "$log" >&2; fail "building msgs/ (full log: $log)"; }
+    "$VENV/bin/python" -c 'import tlt_interfaces.msg, tlt_interfaces.srv, tlt_interfaces.action' \
+        || fail "tlt_interfaces was built but does not import"
+    stamp_set msgs "$h"
+}
+
+# --- 5. this project --------------------------------------------------------------------------
+project_stage() {
+    local h
+    h=$(hash_of pyproject.toml)
+    stamp_ok project "$h" && return 0
+    say "installing the tlt project (editable)"
+    pip_install --no-deps --no-build-isolation -e "$ROOT"
+    "$VENV/bin/python" -c 'import tlt_common' || fail "pip install -e . (the tlt project)"
+    stamp_set project "$h"
+}
+
+apt_stage
+venv_stage
+cmake_paths_stage
+msgs_stage
+project_stage
+say "ready: $VENV"

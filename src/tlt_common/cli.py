@@ -1,0 +1,73 @@
+"""The ``tlt`` command: one entry point for operators and engineers.
+
+Subcommands live with the code they drive and are imported only when called, so ``tlt launch``
+does not pay for loading the vision models. Each is ``module:function`` taking ``argv`` and
+returning an exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from tlt_common.config_schema import ConfigError
+
+# name -> (module:function, one-line help)
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "launch": ("tlt_common.cli:launch_main", "start the processes of a launch set"),
+    "check": ("tlt_common.cli:check_main", "validate launch sets without starting anything"),
+    "interfaces": ("tlt_common.interfaces_cli:main", "list the tlt_interfaces messages, services, actions"),
+}
+
+
+def launch_main(argv: list[str]) -> int:
+    from tlt_common.launch import Supervisor, load_launch_set
+
+    parser = argparse.ArgumentParser(prog="tlt launch", description="Start the processes of a launch set.")
+    parser.add_argument("launch_set", help="launch set YAML, e.g. config/launch/interfaces_demo.yaml")
+    args = parser.parse_args(argv)
+    try:
+        launch_set = load_launch_set(args.launch_set)
+    except ConfigError as exc:
+        print(f"tlt launch: {exc}", file=sys.stderr)
+        return 2
+    return Supervisor(launch_set).run()
+
+
+def check_main(argv: list[str]) -> int:
+    from tlt_common.launch import load_launch_set
+
+    parser = argparse.ArgumentParser(prog="tlt check", description="Validate launch sets.")
+    parser.add_argument("launch_sets", nargs="+")
+    args = parser.parse_args(argv)
+    status = 0
+    for path in args.launch_sets:
+        try:
+            launch_set = load_launch_set(path)
+        except ConfigError as exc:
+            print(f"FAIL {exc}")
+            status = 1
+            continue
+        print(f"ok   {path}: {', '.join(p.name for p in launch_set.processes)}")
+    return status
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: tlt <command> [args...]\n\ncommands:")
+        for name, (_, text) in SUBCOMMANDS.items():
+            print(f"  {name:<12} {text}")
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in SUBCOMMANDS:
+        print(f"tlt: unknown command {name!r} (try: {', '.join(SUBCOMMANDS)})", file=sys.stderr)
+        return 2
+    module_name, func_name = SUBCOMMANDS[name][0].split(":")
+    func = getattr(importlib.import_module(module_name), func_name)
+    return int(func(rest) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""Launch sets: which processes to start, with what parameters, environment and restart policy.
+
+A launch set is a YAML file under ``config/launch/``. It is validated completely before anything
+starts, so a typo never leaves half a system running. Example::
+
+    name: lifter_on_emulator
+    grace_period_s: 5.0          # SIGINT, then SIGTERM, then SIGKILL, each after this long
+    env: {TLT_LOG_LEVEL: info}   # for every process
+    processes:
+      - name: lifter
+        executable: tlt-lifter   # looked up in the venv's bin/, then PATH; "python" is this interpreter
+        args: [--config, "${LAUNCH_DIR}/../hardware/lifter.yaml"]
+        node_name: lifter        # appended as --ros-args -r __node:=lifter
+        parameters: {rate_hz: 50}  # appended as --ros-args -p rate_hz:=50
+        restart: on-failure      # never | on-failure | always
+        max_restarts: 3
+        required: true           # if it dies for good, the whole set stops with a non-zero exit
+
+``${VAR}`` in ``executable``, ``args``, ``cwd`` and ``env`` values expands from the launcher's
+environment, the set's ``env``, the process's ``env``, and ``LAUNCH_DIR`` (the set's folder).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+
+RESTART_POLICIES = ("never", "on-failure", "always")
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+
+
+def _name_check(value: str) -> str | None:
+    if not _NAME.match(value):
+        return f"expected a name of letters, digits and '_' starting with a letter, got {value!r}"
+    return None
+
+
+_SCALAR = Field("any", check=lambda v: None if isinstance(v, str | int | float | bool) else
+                f"expected a string, number or boolean, got {type(v).__name__}")
+
+PROCESS_SCHEMA: dict[str, Field] = {
+    "name": Field("str", check=_name_check, doc="the process name, unique in the set"),
+    "executable": Field("str", doc="program to run"),
+    "args": opt("list", [], item=Field("any", check=lambda v: None if isinstance(v, str | int | float)
+                                       else f"expected a string or number, got {type(v).__name__}")),
+    "node_name": opt("str", None, check=_name_check),
+    "parameters": opt("map", {}, item=Field("any", check=lambda v: None if isinstance(
+        v, str | int | float | bool | list) else f"expected a scalar or list, got {type(v).__name__}")),
+    "env": opt("map", {}, item=_SCALAR),
+    "cwd": opt("str", None),
+    "restart": opt("str", "never", choices=RESTART_POLICIES),
+    "max_restarts": opt("int", 5, minimum=0),
+    "restart_delay_s": opt("float", 1.0, minimum=0.0),
+    "required": opt("bool", False),
+    "startup_s": opt("float", 3.0, minimum=0.0,
+                     doc="an exit within this long after start is reported as a failure to start"),
+}
+
+LAUNCH_SET_SCHEMA: dict[str, Field] = {
+    "name": opt("str", None),
+    "description": opt("str", ""),
+    "grace_period_s": opt("float", 5.0, minimum=0.1),
+    "env": opt("map", {}, item=_SCALAR),
+    "processes": Field("list", min_items=1, item=Field("dict", schema=PROCESS_SCHEMA),
+                       doc="a list of processes"),
+}
+
+
+@dataclass(frozen=True)
+class ProcessSpec:
+    """One process of a launch set, resolved and ready to start."""
+
+    name: str
+    argv: tuple[str, ...]
+    env: dict[str, str]
+    cwd: str | None
+    restart: str
+    max_restarts: int
+    restart_delay_s: float
+    required: bool
+    startup_s: float
+
+
+@dataclass(frozen=True)
+class LaunchSet:
+    name: str
+    source: str
+    grace_period_s: float
+    processes: tuple[ProcessSpec, ...] = field(default_factory=tuple)
+
+
+def _expand(text: str, variables: dict[str, str], source: str, key: str) -> str:
+    def sub(match: re.Match[str]) -> str:
+        var = match.group(1)
+        if var not in variables:
+            raise ConfigError(source, key, f"${{{var}}} is not set in the environment or the launch set")
+        return variables[var]
+
+    return _VAR.sub(sub, text)
+
+
+def _resolve_executable(executable: str, source: str, key: str) -> str:
+    if executable == "python":
+        return sys.executable
+    if "/" in executable:
+        path = Path(executable)
+        if not (path.is_file() and os.access(path, os.X_OK)):
+            raise ConfigError(source, key, f"{executable} is not an executable file")
+        return str(path)
+    # The venv's own scripts first, so a launch set works without activating the venv.
+    venv_bin = str(Path(sys.executable).parent)
+    found = shutil.which(executable, path=os.pathsep.join([venv_bin, os.environ.get("PATH", "")]))
+    if found is None:
+        raise ConfigError(source, key, f"executable {executable!r} not found in {venv_bin} or PATH")
+    return found
+
+
+def _ros_value(value: Any) -> str:
+    # ROS parameter values on the command line are YAML; flow style keeps lists on one line.
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+
+
+def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None) -> LaunchSet:
+    """Load and fully resolve a launch set; raise :class:`ConfigError` on any problem."""
+    path = Path(path)
+    source = str(path)
+    data = validate(load_yaml(path), LAUNCH_SET_SCHEMA, source=source)
+    base = dict(os.environ if base_env is None else base_env)
+    base["LAUNCH_DIR"] = str(path.resolve().parent)
+    set_env = {k: _expand(str(v), base, source, f"env.{k}") for k, v in data["env"].items()}
+
+    seen: set[str] = set()
+    specs = []
+    for i, proc in enumerate(data["processes"]):
+        key = f"processes[{i}]"
+        if proc["name"] in seen:
+            raise ConfigError(source, f"{key}.name", f"duplicate process name {proc['name']!r}")
+        seen.add(proc["name"])
+        variables = {**base, **set_env}
+        proc_env = {k: _expand(str(v), variables, source, f"{key}.env.{k}") for k, v in proc["env"].items()}
+        variables.update(proc_env)
+        executable = _resolve_executable(
+            _expand(proc["executable"], variables, source, f"{key}.executable"), source, f"{key}.executable"
+        )
+        argv = [executable] + [
+            _expand(str(a), variables, source, f"{key}.args[{j}]") for j, a in enumerate(proc["args"])
+        ]
+        if proc["node_name"] or proc["parameters"]:
+            argv.append("--ros-args")
+            if proc["node_name"]:
+                argv += ["-r", f"__node:={proc['node_name']}"]
+            for pname, pvalue in proc["parameters"].items():
+                argv += ["-p", f"{pname}:={_ros_value(pvalue)}"]
+        cwd = proc["cwd"] and _expand(proc["cwd"], variables, source, f"{key}.cwd")
+        if cwd and not Path(cwd).is_dir():
+            raise ConfigError(source, f"{key}.cwd", f"{cwd} is not a directory")
+        specs.append(ProcessSpec(
+            name=proc["name"],
+            argv=tuple(argv),
+            env={**set_env, **proc_env},
+            cwd=cwd,
+            restart=proc["restart"],
+            max_restarts=proc["max_restarts"],
+            restart_delay_s=proc["restart_delay_s"],
+            required=proc["required"],
+            startup_s=proc["startup_s"],
+        ))
+    return LaunchSet(
+        name=data["name"] or path.stem,
+        source=source,
+        grace_period_s=data["grace_period_s"],
+        processes=tuple(specs),
+    )

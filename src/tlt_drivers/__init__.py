@@ -1,0 +1,1 @@
+"""Hardware drivers (paper §V.B): Dynamixel, MightyZAP, lifter serial, UR RTDE and GPIO links."""

@@ -1,0 +1,1 @@
+"""Ground software (paper §V.A): CCSDS link to the CRS, SQLite archive, Qt GUI and CLI."""

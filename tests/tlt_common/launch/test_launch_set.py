@@ -1,0 +1,105 @@
+"""Launch sets are refused before anything starts when a key is unknown, a type is wrong or a
+required value is missing, with the file, the key and what was expected."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from tlt_common.config_schema import ConfigError
+from tlt_common.launch import load_launch_set
+
+CONFIG = Path(__file__).resolve().parents[3] / "config" / "launch"
+
+
+def write(tmp_path: Path, body: str) -> Path:
+    path = tmp_path / "set.yaml"
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+def refused(tmp_path: Path, body: str) -> str:
+    path = write(tmp_path, body)
+    with pytest.raises(ConfigError) as info:
+        load_launch_set(path, base_env={"PATH": "/usr/bin:/bin"})
+    assert str(info.value).startswith(f"{path}: ")
+    return str(info.value).removeprefix(f"{path}: ")
+
+
+def test_a_full_set_resolves_arguments_parameters_and_environment(tmp_path):
+    path = write(tmp_path, """
+        name: demo
+        grace_period_s: 2
+        env: {SHARED: one}
+        processes:
+          - name: lifter
+            executable: python
+            args: ["${LAUNCH_DIR}/x.py", 3, "${SHARED}-${OWN}"]
+            env: {OWN: two}
+            node_name: lifter
+            parameters: {rate_hz: 50, port: /dev/ttyACM0, joints: [a, b], safe: true}
+            restart: always
+            max_restarts: 2
+            required: true
+    """)
+    launch_set = load_launch_set(path, base_env={"PATH": "/usr/bin:/bin"})
+    (proc,) = launch_set.processes
+    assert launch_set.name == "demo" and launch_set.grace_period_s == 2.0
+    assert proc.argv == (
+        sys.executable, f"{tmp_path}/x.py", "3", "one-two",
+        "--ros-args", "-r", "__node:=lifter",
+        "-p", "rate_hz:=50", "-p", "port:=/dev/ttyACM0", "-p", "joints:=[a, b]", "-p", "safe:=true",
+    )
+    assert proc.env == {"SHARED": "one", "OWN": "two"}
+    assert (proc.restart, proc.max_restarts, proc.required) == ("always", 2, True)
+
+
+def test_defaults(tmp_path):
+    launch_set = load_launch_set(write(tmp_path, """
+        processes:
+          - {name: a, executable: python}
+    """))
+    (proc,) = launch_set.processes
+    assert launch_set.name == "set"
+    assert (proc.restart, proc.required, proc.argv) == ("never", False, (sys.executable,))
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ("processes: []", "processes: expected at least 1 item(s), got 0"),
+    ("name: x", "processes: missing required key (a list of processes)"),
+    ("processes:\n  - {name: a, executable: python, restrat: always}",
+     "processes[0].restrat: unknown key (known keys: "),
+    ("processes:\n  - {name: a, executable: python, max_restarts: many}",
+     "processes[0].max_restarts: expected an integer, got str 'many'"),
+    ("processes:\n  - {name: a, executable: python, required: yes please}",
+     "processes[0].required: expected true or false, got str 'yes please'"),
+    ("processes:\n  - {name: a}", "processes[0].executable: missing required key (program to run)"),
+    ("processes:\n  - {name: a, executable: python}\n  - {name: a, executable: python}",
+     "processes[1].name: duplicate process name 'a'"),
+    ("processes:\n  - {name: a, executable: tlt-no-such-program}",
+     "processes[0].executable: executable 'tlt-no-such-program' not found in"),
+    ("processes:\n  - {name: a, executable: python, args: ['${NOT_SET}']}",
+     "processes[0].args[0]: ${NOT_SET} is not set in the environment or the launch set"),
+    ("processes:\n  - {name: 2fast, executable: python}",
+     "processes[0].name: expected a name of letters, digits and '_' starting with a letter, got '2fast'"),
+    ("grace_period_s: 0\nprocesses:\n  - {name: a, executable: python}",
+     "grace_period_s: expected at least 0.1, got 0.0"),
+    ("processes:\n  - {name: a, executable: python, cwd: /no/such/dir}",
+     "processes[0].cwd: /no/such/dir is not a directory"),
+    ("processes: [a", "invalid YAML: line 1, column 14: "),
+])
+def test_bad_sets_are_refused_naming_file_key_and_expectation(tmp_path, body, message):
+    assert refused(tmp_path, body).startswith(message)
+
+
+def test_a_missing_file_is_named():
+    with pytest.raises(ConfigError, match=r"/no/such/set.yaml: cannot read file: No such file"):
+        load_launch_set("/no/such/set.yaml")
+
+
+@pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.name)
+def test_every_shipped_launch_set_is_valid(path):
+    assert load_launch_set(path).processes

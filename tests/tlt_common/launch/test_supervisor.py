@@ -1,0 +1,228 @@
+"""The launcher against real processes: real rclpy nodes exchanging an action over DDS, restarts,
+required processes, start-up failures and a clean shutdown that leaves no child behind."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+PAIR = Path(__file__).with_name("action_pair.py")
+TLT = Path(sys.executable).with_name("tlt")
+
+
+class Launcher:
+    """``tlt launch`` as a subprocess, with its output collected line by line."""
+
+    def __init__(self, launch_file: Path) -> None:
+        self.proc = subprocess.Popen([str(TLT), "launch", str(launch_file)], stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+        self.lines: list[str] = []
+        self._changed = threading.Condition()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._changed:
+                self.lines.append(line.rstrip("\n"))
+                self._changed.notify_all()
+
+    def wait_for(self, pattern: str, timeout: float = 30.0, after: int = 0) -> re.Match[str]:
+        """The first line (from index ``after``) matching ``pattern``."""
+        regex = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while True:
+                for line in self.lines[after:]:
+                    if match := regex.search(line):
+                        return match
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"no line matching {pattern!r} in:\n" + "\n".join(self.lines))
+                self._changed.wait(left)
+
+    def pid_of(self, name: str, after: int = 0) -> int:
+        return int(self.wait_for(rf"\[launch\] started {name} \(pid (\d+)\)", after=after).group(1))
+
+    def finish(self, timeout: float = 60.0) -> int:
+        return self.proc.wait(timeout=timeout)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie is dead for our purpose (waiting for its parent to reap it).
+    stat = Path(f"/proc/{pid}/stat")
+    try:
+        return stat.read_text().split(") ")[1][0] != "Z"
+    except (FileNotFoundError, IndexError):
+        return False
+
+
+def write_set(tmp_path: Path, body: str, name: str = "set.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+@pytest.fixture
+def launcher():
+    started: list[Launcher] = []
+
+    def start(path: Path) -> Launcher:
+        started.append(Launcher(path))
+        return started[-1]
+
+    yield start
+    for item in started:
+        item.stop()
+
+
+def pair_set(tmp_path: Path, client_restart: str = "on-failure", server_required: bool = True) -> Path:
+    return write_set(tmp_path, f"""
+        name: pair
+        grace_period_s: 3
+        processes:
+          - name: server
+            executable: python
+            args: ["{PAIR}", server]
+            required: {str(server_required).lower()}
+          - name: client
+            executable: python
+            args: ["{PAIR}", client]
+            restart: {client_restart}
+            restart_delay_s: 0.2
+    """)
+
+
+def test_two_nodes_exchange_an_action_and_ctrl_c_stops_everything(tmp_path, launcher):
+    run = launcher(pair_set(tmp_path))
+    server, client = run.pid_of("server"), run.pid_of("client")
+    run.wait_for(r"^\[client\] result success=True reason=placed m\d+$")
+    run.wait_for(r"^\[server\] server up$")
+    run.proc.send_signal(signal.SIGINT)
+    assert run.finish() == 0
+    assert not alive(server) and not alive(client)
+    assert any("stopped" in line for line in run.lines)
+
+
+def test_a_killed_process_with_a_restart_policy_comes_back(tmp_path, launcher):
+    run = launcher(pair_set(tmp_path))
+    first = run.pid_of("client")
+    run.wait_for(r"^\[client\] result success=True")
+    os.kill(first, signal.SIGKILL)
+    run.wait_for(r"\[launch\] client exited with signal SIGKILL")
+    mark = len(run.lines)
+    run.wait_for(r"\[launch\] restarting client \(1 of 5\)", after=0)
+    second = run.pid_of("client", after=mark)
+    assert second != first
+    # The new client talks to the same server again.
+    run.wait_for(r"^\[client\] result success=True", after=mark)
+    run.proc.send_signal(signal.SIGTERM)
+    assert run.finish() == 0
+    assert not alive(second)
+
+
+def test_a_required_process_that_dies_stops_the_set_with_an_error(tmp_path, launcher):
+    run = launcher(pair_set(tmp_path))
+    server, client = run.pid_of("server"), run.pid_of("client")
+    run.wait_for(r"^\[client\] result success=True")
+    os.kill(server, signal.SIGKILL)
+    assert run.finish() != 0
+    run.wait_for(r"required process server is down: stopping the launch set")
+    assert not alive(client)
+
+
+def test_a_process_that_cannot_start_is_named_with_its_last_output(tmp_path, launcher):
+    path = write_set(tmp_path, """
+        processes:
+          - name: broken
+            executable: python
+            args: ["-c", "print('loading config'); import tlt_no_such_module"]
+            required: true
+          - name: bystander
+            executable: python
+            args: ["-c", "import time; time.sleep(60)"]
+    """)
+    run = launcher(path)
+    bystander = run.pid_of("bystander")
+    assert run.finish() != 0
+    run.wait_for(r"\[launch\] broken exited with exit code 1 during start-up")
+    text = "\n".join(run.lines)
+    assert "last output of broken:" in text
+    assert "    | loading config" in text
+    assert "ModuleNotFoundError: No module named 'tlt_no_such_module'" in text
+    assert not alive(bystander)
+
+
+def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_path, launcher):
+    stubborn = tmp_path / "stubborn.py"
+    stubborn.write_text(textwrap.dedent("""
+        import signal, subprocess, sys, time
+        ignored = [signal.SIGINT] + ([signal.SIGTERM] if sys.argv[1] == "both" else [])
+        for sig in ignored:
+            signal.signal(sig, signal.SIG_IGN)
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+        print(f"grandchild {child.pid}", flush=True)
+        time.sleep(120)
+    """))
+    path = write_set(tmp_path, f"""
+        grace_period_s: 0.5
+        processes:
+          - name: ignores_int
+            executable: python
+            args: ["{stubborn}", "int"]
+          - name: ignores_both
+            executable: python
+            args: ["{stubborn}", "both"]
+    """)
+    run = launcher(path)
+    pids = [run.pid_of("ignores_int"), run.pid_of("ignores_both")]
+    for name in ("ignores_int", "ignores_both"):
+        pids.append(int(run.wait_for(rf"^\[{name}\] grandchild (\d+)").group(1)))
+    run.proc.send_signal(signal.SIGINT)
+    assert run.finish() == 0
+    run.wait_for(r"SIGTERM to .*ignores_int")
+    run.wait_for(r"SIGKILL to ignores_both")
+    assert [pid for pid in pids if alive(pid)] == []
+
+
+def test_children_die_with_a_killed_launcher(tmp_path, launcher):
+    run = launcher(pair_set(tmp_path))
+    server, client = run.pid_of("server"), run.pid_of("client")
+    run.proc.kill()
+    run.proc.wait()
+    deadline = time.monotonic() + 10
+    while (alive(server) or alive(client)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not alive(server) and not alive(client)
+
+
+def test_a_bad_launch_set_starts_nothing(tmp_path):
+    path = write_set(tmp_path, """
+        processes:
+          - name: a
+            executable: python
+            restart: sometimes
+    """)
+    result = subprocess.run([str(TLT), "launch", str(path)], capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2
+    assert f"{path}: processes[0].restart: expected one of 'never', 'on-failure', 'always', got 'sometimes'" \
+        in result.stderr
+    assert "[launch] started" not in result.stdout
