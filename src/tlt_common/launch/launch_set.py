@@ -15,6 +15,10 @@ starts, so a typo never leaves half a system running. Example::
         restart: on-failure      # never | on-failure | always
         max_restarts: 3
         required: true           # if it dies for good, the whole set stops with a non-zero exit
+      - name: exercise
+        executable: python
+        args: [-m, some.job]
+        on_exit: shutdown        # when it ends, stop the set and exit with its exit code
 
 ``${VAR}`` in ``executable``, ``args``, ``cwd`` and ``env`` values expands from the launcher's
 environment, the set's ``env``, the process's ``env``, and ``LAUNCH_DIR`` (the set's folder).
@@ -35,6 +39,7 @@ import yaml
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
 
 RESTART_POLICIES = ("never", "on-failure", "always")
+ON_EXIT = ("continue", "shutdown")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
@@ -62,6 +67,7 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "max_restarts": opt("int", 5, minimum=0),
     "restart_delay_s": opt("float", 1.0, minimum=0.0),
     "required": opt("bool", False),
+    "on_exit": opt("str", "continue", choices=ON_EXIT),
     "startup_s": opt("float", 3.0, minimum=0.0,
                      doc="an exit within this long after start is reported as a failure to start"),
 }
@@ -88,6 +94,7 @@ class ProcessSpec:
     max_restarts: int
     restart_delay_s: float
     required: bool
+    on_exit: str
     startup_s: float
 
 
@@ -97,6 +104,10 @@ class LaunchSet:
     source: str
     grace_period_s: float
     processes: tuple[ProcessSpec, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        if sum(p.on_exit == "shutdown" for p in self.processes) > 1:
+            raise ConfigError(self.source, "processes", "at most one process may have on_exit: shutdown")
 
 
 def _expand(text: str, variables: dict[str, str], source: str, key: str) -> str:
@@ -173,6 +184,7 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None) ->
             max_restarts=proc["max_restarts"],
             restart_delay_s=proc["restart_delay_s"],
             required=proc["required"],
+            on_exit=proc["on_exit"],
             startup_s=proc["startup_s"],
         ))
     return LaunchSet(

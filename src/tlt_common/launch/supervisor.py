@@ -176,6 +176,11 @@ class Supervisor:
                     self._write(f"    | {line}")
         else:
             self._say(f"{spec.name} exited with {describe_exit(rc)}")
+        if spec.on_exit == "shutdown":
+            self._say(f"{spec.name} ended the launch set ({describe_exit(rc)})")
+            self._exit_code = rc if rc >= 0 else 128 - rc
+            self._shutdown.set()
+            return
         wants_restart = spec.restart == "always" or (spec.restart == "on-failure" and failed)
         if wants_restart and proc.restarts < spec.max_restarts:
             proc.restart_at = time.monotonic() + spec.restart_delay_s

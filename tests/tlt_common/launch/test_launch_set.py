@@ -87,6 +87,9 @@ def test_defaults(tmp_path):
      "processes[0].name: expected a name of letters, digits and '_' starting with a letter, got '2fast'"),
     ("grace_period_s: 0\nprocesses:\n  - {name: a, executable: python}",
      "grace_period_s: expected at least 0.1, got 0.0"),
+    ("processes:\n  - {name: a, executable: python, on_exit: shutdown}\n"
+     "  - {name: b, executable: python, on_exit: shutdown}",
+     "processes: at most one process may have on_exit: shutdown"),
     ("processes:\n  - {name: a, executable: python, cwd: /no/such/dir}",
      "processes[0].cwd: /no/such/dir is not a directory"),
     ("processes: [a", "invalid YAML: line 1, column 14: "),

@@ -226,3 +226,22 @@ def test_a_bad_launch_set_starts_nothing(tmp_path):
     assert f"{path}: processes[0].restart: expected one of 'never', 'on-failure', 'always', got 'sometimes'" \
         in result.stderr
     assert "[launch] started" not in result.stdout
+
+
+@pytest.mark.parametrize("code", [0, 3])
+def test_a_job_with_on_exit_shutdown_ends_the_set_with_its_exit_code(tmp_path, launcher, code):
+    path = write_set(tmp_path, f"""
+        processes:
+          - name: service
+            executable: python
+            args: ["-c", "import time; time.sleep(60)"]
+          - name: job
+            executable: python
+            args: ["-c", "import time, sys; time.sleep(0.5); print('job done'); sys.exit({code})"]
+            on_exit: shutdown
+    """)
+    run = launcher(path)
+    service = run.pid_of("service")
+    assert run.finish() == code
+    run.wait_for(rf"\[launch\] job ended the launch set \(exit code {code}\)")
+    assert not alive(service)
