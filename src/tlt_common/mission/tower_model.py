@@ -1,0 +1,359 @@
+"""The CRS's model of the tower and of the parts left in each dispenser (paper §IV.B).
+
+Every member of the mission is NOT_PLACED, PLACED, RIVETED or INSPECTED (as
+``tlt_interfaces/MemberState``), and moves only forward along its kind's sequence:
+
+* cross frame: NOT_PLACED -> PLACED -> INSPECTED (it is pre-assembled, not riveted)
+* vertical and diagonal: NOT_PLACED -> PLACED -> RIVETED -> INSPECTED
+* foundation rivet: NOT_PLACED -> RIVETED -> INSPECTED
+
+Each dispenser has ``remaining`` parts and a count of parts ``discarded`` after a failed
+inspection. Any refused change (an already placed member, riveting an unplaced one, an empty
+dispenser) raises :class:`TransitionRefused` with the reason and changes nothing.
+
+Every accepted change is persisted at once to a JSON file by an atomic, crash-safe write (temp
+file, fsync, rename, fsync of the directory), so a CRS that restarts :meth:`TowerModel.open`\\ s
+the file and resumes where it stood, never adding a member the model says is placed. A file made
+for another mission (different content hash), or corrupt (bad JSON, bad checksum, unknown
+members), is refused with a clear :class:`TowerModelError`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tlt_common.mission.schema import Member, Mission
+
+FILE_FORMAT = 1
+NOT_PLACED, PLACED, RIVETED, INSPECTED = 0, 1, 2, 3  # tlt_interfaces/MemberState.STATE_*
+STATE_NAMES = {NOT_PLACED: "NOT_PLACED", PLACED: "PLACED", RIVETED: "RIVETED", INSPECTED: "INSPECTED"}
+_STATE_CODES = {v: k for k, v in STATE_NAMES.items()}
+SEQUENCES = {
+    "cross_frame": (NOT_PLACED, PLACED, INSPECTED),
+    "vertical": (NOT_PLACED, PLACED, RIVETED, INSPECTED),
+    "diagonal": (NOT_PLACED, PLACED, RIVETED, INSPECTED),
+    "foundation_rivet": (NOT_PLACED, RIVETED, INSPECTED),
+}
+
+
+class TowerModelError(RuntimeError):
+    """A persisted tower model that cannot be resumed (wrong mission, corrupt, unreadable)."""
+
+
+class TransitionRefused(ValueError):
+    """A change the model refuses; ``reason`` says why. Nothing was changed."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(reason)
+
+
+def atomic_write(path: Path, data: bytes) -> None:
+    """Replace ``path`` with ``data`` so that a crash at any point leaves the old or the new file whole."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    # The rename is durable only once the directory entry is.
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def _checksum(body: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+class TowerModel:
+    """Member states and dispenser counts of one mission, persisted on every change."""
+
+    def __init__(self, mission: Mission, path: str | Path | None = None) -> None:
+        """A fresh model (nothing placed, dispensers full). Persisted at once when ``path`` is given."""
+        self.mission = mission
+        self.path = Path(path) if path is not None else None
+        self._members: dict[str, Member] = {m.id: m for m in mission.members}
+        self.states: dict[str, int] = dict.fromkeys(self._members, NOT_PLACED)
+        self.remaining: dict[str, int] = {d.name: d.count for d in mission.dispensers.values()}
+        self.discarded: dict[str, int] = dict.fromkeys(mission.dispensers, 0)
+        self.revision = 0
+        # The tick thread and the ground-command thread both change the model.
+        self.lock = threading.RLock()
+        self.listeners: list[Callable[[TowerModel], None]] = []
+        if self.path is not None:
+            self._persist()
+
+    # ----- persistence -----
+    def _body(self) -> dict[str, Any]:
+        return {
+            "format": FILE_FORMAT,
+            "mission": self.mission.name,
+            "mission_hash": self.mission.hash,
+            "revision": self.revision,
+            "members": {k: STATE_NAMES[v] for k, v in self.states.items()},
+            "dispensers": {
+                k: {"remaining": self.remaining[k], "discarded": self.discarded[k]} for k in self.remaining
+            },
+        }
+
+    def _persist(self) -> None:
+        if self.path is None:
+            return
+        body = self._body()
+        document = {"checksum": _checksum(body), **body}
+        atomic_write(self.path, json.dumps(document, indent=1).encode())
+
+    @classmethod
+    def load(cls, mission: Mission, path: str | Path) -> TowerModel:
+        """Resume from ``path``; :class:`TowerModelError` if it is not a sound file of ``mission``."""
+        path = Path(path)
+        try:
+            text = path.read_bytes()
+        except OSError as exc:
+            raise TowerModelError(f"{path}: cannot read tower model: {exc.strerror or exc}") from exc
+        try:
+            document = json.loads(text)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise TowerModelError(
+                f"{path}: tower model is not valid JSON ({exc}); it may be corrupt"
+            ) from exc
+        if not isinstance(document, dict) or "checksum" not in document:
+            raise TowerModelError(f"{path}: not a tower model file (no checksum)")
+        checksum = document.pop("checksum")
+        if checksum != _checksum(document):
+            raise TowerModelError(f"{path}: tower model checksum does not match its content; it is corrupt")
+        if document.get("format") != FILE_FORMAT:
+            raise TowerModelError(
+                f"{path}: tower model format {document.get('format')!r}, expected {FILE_FORMAT}"
+            )
+        if document.get("mission_hash") != mission.hash:
+            raise TowerModelError(
+                f"{path}: tower model belongs to mission '{document.get('mission')}'"
+                f" ({str(document.get('mission_hash'))[:12]}), not to '{mission.name}' ({mission.hash[:12]})"
+            )
+        model = cls(mission)
+        members = document.get("members")
+        dispensers = document.get("dispensers")
+        if not isinstance(members, dict) or set(members) != set(model.states):
+            raise TowerModelError(f"{path}: tower model members do not match mission '{mission.name}'")
+        if not isinstance(dispensers, dict) or set(dispensers) != set(model.remaining):
+            raise TowerModelError(f"{path}: tower model dispensers do not match mission '{mission.name}'")
+        for member_id, name in members.items():
+            state = _STATE_CODES.get(name)
+            if state is None or state not in SEQUENCES[model._members[member_id].kind]:
+                raise TowerModelError(f"{path}: member '{member_id}' has impossible state {name!r}")
+            model.states[member_id] = state
+        for name, counts in dispensers.items():
+            capacity = mission.dispensers[name].count
+            try:
+                remaining, discarded = int(counts["remaining"]), int(counts["discarded"])
+            except (TypeError, KeyError, ValueError) as exc:
+                raise TowerModelError(f"{path}: dispenser '{name}' counts unreadable: {exc}") from exc
+            if not 0 <= remaining <= capacity or not 0 <= discarded <= capacity - remaining:
+                raise TowerModelError(f"{path}: dispenser '{name}' counts impossible: {counts}")
+            model.remaining[name], model.discarded[name] = remaining, discarded
+        revision = document.get("revision")
+        if not isinstance(revision, int) or revision < 0:
+            raise TowerModelError(f"{path}: tower model revision {revision!r} is not a count")
+        model.revision = revision
+        model.path = path
+        return model
+
+    @classmethod
+    def open(cls, mission: Mission, path: str | Path) -> TowerModel:
+        """Resume from ``path`` if it exists, else start fresh and persist there."""
+        path = Path(path)
+        # Temp files of writers killed mid-write: never read, safe to remove.
+        for stale in path.parent.glob(f".{path.name}.*.tmp"):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        return cls.load(mission, path) if path.exists() else cls(mission, path)
+
+    def _commit(self) -> None:
+        self.revision += 1
+        self._persist()
+        for listener in list(self.listeners):
+            listener(self)
+
+    # ----- members -----
+    def member(self, member_id: str) -> Member:
+        try:
+            return self._members[member_id]
+        except KeyError:
+            raise TransitionRefused(f"unknown member '{member_id}'") from None
+
+    def state(self, member_id: str) -> int:
+        self.member(member_id)
+        return self.states[member_id]
+
+    def check(self, member_id: str, target: int) -> str | None:
+        """Why moving ``member_id`` to ``target`` is refused, or None when it is legal."""
+        if member_id not in self._members:
+            return f"unknown member '{member_id}'"
+        member = self._members[member_id]
+        sequence = SEQUENCES[member.kind]
+        current = self.states[member_id]
+        if target not in sequence:
+            return f"a {member.kind.replace('_', ' ')} is never {STATE_NAMES[target]}"
+        here, there = sequence.index(current), sequence.index(target)
+        if there <= here:
+            return f"'{member_id}' is already {STATE_NAMES[current]}"
+        if there != here + 1:
+            before = STATE_NAMES[sequence[there - 1]]
+            return f"'{member_id}' is {STATE_NAMES[current]}; it must be {before} first"
+        return None
+
+    def _move(self, member_id: str, target: int) -> None:
+        with self.lock:
+            reason = self.check(member_id, target)
+            if reason:
+                raise TransitionRefused(reason)
+            self.states[member_id] = target
+            self._commit()
+
+    def place(self, member_id: str) -> None:
+        """NOT_PLACED -> PLACED (cross frames, verticals, diagonals)."""
+        self._move(member_id, PLACED)
+
+    def rivet(self, member_id: str) -> None:
+        """PLACED -> RIVETED (verticals, diagonals), or NOT_PLACED -> RIVETED (foundation rivets)."""
+        self._move(member_id, RIVETED)
+
+    def inspect(self, member_id: str) -> None:
+        """The last step of the member's sequence -> INSPECTED."""
+        self._move(member_id, INSPECTED)
+
+    def override(self, member_id: str, state: int) -> None:
+        """Set a member's state directly: the operator's correction of the model from the ground."""
+        member = self.member(member_id)
+        if state not in SEQUENCES[member.kind]:
+            raise TransitionRefused(
+                f"a {member.kind.replace('_', ' ')} is never {STATE_NAMES.get(state, state)}"
+            )
+        with self.lock:
+            self.states[member_id] = state
+            self._commit()
+
+    def is_done(self, member_id: str) -> bool:
+        """Placed and fixed: RIVETED or later (a cross frame: PLACED or later)."""
+        member = self.member(member_id)
+        needed = PLACED if member.kind == "cross_frame" else RIVETED
+        return self.states[member_id] >= needed
+
+    def next_member(self) -> Member | None:
+        """The first member in build order that is not done, or None when the tower is built."""
+        return next((m for m in self.mission.members if not self.is_done(m.id)), None)
+
+    def bays_built(self) -> int:
+        built = 0
+        for bay in range(1, self.mission.bay_count + 1):
+            if not all(self.is_done(m.id) for m in self.mission.bay_members(bay)):
+                break
+            built = bay
+        return built
+
+    @property
+    def tower_built(self) -> bool:
+        return all(self.is_done(m) for m in self._members)
+
+    # ----- dispensers -----
+    def take_part(self, dispenser: str, count: int = 1) -> None:
+        """``count`` parts taken from ``dispenser``; refused if it holds fewer."""
+        if dispenser not in self.remaining:
+            raise TransitionRefused(f"unknown dispenser '{dispenser}'")
+        if count < 1:
+            raise TransitionRefused(f"cannot take {count} part(s)")
+        with self.lock:
+            if self.remaining[dispenser] < count:
+                raise TransitionRefused(
+                    f"dispenser '{dispenser}' holds {self.remaining[dispenser]} part(s); cannot take {count}"
+                )
+            self.remaining[dispenser] -= count
+            self._commit()
+
+    def discard_part(self, dispenser: str, count: int = 1) -> None:
+        """``count`` parts already taken from ``dispenser`` were discarded after a failed inspection."""
+        if dispenser not in self.remaining:
+            raise TransitionRefused(f"unknown dispenser '{dispenser}'")
+        with self.lock:
+            taken = self.mission.dispensers[dispenser].count - self.remaining[dispenser]
+            if count < 1 or self.discarded[dispenser] + count > taken:
+                raise TransitionRefused(
+                    f"dispenser '{dispenser}': {taken} part(s) taken,"
+                    f" {self.discarded[dispenser]} already discarded;"
+                    f" cannot discard {count}"
+                )
+            self.discarded[dispenser] += count
+            self._commit()
+
+    # ----- ROS messages -----
+    def member_states(self) -> list[Any]:
+        """Every member as ``tlt_interfaces/MemberState``, in build order."""
+        from tlt_interfaces.msg import MemberState
+
+        out = []
+        for m in self.mission.members:
+            msg = MemberState()
+            msg.member_id = m.id
+            msg.kind = m.kind_code
+            msg.bay = m.bay
+            msg.state = self.states[m.id]
+            out.append(msg)
+        return out
+
+    def dispenser_states(self) -> list[Any]:
+        """Every dispenser as ``tlt_interfaces/DispenserState``."""
+        from tlt_interfaces.msg import DispenserState
+
+        out = []
+        for name, d in self.mission.dispensers.items():
+            msg = DispenserState()
+            msg.name = name
+            msg.part_kind = d.part_kind
+            msg.remaining = self.remaining[name]
+            msg.discarded = self.discarded[name]
+            out.append(msg)
+        return out
+
+    def fill_progress(self, msg: Any) -> Any:
+        """Fill a ``tlt_interfaces/MissionProgress``'s model fields (mission, bays, members, dispensers)."""
+        msg.mission = self.mission.name
+        msg.bays_total = self.mission.bay_count
+        msg.bays_built = self.bays_built()
+        msg.tower_built = self.tower_built
+        msg.members = self.member_states()
+        msg.dispensers = self.dispenser_states()
+        return msg
+
+
+__all__ = [
+    "INSPECTED",
+    "NOT_PLACED",
+    "PLACED",
+    "RIVETED",
+    "STATE_NAMES",
+    "TowerModel",
+    "TowerModelError",
+    "TransitionRefused",
+    "atomic_write",
+]
