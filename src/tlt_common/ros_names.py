@@ -1,0 +1,86 @@
+"""The names of the system's ROS topics, services and actions, in one place.
+
+Every agent builds the names it publishes, serves or calls from these functions, so the CRS, the
+ARSs, vision, the drivers and the tests cannot drift apart. Names are absolute: a driver node for
+component ``lifter`` publishes ``/lifter/state`` whatever its node name or namespace.
+"""
+
+from __future__ import annotations
+
+ARS_AGENTS = ("ars_x", "ars_y")
+
+# --- driver components (paper §V.B) ---------------------------------------------------------------
+LIFTER = "lifter"
+TOP_GRIPPERS = "top_grippers"
+ACTIVE_GRIPPERS = "active_grippers"
+CAMERA_MOUNTS = "camera_mounts"
+
+
+def ee(ars: str) -> str:
+    """End-effector component of an ARS: ``ars_x`` -> ``ee_x``."""
+    return "ee_" + ars.removeprefix("ars_")
+
+
+def ur(ars: str) -> str:
+    """UR arm component of an ARS: ``ars_x`` -> ``ur_x``."""
+    return "ur_" + ars.removeprefix("ars_")
+
+
+def state_topic(component: str) -> str:
+    """LifterState, GripperState or EndEffectorState of a component."""
+    return f"/{component}/state"
+
+
+def joint_states_topic(component: str) -> str:
+    """sensor_msgs/JointState of a component's joints."""
+    return f"/{component}/joint_states"
+
+
+def hardware_status_topic(component: str) -> str:
+    """tlt_interfaces/HardwareStatus of a component's hardware interface."""
+    return f"/{component}/hardware_status"
+
+
+def trajectory_action(component: str) -> str:
+    """FollowJointTrajectory of a component's trajectory-controlled joints."""
+    return f"/{component}/follow_joint_trajectory"
+
+
+def position_command_topic(component: str) -> str:
+    """std_msgs/Float64MultiArray for a component's group-position-controlled joints."""
+    return f"/{component}/position_command"
+
+
+LIFTER_SET_MODE = "/lifter/set_mode"
+
+# --- agents (paper §IV, §V.C.1) --------------------------------------------------------------------
+ARS_ACTIONS = ("add_cross_frame", "add_member", "affix_member", "foundation_rivet")
+
+
+def ars_action(ars: str, request: str) -> str:
+    """An ARS's action server for one CRS request, e.g. ``/ars_x/add_member``."""
+    if request not in ARS_ACTIONS:
+        raise ValueError(f"unknown ARS request {request!r} (known: {', '.join(ARS_ACTIONS)})")
+    return f"/{ars}/{request}"
+
+
+def ground_command_service(agent: str) -> str:
+    """GroundCommand forwarded by the CRS to an ARS."""
+    return f"/{agent}/ground_command"
+
+
+def tree_status_topic(agent: str) -> str:
+    """TreeStatus of an agent's behaviour tree."""
+    return f"/{agent}/tree_status"
+
+
+CRS_INSPECT_PART = "/crs/inspect_part"  # served by the CRS for the ARSs (it forwards to vision)
+CRS_SET_BLACKBOARD = "/crs/set_blackboard_value"
+CRS_MISSION_PROGRESS = "/crs/mission_progress"
+EVENTS = "/events"
+
+# --- vision (paper §V.E) ---------------------------------------------------------------------------
+VISION_INSPECT_PART = "/vision/inspect_part"
+VISION_INSPECT_BAY = "/vision/inspect_bay"
+VISION_CHECK_ALIGNMENT = "/vision/check_alignment"
+VISION_LOCATE_TAG = "/vision/locate_tag"
