@@ -1,0 +1,58 @@
+"""Endpoint and state-file settings of the ground link, from ``config/ccsds/link.yaml``.
+
+Validated with :mod:`tlt_common.config_schema`; paths have ``~`` and ``$VARS`` expanded. Errors name
+the file, the key and the reason.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from tlt_common.config_schema import Field, load_validated, opt
+
+DEFAULT_PATH = Path(__file__).resolve().parents[3] / "config" / "ccsds" / "link.yaml"
+ENV_PATH = "TLT_CCSDS_LINK_CONFIG"
+
+_PORT = {"minimum": 0, "maximum": 65535}
+SCHEMA = {
+    "key_file": opt("str", ""),
+    "key_id": Field("int", minimum=0, maximum=0xFFFF),
+    "crs": Field(
+        "dict",
+        schema={
+            "bind_host": Field("str"),
+            "bind_port": Field("int", **_PORT),
+            "gsw_host": opt("str", ""),
+            "gsw_port": opt("int", 0, **_PORT),
+            "replay_state": Field("str"),
+            "max_rejection_events_per_s": opt("float", 20.0, minimum=0.1),
+        },
+    ),
+    "gsw": Field(
+        "dict",
+        schema={
+            "crs_host": Field("str"),
+            "crs_port": Field("int", **_PORT),
+            "bind_host": Field("str"),
+            "bind_port": Field("int", **_PORT),
+            "archive": Field("str"),
+            "command_state": Field("str"),
+            "ack_timeout_s": opt("float", 2.0, minimum=0.01, maximum=600.0),
+        },
+    ),
+}
+
+
+def expand_path(text: str) -> Path:
+    return Path(os.path.expandvars(os.path.expanduser(text)))
+
+
+def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
+    """Load the link settings: ``path``, else ``$TLT_CCSDS_LINK_CONFIG``, else the project's file."""
+    chosen = Path(path or os.environ.get(ENV_PATH) or DEFAULT_PATH)
+    return load_validated(chosen, SCHEMA)
+
+
+__all__ = ["expand_path", "load_link_config"]

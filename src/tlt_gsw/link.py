@@ -1,0 +1,217 @@
+"""The GSW end of the CCSDS ground link over UDP (paper §V.A, Fig. 3 and Fig. 6).
+
+Sends authenticated commands to the CRS (:meth:`GswLink.send_command`), receives telemetry
+(:meth:`GswLink.poll`), counts it (:class:`LinkStats`: gaps per APID, CRC errors, rejections) and
+hands every datagram sent or received to the archive :class:`Recorder`. Acknowledgements are
+matched to the command they answer by its security sequence number; :meth:`GswLink.wait_ack` waits
+for a stage with a bounded timeout. Nothing here blocks without a timeout.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from tlt_common.ccsds.auth import CommandSequencer, KeyRing
+from tlt_common.ccsds.codec import Packet, ParseResult, encode_command, parse_datagram
+from tlt_common.ccsds.definitions import Definitions
+from tlt_common.ccsds.reasons import AckStage, Reason
+from tlt_common.ccsds.sequence import SequenceCounters
+from tlt_common.ccsds.stats import LinkStats
+from tlt_gsw.archive.recorder import Recorder
+
+RECV_BUFFER = 65535
+MAX_TRACKED_COMMANDS = 1000
+
+
+@dataclass(frozen=True)
+class Ack:
+    """One acknowledgement packet for a command."""
+
+    stage: AckStage
+    reason: Reason
+    detail: str
+    command: str
+    received_at: float
+    packet: Packet
+
+
+@dataclass
+class SentCommand:
+    """A command as sent, and the acknowledgements received for it so far."""
+
+    name: str
+    params: Mapping[str, Any]
+    security_seq: int
+    seq_count: int
+    raw: bytes
+    sent_at: float
+    acks: list[Ack] = field(default_factory=list)
+
+    @property
+    def last_stage(self) -> AckStage | None:
+        return self.acks[-1].stage if self.acks else None
+
+    @property
+    def final(self) -> Ack | None:
+        """The rejected/completed/failed ack, if one arrived."""
+        return next((a for a in self.acks if a.stage.final), None)
+
+
+class GswLink:
+    """Command sender and telemetry receiver of the ground station."""
+
+    def __init__(
+        self,
+        definitions: Definitions,
+        keyring: KeyRing,
+        key_id: int,
+        crs_address: tuple[str, int],
+        *,
+        bind: tuple[str, int] = ("127.0.0.1", 0),
+        recorder: Recorder | None = None,
+        sequencer: CommandSequencer | None = None,
+        on_packet: Callable[[ParseResult], None] | None = None,
+        close_recorder: bool = False,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        key = keyring.get(key_id)
+        if key is None:
+            raise KeyError(f"key id {key_id} is not in the key ring (have {keyring.key_ids})")
+        self.defs = definitions
+        self.keyring = keyring
+        self.key_id = key_id
+        self._key = key
+        self.crs_address = crs_address
+        self.recorder = recorder
+        self._close_recorder = close_recorder
+        self.sequencer = sequencer or CommandSequencer()
+        self.on_packet = on_packet
+        self.clock = clock
+        self.stats = LinkStats()
+        self._counters = SequenceCounters()
+        self._sent: dict[int, SentCommand] = {}
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(bind)
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self._sock.getsockname()
+
+    def close(self) -> None:
+        """Close the socket; flush the recorder (and close it if this link was given it to own)."""
+        self._sock.close()
+        if self.recorder is not None:
+            if self._close_recorder:
+                self.recorder.close()
+            else:
+                self.recorder.flush()
+
+    def __enter__(self) -> GswLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- commands ---------------------------------------------------------------------------
+    def send_command(
+        self, name: str, params: Mapping[str, Any] | None = None, *, check: bool = True
+    ) -> SentCommand:
+        """Build, record and send one command; raise FieldError/KeyError on bad parameters."""
+        params = dict(params or {})
+        security_seq = self.sequencer.next()
+        seq_count = self._counters.next(self.defs.command_apid)
+        raw = encode_command(
+            self.defs,
+            name,
+            params,
+            key_id=self.key_id,
+            key=self._key,
+            security_seq=security_seq,
+            seq_count=seq_count,
+            timestamp=self.clock(),
+            check=check,
+        )
+        sent = SentCommand(name, params, security_seq, seq_count, raw, self.clock())
+        self._sent[security_seq] = sent
+        while len(self._sent) > MAX_TRACKED_COMMANDS:
+            self._sent.pop(next(iter(self._sent)))
+        self._sock.sendto(raw, self.crs_address)
+        self.stats.record_tx(len(raw))
+        if self.recorder is not None:
+            self.recorder.record("tx", raw, parse_datagram(raw, self.defs, expect="tc", keyring=self.keyring))
+        return sent
+
+    def send_raw(self, datagram: bytes) -> None:
+        """Send bytes as they are (link diagnostics, replay tests); recorded as ``tx`` undecoded."""
+        self._sock.sendto(datagram, self.crs_address)
+        self.stats.record_tx(len(datagram))
+        if self.recorder is not None:
+            self.recorder.record("tx", datagram)
+
+    def wait_ack(self, sent: SentCommand, *, final: bool = False, timeout: float = 2.0) -> Ack | None:
+        """Wait for the first ack of ``sent`` (or, with ``final``, its rejected/completed/failed ack).
+
+        Returns that ack, or None after ``timeout`` seconds. Telemetry arriving meanwhile is
+        processed (counted, recorded) as :meth:`poll` does.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            found = sent.final if final else (sent.acks[0] if sent.acks else None)
+            if found is not None:
+                return found
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            self.poll(left)
+
+    # -- telemetry --------------------------------------------------------------------------
+    def poll(self, timeout: float = 0.1, max_packets: int = 1000) -> list[ParseResult]:
+        """Receive what arrives within ``timeout`` (returns as soon as one batch was read)."""
+        results: list[ParseResult] = []
+        self._sock.settimeout(max(timeout, 1e-4))
+        try:
+            data, _ = self._sock.recvfrom(RECV_BUFFER)
+        except (TimeoutError, BlockingIOError):
+            return results
+        results.append(self._handle(data))
+        self._sock.setblocking(False)
+        try:
+            while len(results) < max_packets:
+                data, _ = self._sock.recvfrom(RECV_BUFFER)
+                results.append(self._handle(data))
+        except (BlockingIOError, InterruptedError):
+            pass
+        if self.recorder is not None:
+            self.recorder.maybe_flush()
+        return results
+
+    def _handle(self, data: bytes) -> ParseResult:
+        now = self.clock()
+        result = parse_datagram(data, self.defs, expect="tm")
+        self.stats.record_rx(len(data), result)
+        if self.recorder is not None:
+            self.recorder.record("rx", data, result, recorded_at=now)
+        if isinstance(result, Packet) and result.kind == "ack":
+            fields = result.fields
+            sent = self._sent.get(fields["security_seq"])
+            if sent is not None:
+                sent.acks.append(
+                    Ack(
+                        AckStage[fields["stage"].upper()],
+                        Reason[fields["reason"].upper()],
+                        fields["detail"],
+                        fields["command"],
+                        now,
+                        result,
+                    )
+                )
+        if self.on_packet is not None:
+            self.on_packet(result)
+        return result
+
+
+__all__ = ["Ack", "GswLink", "SentCommand"]
