@@ -15,12 +15,14 @@ starts, so a typo never leaves half a system running. Example::
         restart: on-failure      # never | on-failure | always
         max_restarts: 3
         required: true           # if it dies for good, the whole set stops with a non-zero exit
+        wait_for_path: /tmp/tlt/lifter  # start only once this exists (an emulator's pty link)
       - name: exercise
         executable: python
         args: [-m, some.job]
         on_exit: shutdown        # when it ends, stop the set and exit with its exit code
 
-``${VAR}`` in ``executable``, ``args``, ``cwd`` and ``env`` values expands from the launcher's
+``${VAR}`` (or ``${VAR:-default}``) in ``executable``, ``args``, ``cwd``, ``env`` and
+``wait_for_path`` values expands from the launcher's
 environment, the set's ``env``, the process's ``env``, and ``LAUNCH_DIR`` (the set's folder).
 """
 
@@ -41,7 +43,7 @@ from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validat
 RESTART_POLICIES = ("never", "on-failure", "always")
 ON_EXIT = ("continue", "shutdown")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
 
 
 def _name_check(value: str) -> str | None:
@@ -68,6 +70,8 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "restart_delay_s": opt("float", 1.0, minimum=0.0),
     "required": opt("bool", False),
     "on_exit": opt("str", "continue", choices=ON_EXIT),
+    "wait_for_path": opt("str", None, doc="start once this path exists (e.g. a device link)"),
+    "wait_timeout_s": opt("float", 30.0, minimum=0.0),
     "startup_s": opt("float", 3.0, minimum=0.0,
                      doc="an exit within this long after start is reported as a failure to start"),
 }
@@ -96,6 +100,8 @@ class ProcessSpec:
     required: bool
     on_exit: str
     startup_s: float
+    wait_for_path: str | None = None
+    wait_timeout_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -112,10 +118,12 @@ class LaunchSet:
 
 def _expand(text: str, variables: dict[str, str], source: str, key: str) -> str:
     def sub(match: re.Match[str]) -> str:
-        var = match.group(1)
-        if var not in variables:
-            raise ConfigError(source, key, f"${{{var}}} is not set in the environment or the launch set")
-        return variables[var]
+        var, default = match.group(1), match.group(2)
+        if var in variables:
+            return variables[var]
+        if default is not None:
+            return default
+        raise ConfigError(source, key, f"${{{var}}} is not set in the environment or the launch set")
 
     return _VAR.sub(sub, text)
 
@@ -185,6 +193,9 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None) ->
             restart_delay_s=proc["restart_delay_s"],
             required=proc["required"],
             on_exit=proc["on_exit"],
+            wait_for_path=proc["wait_for_path"] and _expand(
+                proc["wait_for_path"], variables, source, f"{key}.wait_for_path"),
+            wait_timeout_s=proc["wait_timeout_s"],
             startup_s=proc["startup_s"],
         ))
     return LaunchSet(

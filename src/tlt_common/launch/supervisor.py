@@ -54,6 +54,7 @@ class _Proc:
     started_at: float = 0.0
     restarts: int = 0
     restart_at: float | None = None
+    waiting_since: float | None = None
     returncode: int | None = None
     reader: threading.Thread | None = None
     last_lines: collections.deque[str] = field(default_factory=lambda: collections.deque(maxlen=_LAST_LINES))
@@ -83,10 +84,15 @@ class Supervisor:
             self._say(f"launch set '{self.launch_set.name}' ({self.launch_set.source}): "
                       f"{len(self._procs)} process(es)")
             for proc in self._procs:
-                self._start(proc)
+                if proc.spec.wait_for_path:
+                    proc.waiting_since = time.monotonic()
+                    self._say(f"{proc.spec.name} waits for {proc.spec.wait_for_path}")
+                else:
+                    self._start(proc)
             while not self._shutdown.is_set():
                 self._watch()
-                if not any(p.running or p.restart_at is not None for p in self._procs):
+                if not any(p.running or p.restart_at is not None or p.waiting_since is not None
+                           for p in self._procs):
                     failed = [p for p in self._procs if p.returncode not in (0, None)]
                     self._say("every process has ended")
                     return 1 if failed else self._exit_code
@@ -150,7 +156,9 @@ class Supervisor:
     def _watch(self) -> None:
         now = time.monotonic()
         for proc in self._procs:
-            if proc.restart_at is not None and now >= proc.restart_at:
+            if proc.waiting_since is not None:
+                self._check_wait(proc, now)
+            elif proc.restart_at is not None and now >= proc.restart_at:
                 proc.restarts += 1
                 self._say(f"restarting {proc.spec.name} ({proc.restarts} of {proc.spec.max_restarts})")
                 self._start(proc)
@@ -162,6 +170,21 @@ class Supervisor:
                     if proc.reader:
                         proc.reader.join(timeout=1.0)
                     self._after_exit(proc, early=now - proc.started_at < proc.spec.startup_s)
+
+    def _check_wait(self, proc: _Proc, now: float) -> None:
+        spec = proc.spec
+        assert proc.waiting_since is not None and spec.wait_for_path
+        if os.path.exists(spec.wait_for_path):
+            proc.waiting_since = None
+            self._start(proc)
+        elif now - proc.waiting_since > spec.wait_timeout_s:
+            proc.waiting_since = None
+            proc.returncode = 1
+            self._say(f"{spec.name} cannot start: {spec.wait_for_path} did not appear "
+                      f"within {spec.wait_timeout_s:g} s")
+            if spec.required or spec.on_exit == "shutdown":
+                self._exit_code = 1
+                self._shutdown.set()
 
     def _after_exit(self, proc: _Proc, *, early: bool) -> None:
         spec, rc = proc.spec, proc.returncode
@@ -195,7 +218,7 @@ class Supervisor:
     # --- stopping -------------------------------------------------------------------------------------
     def _stop_all(self) -> None:
         for proc in self._procs:
-            proc.restart_at = None
+            proc.restart_at = proc.waiting_since = None
         running = [p for p in self._procs if p.running]
         if running:
             self._say(f"stopping {', '.join(p.spec.name for p in running)}")

@@ -54,8 +54,19 @@ def test_a_full_set_resolves_arguments_parameters_and_environment(tmp_path):
         "-p", "rate_hz:=50", "-p", "port:=/dev/ttyACM0", "-p", "joints:=[a, b]", "-p", "safe:=true",
     )
     assert proc.env == {"SHARED": "one", "OWN": "two"}
+
     assert (proc.restart, proc.max_restarts, proc.required) == ("always", 2, True)
 
+
+def test_variables_may_have_defaults(tmp_path):
+    path = write(tmp_path, """
+        processes:
+          - {name: a, executable: python, args: ["${RUN_DIR:-/tmp/run}/x", "${HOME_ISH:-h}"],
+             wait_for_path: "${RUN_DIR:-/tmp/run}/dev"}
+    """)
+    (proc,) = load_launch_set(path, base_env={"HOME_ISH": "set"}).processes
+    assert proc.argv[1:] == ("/tmp/run/x", "set")
+    assert proc.wait_for_path == "/tmp/run/dev"
 
 def test_defaults(tmp_path):
     launch_set = load_launch_set(write(tmp_path, """

@@ -245,3 +245,39 @@ def test_a_job_with_on_exit_shutdown_ends_the_set_with_its_exit_code(tmp_path, l
     assert run.finish() == code
     run.wait_for(rf"\[launch\] job ended the launch set \(exit code {code}\)")
     assert not alive(service)
+
+
+def test_a_process_waits_for_its_device_path(tmp_path, launcher):
+    link = tmp_path / "device"
+    path = write_set(tmp_path, f"""
+        processes:
+          - name: driver
+            executable: python
+            args: ["-c", "print('driver up', flush=True); import time; time.sleep(60)"]
+            wait_for_path: {link}
+          - name: emulator
+            executable: python
+            args: ["-c", "import time, pathlib; time.sleep(1); pathlib.Path('{link}').touch(); time.sleep(9)"]
+    """)
+    run = launcher(path)
+    run.wait_for(rf"\[launch\] driver waits for {link}")
+    run.pid_of("emulator")
+    run.wait_for(r"^\[driver\] driver up$")
+    assert link.exists()
+    run.proc.send_signal(signal.SIGINT)
+    assert run.finish() == 0
+
+
+def test_a_device_path_that_never_appears_fails_a_required_process(tmp_path, launcher):
+    path = write_set(tmp_path, f"""
+        processes:
+          - name: driver
+            executable: python
+            args: ["-c", "import time; time.sleep(60)"]
+            wait_for_path: {tmp_path / "never"}
+            wait_timeout_s: 0.5
+            required: true
+    """)
+    run = launcher(path)
+    assert run.finish() == 1
+    run.wait_for(r"driver cannot start: .*never did not appear within 0.5 s")
