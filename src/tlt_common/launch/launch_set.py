@@ -28,6 +28,7 @@ environment, the set's ``env``, the process's ``env``, and ``LAUNCH_DIR`` (the s
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
@@ -81,8 +82,8 @@ LAUNCH_SET_SCHEMA: dict[str, Field] = {
     "description": opt("str", ""),
     "grace_period_s": opt("float", 5.0, minimum=0.1),
     "env": opt("map", {}, item=_SCALAR),
-    "processes": Field("list", min_items=1, item=Field("dict", schema=PROCESS_SCHEMA),
-                       doc="a list of processes"),
+    "include": opt("list", [], item=Field("str"), doc="launch sets whose processes join this one"),
+    "processes": opt("list", [], item=Field("dict", schema=PROCESS_SCHEMA)),
 }
 
 
@@ -149,20 +150,34 @@ def _ros_value(value: Any) -> str:
     return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
-def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None) -> LaunchSet:
+def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
+                    _including: tuple[Path, ...] = ()) -> LaunchSet:
     """Load and fully resolve a launch set; raise :class:`ConfigError` on any problem."""
     path = Path(path)
     source = str(path)
     data = validate(load_yaml(path), LAUNCH_SET_SCHEMA, source=source)
+    if not data["processes"] and not data["include"]:
+        raise ConfigError(source, "processes", "no processes and nothing included")
     base = dict(os.environ if base_env is None else base_env)
-    base["LAUNCH_DIR"] = str(path.resolve().parent)
-    set_env = {k: _expand(str(v), base, source, f"env.{k}") for k, v in data["env"].items()}
+    base.pop("LAUNCH_DIR", None)
+    set_env = {k: _expand(str(v), {**base, "LAUNCH_DIR": str(path.resolve().parent)}, source, f"env.{k}")
+               for k, v in data["env"].items()}
 
-    seen: set[str] = set()
-    specs = []
+    specs: list[ProcessSpec] = []
+    for i, name in enumerate(data["include"]):
+        included = (path.resolve().parent / name).resolve()
+        if not included.is_file():
+            raise ConfigError(source, f"include[{i}]", f"no launch set at {included}")
+        if included in _including or included == path.resolve():
+            raise ConfigError(source, f"include[{i}]", f"{name} includes itself")
+        # The including set's environment is visible to, and given to, what it includes.
+        inner = load_launch_set(included, {**base, **set_env}, (*_including, path.resolve()))
+        specs += [dataclasses.replace(spec, env={**set_env, **spec.env}) for spec in inner.processes]
+    base["LAUNCH_DIR"] = str(path.resolve().parent)
+    seen = {spec.name for spec in specs}
     for i, proc in enumerate(data["processes"]):
         key = f"processes[{i}]"
-        if proc["name"] in seen:
+        if proc["name"] in seen:  # also a name an included set uses
             raise ConfigError(source, f"{key}.name", f"duplicate process name {proc['name']!r}")
         seen.add(proc["name"])
         variables = {**base, **set_env}

@@ -79,8 +79,9 @@ def test_defaults(tmp_path):
 
 
 @pytest.mark.parametrize(("body", "message"), [
-    ("processes: []", "processes: expected at least 1 item(s), got 0"),
-    ("name: x", "processes: missing required key (a list of processes)"),
+    ("processes: []", "processes: no processes and nothing included"),
+    ("name: x", "processes: no processes and nothing included"),
+    ("include: [no_such_set.yaml]", "include[0]: no launch set at /"),
     ("processes:\n  - {name: a, executable: python, restrat: always}",
      "processes[0].restrat: unknown key (known keys: "),
     ("processes:\n  - {name: a, executable: python, max_restarts: many}",
@@ -107,6 +108,35 @@ def test_defaults(tmp_path):
 ])
 def test_bad_sets_are_refused_naming_file_key_and_expectation(tmp_path, body, message):
     assert refused(tmp_path, body).startswith(message)
+
+
+def test_included_sets_join_with_the_including_environment(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "devices.yaml").write_text(textwrap.dedent("""
+        env: {LINKS: "${RUN:-/default}/links"}
+        processes:
+          - {name: emulator, executable: python, args: ["${LINKS}", "${LAUNCH_DIR}"]}
+    """))
+    path = write(tmp_path, """
+        env: {RUN: /run/here}
+        include: [sub/devices.yaml]
+        processes:
+          - {name: job, executable: python, args: ["${LAUNCH_DIR}"], on_exit: shutdown}
+    """)
+    emulator, job = load_launch_set(path, base_env={}).processes
+    assert emulator.argv[1:] == ("/run/here/links", str(tmp_path / "sub"))
+    assert emulator.env == {"RUN": "/run/here", "LINKS": "/run/here/links"}
+    assert job.argv[1:] == (str(tmp_path),)
+
+
+def test_an_included_name_may_not_repeat_and_a_set_may_not_include_itself(tmp_path):
+    (tmp_path / "other.yaml").write_text("processes:\n  - {name: a, executable: python}\n")
+    path = write(tmp_path, "include: [other.yaml]\nprocesses:\n  - {name: a, executable: python}\n")
+    with pytest.raises(ConfigError, match=r"processes\[0\].name: duplicate process name 'a'"):
+        load_launch_set(path)
+    path.write_text("include: [set.yaml]\n")
+    with pytest.raises(ConfigError, match=r"include\[0\]: set.yaml includes itself"):
+        load_launch_set(path)
 
 
 def test_a_missing_file_is_named():
