@@ -53,6 +53,21 @@ def position_command_topic(component: str) -> str:
 
 LIFTER_SET_MODE = "/lifter/set_mode"
 
+
+def ur_unlock_service(ur_component: str) -> str:
+    """std_srvs/Trigger: release a UR protective stop through the dashboard."""
+    return f"/{ur_component}/unlock_protective_stop"
+
+
+def ee_calibrate_service(ee_component: str) -> str:
+    """std_srvs/Trigger: seek the EE width joint's limit switch and zero it."""
+    return f"/{ee_component}/calibrate"
+
+
+def ee_rivet_gun_service(ee_component: str) -> str:
+    """SetActuatorState: drive one of the EE's rivet-gun GPIO outputs."""
+    return f"/{ee_component}/set_rivet_gun"
+
 # --- agents (paper §IV, §V.C.1) --------------------------------------------------------------------
 ARS_ACTIONS = ("add_cross_frame", "add_member", "affix_member", "foundation_rivet")
 

@@ -59,6 +59,7 @@ from tlt_drivers.lifter.protocol import (
     VelocityCommand,
     decode_message,
 )
+from tlt_sim.emulators.pty_device import publish_link, withdraw_link
 
 
 class Button(enum.IntEnum):
@@ -451,11 +452,7 @@ class PtyFirmwareServer:
         os.set_blocking(self._master, False)
         self.path = os.ttyname(self._slave)
         if self.link_path:
-            tmp = self.link_path.with_name(self.link_path.name + ".new")
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
-            tmp.symlink_to(self.path)
-            tmp.replace(self.link_path)
+            publish_link(self.link_path, self.path)
         self._running.set()
         self._thread = threading.Thread(target=self._serve, name="lifter-firmware", daemon=True)
         self._thread.start()
@@ -471,8 +468,8 @@ class PtyFirmwareServer:
                 with contextlib.suppress(OSError):
                     os.close(fd)
         self._master = self._slave = -1
-        if self.link_path and self.link_path.is_symlink() and os.readlink(self.link_path) == self.path:
-            self.link_path.unlink()
+        if self.link_path:
+            withdraw_link(self.link_path, self.path)
 
     def __enter__(self) -> PtyFirmwareServer:
         self.start()

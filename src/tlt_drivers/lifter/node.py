@@ -33,6 +33,7 @@ from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import HardwareStatus, LifterState
 from tlt_interfaces.srv import SetLifterMode
 
+from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_drivers.hardware_interface import Lifecycle
 
@@ -46,10 +47,10 @@ from .velocity_trajectory_controller import (
     VelocityTrajectoryController,
 )
 
-STATE_TOPIC = "lifter/state"
-STATUS_TOPIC = "lifter/hardware_status"
-MODE_SERVICE = "lifter/set_mode"
-TRAJECTORY_ACTION = "lifter/follow_joint_trajectory"
+STATE_TOPIC = ros_names.state_topic(ros_names.LIFTER)
+STATUS_TOPIC = ros_names.hardware_status_topic(ros_names.LIFTER)
+MODE_SERVICE = ros_names.LIFTER_SET_MODE
+TRAJECTORY_ACTION = ros_names.trajectory_action(ros_names.LIFTER)
 
 Result = FollowJointTrajectory.Result
 

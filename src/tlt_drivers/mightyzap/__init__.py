@@ -1,0 +1,1 @@
+"""MightyZAP linear actuators (Top Grippers) over the IR serial protocol with pyserial."""

@@ -1,0 +1,55 @@
+"""``active_grippers`` driver node: four MX-106T on lead screws (paper §V.B.3), trajectory-controlled.
+
+Publishes ``tlt_interfaces/msg/GripperState`` on ``/active_grippers/state``; a gripper counts as
+engaged when its position is beyond the joint's ``engaged_above``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from tlt_interfaces.msg import GripperState
+
+from tlt_common import ros_names
+from tlt_drivers.dynamixel.config import load_chain
+from tlt_drivers.hardware_interface import Lifecycle
+from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
+from tlt_drivers.nodes.node_main import run_node
+
+
+class GripperGroupNode(DynamixelDriverNode):
+    """A Dynamixel gripper group publishing GripperState."""
+
+    def __init__(
+        self, config: dict[str, Any], *, node_name: str | None = None, start: bool = True, context=None
+    ) -> None:
+        super().__init__(node_name or config["component"], config, start=False, context=context)
+        self.state_pub = self.create_publisher(GripperState, ros_names.state_topic(config["component"]), 10)
+        if start:
+            self.loop.start()
+
+    def publish_state(self) -> None:
+        msg = GripperState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.group = self.config["component"]
+        names = self.hw.joint_names
+        msg.joint_names = names
+        msg.position = [self.hw.position[n] for n in names]
+        msg.goal_position = [self.hw.command[n] for n in names]
+        msg.engaged = [
+            j.engaged_above is not None and self.hw.position[j.name] >= j.engaged_above
+            for j in self.hw.joints
+        ]
+        msg.hardware_error = [self.hw.hardware_error[n] & 0xFF for n in names]
+        msg.torque_enabled = self.hw.state == Lifecycle.ACTIVE
+        msg.fault = self.hw.state == Lifecycle.ERROR
+        msg.fault_reason = self.hw.fault
+        self.state_pub.publish(msg)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("active_grippers", "active_grippers.yaml", load_chain, GripperGroupNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,217 @@
+"""``ee_x`` / ``ee_y`` driver node: one ARS end effector (paper §V.B.4, Fig. 12).
+
+One Dynamixel chain carries three MX-106T with different operating modes: the two grasp joints
+(current-based position, so a grasp presses with a bounded current) under the trajectory
+controller (``/<ee>/follow_joint_trajectory``), and the lead-screw width joint (extended position,
+multi-turn) under the group position controller (``/<ee>/position_command``). GPIO: a limit-switch
+input for the width joint's calibration and two rivet-gun outputs, reached through any object
+with ``read_input(name) -> bool`` and ``write_output(name, value)`` (:class:`DigitalIO`).
+
+Calibration runs on activation when ``ee.calibration.on_start`` is set, and on request through
+``/<ee>/calibrate`` (``std_srvs/Trigger``). Until it has succeeded every motion command is refused
+with the reason. Rivet guns: ``/<ee>/set_rivet_gun`` (``tlt_interfaces/srv/SetActuatorState``,
+actuator ``rivet_gun_0`` or ``rivet_gun_1``, state ``on`` or ``off``). State:
+``tlt_interfaces/msg/EndEffectorState`` on ``/<ee>/state``; ``part_grasped`` is true when every grasp
+joint presses with at least ``ee.grasp_effort_threshold`` of stall current.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any, Protocol
+
+from std_srvs.srv import Trigger
+from tlt_interfaces.msg import EndEffectorState
+from tlt_interfaces.srv import SetActuatorState
+
+from tlt_common import ros_names
+from tlt_drivers.dynamixel.config import load_chain
+from tlt_drivers.dynamixel.ee_calibration import WidthCalibration
+from tlt_drivers.hardware_interface import Lifecycle
+from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
+from tlt_drivers.nodes.node_main import HARDWARE_CONFIG_DIR, run_node
+
+
+class DigitalIO(Protocol):
+    """The two GPIO calls the end effector needs (implemented by the GPIO driver and its emulator)."""
+
+    def read_input(self, name: str) -> bool: ...
+
+    def write_output(self, name: str, value: bool) -> None: ...
+
+
+class EndEffectorNode(DynamixelDriverNode):
+    """The end-effector driver over ``gpio`` and the chain in ``config`` (which must have ``ee``)."""
+
+    def __init__(self, config: dict[str, Any], gpio: DigitalIO, *, start: bool = True, context=None) -> None:
+        if not config.get("ee"):
+            raise ValueError(f"{config['component']}: an end-effector config needs an 'ee' section")
+        self.ee = config["ee"]
+        self.gpio = gpio
+        self._calibration: WidthCalibration | None = None
+        super().__init__(
+            config["component"], config, motion_gate=self._calibration_refusal, start=False, context=context
+        )
+        self.calibration = WidthCalibration(
+            self.hw,
+            self.ee["width_joint"],
+            self.ee["calibration"],
+            self._limit_switch,
+            on_end=self._calibration_ended,
+        )
+        self._calibration = self.calibration
+        self.loop.override = self._override
+        self.rivet_outputs = [False] * len(self.ee["rivet_gun_outputs"])
+        self._activations_seen = 0
+        component = config["component"]
+        self.state_pub = self.create_publisher(EndEffectorState, ros_names.state_topic(component), 10)
+        self.create_service(Trigger, ros_names.ee_calibrate_service(component), self._on_calibrate)
+        self.create_service(SetActuatorState, ros_names.ee_rivet_gun_service(component), self._on_rivet_gun)
+        for name in self.ee["rivet_gun_outputs"]:
+            self.gpio.write_output(name, False)
+        if start:
+            self.loop.start()
+
+    # --- calibration ---------------------------------------------------------------------------------------
+    def _limit_switch(self) -> bool:
+        return bool(self.gpio.read_input(self.ee["limit_switch_input"]))
+
+    def _calibration_refusal(self) -> str | None:
+        return self._calibration.refusal() if self._calibration is not None else "starting up"
+
+    def _calibration_ended(self) -> None:
+        if self.calibration.calibrated:
+            self.get_logger().info(f"{self.config['component']}: width joint zeroed on the limit switch")
+        else:
+            self.get_logger().error(
+                f"{self.config['component']}: calibration failed: {self.calibration.reason}"
+            )
+        # Hold where the width joint stopped (in the new coordinates after a zeroing).
+        if self.loop.group is not None:
+            self.loop.group.reset_hold(self.hw.position)
+
+    def _override(self, now: float) -> dict[str, float]:
+        if self.loop.activations != self._activations_seen:
+            if self._activations_seen:
+                # Re-activated after a fault: the servos may have rebooted and lost their multi-turn count.
+                self.calibration.invalidate("hardware was re-activated after a fault")
+            self._activations_seen = self.loop.activations
+            if self.ee["calibration"]["on_start"]:
+                self.calibration.start(now)
+        return self.calibration.update(now)
+
+    def _on_calibrate(self, _request, response):
+        problem = self.calibration.start(self.loop.now())
+        response.success = problem is None
+        response.message = problem or f"calibration {self.calibration.state.value}"
+        return response
+
+    # --- rivet guns ----------------------------------------------------------------------------------------
+    def _on_rivet_gun(self, request, response):
+        names = [f"rivet_gun_{i}" for i in range(len(self.rivet_outputs))]
+        if request.actuator not in names:
+            response.accepted, response.reason = (
+                False,
+                f"unknown actuator {request.actuator!r}; expected {names}",
+            )
+            return response
+        if request.state not in ("on", "off"):
+            response.accepted, response.reason = False, f"state {request.state!r} is not 'on' or 'off'"
+            return response
+        index = names.index(request.actuator)
+        value = request.state == "on"
+        try:
+            self.gpio.write_output(self.ee["rivet_gun_outputs"][index], value)
+        except Exception as exc:  # a GPIO failure is reported to the caller, not raised into the executor
+            response.accepted, response.reason = False, f"GPIO write failed: {exc}"
+            return response
+        self.rivet_outputs[index] = value
+        response.accepted, response.reason = True, ""
+        return response
+
+    def close(self) -> None:
+        super().close()
+        for name in self.ee["rivet_gun_outputs"]:
+            try:
+                self.gpio.write_output(name, False)  # never leave a rivet gun firing
+            except Exception as exc:  # shutting down anyway; the GPIO may already be gone
+                self.get_logger().warning(f"rivet gun {name} not released: {exc}")
+        close = getattr(self.gpio, "close", None)
+        if close is not None:
+            close()
+
+    # --- state ---------------------------------------------------------------------------------------------
+    def publish_state(self) -> None:
+        names = self.hw.joint_names
+        msg = EndEffectorState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.ars = self.ee["ars"]
+        msg.joint_names = names
+        msg.position = [self.hw.position[n] for n in names]
+        msg.velocity = [self.hw.velocity[n] for n in names]
+        msg.effort = [self.hw.effort[n] for n in names]
+        msg.hardware_error = [self.hw.hardware_error[n] & 0xFF for n in names]
+        msg.calibrated = self.calibration.calibrated
+        try:
+            msg.limit_switch = self._limit_switch()
+        except Exception:  # a failing GPIO read must not stop the state stream
+            msg.limit_switch = False
+        threshold = self.ee["grasp_effort_threshold"]
+        msg.part_grasped = self.hw.state == Lifecycle.ACTIVE and all(
+            abs(self.hw.effort[n]) >= threshold for n in self.ee["grasp_joints"]
+        )
+        msg.rivet_gun_output = [bool(v) for v in self.rivet_outputs[:2]]
+        msg.fault = self.hw.state == Lifecycle.ERROR
+        msg.fault_reason = self.hw.fault
+        self.state_pub.publish(msg)
+
+
+class GpioUnavailable(RuntimeError):
+    """No GPIO backend could be opened for the end effector."""
+
+
+def open_ee_gpio(config: dict[str, Any]) -> DigitalIO:
+    """The EE's GPIO lines from ``ee.gpio_config`` through :func:`tlt_drivers.gpio.lines.open_gpio`
+    (character device on the Jetsons, the twin's emulated chip otherwise, as that file says)."""
+    name = config["ee"].get("gpio_config")
+    if not name:
+        raise GpioUnavailable(f"{config['component']}: ee.gpio_config names no GPIO map")
+    path = Path(name)
+    if not path.is_absolute():
+        path = HARDWARE_CONFIG_DIR / path
+    try:
+        from tlt_drivers.gpio.lines import open_gpio
+    except ImportError as exc:
+        raise GpioUnavailable(f"{config['component']}: the GPIO driver is not available: {exc}") from exc
+    try:
+        return open_gpio(path)
+    except OSError as exc:
+        raise GpioUnavailable(f"{config['component']}: cannot open GPIO from {path}: {exc}") from exc
+
+
+def main(argv: list[str] | None = None, default_config: str = "ee_x.yaml") -> int:
+    """Run one end-effector node (``--config`` picks ee_x.yaml or ee_y.yaml)."""
+
+    def build(config: dict[str, Any]) -> EndEffectorNode:
+        return EndEffectorNode(config, open_ee_gpio(config))
+
+    try:
+        return run_node("ee", default_config, load_chain, build, argv)
+    except GpioUnavailable as exc:
+        print(f"ee: {exc}", file=sys.stderr)
+        return 2
+
+
+def main_x(argv: list[str] | None = None) -> int:
+    """``ee_x``: the end effector of ars_x (config/hardware/ee_x.yaml unless ``--config``)."""
+    return main(argv, "ee_x.yaml")
+
+
+def main_y(argv: list[str] | None = None) -> int:
+    """``ee_y``: the end effector of ars_y (config/hardware/ee_y.yaml unless ``--config``)."""
+    return main(argv, "ee_y.yaml")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,69 @@
+"""``top_grippers`` driver node: MightyZAP push pins on one IR-USB02 port (paper §V.B.2).
+
+Position commands (metres of stroke, one per actuator in YAML order) arrive as
+``std_msgs/Float64MultiArray`` on ``/top_grippers/position_command`` (JointGroupPositionController);
+``tlt_interfaces/msg/GripperState`` goes out on ``/top_grippers/state``, with ``engaged`` from the
+measured stroke against each actuator's ``engaged_above``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.node import Node
+from tlt_interfaces.msg import GripperState
+
+from tlt_common import ros_names
+from tlt_drivers.hardware_interface import Lifecycle
+from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
+from tlt_drivers.mightyzap.config import load_mightyzap
+from tlt_drivers.nodes.driver_loop import DriverLoop
+from tlt_drivers.nodes.node_main import run_node
+
+
+class TopGrippersNode(Node):
+    def __init__(self, config: dict[str, Any], *, start: bool = True, context=None) -> None:
+        super().__init__(config["component"], context=context)
+        self.config = config
+        self.hw = MightyZapChainInterface(config)
+        acts = config["actuators"]
+        self.loop = DriverLoop(
+            self,
+            self.hw,
+            component=config["component"],
+            rate_hz=config["rate_hz"],
+            state_rate_hz=config["state_rate_hz"],
+            recover_period_s=config["comm"]["recover_period_s"],
+            limits={a["name"]: (a["lower"], a["upper"]) for a in acts},
+            group_joints=[a["name"] for a in acts],
+            publish_state=self.publish_state,
+        )
+        self.state_pub = self.create_publisher(GripperState, ros_names.state_topic(config["component"]), 10)
+        if start:
+            self.loop.start()
+
+    def publish_state(self) -> None:
+        msg = GripperState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.group = self.config["component"]
+        names = self.hw.joint_names
+        msg.joint_names = names
+        msg.position = [self.hw.position[n] for n in names]
+        msg.goal_position = [self.hw.command[n] for n in names]
+        msg.engaged = [self.hw.position[a["name"]] >= a["engaged_above"] for a in self.hw.actuators]
+        msg.hardware_error = [self.hw.hardware_error[n] & 0xFF for n in names]
+        msg.torque_enabled = self.hw.state == Lifecycle.ACTIVE
+        msg.fault = self.hw.state == Lifecycle.ERROR
+        msg.fault_reason = self.hw.fault
+        self.state_pub.publish(msg)
+
+    def close(self) -> None:
+        self.loop.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("top_grippers", "top_grippers.yaml", load_mightyzap, TopGrippersNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

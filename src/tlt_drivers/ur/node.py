@@ -1,0 +1,218 @@
+"""The ``ur`` driver node: one UR10e arm over ur-rtde (paper §V.B, Fig. 5), e.g. ``ur_x``.
+
+Interfaces (names relative to the node's namespace; ``<c>`` is the configured component):
+
+* ``/<c>/joint_states`` (``sensor_msgs/JointState``): actual positions and velocities, every
+  control cycle while the controller's data is fresh;
+* ``hardware_status`` (``tlt_interfaces/msg/HardwareStatus``, component ``<c>``): at
+  ``status_rate_hz`` and at once on any change of lifecycle state or fault;
+* ``/<c>/follow_joint_trajectory`` (``tlt_interfaces/action/FollowJointTrajectory``): the shared
+  :class:`~tlt_drivers.controllers.trajectory.JointTrajectoryController` interpolates the goal
+  and judges tolerances; each control cycle its position command is streamed with servoJ. A new
+  goal replaces the running one; a protective stop, a stopped control script or a lost link
+  aborts it with HARDWARE_FAULT; goals outside the joint limits end at once with INVALID_GOAL
+  naming the joint and the limit;
+* ``/<c>/unlock_protective_stop`` (``std_srvs/Trigger``): asks the controller's dashboard to
+  release a protective stop; the node then returns to ACTIVE by itself.
+
+One timer at ``control_rate_hz`` runs the cycle (read, controller, write). While the interface is
+in ERROR the cycle tries to recover every ``reconnect_period_s``: the probe waits at most
+``probe_timeout_s``; a reconnect re-runs ur-rtde's handshake, whose first connection holds the
+interpreter for the few milliseconds the controller needs to answer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from tlt_interfaces.msg import HardwareStatus
+
+from tlt_common import ros_names
+from tlt_common.config_schema import ConfigError
+from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
+from tlt_drivers.controllers.trajectory import JointTrajectoryController
+from tlt_drivers.hardware_interface import Lifecycle
+
+from .config import DEFAULT_CONFIG, URConfig, load_ur_config
+from .hardware import URHardware
+from .rtde_link import LinkDown
+
+
+class URNode(Node):
+    """The driver node of one arm; ``hw`` is its :class:`URHardware`."""
+
+    def __init__(self, config: URConfig, *, hardware: URHardware | None = None, **node_kwargs) -> None:
+        super().__init__(node_kwargs.pop("node_name", config.component), **node_kwargs)
+        self.config = config
+        self.hw = hardware or URHardware(config)
+        c = config.component
+        self.controller = JointTrajectoryController(
+            config.joint_names,
+            config.limits,
+            path_tolerance=config.default_path_tolerance,
+            goal_tolerance=config.default_goal_tolerance,
+            goal_time_tolerance=config.default_goal_time_tolerance_s,
+            motion_gate=self._motion_gate,
+        )
+        self._joint_pub = self.create_publisher(JointState, ros_names.joint_states_topic(c), 10)
+        self._status_pub = self.create_publisher(HardwareStatus, ros_names.hardware_status_topic(c), 10)
+        self.action = TrajectoryActionServer(
+            self, ros_names.trajectory_action(c), self.controller, lambda: self.hw.positions, self._ros_now
+        )
+        self.create_service(Trigger, ros_names.ur_unlock_service(c), self._on_unlock)
+        self._reported: tuple[Lifecycle, str] | None = None
+        self._settling = False
+        self._last_recovery = time.monotonic()
+        if not (self.hw.configure() and self.hw.activate()):
+            self.get_logger().error(
+                f"{c}: arm not ready: {self.hw.fault}; retrying every {config.reconnect_period_s} s"
+            )
+        self._timer = self.create_timer(1.0 / config.control_rate_hz, self._control_cycle)
+        self._status_timer = self.create_timer(1.0 / config.status_rate_hz, self._publish_status)
+
+    # --- control cycle -------------------------------------------------------------------------
+    def _motion_gate(self) -> str | None:
+        if self.hw.state != Lifecycle.ACTIVE:
+            return f"{self.config.component} is not active: {self.hw.fault or self.hw.state.name.lower()}"
+        return None
+
+    def _control_cycle(self) -> None:
+        hw = self.hw
+        now = time.monotonic()
+        if hw.state in (Lifecycle.INACTIVE, Lifecycle.ACTIVE):
+            hw.read(now)
+        if hw.state == Lifecycle.ACTIVE:
+            goal = self.controller.active
+            if goal is not None and not goal.done:
+                commands = self.controller.update(self._ros_now(), hw.positions)
+                self._settling = True
+            elif self._settling and self._still_moving():
+                # After a goal ends the controller holds a point (the final one after success);
+                # it is streamed until the arm is at rest there, so the arm does not coast past it.
+                commands = self.controller.hold
+            else:
+                commands, self._settling = None, False
+            target = None if commands is None else [commands[n] for n in self.config.joint_names]
+            try:
+                hw.set_servo_target(target)
+            except ValueError as exc:  # a hold or interpolated point outside the limits
+                self.controller.fault(str(exc), hw.positions)
+                hw.set_servo_target(None)
+            hw.write(now)
+        if hw.state == Lifecycle.ERROR:
+            self.controller.fault(f"{self.config.component}: {hw.fault}", hw.positions)
+            if now - self._last_recovery >= self.config.reconnect_period_s:
+                self._last_recovery = now
+                if hw.try_recover():
+                    self.controller.reset_hold(hw.positions)
+                    self.get_logger().info(f"{self.config.component}: arm active again")
+        self.action.tick()
+        if hw.link_ok and hw.reading is not None and hw.state != Lifecycle.ERROR:
+            self._publish_joints()
+        if (hw.state, hw.fault) != self._reported:
+            self._publish_status()
+
+    def _still_moving(self) -> bool:
+        """Whether the arm is moving or away from the held point (rest: 1 mrad/s, 1 mrad)."""
+        reading, hold = self.hw.reading, self.controller.hold
+        if reading is None:
+            return False
+        if max(abs(v) for v in reading.qd) > 1e-3:
+            return True
+        names = self.config.joint_names
+        return any(abs(q - hold.get(n, q)) > 1e-3 for n, q in zip(names, reading.q, strict=True))
+
+    def _ros_now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # --- services --------------------------------------------------------------------------------
+    def _on_unlock(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            answer = self.hw.unlock_protective_stop()
+        except (LinkDown, RuntimeError) as exc:
+            response.success, response.message = False, str(exc)
+            return response
+        response.success = answer == "Protective stop releasing"
+        response.message = answer
+        self._last_recovery = 0.0  # try to come back on the next cycle
+        return response
+
+    # --- publication -----------------------------------------------------------------------------
+    def _publish_joints(self) -> None:
+        msg = JointState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = list(self.config.joint_names)
+        msg.position = list(self.hw.reading.q)
+        msg.velocity = list(self.hw.reading.qd)
+        self._joint_pub.publish(msg)
+
+    def _publish_status(self) -> None:
+        msg = HardwareStatus()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.component = self.hw.name
+        msg.lifecycle_state = int(self.hw.state)
+        msg.link_ok = bool(self.hw.link_ok)
+        msg.errors = self.hw.errors
+        msg.fault = self.hw.fault
+        self._reported = (self.hw.state, self.hw.fault)
+        self._status_pub.publish(msg)
+
+    def shutdown(self) -> None:
+        """Abort any goal, stop the arm and the control script, close the link."""
+        self.controller.fault(f"{self.config.component} driver shutting down", self.hw.positions)
+        self.action.tick()
+        self.hw.shutdown()
+
+
+SHUTDOWN_TIMEOUT_S = 3.0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one UR driver node until interrupted. Returns the process exit status."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(prog="tlt-ur", description="UR10e driver node (ur-rtde)")
+    parser.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help="arm YAML (config/hardware/ur_x.yaml)"
+    )
+    parser.add_argument("--host", help="controller address, overriding the configured host")
+    own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-ur", *args])[1:])
+    try:
+        config = load_ur_config(own.config)
+    except ConfigError as exc:
+        print(f"tlt-ur: {exc}", file=sys.stderr)
+        return 2
+    if own.host:
+        config = replace(config, host=own.host)
+    rclpy.init(args=["tlt-ur", *args])
+    node = URNode(config)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        # With the controller gone, ur-rtde's disconnect waits on its own reconnect attempts; the
+        # controller stops the arm by itself when the script's connection drops, so do not hang.
+        done = threading.Event()
+        threading.Thread(target=lambda: (node.shutdown(), done.set()), daemon=True).start()
+        if not done.wait(SHUTDOWN_TIMEOUT_S):
+            print(f"tlt-ur: no clean disconnect from {config.host} within {SHUTDOWN_TIMEOUT_S:g} s; "
+                  "exiting without it", file=sys.stderr, flush=True)
+            os._exit(0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

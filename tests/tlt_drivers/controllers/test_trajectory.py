@@ -1,0 +1,148 @@
+"""JointTrajectoryController logic: interpolation, tolerances, goal time, replacement, refusal."""
+
+from __future__ import annotations
+
+import pytest
+
+from tlt_drivers.controllers import trajectory as jtc
+from tlt_drivers.controllers.trajectory import (
+    GoalStatus,
+    JointTrajectoryController,
+    TrajectoryGoal,
+    TrajectoryPoint,
+    sample,
+)
+
+LIMITS = {"a": (-1.0, 1.0), "b": (-2.0, 2.0)}
+
+
+def make(**kw) -> JointTrajectoryController:
+    return JointTrajectoryController(
+        ["a", "b"], LIMITS, path_tolerance=0.1, goal_tolerance=0.01, goal_time_tolerance=0.5, **kw
+    )
+
+
+def goal(*points, names=("a", "b"), **kw) -> TrajectoryGoal:
+    return TrajectoryGoal(tuple(names), tuple(TrajectoryPoint(*p) for p in points), **kw)
+
+
+def test_linear_interpolation_from_start_state():
+    g = goal((1.0, (0.5, 1.0)), (2.0, (1.0, 0.0)))
+    pos, vel = sample(g, (0.0, 0.0), 0.5)
+    assert pos == pytest.approx({"a": 0.25, "b": 0.5}) and vel == pytest.approx({"a": 0.5, "b": 1.0})
+    pos, _ = sample(g, (0.0, 0.0), 1.5)
+    assert pos == pytest.approx({"a": 0.75, "b": 0.5})
+    assert sample(g, (0.0, 0.0), 5.0)[0] == {"a": 1.0, "b": 0.0}
+
+
+def test_cubic_interpolation_meets_point_velocities():
+    g = goal((1.0, (1.0, 0.0), (0.0, 0.0)))
+    pos, vel = sample(g, (0.0, 0.0), 0.5)
+    assert pos["a"] == pytest.approx(0.5) and vel["a"] == pytest.approx(1.5)  # smoothstep mid-speed
+    assert sample(g, (0.0, 0.0), 0.0)[1]["a"] == pytest.approx(0.0)
+    assert sample(g, (0.0, 0.0), 1.0)[1]["a"] == pytest.approx(0.0)
+    g2 = goal((1.0, (1.0, 0.0), (2.0, 0.0)))
+    assert sample(g2, (0.0, 0.0), 1.0)[1]["a"] == pytest.approx(2.0)
+
+
+def test_tracking_goal_succeeds_and_holds_final_point():
+    c = make()
+    run = c.start(goal((1.0, (0.5, -0.5))), 10.0, {"a": 0.0, "b": 0.0})
+    actual = {"a": 0.0, "b": 0.0}
+    for k in range(21):  # a servo one 50 ms cycle behind the command
+        actual = c.update(10.0 + 0.05 * k, actual)
+        assert run.status == GoalStatus.RUNNING
+    assert actual == pytest.approx({"a": 0.5, "b": -0.5})
+    cmd = c.update(11.05, {"a": 0.5, "b": -0.5})
+    assert run.status == GoalStatus.SUCCEEDED and run.error_code == jtc.SUCCESSFUL
+    assert cmd == {"a": 0.5, "b": -0.5}
+    assert c.update(20.0, {"a": 0.5, "b": -0.5}) == {"a": 0.5, "b": -0.5}
+
+
+def test_path_tolerance_violation_aborts_and_holds_actual():
+    c = make()
+    run = c.start(goal((1.0, (1.0, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    c.update(0.1, {"a": 0.0, "b": 0.0})  # desired 0.1, actual 0.0: within 0.1
+    cmd = c.update(0.5, {"a": 0.0, "b": 0.0})  # desired 0.5: 0.5 off
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.PATH_TOLERANCE_VIOLATED
+    assert "joint 'a'" in run.error_string
+    assert cmd == {"a": 0.0, "b": 0.0}
+
+
+def test_negative_tolerance_means_no_limit():
+    c = make()
+    run = c.start(goal((1.0, (1.0, 0.0)), path_tolerance={"a": -1.0}), 0.0, {"a": 0.0, "b": 0.0})
+    c.update(0.5, {"a": 0.0, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING
+
+
+def test_goal_tolerance_after_goal_time_aborts():
+    c = make()
+    run = c.start(goal((1.0, (0.5, 0.0)), path_tolerance={"a": -1.0}), 0.0, {"a": 0.0, "b": 0.0})
+    c.update(1.2, {"a": 0.45, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING  # still within the goal time tolerance
+    c.update(1.6, {"a": 0.45, "b": 0.0})
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.GOAL_TOLERANCE_VIOLATED
+    assert "joint 'a'" in run.error_string and "0.0500" in run.error_string
+
+
+def test_goal_time_tolerance_from_goal_overrides_default():
+    c = make()
+    run = c.start(
+        goal((1.0, (0.5, 0.0)), path_tolerance={"a": -1.0}, goal_time_tolerance=2.0),
+        0.0,
+        {"a": 0.0, "b": 0.0},
+    )
+    c.update(2.5, {"a": 0.45, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING
+    c.update(2.6, {"a": 0.5, "b": 0.0})
+    assert run.status == GoalStatus.SUCCEEDED
+
+
+def test_new_goal_preempts_the_running_one():
+    c = make()
+    first = c.start(goal((2.0, (1.0, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    c.update(0.5, {"a": 0.25, "b": 0.0})
+    second = c.start(goal((1.0, (-0.5,)), names=("a",)), 0.5, {"a": 0.25, "b": 0.0})
+    assert first.status == GoalStatus.PREEMPTED and "replaced" in first.error_string
+    cmd = c.update(1.0, {"a": -0.125, "b": 0.0})
+    assert cmd["a"] == pytest.approx(-0.125) and cmd["b"] == 0.0  # b holds
+    assert second.status == GoalStatus.RUNNING
+
+
+@pytest.mark.parametrize(
+    ("g", "code", "words"),
+    [
+        (goal((1.0, (0.5,)), names=("z",)), jtc.INVALID_JOINTS, "unknown joint"),
+        (goal((1.0, (0.5, 0.5)), names=("a", "a")), jtc.INVALID_JOINTS, "twice"),
+        (goal(), jtc.INVALID_GOAL, "no points"),
+        (goal((1.0, (0.5, 0.0)), (1.0, (0.6, 0.0))), jtc.INVALID_GOAL, "not after"),
+        (goal((1.0, (0.5,))), jtc.INVALID_GOAL, "1 positions for 2 joints"),
+        (goal((1.0, (1.5, 0.0))), jtc.INVALID_GOAL, "joint 'a' position 1.5 above upper limit 1.0"),
+        (goal((1.0, (0.0, -3.0))), jtc.INVALID_GOAL, "joint 'b' position -3.0 below lower limit -2.0"),
+        (goal((1.0, (float("nan"), 0.0))), jtc.INVALID_GOAL, "not a number"),
+    ],
+)
+def test_invalid_goals_are_aborted_with_a_reason_and_do_not_preempt(g, code, words):
+    c = make()
+    running = c.start(goal((2.0, (1.0, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    bad = c.start(g, 0.1, {"a": 0.0, "b": 0.0})
+    assert bad.status == GoalStatus.ABORTED and bad.error_code == code and words in bad.error_string
+    assert running.status == GoalStatus.RUNNING
+
+
+def test_motion_gate_refuses_with_its_reason():
+    c = make(motion_gate=lambda: "ee_x is not calibrated")
+    run = c.start(goal((1.0, (0.5, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.HARDWARE_FAULT
+    assert run.error_string == "ee_x is not calibrated"
+
+
+def test_fault_and_cancel_stop_where_the_joints_are():
+    c = make()
+    run = c.start(goal((1.0, (1.0, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    c.fault("link lost", {"a": 0.3, "b": 0.0})
+    assert run.error_code == jtc.HARDWARE_FAULT and c.update(0.5, {"a": 0.3, "b": 0.0})["a"] == 0.3
+    run2 = c.start(goal((1.0, (1.0, 0.0))), 1.0, {"a": 0.3, "b": 0.0})
+    c.cancel({"a": 0.4, "b": 0.0})
+    assert run2.status == GoalStatus.CANCELED and c.update(1.5, {"a": 0.4, "b": 0.0})["a"] == 0.4

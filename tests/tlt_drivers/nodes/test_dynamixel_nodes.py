@@ -1,0 +1,417 @@
+"""Driver nodes in-process against the emulated chains on real ptys: the active_grippers node follows a
+FollowJointTrajectory goal and refuses one outside the limits; the end-effector node refuses motion
+until its limit-switch calibration, then accepts it; the top_grippers node applies group commands."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import pytest
+import rclpy
+from builtin_interfaces.msg import Duration
+from rclpy.action import ActionClient
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
+from tlt_interfaces.action import FollowJointTrajectory
+from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, JointTolerance
+from tlt_sim.emulators.dynamixel_chain import DynamixelChain
+from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD
+from tlt_sim.emulators.mightyzap_chain import MightyZapChain
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from tlt_drivers.dynamixel.config import load_chain, validate_chain
+from tlt_drivers.mightyzap.config import load_mightyzap
+from tlt_drivers.nodes.active_grippers import GripperGroupNode
+from tlt_drivers.nodes.camera_mounts import CameraMountsNode
+from tlt_drivers.nodes.ee import EndEffectorNode
+from tlt_drivers.nodes.top_grippers import TopGrippersNode
+
+TIMEOUT_S = 15.0
+#: the emulators share this process and a 2-core host with other test runs: allow generous reply times
+LATENCY_MS = 60.0
+
+
+class Harness:
+    """A private ROS context spinning the driver node and a client node in one background thread."""
+
+    def __init__(self) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.client = Node("driver_test_client", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.client)
+        self.nodes: list[Node] = []
+        self.thread: threading.Thread | None = None
+        self.closed = False
+
+    def add(self, node: Node) -> Node:
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin(self) -> None:
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self.executor.shutdown(timeout_sec=5.0)
+        if self.thread is not None:
+            self.thread.join(timeout=5.0)  # no control cycle may run while the nodes close their links
+        for node in self.nodes:
+            node.close()
+            node.destroy_node()
+        self.client.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+    @staticmethod
+    def wait(predicate, what: str, timeout: float = TIMEOUT_S):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            value = predicate()
+            if value:
+                return value
+            time.sleep(0.01)
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def result(self, future, what: str):
+        self.wait(future.done, what)
+        return future.result()
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+def send_goal(h: Harness, action: ActionClient, names, positions, seconds: float):
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = list(names)
+    point = JointTrajectoryPoint(positions=list(positions))
+    point.time_from_start = Duration(sec=int(seconds), nanosec=int((seconds % 1) * 1e9))
+    goal.trajectory.points = [point]
+    h.wait(action.server_is_ready, "action server")
+    handle = h.result(action.send_goal_async(goal), "goal acceptance")
+    return h.result(handle.get_result_async(), "goal result")
+
+
+def test_active_grippers_follow_a_trajectory_and_refuse_out_of_limit_goals(harness):
+    chain = DynamixelChain([1, 2, 3, 4])
+    chain.start()
+    try:
+        config = load_chain("config/hardware/active_grippers.yaml")
+        config["port"] = chain.port
+        config["comm"]["latency_timer_ms"] = LATENCY_MS  # in-process emulator on a busy host
+        node = harness.add(GripperGroupNode(config, context=harness.context))
+        states: list[GripperState] = []
+        statuses: list[HardwareStatus] = []
+        harness.client.create_subscription(GripperState, "/active_grippers/state", states.append, 50)
+        harness.client.create_subscription(
+            HardwareStatus, "/active_grippers/hardware_status", statuses.append, 50
+        )
+        action = ActionClient(
+            harness.client, FollowJointTrajectory, "/active_grippers/follow_joint_trajectory"
+        )
+        harness.spin()
+        names = node.hw.joint_names
+
+        result = send_goal(harness, action, names, [0.6, 0.3, 0.0, 0.0], 1.5)  # 0.4 rad/s of the 1 allowed
+        assert result.status == 4 and result.result.error_code == 0, result.result.error_string  # SUCCEEDED
+        ticks = chain.servo(1).get("present_position")
+        assert ticks == pytest.approx(2048 + 0.6 * 4096 / (2 * math.pi), abs=0.03 * 4096 / (2 * math.pi))
+
+        bad = send_goal(harness, action, names, [2.0, 0.0, 0.0, 0.0], 0.5)
+        assert (
+            bad.status == 6 and bad.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
+        )  # ABORTED
+        assert "'active_gripper_1' position 2.0 above upper limit 1.6" in bad.result.error_string
+
+        harness.wait(lambda: states and states[-1].position[0] > 0.55, "GripperState with the new position")
+        assert states[-1].group == "active_grippers" and states[-1].torque_enabled and not states[-1].fault
+        harness.wait(
+            lambda: statuses and statuses[-1].lifecycle_state == 2 and statuses[-1].link_ok, "status"
+        )
+
+        chain.silence(3)
+        harness.wait(lambda: states and states[-1].fault, "fault on the state topic")
+        assert "'active_gripper_3' (id 3) did not answer" in states[-1].fault_reason
+        refused = send_goal(harness, action, names, [0.0, 0.0, 0.0, 0.0], 0.5)
+        assert refused.result.error_code == FollowJointTrajectory.Result.HARDWARE_FAULT
+        chain.silence(3, False)
+        harness.wait(lambda: states and not states[-1].fault, "recovery once the servo answers again")
+    finally:
+        harness.close()  # the driver lets go of the link before the emulator goes away
+        chain.stop()
+
+
+def test_hardware_error_reported_on_state_then_reboot_recovers(harness):
+    chain = DynamixelChain([1, 2, 3, 4])
+    chain.start()
+    try:
+        config = load_chain("config/hardware/active_grippers.yaml")
+        config["port"] = chain.port
+        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        harness.add(GripperGroupNode(config, context=harness.context))
+        states: list[GripperState] = []
+        harness.client.create_subscription(GripperState, "/active_grippers/state", states.append, 50)
+        harness.spin()
+        harness.wait(lambda: states and states[-1].torque_enabled, "active state")
+        chain.servo(2).inject_hardware_error(HW_OVERLOAD)
+        harness.wait(lambda: states and states[-1].fault, "fault on the state topic")
+        assert list(states[-1].hardware_error) == [0, HW_OVERLOAD, 0, 0]
+        assert "'active_gripper_2' (id 2) hardware error: overload" in states[-1].fault_reason
+        harness.wait(lambda: states and not states[-1].fault and states[-1].torque_enabled, "reboot recovery")
+        assert list(states[-1].hardware_error) == [0, 0, 0, 0]
+        assert chain.servo(2).get("hardware_error_status") == 0
+    finally:
+        harness.close()
+        chain.stop()
+
+
+def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harness):
+    chain = DynamixelChain([1, 2])
+    chain.start()
+    try:
+        config = load_chain("config/hardware/camera_mounts.yaml")
+        config["port"] = chain.port
+        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        harness.add(CameraMountsNode(config, context=harness.context))
+        joint_states: list[JointState] = []
+        harness.client.create_subscription(JointState, "/camera_mounts/joint_states", joint_states.append, 50)
+        action = ActionClient(harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory")
+        harness.spin()
+        names = ["camera_mount_1", "camera_mount_2"]
+        slow = FollowJointTrajectory.Goal()
+        slow.trajectory.joint_names = names
+        slow.trajectory.points = [JointTrajectoryPoint(positions=[1.0, 1.0], time_from_start=Duration(sec=5))]
+        harness.wait(action.server_is_ready, "action server")
+        first = harness.result(action.send_goal_async(slow), "first goal acceptance")
+        first_result = first.get_result_async()
+        time.sleep(0.3)
+        second = send_goal(harness, action, names, [-0.3, 0.2], 0.5)
+        assert second.result.error_code == 0, second.result.error_string
+        replaced = harness.result(first_result, "first goal's result")
+        assert replaced.status == 6 and replaced.result.error_string == "replaced by a new goal"  # ABORTED
+        harness.wait(lambda: joint_states and abs(joint_states[-1].position[0] + 0.3) < 0.02, "joint states")
+        assert list(joint_states[-1].name) == names
+    finally:
+        harness.close()
+        chain.stop()
+
+
+def test_cancel_stops_the_goal_where_the_joints_stand(harness):
+    chain = DynamixelChain([1, 2])
+    chain.start()
+    try:
+        config = load_chain("config/hardware/camera_mounts.yaml")
+        config["port"] = chain.port
+        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        node = harness.add(CameraMountsNode(config, context=harness.context))
+        action = ActionClient(harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory")
+        harness.spin()
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = ["camera_mount_1"]
+        goal.trajectory.points = [JointTrajectoryPoint(positions=[1.0], time_from_start=Duration(sec=4))]
+        harness.wait(action.server_is_ready, "action server")
+        handle = harness.result(action.send_goal_async(goal), "goal acceptance")
+        harness.wait(lambda: node.hw.position["camera_mount_1"] > 0.1, "motion under way")
+        harness.result(handle.cancel_goal_async(), "cancel reply")
+        result = harness.result(handle.get_result_async(), "result")
+        assert result.status == 5  # CANCELED
+        stopped = node.hw.position["camera_mount_1"]
+        time.sleep(0.5)
+        assert node.hw.position["camera_mount_1"] == pytest.approx(stopped, abs=0.05)
+        assert stopped < 0.9
+    finally:
+        harness.close()
+        chain.stop()
+
+
+class LimitSwitchFromServo:
+    """In-test GPIO: the width limit switch closes when the emulated width servo is at or below ``ticks``."""
+
+    def __init__(self, chain: DynamixelChain, dxl_id: int, ticks: float) -> None:
+        self.chain, self.dxl_id, self.ticks = chain, dxl_id, ticks
+        self.outputs: dict[str, bool] = {}
+
+    def read_input(self, name: str) -> bool:
+        assert name == "ee_x_width_limit"
+        return self.chain.servo(self.dxl_id).position <= self.ticks
+
+    def write_output(self, name: str, value: bool) -> None:
+        self.outputs[name] = value
+
+
+def ee_config(port: str) -> dict:
+    raw = {
+        "component": "ee_x",
+        "port": port,
+        "rate_hz": 100.0,
+        "comm": {"latency_timer_ms": LATENCY_MS},
+        "joints": [
+            {
+                "name": "grasp_left",
+                "id": 1,
+                "mode": "current_based_position",
+                "goal_current_ma": 1000.0,
+                "controller": "trajectory",
+                "unit": "rad",
+                "lower": -0.2,
+                "upper": 1.4,
+                "max_velocity": 2.0,
+            },
+            {
+                "name": "grasp_right",
+                "id": 2,
+                "mode": "current_based_position",
+                "goal_current_ma": 1000.0,
+                "controller": "trajectory",
+                "unit": "rad",
+                "lower": -0.2,
+                "upper": 1.4,
+                "max_velocity": 2.0,
+            },
+            {
+                "name": "width",
+                "id": 3,
+                "mode": "extended_position",
+                "controller": "group_position",
+                "unit": "m",
+                "lead_m_per_rev": 0.01,
+                "zero_ticks": 0,
+                "lower": 0.0,
+                "upper": 0.05,
+                "max_velocity": 0.008,
+            },
+        ],
+        "ee": {
+            "ars": "ars_x",
+            "width_joint": "width",
+            "grasp_joints": ["grasp_left", "grasp_right"],
+            "limit_switch_input": "ee_x_width_limit",
+            "rivet_gun_outputs": ["gun_0", "gun_1"],
+            "grasp_effort_threshold": 0.15,
+            "calibration": {
+                "direction": -1,
+                "speed": 0.005,
+                "switch_position": 0.0,
+                "max_travel": 0.02,
+                "timeout_s": 10.0,
+                "on_start": False,
+            },
+        },
+    }
+    return validate_chain(raw)
+
+
+def test_ee_refuses_motion_until_calibrated_then_moves(harness):
+    chain = DynamixelChain([1, 2, 3])
+    chain.start()
+    switch_ticks = 2048 - 0.002 / 0.01 * 4096  # 2 mm below where the width servo powers up
+    try:
+        gpio = LimitSwitchFromServo(chain, 3, switch_ticks)
+        node = harness.add(EndEffectorNode(ee_config(chain.port), gpio, context=harness.context))
+        states: list[EndEffectorState] = []
+        rejected: list[String] = []
+        harness.client.create_subscription(EndEffectorState, "/ee_x/state", states.append, 50)
+        harness.client.create_subscription(String, "/ee_x/position_command/rejected", rejected.append, 10)
+        commands = harness.client.create_publisher(Float64MultiArray, "/ee_x/position_command", 10)
+        calibrate = harness.client.create_client(Trigger, "/ee_x/calibrate")
+        action = ActionClient(harness.client, FollowJointTrajectory, "/ee_x/follow_joint_trajectory")
+        harness.spin()
+
+        harness.wait(lambda: commands.get_subscription_count() > 0, "command subscription")
+        commands.publish(Float64MultiArray(data=[0.01]))
+        harness.wait(lambda: rejected, "the rejection")
+        assert "width joint 'width' is not calibrated" in rejected[-1].data
+        refused = send_goal(harness, action, ["grasp_left"], [0.5], 0.3)
+        assert refused.result.error_code == FollowJointTrajectory.Result.HARDWARE_FAULT
+        assert "not calibrated" in refused.result.error_string
+        assert not states or not states[-1].calibrated
+
+        harness.wait(calibrate.service_is_ready, "calibrate service")
+        reply = harness.result(calibrate.call_async(Trigger.Request()), "calibrate reply")
+        assert reply.success, reply.message
+        harness.wait(lambda: states and states[-1].calibrated, "calibrated state")
+        assert states[-1].limit_switch
+        assert chain.servo(3).position == pytest.approx(switch_ticks, abs=0.001 / 0.01 * 4096)
+        assert node.hw.position["width"] == pytest.approx(0.0, abs=0.001)
+
+        commands.publish(Float64MultiArray(data=[0.004]))
+        target = chain.servo(3).position + 0.004 / 0.01 * 4096
+        harness.wait(lambda: abs(chain.servo(3).position - target) < 20, "width moved 4 mm from the switch")
+        ok = send_goal(harness, action, ["grasp_left", "grasp_right"], [0.5, 0.5], 0.4)
+        assert ok.result.error_code == 0, ok.result.error_string
+        assert not states[-1].part_grasped
+
+        # A strut between the jaws: both grasp servos stop at 0.7 rad, pressing with their goal current.
+        for dxl_id in (1, 2):
+            chain.servo(dxl_id).set_obstacle(upper=2048 + 0.7 * 4096 / (2 * math.pi))
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = ["grasp_left", "grasp_right"]
+        goal.trajectory.points = [JointTrajectoryPoint(positions=[1.2, 1.2], time_from_start=Duration(sec=1))]
+        goal.path_tolerance = [JointTolerance(name=n, position=-1.0) for n in ("grasp_left", "grasp_right")]
+        goal.goal_tolerance = [JointTolerance(name=n, position=-1.0) for n in ("grasp_left", "grasp_right")]
+        handle = harness.result(action.send_goal_async(goal), "grasp goal acceptance")
+        assert harness.result(handle.get_result_async(), "grasp result").result.error_code == 0
+        harness.wait(lambda: states and states[-1].part_grasped, "part_grasped from servo position and load")
+        assert states[-1].position[0] == pytest.approx(0.7, abs=0.01)
+    finally:
+        harness.close()  # the driver lets go of the link before the emulator goes away
+        chain.stop()
+
+
+def test_ee_calibration_fails_with_reason_when_switch_never_closes(harness):
+    chain = DynamixelChain([1, 2, 3])
+    chain.start()
+    try:
+        gpio = LimitSwitchFromServo(chain, 3, -1e9)  # a broken switch
+        config = ee_config(chain.port)
+        config["ee"]["calibration"]["max_travel"] = 0.003
+        node = harness.add(EndEffectorNode(config, gpio, context=harness.context))
+        calibrate = harness.client.create_client(Trigger, "/ee_x/calibrate")
+        harness.spin()
+        harness.wait(calibrate.service_is_ready, "calibrate service")
+        assert harness.result(calibrate.call_async(Trigger.Request()), "calibrate reply").success
+        harness.wait(lambda: node.calibration.state.name == "FAILED", "calibration failure")
+        assert "limit switch not reached" in node.calibration.refusal()
+    finally:
+        harness.close()  # the driver lets go of the link before the emulator goes away
+        chain.stop()
+
+
+def test_top_grippers_apply_group_commands_and_reject_out_of_limit(harness):
+    chain = MightyZapChain([1, 2, 3, 4])
+    chain.start()
+    try:
+        config = load_mightyzap("config/hardware/top_grippers.yaml")
+        config["port"] = chain.port
+        config["comm"]["response_timeout_s"] = LATENCY_MS * 3 / 1000.0
+        harness.add(TopGrippersNode(config, context=harness.context))
+        states: list[GripperState] = []
+        rejected: list[String] = []
+        harness.client.create_subscription(GripperState, "/top_grippers/state", states.append, 50)
+        harness.client.create_subscription(
+            String, "/top_grippers/position_command/rejected", rejected.append, 10
+        )
+        commands = harness.client.create_publisher(Float64MultiArray, "/top_grippers/position_command", 10)
+        harness.spin()
+        harness.wait(lambda: commands.get_subscription_count() > 0, "command subscription")
+        commands.publish(Float64MultiArray(data=[0.025, 0.025, 0.0, 0.03]))
+        harness.wait(lambda: rejected, "the rejection")
+        assert "joint 'top_gripper_4': command 0.03 is above the upper limit 0.027" in rejected[-1].data
+        commands.publish(Float64MultiArray(data=[0.025, 0.025, 0.0, 0.0]))
+        harness.wait(lambda: states and abs(states[-1].position[0] - 0.025) < 0.0005, "stroke reached")
+        assert states[-1].engaged == [True, True, False, False] and not states[-1].fault
+    finally:
+        harness.close()  # the driver lets go of the link before the emulator goes away
+        chain.stop()

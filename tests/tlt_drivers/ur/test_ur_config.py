@@ -1,0 +1,59 @@
+"""The UR arm YAML files and their validation."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from tlt_common.config_schema import ConfigError
+from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
+
+
+@pytest.mark.parametrize("arm,host", [("x", "127.0.0.2"), ("y", "127.0.0.3")])
+def test_shipped_configs_load(arm: str, host: str) -> None:
+    config = load_ur_config(CONFIG_DIR / f"ur_{arm}.yaml")
+    assert config.component == f"ur_{arm}"
+    assert config.host == host
+    assert len(config.joint_names) == 6
+    assert all(name.startswith(f"ur_{arm}_") for name in config.joint_names)
+
+
+def _write(tmp_path, change) -> str:
+    doc = yaml.safe_load((CONFIG_DIR / "ur_x.yaml").read_text())
+    change(doc)
+    path = tmp_path / "ur.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+@pytest.mark.parametrize(
+    "change,key,reason",
+    [
+        (lambda d: d.pop("host"), "host", "missing required key"),
+        (lambda d: d.update(servo_gain=5000.0), "servo_gain", "at most 2000"),
+        (lambda d: d["joints"].pop(), "joints", "expected the 6 joints"),
+        (lambda d: d["joints"][2].update(max_position=7.0), "joints", "UR10e range"),
+        (lambda d: d["joints"][0].update(max_velocity=3.0), "joints", "UR10e limit"),
+        (
+            lambda d: d.update(link_timeout_s=0.05, rtde_frequency_hz=10.0),
+            "link_timeout_s",
+            "one RTDE period",
+        ),
+        (lambda d: d.update(colour="red"), "colour", "unknown key"),
+    ],
+)
+def test_bad_values_are_rejected_naming_the_key(tmp_path, change, key: str, reason: str) -> None:
+    path = _write(tmp_path, change)
+    with pytest.raises(ConfigError) as err:
+        load_ur_config(path)
+    assert err.value.key == key
+    assert reason in err.value.reason
+    assert str(path) in str(err.value)
+
+
+def test_node_main_refuses_a_bad_config_with_exit_status_2(tmp_path, capsys) -> None:
+    from tlt_drivers.ur.node import main
+
+    path = _write(tmp_path, lambda d: d.pop("joints"))
+    assert main(["--config", str(path)]) == 2
+    assert "joints" in capsys.readouterr().err
