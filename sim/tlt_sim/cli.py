@@ -1,0 +1,20 @@
+"""``tlt twin``: the digital twin's commands."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {
+    "render": ("tlt_sim.model.render_png", "render the EDU scene to a PNG"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in COMMANDS:
+        print("usage: tlt twin <command> [args...]\n\ncommands:")
+        for name, (_, text) in COMMANDS.items():
+            print(f"  {name:<10} {text}")
+        return 0 if argv[:1] in (["-h"], ["--help"]) else 2
+    return int(importlib.import_module(COMMANDS[argv[0]][0]).main(argv[1:]) or 0)

@@ -1,0 +1,104 @@
+"""Cameras: frames carry the expected objects, depth and intrinsics agree with ground truth."""
+
+import cv2
+import numpy as np
+import pytest
+from tlt_sim.model import names
+from tlt_sim.model.cameras import intrinsics
+from tlt_sim.model.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def shared(tmp_path_factory):
+    """One scene (and GL context) for this module's tests; each test starts from a reset."""
+    with Scene(out_dir=tmp_path_factory.mktemp("cameras")) as s:
+        yield s
+
+
+@pytest.fixture
+def scene(shared):
+    shared.reset()
+    return shared
+
+
+def test_d405_sees_a_strut_tube_and_both_end_fittings(scene):
+    camera, part = names.d405_camera("ars_x", "a"), "vertical_dispenser_x/0"
+    body = scene.part(part).body
+    scene.place_in_view(part, camera, 0.45)
+    frame = scene.render(camera, 160, 120)
+    seen = frame.instances()
+    for piece, cls in (("tube", "strut_tube"), ("fitting_a", "end_fitting"), ("fitting_b", "end_fitting")):
+        assert seen.get(f"{body}/{piece}", 0) > 5, (piece, sorted(seen))
+        assert frame.class_of(f"{body}/{piece}") == cls
+    assert frame.rgb.shape == (120, 160, 3) and frame.depth.shape == (120, 160)
+    # Depth on the tube is the distance to it along the optical axis.
+    tube = frame.mask(f"{body}/tube")
+    assert float(np.median(frame.depth[tube])) == pytest.approx(0.45, abs=0.02)
+
+
+def test_projected_corners_land_on_their_geoms_in_the_segmentation(scene):
+    frame_body = scene.part(scene.stage_bay(1)["bay1/cross_frame"]).body
+    camera = names.zed_camera(0)
+    scene.command_position(names.camera_mount(0), scene.edu["camera_mounts"]["inward_angle"])
+    scene.advance(1.5)
+    frame = scene.render(camera, 320, 240)
+    k, hits = frame.intrinsics, 0
+    for body in ("payload", frame_body):
+        for corner in range(4):
+            name = f"{body}/corner_{corner}"
+            mask = frame.mask(name)
+            if mask.sum() < 10 or mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any():
+                continue  # out of view, hidden or cut by the image edge
+            target = scene.site_position(names.corner_site(body, corner))
+            p = frame.rotation.T @ (target - frame.position)
+            projected = np.array([k.fx * p[0] / p[2] + k.cx, k.fy * p[1] / p[2] + k.cy])
+            rows, cols = np.nonzero(mask)
+            assert np.linalg.norm(projected - [cols.mean(), rows.mean()]) < 4.0, name
+            assert float(np.median(frame.depth[mask])) == pytest.approx(p[2], abs=0.04)
+            hits += 1
+    assert hits >= 3
+
+
+def test_intrinsics_follow_the_vertical_field_of_view():
+    k = intrinsics(90.0, 640, 480)
+    assert k.fy == pytest.approx(240.0)
+    assert k.fx == k.fy and k.cx == pytest.approx(319.5) and k.cy == pytest.approx(239.5)
+
+
+def test_zed_mount_turns_inward_to_see_the_bay(scene):
+    camera, mount = names.zed_camera(1), names.camera_mount(1)
+    tower = ("payload/", scene.part(scene.stage_bay(1)["bay1/cross_frame"]).body + "/")
+
+    def tower_corners() -> set[str]:
+        seen = scene.render(camera, 160, 90).instances()
+        return {n for n in seen if n.startswith(tower) and "/corner_" in n and seen[n] >= 3}
+
+    outward = tower_corners()
+    scene.command_position(mount, scene.edu["camera_mounts"]["inward_angle"])
+    scene.advance(1.5)
+    inward = tower_corners()
+    assert len(inward) >= 4
+    assert len(outward) < len(inward)
+
+
+def test_dispenser_apriltag_is_detected_with_its_id(scene):
+    import mujoco
+
+    name = "vertical_dispenser_x"
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = scene.site_position(f"dispenser/{name}/tag")
+    cam.distance, cam.elevation, cam.azimuth = 0.5, -89.0, 0.0
+    gray = cv2.cvtColor(scene.render(cam, 320, 240, depth=False, segmentation=False).rgb, cv2.COLOR_RGB2GRAY)
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11))
+    _, ids, _ = detector.detectMarkers(gray)
+    assert ids is not None and scene.info.dispenser_tags[name] in ids.ravel().tolist()
+
+
+def test_renderer_is_made_only_when_a_frame_is_asked_for(tmp_path):
+    with Scene(out_dir=tmp_path / "model") as scene:
+        scene.advance(0.1)
+        assert scene._renderer is None
+        scene.render(names.d405_camera("ars_y", "b"), 64, 48, depth=False, segmentation=False)
+        assert scene._renderer is not None
+        with pytest.raises(ValueError, match="exceeds"):
+            scene.render(names.zed_camera(0), 5000, 10)
