@@ -10,6 +10,7 @@ filled in; it never changes its input.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -148,7 +149,8 @@ def validate(
             if spec.required:
                 what = spec.doc or _TYPE_NAMES.get(spec.kind, spec.kind)
                 raise ConfigError(source, key, f"missing required key ({what})")
-            out[name] = spec.default
+            # A copy: callers may change what they get without changing the schema's default.
+            out[name] = copy.deepcopy(spec.default)
             continue
         out[name] = _check_value(data[name], spec, source, key)
     return out

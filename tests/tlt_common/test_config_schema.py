@@ -46,6 +46,14 @@ def test_errors_name_the_file_the_key_and_the_reason(data, message):
     assert str(info.value) == message
 
 
+def test_changing_a_result_leaves_the_defaults_alone():
+    first = validate({"port": "p"}, SCHEMA, source="f.yaml")
+    first["servos"].append({"id": 1, "name": "a"})
+    first["limits"]["lift"] = 1.0
+    second = validate({"port": "p"}, SCHEMA, source="f.yaml")
+    assert second["servos"] == [] and second["limits"] == {}
+
+
 def test_input_is_not_changed():
     data = {"port": "p"}
     validate(data, SCHEMA, source="f.yaml")

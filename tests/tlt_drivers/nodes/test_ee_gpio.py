@@ -116,11 +116,12 @@ def test_ee_x_process_with_emulated_chain_and_gpio(tmp_path):
     executor.add_node(node)
     try:
         deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and not (states and not states[-1].fault):
+        # The emulated chain's width carriage presses the limit switch on the shared GPIO chip.
+        while time.monotonic() < deadline and not (states and states[-1].calibrated):
             executor.spin_once(timeout_sec=0.1)
         assert states and not states[-1].fault, "no healthy EndEffectorState from the ee_x process"
         assert states[-1].ars == "ars_x"
-        assert not states[-1].calibrated  # seeking a switch nobody presses in this test
+        assert states[-1].calibrated and states[-1].limit_switch
         assert list(states[-1].rivet_gun_output) == [False, False]
     finally:
         executor.shutdown()
