@@ -29,8 +29,16 @@ def launch_main(argv: list[str]) -> int:
     from tlt_common.launch import Supervisor, load_launch_set
 
     parser = argparse.ArgumentParser(prog="tlt launch", description="Start the processes of a launch set.")
-    parser.add_argument("launch_set", help="launch set YAML, e.g. config/launch/interfaces_demo.yaml")
+    parser.add_argument("launch_set", help="launch set YAML, e.g. config/launch/hardware_emulated.yaml")
+    parser.add_argument("--isolated", action="store_true",
+                        help="claim a ROS domain no other run here holds; localhost discovery only")
     args = parser.parse_args(argv)
+    if args.isolated:
+        import os
+
+        from tlt_common.ros_isolation import isolate
+
+        print(f"[launch] isolated: ROS_DOMAIN_ID={isolate(os.environ)}, localhost discovery", flush=True)
     try:
         launch_set = load_launch_set(args.launch_set)
     except ConfigError as exc:
