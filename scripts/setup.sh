@@ -18,6 +18,8 @@ BUILD="$ROOT/build"
 
 say() { printf '[setup] %s\n' "$*"; }
 fail() { printf '[setup] FAILED: %s\n' "$*" >&2; exit 1; }
+# Any command that fails without its own message still says where.
+trap 'fail "command at scripts/setup.sh line $LINENO exited with $?"' ERR
 
 # hash_of FILE... : one hash over the named files' contents and names.
 hash_of() { (cd "$ROOT" && sha256sum "$@" | sha256sum | cut -c1-16); }
@@ -88,7 +90,8 @@ cmake_paths_stage() {
     np_inc=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
     say "rewriting the wheels' CMake include paths for $py_inc"
     # The wheels were built on another machine; their exported CMake files name its paths.
-    grep -rlE '/opt/python/cp311-cp311/' "$VENV/share" --include='*.cmake' 2>/dev/null \
+    # Nothing left to rewrite (a venv updated in place) is fine: grep's "no match" is not an error.
+    { grep -rlE '/opt/python/cp311-cp311/' "$VENV/share" --include='*.cmake' 2>/dev/null || true; } \
         | while read -r f; do
             sed -i \
                 -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$np_inc#g" \
@@ -132,6 +135,11 @@ project_stage() {
     "$VENV/bin/python" -c 'import tlt_common' || fail "pip install -e . (the tlt project)"
     stamp_set project "$h"
 }
+
+# One set-up at a time (a main job and a test run started together share the venv).
+mkdir -p "$(dirname "$VENV")"
+exec 9>"$VENV.setup-lock"
+flock 9
 
 apt_stage
 venv_stage
