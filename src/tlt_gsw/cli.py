@@ -379,6 +379,12 @@ _ACTIONS = {
 def main(argv: list[str] | None = None, out=None) -> int:
     """Entry point of ``tlt gsw``; returns the exit status."""
     out = out or sys.stdout
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["gui"]:
+        # Qt is loaded only for the GUI, so the CLI stays light on a headless ground station.
+        from tlt_gsw.gui.app import main as gui_main
+
+        return gui_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         return _ACTIONS[args.action](args, out)

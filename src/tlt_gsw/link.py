@@ -77,6 +77,7 @@ class GswLink:
         on_packet: Callable[[ParseResult], None] | None = None,
         close_recorder: bool = False,
         clock: Callable[[], float] = time.time,
+        recv_buffer_bytes: int | None = None,
     ) -> None:
         key = keyring.get(key_id)
         if key is None:
@@ -95,6 +96,11 @@ class GswLink:
         self._counters = SequenceCounters()
         self._sent: dict[int, SentCommand] = {}
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if recv_buffer_bytes:
+            # The default (about 200 KiB, a few hundred small datagrams) overflows when the receiving
+            # process is not scheduled for a tenth of a second at thousands of packets/s; the kernel
+            # caps the request at net.core.rmem_max.
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, recv_buffer_bytes)
         self._sock.bind(bind)
 
     @property
@@ -176,6 +182,9 @@ class GswLink:
         try:
             data, _ = self._sock.recvfrom(RECV_BUFFER)
         except (TimeoutError, BlockingIOError):
+            # A quiet link must still commit what was buffered before it went quiet.
+            if self.recorder is not None:
+                self.recorder.maybe_flush()
             return results
         results.append(self._handle(data))
         self._sock.setblocking(False)
