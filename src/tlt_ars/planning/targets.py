@@ -1,0 +1,230 @@
+"""Where the tool goes for each assembly step: candidate tool poses (world, 4x4) of one arm.
+
+Reads the scene file (tool, approach distance, dispenser stacks, inspection poses are the
+scene's) and the mission (member joints, dispenser poses). Writes :class:`Target` lists; a target
+is a tool pose and its pre-pose (standing off by the approach distance, where a straight final
+move starts). Several candidates exist for most steps (which side to come from, which way the
+bar points); the planner or the reachability check takes the first that works.
+
+Tool frame conventions (docs/motion-planning.md):
+
+* A strut is held at its middle, along tool x; the tool z is the approach direction.
+* A cross frame is held at the middle of one side, along tool x, the frame extending along
+  tool +y; tool z points down.
+* A rivet gun sits at tool (+-gun_offset, 0, 0): riveting a joint puts one gun on it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
+from tlt_ars.planning.world import SceneConfig, dispenser_frame, member_segments, tower_origin
+
+# Distance of each rivet gun from the grasp centre along the bar (grip spacing / 2 + gun offset).
+DEFAULT_GUN_OFFSET = 0.375
+_DOWN = np.array([0.0, 0.0, -1.0])
+
+
+@dataclass(frozen=True)
+class Target:
+    """A tool pose ``pose`` reached through ``pre_pose``; ``label`` says which candidate it is."""
+
+    label: str
+    pose: np.ndarray
+    pre_pose: np.ndarray
+
+
+def frame_from_axes(origin: np.ndarray, x: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Pose with tool x along ``x`` (made orthogonal to ``z``) and tool z along ``z``."""
+    z = z / np.linalg.norm(z)
+    x = x - np.dot(x, z) * z
+    x = x / np.linalg.norm(x)
+    return pose_matrix(origin, np.column_stack([x, np.cross(z, x), z]))
+
+
+def _target(label: str, pose: np.ndarray, back: np.ndarray) -> Target:
+    pre = pose.copy()
+    pre[:3, 3] = pose[:3, 3] + back
+    return Target(label, pose, pre)
+
+
+def _horizontal_approaches(axis: np.ndarray, towards: np.ndarray) -> list[np.ndarray]:
+    """Horizontal unit directions at right angles to ``axis`` that go away from the arm
+    (positive along ``towards``), best aligned first."""
+    if abs(axis[2]) > 0.999:
+        dirs = [np.array([math.cos(a), math.sin(a), 0.0]) for a in np.arange(8) * math.pi / 4]
+    else:
+        side = np.cross(axis, [0.0, 0.0, 1.0])
+        side /= np.linalg.norm(side)
+        dirs = [side, -side]
+    flat = np.array([towards[0], towards[1], 0.0])
+    n = np.linalg.norm(flat)
+    if n < 1e-9:
+        return dirs
+    flat /= n
+    good = [d for d in dirs if np.dot(d, flat) > 1e-6]
+    return sorted(good, key=lambda d: -float(np.dot(d, flat)))
+
+
+def strut_targets(
+    p0: np.ndarray, p1: np.ndarray, arm_base: np.ndarray, approach: float, origin_shift: float = 0.0
+) -> list[Target]:
+    """Candidates for holding the strut p0..p1 at its middle (shifted by ``origin_shift`` along
+    it), coming from the arm's side, with the bar either way along the strut."""
+    mid = (p0 + p1) / 2
+    u = (p1 - p0) / np.linalg.norm(p1 - p0)
+    out = []
+    for k, d in enumerate(_horizontal_approaches(u, mid - arm_base[:3, 3])):
+        for sign in (1.0, -1.0):
+            pose = frame_from_axes(mid + origin_shift * sign * u, sign * u, d)
+            out.append(_target(f"approach {k} bar {'+' if sign > 0 else '-'}", pose, -approach * d))
+    return out
+
+
+def cross_frame_targets(corners: list[np.ndarray], arm_base: np.ndarray, approach: float) -> list[Target]:
+    """Candidates for holding a cross frame (corners in order) by one side from above, nearest
+    side to the arm first; the pre-pose stands off outwards, horizontally."""
+    centre = sum(corners) / len(corners)
+    out = []
+    for i in range(len(corners)):
+        a, b = corners[i], corners[(i + 1) % len(corners)]
+        mid = (a + b) / 2
+        inward = centre - mid
+        inward[2] = 0.0
+        inward /= np.linalg.norm(inward)
+        # Tool z down and tool y inwards make tool x = y cross z.
+        x = np.cross(inward, _DOWN)
+        pose = frame_from_axes(mid, x, _DOWN)
+        out.append(_target(f"side {i}", pose, -approach * inward))
+    base_xy = arm_base[:3, 3]
+    return sorted(out, key=lambda t: float(np.linalg.norm(t.pose[:2, 3] - base_xy[:2])))
+
+
+def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: str) -> list[Target]:
+    """Where ``arm`` holds ``member`` when placing it (tower frame at the build level of its bay)."""
+    approach = cfg.raw["end_effector"]["approach_distance"]
+    base = cfg.base(arm)
+    origin = tower_origin(cfg, mission, member.bay)
+    if member.kind == "cross_frame":
+        corners = [origin + np.asarray(p, dtype=float) for _, p in member.joints]
+        return cross_frame_targets(corners, base, cfg.raw["end_effector"]["cross_frame_approach_distance"])
+    if member.kind in ("vertical", "diagonal"):
+        (p0, p1) = member_segments(member, origin)[0]
+        return strut_targets(p0, p1, base, approach)
+    return []
+
+
+def rivet_targets(
+    cfg: SceneConfig,
+    mission: object,
+    member: object,
+    joint: str,
+    arm: str,
+    gun_offset: float = DEFAULT_GUN_OFFSET,
+) -> list[Target]:
+    """Where the tool goes to put a rivet gun on ``joint`` of ``member`` (bar along the member,
+    or vertical for a foundation rivet)."""
+    approach = cfg.raw["end_effector"]["approach_distance"]
+    base = cfg.base(arm)
+    origin = tower_origin(cfg, mission, member.bay)
+    points = dict(member.joints)
+    if joint not in points:
+        raise KeyError(f"member {member.id} has no joint {joint}")
+    j = origin + np.asarray(points[joint], dtype=float)
+    if member.kind in ("vertical", "diagonal"):
+        others = [origin + np.asarray(p, dtype=float) for k, p in member.joints if k != joint]
+        u = others[0] - j
+        u /= np.linalg.norm(u)
+    else:
+        u = np.array([0.0, 0.0, 1.0])
+    out = []
+    # The gun at tool x = -gun_offset sits on the joint when the tool is gun_offset along the bar.
+    for k, d in enumerate(_horizontal_approaches(u, j - base[:3, 3])):
+        for sign in (1.0, -1.0):
+            pose = frame_from_axes(j + gun_offset * sign * u, sign * u, d)
+            out.append(
+                _target(f"gun on {joint}, approach {k} bar {'+' if sign > 0 else '-'}", pose, -approach * d)
+            )
+    return out
+
+
+def dispenser_targets(
+    cfg: SceneConfig,
+    mission: object,
+    dispenser: str,
+    arm: str,
+    remaining: int | None = None,
+    gun_offset: float = DEFAULT_GUN_OFFSET,
+) -> list[Target]:
+    """Where ``arm`` grasps the top part of ``dispenser`` (``remaining`` parts, full when omitted);
+    the pre-pose is straight above it. A rivet is picked up by a gun."""
+    disp = mission.dispensers[dispenser]
+    racks = cfg.raw["dispensers"]
+    approach = cfg.raw["end_effector"]["approach_distance"]
+    frame = dispenser_frame(cfg, disp)
+    base = cfg.base(arm)
+    up = np.array([0.0, 0.0, approach])
+    count = disp.count if remaining is None else remaining
+    top = racks["first_slot_height"] + max(count - 1, 0) * racks["slot_pitch"]
+    if disp.part_kind == "rivet":
+        pick = (frame @ np.array([0.0, 0.0, racks["rivet"]["top"] + 0.02, 1.0]))[:3]
+        out = []
+        for k, yaw in enumerate(np.arange(4) * math.pi / 2):
+            x = rpy_matrix((0.0, 0.0, yaw)) @ np.array([1.0, 0.0, 0.0])
+            pose = frame_from_axes(pick + gun_offset * x, x, _DOWN)
+            out.append(_target(f"rivet gun, yaw {k}", pose, up))
+        return out
+    centre = (frame @ np.array([0.0, 0.0, top, 1.0]))[:3]
+    if disp.part_kind == "cross_frame":
+        w = mission.bay_width
+        local = [(-w / 2, -w / 2), (w / 2, -w / 2), (w / 2, w / 2), (-w / 2, w / 2)]
+        corners = [(frame @ np.array([x, y, top, 1.0]))[:3] for x, y in local]
+        return [
+            Target(t.label, t.pose, _lift(t.pose, up)) for t in cross_frame_targets(corners, base, approach)
+        ]
+    axis = frame[:3, 0]
+    out = []
+    for sign in (1.0, -1.0):
+        pose = frame_from_axes(centre, sign * axis, _DOWN)
+        out.append(_target(f"bar {'+' if sign > 0 else '-'}", pose, up))
+    return out
+
+
+def _lift(pose: np.ndarray, up: np.ndarray) -> np.ndarray:
+    pre = pose.copy()
+    pre[:3, 3] += up
+    return pre
+
+
+def inspection_targets(cfg: SceneConfig, arm: str) -> list[Target]:
+    """The configured inspection pose of ``arm`` (where the CRS camera sees the held part), and
+    the same pose turned half a turn about the tool z (a strut looks the same; a cross frame then
+    extends the other way)."""
+    spec = cfg.arm(arm)["inspection"]
+    pose = pose_matrix(spec["position"], rpy_matrix(spec["rpy"]))
+    turned = pose.copy()
+    turned[:3, :2] = -turned[:3, :2]
+    return [Target("inspection", pose, pose.copy()), Target("inspection turned", turned, turned.copy())]
+
+
+def poses(targets: Iterable[Target]) -> list[np.ndarray]:
+    return [t.pose for t in targets]
+
+
+__all__ = [
+    "DEFAULT_GUN_OFFSET",
+    "Target",
+    "cross_frame_targets",
+    "dispenser_targets",
+    "frame_from_axes",
+    "inspection_targets",
+    "placement_targets",
+    "poses",
+    "rivet_targets",
+    "strut_targets",
+]
