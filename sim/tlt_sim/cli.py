@@ -6,6 +6,7 @@ import importlib
 import sys
 
 COMMANDS = {
+    "run": ("tlt_sim.twin.main", "run the twin as a ROS process behind the drivers' links"),
     "render": ("tlt_sim.model.render_png", "render the EDU scene to a PNG"),
 }
 

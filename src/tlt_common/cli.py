@@ -19,7 +19,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "check": ("tlt_common.cli:check_main", "validate launch sets without starting anything"),
     "interfaces": ("tlt_common.interfaces_cli:main", "list the tlt_interfaces messages, services, actions"),
     "gsw": ("tlt_gsw.cli:main", "ground station: gui, send, watch, query, export, keygen"),
-    "twin": ("tlt_sim.cli:main", "the digital twin: render the EDU scene to a PNG"),
+    "twin": ("tlt_sim.cli:main", "the digital twin: run it behind the drivers' links, render a PNG"),
     "mission-check": ("tlt_common.mission.check:main", "validate mission files"),
     "mission-generate": ("tlt_common.mission.generate:main", "write a mission file for N bays"),
 }

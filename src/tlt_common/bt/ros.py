@@ -11,7 +11,7 @@ ROS time, so a twin publishing ``/clock`` faster than real time shortens them ac
 
 from __future__ import annotations
 
-import weakref
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -34,22 +34,60 @@ def node_clock(node: Node) -> Clock:
     return lambda: clock.now().nanoseconds * 1e-9
 
 
-_CLIENTS: weakref.WeakKeyDictionary[Node, dict[tuple[str, str], Any]] = weakref.WeakKeyDictionary()
+def _clients_of(node: Node) -> dict[tuple[str, str], Any]:
+    # Kept on the node itself: as values of a module-level WeakKeyDictionary the clients (which
+    # hold their node) kept every node, and with it its context, alive for the life of the process.
+    clients = getattr(node, "_tlt_shared_clients", None)
+    if clients is None:
+        clients = {}
+        node._tlt_shared_clients = clients
+    return clients
+
+
+class SerialisedActionClient(ActionClient):
+    """An ActionClient safe to use from a thread other than the executor's.
+
+    rclpy's ActionClient sends a goal (cancel, result) request and only then registers the future
+    waiting for its response. When a tree ticks in one thread and the executor takes responses in
+    another, a fast server's response can be taken in between and is dropped ("Ignoring unexpected
+    goal response"), leaving the behaviour waiting for an answer that already came. Sending and
+    taking are serialised here, so a response is taken only once its request is registered.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._serial = threading.RLock()
+
+    def send_goal_async(self, *args: Any, **kwargs: Any) -> Any:
+        with self._serial:
+            return super().send_goal_async(*args, **kwargs)
+
+    def _cancel_goal_async(self, goal_handle: Any) -> Any:
+        with self._serial:
+            return super()._cancel_goal_async(goal_handle)
+
+    def _get_result_async(self, goal_handle: Any) -> Any:
+        with self._serial:
+            return super()._get_result_async(goal_handle)
+
+    def take_data(self) -> Any:
+        with self._serial:
+            return super().take_data()
 
 
 def shared_action_client(node: Node, action_type: Any, action_name: str) -> ActionClient:
     """One ActionClient per (node, action name): a CRS tree has a goal behaviour per member, and
     a client each would multiply DDS entities and discovery traffic for nothing."""
-    clients = _CLIENTS.setdefault(node, {})
+    clients = _clients_of(node)
     key = ("action", action_name)
     if key not in clients:
-        clients[key] = ActionClient(node, action_type, action_name)
+        clients[key] = SerialisedActionClient(node, action_type, action_name)
     return clients[key]
 
 
 def shared_service_client(node: Node, srv_type: Any, srv_name: str) -> Any:
     """One service client per (node, service name), for the same reason."""
-    clients = _CLIENTS.setdefault(node, {})
+    clients = _clients_of(node)
     key = ("service", srv_name)
     if key not in clients:
         clients[key] = node.create_client(srv_type, srv_name)
@@ -214,6 +252,12 @@ class ActionGoal(Action):
 
     def _cancel(self) -> None:
         handle = self._goal_handle
+        if handle is None and self._send_future is not None and self._send_future.done():
+            # Accepted between two ticks: the handle exists but update() has not picked it up yet.
+            accepted = self._send_future.result()
+            handle = accepted if accepted is not None and accepted.accepted else None
+            if handle is None:
+                self._send_future = None
         if handle is not None:
             handle.cancel_goal_async()
         elif self._send_future is not None and not self._send_future.done():
@@ -512,6 +556,7 @@ class TreeStatusPublisher:
 
 __all__ = [
     "ActionGoal",
+    "SerialisedActionClient",
     "ServiceCall",
     "TopicCache",
     "TopicCondition",

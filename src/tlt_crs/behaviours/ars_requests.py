@@ -1,0 +1,247 @@
+"""CRS -> ARS requests as ROS 2 actions, split into "send and wait for acknowledgement" and "wait for
+the ARS to finish" as Figs. 21, 23-25 and 27 draw them (paper §V.C.1).
+
+One :class:`ArsRequest` holds the goal of one request for one member while it is in flight. Three
+behaviours share it: :class:`SendArsRequest` (the acknowledgement), the Inspection Check in between
+(:mod:`tlt_crs.behaviours.inspection`), and :class:`AwaitArsResult` (the result). They sit under a
+:class:`RequestScope`, a Sequence with memory that cancels the goal when the scope is pre-empted
+(a fault, Stop), so no goal is left running on an ARS that the CRS no longer follows.
+
+Failures name the ARS and the action: server not found within ``timeouts.ars_server_s``, goal
+rejected, server gone while the goal runs (not discoverable for ``ars_server_s``), no result
+within blackboard ``ars_result_timeout``, aborted, or a result of failure with the ARS's reason.
+Every wait is measured on the mission clock, which stands still while the CRS is paused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import py_trees
+from action_msgs.msg import GoalStatus
+from py_trees.common import Status
+
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Action
+from tlt_common.bt.ros import default_feedback_text, shared_action_client
+from tlt_common.mission.schema import Member
+from tlt_crs.context import CrsContext
+
+GoalBuilder = Callable[[str], Any]  # ARS name -> goal message
+ResultRecorder = Callable[[CrsContext, Member, Any, bool], None]
+
+
+class ArsRequest:
+    """The goal of one request (``request``, one of ``ros_names.ARS_ACTIONS``) for one member."""
+
+    def __init__(
+        self,
+        ctx: CrsContext,
+        action_type: Any,
+        request: str,
+        member: Member,
+        ars: str | Callable[[], str],
+        make_goal: GoalBuilder,
+        record: ResultRecorder,
+        *,
+        inspected: bool = False,
+    ) -> None:
+        self.ctx = ctx
+        self.action_type = action_type
+        self.request = request
+        self.member = member
+        self._ars = ars
+        self.make_goal = make_goal
+        self.record = record
+        self.inspected = inspected  # the ARS presents the part to /crs/inspect_part meanwhile
+        self.title = request.replace("_", " ").title().replace(" ", "")
+        self.reset()
+
+    def ars(self) -> str:
+        return self._ars() if callable(self._ars) else self._ars
+
+    def client(self, ars: str) -> Any:
+        return shared_action_client(self.ctx.node, self.action_type, ros_names.ars_action(ars, self.request))
+
+    def reset(self) -> None:
+        self.ars_name = ""
+        self.send_future: Any = None
+        self.handle: Any = None
+        self.result_future: Any = None
+        self.feedback: Any = None
+        self.accepted_at = 0.0
+
+    @property
+    def finished(self) -> bool:
+        return self.result_future is not None and self.result_future.done()
+
+    def describe(self) -> str:
+        return f"{self.title} for '{self.member.id}' on {self.ars_name or self.ars()}"
+
+    def cancel(self) -> None:
+        """Cancel the goal in flight (also one not yet accepted); forget it."""
+        if self.handle is not None and not self.finished:
+            self.handle.cancel_goal_async()
+        elif self.send_future is not None and not self.send_future.done():
+
+            def cancel_when_accepted(future: Any) -> None:
+                handle = future.result()
+                if handle is not None and handle.accepted:
+                    handle.cancel_goal_async()
+
+            self.send_future.add_done_callback(cancel_when_accepted)
+        if self.inspected:
+            self.ctx.desk.withdraw(self.member.id, "the CRS stopped following this request")
+        self.reset()
+
+    def conclude(self) -> tuple[bool, str]:
+        """Record the finished goal's result in the tower model and forget the goal.
+
+        Returns (success, text): the ARS's reason of a failure, or "... done".
+        """
+        response = self.result_future.result()
+        result, status = response.result, response.status
+        ok = status == GoalStatus.STATUS_SUCCEEDED and bool(getattr(result, "success", True))
+        reason = str(getattr(result, "reason", "") or "")
+        if status != GoalStatus.STATUS_SUCCEEDED:
+            reason = f"goal ended with status {status}" + (f": {reason}" if reason else "")
+        name = self.describe()
+        with self.ctx.lock:
+            self.record(self.ctx, self.member, result, ok)
+        if self.inspected:
+            self.ctx.desk.withdraw(self.member.id, "the ARS finished the request")
+        self.reset()
+        return ok, (f"{name} done" if ok else f"{name} failed: {reason or 'no reason given'}")
+
+    def _on_feedback(self, message: Any) -> None:
+        self.feedback = message.feedback
+
+
+class SendArsRequest(Action):
+    """Send the request's goal and wait for the ARS to acknowledge (accept) it.
+
+    Reads: blackboard ``cross_frame_ars`` for a cross frame (through the request's ARS callable).
+    RUNNING: waiting for the server or the acceptance, each up to ``timeouts.ars_server_s``.
+    SUCCESS: the goal was accepted. FAILURE: no server, no answer, rejected, goal not buildable.
+    """
+
+    def __init__(self, request: ArsRequest) -> None:
+        super().__init__(f"Send {request.title} {request.member.id}")
+        self.req = request
+        self.ctx = request.ctx
+        self._started = 0.0
+
+    def initialise(self) -> None:
+        if self.req.send_future is not None or self.req.handle is not None:
+            self.req.cancel()
+        self.req.reset()
+        self._started = self.ctx.clock()
+        self.feedback_message = "looking for the ARS"
+
+    def update(self) -> Status:
+        req, now = self.req, self.ctx.clock()
+        limit = self.ctx.config.timeouts.ars_server_s
+        if req.send_future is None:
+            try:
+                ars = req.ars()
+                client = req.client(ars)
+            except ValueError as exc:
+                return self.fail(f"cannot address the ARS: {exc}")
+            if not client.server_is_ready():
+                if now - self._started > limit:
+                    return self.fail(
+                        f"ARS '{ars}' missing: action server '{ros_names.ars_action(ars, req.request)}'"
+                        f" not available after {limit:g} s"
+                    )
+                self.feedback_message = f"waiting for '{ros_names.ars_action(ars, req.request)}'"
+                return Status.RUNNING
+            try:
+                goal = req.make_goal(ars)
+            except Exception as exc:
+                return self.fail(f"cannot build the {req.title} goal for '{req.member.id}': {exc}")
+            if req.inspected:
+                self.ctx.desk.expect(req.member.id)
+            req.ars_name = ars
+            req.send_future = client.send_goal_async(goal, feedback_callback=req._on_feedback)
+            self._started = now
+            self.feedback_message = f"sent to {ars}"
+            return Status.RUNNING
+        if not req.send_future.done():
+            if now - self._started > limit:
+                req.cancel()
+                return self.fail(f"ARS did not acknowledge {req.describe()} within {limit:g} s")
+            return Status.RUNNING
+        handle = req.send_future.result()
+        if handle is None or not handle.accepted:
+            name = req.describe()
+            req.cancel()
+            return self.fail(f"{name} rejected by the ARS")
+        req.handle = handle
+        req.accepted_at = now
+        req.result_future = handle.get_result_async()
+        self.feedback_message = f"acknowledged by {req.ars_name}"
+        return Status.SUCCESS
+
+
+class AwaitArsResult(Action):
+    """Wait for the ARS to finish the request, then record the result in the tower model.
+
+    Reads: blackboard ``ars_result_timeout``. Writes: the tower model (through the request's recorder).
+    RUNNING: the goal runs (feedback shows the ARS's step). SUCCESS: result success.
+    FAILURE: result failure (the ARS's reason), aborted/canceled, no result in time (the goal is
+    canceled), the server gone for ``timeouts.ars_server_s``, or no goal was sent.
+    """
+
+    def __init__(self, request: ArsRequest) -> None:
+        super().__init__(f"Wait For {request.title} {request.member.id}")
+        self.req = request
+        self.ctx = request.ctx
+        self._lost_since: float | None = None
+
+    def initialise(self) -> None:
+        self._lost_since = None
+
+    def update(self) -> Status:
+        req, now = self.req, self.ctx.clock()
+        if req.result_future is None:
+            return self.fail(f"no {req.title} goal in flight for '{req.member.id}'")
+        if not req.result_future.done():
+            if req.feedback is not None:
+                self.feedback_message = f"{req.ars_name}: {default_feedback_text(req.feedback)}"
+            timeout = float(self.ctx.board.get("ars_result_timeout", 600.0))
+            if now - req.accepted_at > timeout:
+                name = req.describe()
+                req.cancel()
+                return self.fail(f"no result for {name} within {timeout:g} s")
+            if not req.client(req.ars_name).server_is_ready():
+                self._lost_since = now if self._lost_since is None else self._lost_since
+                if now - self._lost_since > self.ctx.config.timeouts.ars_server_s:
+                    name = req.describe()
+                    req.cancel()
+                    return self.fail(f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}")
+            else:
+                self._lost_since = None
+            return Status.RUNNING
+        ok, reason = req.conclude()
+        if not ok:
+            return self.fail(reason)
+        self.feedback_message = reason
+        return Status.SUCCESS
+
+
+class RequestScope(py_trees.composites.Sequence):
+    """A Sequence with memory owning one :class:`ArsRequest`: when it ends other than in SUCCESS
+    (pre-empted or failed), the goal still in flight is canceled."""
+
+    def __init__(self, name: str, request: ArsRequest, children: list[py_trees.behaviour.Behaviour]) -> None:
+        super().__init__(name, memory=True, children=children)
+        self.request = request
+
+    def terminate(self, new_status: Status) -> None:
+        # Pre-empted, or failed part-way (e.g. a part failed inspection too often): the ARS stops too.
+        if new_status != Status.SUCCESS:
+            self.request.cancel()
+
+
+__all__ = ["ArsRequest", "AwaitArsResult", "RequestScope", "SendArsRequest"]

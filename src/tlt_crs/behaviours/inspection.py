@@ -1,0 +1,290 @@
+"""Inspection Check (Fig. 22): the ARS holds a part in front of the lifter's ZED camera, the CRS asks
+vision for an inspection report and forwards the result to the ARS.
+
+The hand-off
+------------
+The ARS calls the CRS's ``/crs/inspect_part`` service (``InspectPart``) while it holds the part,
+and that call is the "forwarding" channel: its response *is* the result the CRS forwards.
+
+* :class:`InspectionDesk` sits between the service and the tree. When the CRS sends a request
+  whose ARS will present a part, it *expects* that member. A call for the expected member waits
+  (in the service's own thread, at most ``timeouts.inspect_handoff_s``) until the tree answers it;
+  any other call is answered at once with a failed report saying why (no inspection expected, a
+  different member expected, one already being inspected). A call the tree did not answer in time,
+  or that the tree withdrew (request finished, fault, Stop), is answered with a failed report that
+  says so. The ARS never waits unboundedly and never gets a report for another member.
+* In the tree, Inspection Check is a Sequence with memory: :class:`WaitForPart` (the ARS's call
+  arrived), ``Inspect Part`` (a ``ServiceCall`` to ``/vision/inspect_part``), and
+  :class:`ForwardResult` (answers the waiting call with vision's report, passed or not).
+* :class:`UntilPartPasses` repeats the check while parts fail, up to blackboard
+  ``inspection_attempts`` parts; the ARS discards each failed part and fetches another (it reports
+  the count as ``parts_discarded``). One failure too many fails the request, which cancels the ARS
+  goal and raises a fault.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import py_trees
+from py_trees.common import Status
+
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Action
+from tlt_common.bt.ros import ServiceCall
+from tlt_crs.behaviours.ars_requests import ArsRequest
+from tlt_crs.context import CrsContext
+
+
+def failed_report(member_id: str, part_kind: str, reason: str) -> Any:
+    from tlt_interfaces.msg import InspectionReport
+
+    report = InspectionReport()
+    report.target_id = member_id
+    report.target_kind = part_kind
+    report.passed = False
+    report.reasons = [reason]
+    return report
+
+
+@dataclass
+class PendingInspection:
+    member_id: str
+    part_kind: str
+    camera: str
+    answered: threading.Event = field(default_factory=threading.Event)
+    report: Any = None
+
+
+class InspectionDesk:
+    """Thread-safe meeting point of ``/crs/inspect_part`` calls and the tree's Inspection Check."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.expected: str | None = None
+        self.pending: PendingInspection | None = None
+        self.served = 0  # reports forwarded to an ARS
+
+    # ----- tree side -----
+    def expect(self, member_id: str) -> None:
+        with self._lock:
+            self.expected = member_id
+
+    def take(self, member_id: str) -> PendingInspection | None:
+        """The unanswered call for ``member_id``, if the ARS made one."""
+        with self._lock:
+            pending = self.pending
+            if pending is not None and pending.member_id == member_id and not pending.answered.is_set():
+                return pending
+            return None
+
+    def answer(self, pending: PendingInspection, report: Any) -> None:
+        with self._lock:
+            pending.report = report
+            pending.answered.set()
+            if self.pending is pending:
+                self.pending = None
+            self.served += 1
+
+    def withdraw(self, member_id: str, why: str) -> None:
+        """Stop expecting ``member_id``; a call still waiting gets a failed report saying ``why``."""
+        with self._lock:
+            if self.expected == member_id:
+                self.expected = None
+            pending = self.pending
+            if pending is not None and pending.member_id == member_id:
+                pending.report = failed_report(member_id, pending.part_kind, f"inspection withdrawn: {why}")
+                pending.answered.set()
+                self.pending = None
+
+    # ----- service side -----
+    def serve(self, member_id: str, part_kind: str, camera: str, timeout: float) -> Any:
+        """Answer one ``/crs/inspect_part`` call (blocks the calling service thread ≤ ``timeout`` s)."""
+        with self._lock:
+            if self.expected is None:
+                return failed_report(member_id, part_kind, "the CRS is not expecting a part for inspection")
+            if member_id != self.expected:
+                return failed_report(
+                    member_id, part_kind, f"the CRS expects a part for '{self.expected}', not '{member_id}'"
+                )
+            if self.pending is not None:
+                return failed_report(
+                    member_id, part_kind, f"a part for '{self.pending.member_id}' is already being inspected"
+                )
+            pending = PendingInspection(member_id, part_kind, camera)
+            self.pending = pending
+        if pending.answered.wait(timeout):
+            return pending.report
+        with self._lock:
+            if self.pending is pending:
+                self.pending = None
+            if pending.report is not None:
+                return pending.report
+        return failed_report(member_id, part_kind, f"the CRS did not inspect the part within {timeout:g} s")
+
+
+class WaitForPart(Action):
+    """Wait until the ARS presents the part of ``request`` (its ``/crs/inspect_part`` call arrived).
+
+    Reads: the inspection desk. Writes: nothing.
+    RUNNING: no call yet. SUCCESS: the call is waiting for a report.
+    FAILURE: the ARS finished the request without presenting a part (its result is recorded in
+    the tower model first and its reason reported), or none came within ``timeouts.part_presented_s``.
+    """
+
+    def __init__(self, request: ArsRequest) -> None:
+        super().__init__(f"Wait For Part {request.member.id}")
+        self.req = request
+        self.ctx = request.ctx
+        self.pending: PendingInspection | None = None
+        self._started = 0.0
+
+    def initialise(self) -> None:
+        self.pending = None
+        self._started = self.ctx.clock()
+        self.feedback_message = "waiting for the ARS to present the part"
+
+    def update(self) -> Status:
+        pending = self.ctx.desk.take(self.req.member.id)
+        if pending is not None:
+            self.pending = pending
+            self.feedback_message = f"part presented ({pending.part_kind})"
+            return Status.SUCCESS
+        if self.req.finished:
+            # The result is recorded (parts discarded, or a placement) before failing with it.
+            ok, reason = self.req.conclude()
+            if ok:
+                reason += " without presenting a part for inspection"
+            return self.fail(reason)
+        limit = self.ctx.config.timeouts.part_presented_s
+        if self.ctx.clock() - self._started > limit:
+            return self.fail(f"no part presented for '{self.req.member.id}' within {limit:g} s")
+        return Status.RUNNING
+
+
+class ForwardResult(Action):
+    """Answer the ARS's waiting call with vision's report (the forwarded result).
+
+    Reads: the report of ``inspect`` and the call found by ``wait``. Writes: ``passed``, ``reasons``.
+    SUCCESS when forwarded, whether the part passed or not; FAILURE if there is nothing to forward.
+    """
+
+    def __init__(self, request: ArsRequest, wait: WaitForPart, inspect: ServiceCall) -> None:
+        super().__init__(f"Forward Result {request.member.id}")
+        self.ctx = request.ctx
+        self.wait = wait
+        self.inspect = inspect
+        self.passed = False
+        self.reasons: list[str] = []
+
+    def update(self) -> Status:
+        pending, response = self.wait.pending, self.inspect.last_response
+        if pending is None or response is None:
+            return self.fail("no inspection report to forward")
+        report = response.report
+        self.passed = bool(report.passed)
+        self.reasons = list(report.reasons)
+        self.ctx.desk.answer(pending, report)
+        self.feedback_message = "passed" if self.passed else "failed: " + "; ".join(self.reasons)
+        return Status.SUCCESS
+
+
+class UntilPartPasses(py_trees.decorators.Decorator):
+    """Repeat Inspection Check while parts fail, up to blackboard ``inspection_attempts`` parts.
+
+    SUCCESS: a part passed. RUNNING: checking, or waiting for the next part after a failed one.
+    FAILURE: the check failed, or ``inspection_attempts`` parts failed (reasons of the last one).
+    """
+
+    def __init__(self, ctx: CrsContext, child: py_trees.behaviour.Behaviour, forward: ForwardResult) -> None:
+        super().__init__(
+            name=f"Until Part Passes {forward.name.removeprefix('Forward Result ')}", child=child
+        )
+        self.ctx = ctx
+        self.forward = forward
+        self.failures = 0
+
+    def initialise(self) -> None:
+        self.failures = 0
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        if status == Status.FAILURE:
+            self.feedback_message = self.decorated.feedback_message
+            return Status.FAILURE
+        if status != Status.SUCCESS:
+            return status
+        if self.forward.passed:
+            self.feedback_message = "part passed inspection"
+            return Status.SUCCESS
+        self.failures += 1
+        attempts = int(self.ctx.board.get("inspection_attempts", 2))
+        reasons = "; ".join(self.forward.reasons) or "no reason given"
+        if self.failures >= attempts:
+            self.feedback_message = f"{self.failures} part(s) failed inspection, last: {reasons}"
+            return Status.FAILURE
+        self.feedback_message = f"part {self.failures} failed inspection ({reasons}); waiting for another"
+        self.decorated.stop(Status.INVALID)
+        return Status.RUNNING
+
+
+def serve_inspect_part(ctx: CrsContext, callback_group: Any = None) -> Any:
+    """Serve ``/crs/inspect_part`` on the context's node from its desk. The callback blocks while
+    it waits for the tree, so give it a reentrant group on a multi-threaded executor."""
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from tlt_interfaces.srv import InspectPart
+
+    def handle(request: Any, response: Any) -> Any:
+        response.report = ctx.desk.serve(
+            request.member_id, request.part_kind, request.camera, ctx.config.timeouts.inspect_handoff_s
+        )
+        return response
+
+    group = callback_group or ReentrantCallbackGroup()
+    return ctx.node.create_service(InspectPart, ros_names.CRS_INSPECT_PART, handle, callback_group=group)
+
+
+def inspection_check(ctx: CrsContext, request: ArsRequest) -> py_trees.behaviour.Behaviour:
+    """Fig. 22 for ``request``'s member, wrapped to repeat while parts fail."""
+    from tlt_interfaces.srv import InspectPart
+
+    member = request.member
+    wait = WaitForPart(request)
+
+    def vision_request() -> Any:
+        msg = InspectPart.Request()
+        msg.member_id = member.id
+        msg.part_kind = wait.pending.part_kind if wait.pending and wait.pending.part_kind else member.kind
+        msg.camera = ctx.config.camera_mounts.part_camera
+        return msg
+
+    inspect = ServiceCall(
+        f"Inspect Part {member.id}",
+        ctx.node,
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        vision_request,
+        service_timeout=ctx.config.timeouts.service_s,
+        timeout=ctx.config.timeouts.vision_s,
+        response_ok=lambda response: (True, ""),  # pass or fail, the report is forwarded
+        clock=ctx.clock,
+    )
+    forward = ForwardResult(request, wait, inspect)
+    check = py_trees.composites.Sequence(
+        f"Inspection Check {member.id}", memory=True, children=[wait, inspect, forward]
+    )
+    return UntilPartPasses(ctx, check, forward)
+
+
+__all__ = [
+    "ForwardResult",
+    "InspectionDesk",
+    "PendingInspection",
+    "UntilPartPasses",
+    "WaitForPart",
+    "failed_report",
+    "inspection_check",
+    "serve_inspect_part",
+]

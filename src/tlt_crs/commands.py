@@ -1,0 +1,428 @@
+"""Ground commands (Table 1) into the CRS: an in-process queue with acknowledgements, and their execution.
+
+Interface for the ground link (or any other front end)::
+
+    queue.submit("set_blackboard_value", {"key": "clear_fault", "value": True}, on_ack)
+
+``on_ack(stage, reason)`` is called with ``AckStage.ACCEPTED`` or ``AckStage.REJECTED`` (with the
+reason) from within ``submit``; an accepted command is then executed by the tree's Process Ground
+Command step (one per tick) and acknowledged again with ``COMPLETED`` or ``FAILED`` (reason). A
+rejected or failed command changes nothing. ``queue.check(name, params)`` returns the refusal
+reason without queueing, for a link that wants to refuse before it acknowledges on its own.
+
+Commands and their parameters (the names of ``config/ccsds/definitions.yaml``):
+
+=====================  =====================================  ======================================
+command                params                                 accepted when
+=====================  =====================================  ======================================
+start                  -                                      not started, not paused, not stopped
+pause                  -                                      started and not paused
+resume                 -                                      paused
+stop                   -                                      not already stopping
+set_blackboard_value   key, value (bool/int/float/str)        the writable registry accepts it
+set_actuator_state     actuator, state, value (optional)      not building: idle, fault or done
+=====================  =====================================  ======================================
+
+Start, Pause, Resume and Stop are forwarded to each ARS with the ``GroundCommand`` service; a
+forward that gets no answer within ``timeouts.forward_s`` is reported in the completion detail and
+as a warning event, but does not undo the CRS's own change. Actuator commands run asynchronously
+(service call or trajectory goal) and complete when the driver answers.
+"""
+
+from __future__ import annotations
+
+import collections
+import itertools
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from py_trees.common import Status
+
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Action
+from tlt_common.bt.ros import shared_action_client, shared_service_client
+from tlt_common.ccsds.reasons import AckStage
+from tlt_crs.behaviours.actuators import trajectory_goal, trajectory_ok
+from tlt_crs.context import CrsContext, RunState
+
+AckCallback = Callable[[AckStage, str], None]
+COMMANDS = ("start", "stop", "pause", "resume", "set_blackboard_value", "set_actuator_state")
+FORWARD_CODES = {"start": 0, "stop": 1, "pause": 2, "resume": 3}  # GroundCommand.Request constants
+LIFTER_MODES = {"hardware_control": 1, "crs_control": 2, "safe": 3}
+ACTUATOR_STATES = {
+    ros_names.LIFTER: ("safe", "hardware_control", "crs_control"),
+    ros_names.TOP_GRIPPERS: ("engage", "disengage"),
+    ros_names.ACTIVE_GRIPPERS: ("engage", "disengage"),
+    ros_names.CAMERA_MOUNTS: ("inward", "outward", "stow", "inspect_bay", "inspect_part", "move"),
+}
+
+
+@dataclass
+class Command:
+    name: str
+    params: Mapping[str, Any]
+    on_ack: AckCallback | None = None
+    id: int = 0
+
+    def ack(self, stage: AckStage, reason: str = "") -> None:
+        if self.on_ack is not None:
+            self.on_ack(stage, reason)
+
+
+class CommandQueue:
+    """Thread-safe queue of accepted commands; ``submit`` checks and acknowledges at once."""
+
+    def __init__(self, check: Callable[[str, Mapping[str, Any]], str | None]) -> None:
+        self._check = check
+        self._lock = threading.Lock()
+        self._items: collections.deque[Command] = collections.deque()
+        self._ids = itertools.count(1)
+
+    def check(self, name: str, params: Mapping[str, Any] | None = None) -> str | None:
+        try:
+            return self._check(name, dict(params or {}))
+        except Exception as exc:  # a checker bug must be a refusal, not a crash of the caller
+            return f"command could not be checked: {exc}"
+
+    def submit(
+        self, name: str, params: Mapping[str, Any] | None = None, on_ack: AckCallback | None = None
+    ) -> Command:
+        command = Command(name, dict(params or {}), on_ack, next(self._ids))
+        refusal = self.check(name, command.params)
+        if refusal:
+            command.ack(AckStage.REJECTED, refusal)
+            return command
+        with self._lock:
+            self._items.append(command)
+        command.ack(AckStage.ACCEPTED, "")
+        return command
+
+    def pop(self) -> Command | None:
+        with self._lock:
+            return self._items.popleft() if self._items else None
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._items)
+
+
+# ----- asynchronous steps of a command ----------------------------------------------------------
+class _ServiceStep:
+    """A service call of a command; ``poll`` returns None while running, else (ok, text)."""
+
+    def __init__(self, label: str, client: Any, request: Any, ok: Callable[[Any], tuple[bool, str]]) -> None:
+        self.label, self.client, self.request, self.ok = label, client, request, ok
+        self.future: Any = None
+
+    def poll(self) -> tuple[bool, str] | None:
+        if self.future is None:
+            if not self.client.service_is_ready():
+                return None
+            self.future = self.client.call_async(self.request)
+        if not self.future.done():
+            return None
+        return self.ok(self.future.result())
+
+    def give_up(self) -> str:
+        if self.future is not None:
+            self.client.remove_pending_request(self.future)
+        return "not available" if self.future is None else "no answer"
+
+
+class _GoalStep:
+    """A trajectory goal of a command; ``poll`` returns None while running, else (ok, text)."""
+
+    def __init__(self, label: str, client: Any, goal: Any) -> None:
+        self.label, self.client, self.goal = label, client, goal
+        self.send: Any = None
+        self.result: Any = None
+
+    def poll(self) -> tuple[bool, str] | None:
+        if self.send is None:
+            if not self.client.server_is_ready():
+                return None
+            self.send = self.client.send_goal_async(self.goal)
+        if self.result is None:
+            if not self.send.done():
+                return None
+            handle = self.send.result()
+            if handle is None or not handle.accepted:
+                return False, "goal rejected"
+            self.result = handle.get_result_async()
+        if not self.result.done():
+            return None
+        return trajectory_ok(self.result.result().result)
+
+    def give_up(self) -> str:
+        if self.send is not None and self.send.done() and self.send.result() is not None:
+            self.send.result().cancel_goal_async()
+        return "not available" if self.send is None else "no result"
+
+
+@dataclass
+class _Operation:
+    command: Command
+    steps: list[Any]
+    deadline: float
+    fatal: bool  # a step that fails makes the command FAILED (else only reported)
+    then: Callable[[bool, str], None] | None = None
+    outcomes: dict[int, tuple[bool, str]] = field(default_factory=dict)
+
+
+class CommandProcessor:
+    """Checks and executes commands against one CRS context.
+
+    ``hold`` is called on Pause (the node pre-empts running actuator motions); ``stop`` on Stop
+    (the node interrupts the tree and puts the lifter in Safe, then shuts down).
+    """
+
+    def __init__(self, ctx: CrsContext) -> None:
+        self.ctx = ctx
+        self.queue = CommandQueue(self.check)
+        self.hold: Callable[[], None] = lambda: None
+        self.stop_tree: Callable[[], None] = lambda: None
+        self.on_stopped: Callable[[], None] = lambda: None
+        self._operations: list[_Operation] = []
+        self.last = ""
+
+    # ----- checks (no state change) -----
+    def check(self, name: str, params: Mapping[str, Any]) -> str | None:
+        ctx = self.ctx
+        if name not in COMMANDS:
+            return f"unknown command '{name}' (known: {', '.join(COMMANDS)})"
+        if ctx.stopped:
+            return "the CRS is stopping"
+        if name == "start":
+            if ctx.paused:
+                return "the CRS is paused; send resume"
+            if ctx.started:
+                return "already started"
+        elif name == "pause":
+            if not ctx.started:
+                return "not started; nothing to pause"
+            if ctx.paused:
+                return "already paused"
+        elif name == "resume":
+            if not ctx.paused:
+                return "not paused"
+        elif name == "set_blackboard_value":
+            if "key" not in params or "value" not in params:
+                return "set_blackboard_value needs 'key' and 'value'"
+            result = ctx.registry.check(str(params["key"]), params["value"])
+            if not result.accepted:
+                return result.reason
+        elif name == "set_actuator_state":
+            return self._check_actuator(params)
+        return None
+
+    def _check_actuator(self, params: Mapping[str, Any]) -> str | None:
+        actuator, state = params.get("actuator"), params.get("state")
+        if actuator not in ACTUATOR_STATES:
+            known = ", ".join(ACTUATOR_STATES)
+            return f"actuator '{actuator}' is not driven by the CRS (CRS actuators: {known})"
+        if state not in ACTUATOR_STATES[actuator]:
+            states = ", ".join(ACTUATOR_STATES[actuator])
+            return f"actuator '{actuator}' has no state '{state}' (states: {states})"
+        if state == "move" and not isinstance(params.get("value"), int | float):
+            return f"'{actuator}' state 'move' needs a numeric value"
+        run_state = self.ctx.run_state
+        if run_state in (RunState.RUNNING, RunState.PAUSED):
+            return (
+                f"refused while building (run state {run_state.name.lower()}): actuators are driven"
+                " by the tree; wait for a fault, the end of the build, or stop"
+            )
+        return None
+
+    # ----- execution -----
+    def process_next(self) -> bool:
+        """Execute one queued command, if any; return whether there was one."""
+        command = self.queue.pop()
+        if command is None:
+            return False
+        refusal = self.check(command.name, command.params)  # the state may have changed since submit
+        self.last = command.name
+        if refusal:
+            command.ack(AckStage.FAILED, refusal)
+            return True
+        try:
+            getattr(self, f"_do_{command.name}")(command)
+        except Exception as exc:  # a command must fail with its reason, never take the CRS down
+            self.ctx.event(3, "COMMAND_FAILED", f"{command.name} failed: {exc}")
+            command.ack(AckStage.FAILED, f"{command.name} failed: {exc}")
+        return True
+
+    def _forward(self, command: Command, then: Callable[[bool, str], None] | None = None) -> None:
+        from tlt_interfaces.srv import GroundCommand
+
+        steps = []
+        for ars in ros_names.ARS_AGENTS:
+            client = shared_service_client(
+                self.ctx.node, GroundCommand, ros_names.ground_command_service(ars)
+            )
+            request = GroundCommand.Request(command=FORWARD_CODES[command.name])
+            steps.append(_ServiceStep(ars, client, request, lambda r: (bool(r.accepted), r.reason)))
+        self._operations.append(
+            _Operation(
+                command, steps, self.ctx.ros_seconds() + self.ctx.config.timeouts.forward_s, False, then
+            )
+        )
+
+    def _do_start(self, command: Command) -> None:
+        self.ctx.board.set("started", True)
+        self.ctx.event(1, "STARTED", "start command: building")
+        self._forward(command)
+
+    def _do_pause(self, command: Command) -> None:
+        self.ctx.clock.pause()
+        self.hold()
+        self.ctx.event(1, "PAUSED", "pause command: tree halted, actuators holding")
+        self._forward(command)
+
+    def _do_resume(self, command: Command) -> None:
+        self.ctx.clock.resume()
+        self.ctx.event(1, "RESUMED", "resume command: continuing where paused")
+        self._forward(command)
+
+    def _do_stop(self, command: Command) -> None:
+        from tlt_interfaces.srv import GroundCommand, SetLifterMode
+
+        ctx = self.ctx
+        ctx.stopped = True
+        ctx.board.set("started", False)
+        self.stop_tree()
+        ctx.event(2, "STOPPING", "stop command: canceling work, lifter to Safe, shutting down")
+        steps: list[Any] = [
+            _ServiceStep(
+                "lifter safe",
+                shared_service_client(ctx.node, SetLifterMode, ros_names.LIFTER_SET_MODE),
+                SetLifterMode.Request(mode=LIFTER_MODES["safe"]),
+                lambda r: (bool(r.success), r.reason),
+            )
+        ]
+        for ars in ros_names.ARS_AGENTS:
+            client = shared_service_client(ctx.node, GroundCommand, ros_names.ground_command_service(ars))
+            steps.append(
+                _ServiceStep(
+                    ars, client, GroundCommand.Request(command=1), lambda r: (bool(r.accepted), r.reason)
+                )
+            )
+        limit = max(ctx.config.timeouts.forward_s, ctx.config.timeouts.service_s)
+        self._operations.append(
+            _Operation(command, steps, ctx.ros_seconds() + limit, False, lambda ok, why: self.on_stopped())
+        )
+
+    def _do_set_blackboard_value(self, command: Command) -> None:
+        key, value = str(command.params["key"]), command.params["value"]
+        with self.ctx.lock:
+            result = self.ctx.registry.write(key, value)
+        if result.accepted:
+            self.ctx.event(1, "BLACKBOARD_SET", f"{key} = {value!r}")
+            command.ack(AckStage.COMPLETED, "")
+        else:
+            command.ack(AckStage.FAILED, result.reason)
+
+    def _do_set_actuator_state(self, command: Command) -> None:
+        from tlt_interfaces.action import FollowJointTrajectory
+        from tlt_interfaces.srv import SetLifterMode
+
+        ctx, params = self.ctx, command.params
+        actuator, state = params["actuator"], params["state"]
+        config = ctx.config
+        if actuator == ros_names.LIFTER:
+            client = shared_service_client(ctx.node, SetLifterMode, ros_names.LIFTER_SET_MODE)
+            step: Any = _ServiceStep(
+                "lifter",
+                client,
+                SetLifterMode.Request(mode=LIFTER_MODES[state]),
+                lambda r: (bool(r.success), r.reason),
+            )
+        elif actuator == ros_names.TOP_GRIPPERS:
+            from std_msgs.msg import Float64MultiArray
+
+            setup = config.top_grippers
+            stroke = setup.engage if state == "engage" else setup.disengage
+            publisher = ctx.node.create_publisher(
+                Float64MultiArray, ros_names.position_command_topic(ros_names.TOP_GRIPPERS), 10
+            )
+            publisher.publish(Float64MultiArray(data=[stroke] * len(setup.joints)))
+            ctx.event(1, "ACTUATOR_SET", f"{actuator} -> {state}")
+            command.ack(AckStage.COMPLETED, "commanded")
+            return
+        else:
+            if actuator == ros_names.ACTIVE_GRIPPERS:
+                setup = config.active_grippers
+                joints, seconds = setup.joints, setup.move_time_s
+                positions = [setup.engage if state == "engage" else setup.disengage] * len(joints)
+            else:
+                cam = config.camera_mounts
+                joints, seconds = cam.joints, cam.move_time_s
+                if state == "move":
+                    positions = [float(params["value"])] * len(joints)
+                else:
+                    positions = list(cam.inward if state in ("inward", "inspect_bay") else cam.outward)
+            client = shared_action_client(
+                ctx.node, FollowJointTrajectory, ros_names.trajectory_action(actuator)
+            )
+            step = _GoalStep(actuator, client, trajectory_goal(joints, positions, seconds))
+        ctx.event(1, "ACTUATOR_SET", f"{actuator} -> {state}")
+        limit = config.timeouts.actuator_s
+        self._operations.append(_Operation(command, [step], ctx.ros_seconds() + limit, True))
+
+    # ----- progress of asynchronous commands -----
+    def poll(self) -> None:
+        """Advance running commands; acknowledge those that finished or ran out of time."""
+        now = self.ctx.ros_seconds()
+        for op in list(self._operations):
+            for i, step in enumerate(op.steps):
+                if i not in op.outcomes:
+                    try:
+                        outcome = step.poll()
+                    except Exception as exc:
+                        outcome = (False, str(exc))
+                    if outcome is not None:
+                        op.outcomes[i] = outcome
+            timed_out = now > op.deadline
+            if len(op.outcomes) < len(op.steps) and not timed_out:
+                continue
+            problems = []
+            for i, step in enumerate(op.steps):
+                if i not in op.outcomes:
+                    problems.append(f"{step.label}: {step.give_up()} within the time limit")
+                elif not op.outcomes[i][0]:
+                    problems.append(f"{step.label}: {op.outcomes[i][1] or 'refused'}")
+            self._operations.remove(op)
+            detail = "; ".join(problems)
+            ok = not (op.fatal and problems)
+            if problems:
+                self.ctx.event(2, "COMMAND_INCOMPLETE", f"{op.command.name}: {detail}")
+            op.command.ack(AckStage.COMPLETED if ok else AckStage.FAILED, detail)
+            if op.then is not None:
+                op.then(ok, detail)
+
+    @property
+    def busy(self) -> bool:
+        return bool(self._operations)
+
+
+class ProcessGroundCommand(Action):
+    """Execute the next pending ground command, if any (Fig. 13).
+
+    Reads/writes: whatever the command does (blackboard keys, ``started``). SUCCESS always: a
+    command's outcome is reported by its acknowledgement, not by the tree.
+    """
+
+    def __init__(self, processor: CommandProcessor) -> None:
+        super().__init__("Process Ground Command")
+        self.processor = processor
+
+    def update(self) -> Status:
+        if self.processor.process_next():
+            self.feedback_message = f"processed '{self.processor.last}'"
+        else:
+            self.feedback_message = "no command pending"
+        return Status.SUCCESS
+
+
+__all__ = ["COMMANDS", "Command", "CommandProcessor", "CommandQueue", "ProcessGroundCommand"]

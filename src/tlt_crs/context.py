@@ -1,0 +1,178 @@
+"""What every CRS behaviour shares: the node, the mission and tower model, clocks, sensors, events.
+
+One :class:`CrsContext` is built per CRS node (or per test) and handed to the subtree builders of
+:mod:`tlt_crs.tree`. It holds no behaviour logic of its own beyond small accessors:
+
+* ``clock`` is *mission time*: ROS time (so ``use_sim_time`` applies) that stands still while the
+  CRS is paused, so a pause never makes a timeout expire on resume;
+* ``cache`` holds the sensor topics (its ages are plain ROS time: a stale sensor is stale even
+  when paused);
+* ``board`` reads and writes the py_trees blackboard keys of ``config/crs/writable_blackboard.yaml``;
+* ``event`` publishes ``tlt_interfaces/Event`` on ``/events`` and logs it.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import py_trees
+from rclpy.node import Node
+
+from tlt_common import ros_names
+from tlt_common.bt.ros import TopicCache, node_clock
+from tlt_common.bt.writable_blackboard import WritableBlackboard
+from tlt_common.mission.schema import Mission
+from tlt_common.mission.tower_model import TowerModel
+from tlt_crs.config import CrsConfig
+from tlt_crs.index_record import IndexRecord
+
+_log = logging.getLogger("tlt_crs")
+
+
+class RunState(enum.IntEnum):
+    """``tlt_interfaces/MissionProgress.run_state``."""
+
+    IDLE = 0
+    RUNNING = 1
+    PAUSED = 2
+    FAULT = 3
+    STOPPED = 4
+    DONE = 5
+
+
+class MissionClock:
+    """Seconds of ROS time minus the time spent paused."""
+
+    def __init__(self, ros_seconds: Callable[[], float]) -> None:
+        self._now = ros_seconds
+        self._paused_at: float | None = None
+        self._paused_total = 0.0
+        self._tick_time: float | None = None
+
+    def __call__(self) -> float:
+        if self._paused_at is not None:
+            now = self._paused_at
+        elif self._tick_time is not None:
+            now = self._tick_time
+        else:
+            now = self._now()
+        return now - self._paused_total
+
+    def begin_tick(self) -> None:
+        """Read ROS time once for the coming tick: every behaviour of a tick sees the same time,
+        and the clock is not read (a ROS call) once per waiting behaviour."""
+        self._tick_time = self._now()
+
+    def end_tick(self) -> None:
+        self._tick_time = None
+
+    @property
+    def paused(self) -> bool:
+        return self._paused_at is not None
+
+    def pause(self) -> None:
+        if self._paused_at is None:
+            self._paused_at = self._now() if self._tick_time is None else self._tick_time
+
+    def resume(self) -> None:
+        if self._paused_at is not None:
+            self._paused_total += max(0.0, self._now() - self._paused_at)
+            self._paused_at = None
+
+
+class Board:
+    """Direct access to top-level keys of the py_trees blackboard (the CRS's runtime model)."""
+
+    def __init__(self, namespace: str = "") -> None:
+        self.prefix = f"/{namespace.strip('/')}/" if namespace.strip("/") else "/"
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return py_trees.blackboard.Blackboard.storage.get(self.prefix + key, default)
+
+    def set(self, key: str, value: Any) -> None:
+        py_trees.blackboard.Blackboard.set(self.prefix + key, value)
+
+
+class CrsContext:
+    """Shared state of one CRS: see the module docstring."""
+
+    def __init__(
+        self,
+        node: Node,
+        config: CrsConfig,
+        mission: Mission,
+        model: TowerModel,
+        registry: WritableBlackboard,
+        *,
+        index: IndexRecord | None = None,
+        ros_seconds: Callable[[], float] | None = None,
+    ) -> None:
+        from tlt_interfaces.msg import Event
+
+        self.node = node
+        self.config = config
+        self.mission = mission
+        self.model = model
+        self.registry = registry
+        self.index = index if index is not None else IndexRecord(mission, None)
+        self.ros_seconds = ros_seconds or node_clock(node)
+        self.clock = MissionClock(self.ros_seconds)
+        self.cache = TopicCache(node, self.ros_seconds)
+        self.board = Board(registry.namespace)
+        from tlt_crs.behaviours.inspection import InspectionDesk
+
+        self.desk = InspectionDesk()
+        self.stopped = False
+        # Held by the tick and by service callbacks that touch the blackboard or the model.
+        self.lock = threading.RLock()
+        self._event_pub = node.create_publisher(Event, ros_names.EVENTS, 50)
+        self._event_type = Event
+
+    # ----- blackboard -----
+    @property
+    def fault(self) -> str:
+        return self.board.get("fault", "") or ""
+
+    def raise_fault(self, reason: str) -> None:
+        self.board.set("fault", reason)
+        self.event(3, "CRS_FAULT", reason)
+
+    @property
+    def started(self) -> bool:
+        return bool(self.board.get("started", False))
+
+    @property
+    def paused(self) -> bool:
+        return self.clock.paused
+
+    @property
+    def run_state(self) -> RunState:
+        """Derived from the blackboard, the clock and the model, so it can never disagree with them."""
+        if self.stopped:
+            return RunState.STOPPED
+        if self.paused:
+            return RunState.PAUSED
+        if self.fault:
+            return RunState.FAULT
+        if self.model.tower_built:
+            return RunState.DONE
+        return RunState.RUNNING if self.started else RunState.IDLE
+
+    # ----- events -----
+    def event(self, severity: int, code: str, text: str) -> None:
+        msg = self._event_type()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.source = self.node.get_name()
+        msg.severity = severity
+        msg.code = code
+        msg.text = text
+        self._event_pub.publish(msg)
+        level = {0: logging.DEBUG, 1: logging.INFO, 2: logging.WARNING}.get(severity, logging.ERROR)
+        _log.log(level, "[%s] %s", code, text)
+
+
+__all__ = ["Board", "CrsContext", "MissionClock", "RunState"]

@@ -1,0 +1,255 @@
+"""The CRS process (paper §IV.B, §V.C.2): ticks the CRS tree on ROS time and serves the ground and ARSs.
+
+``tlt-crs [--config config/crs/crs.yaml] [--mission M] [--state-file F] [--autostart] [--ros-args ...]``
+
+* Ticks the tree at ``tick_rate_hz`` on a timer of the node's clock (ROS time, so
+  ``--ros-args -p use_sim_time:=true`` runs it on the twin's ``/clock``).
+* Publishes ``/crs/tree_status`` (``TreeStatus``) at ``status_rate_hz`` (after a tick),
+  ``/crs/mission_progress`` (``MissionProgress``) at ``progress_rate_hz`` and after every tower
+  model change, and ``/events``.
+* Serves ``/crs/set_blackboard_value`` (the writable registry decides) and ``/crs/inspect_part``
+  (the ARS's part inspection; see :mod:`tlt_crs.behaviours.inspection`).
+* Takes ground commands from :attr:`CrsNode.commands` (``submit(name, params, on_ack)``, see
+  :mod:`tlt_crs.commands`), the in-process interface the CCSDS ground link plugs into.
+* Pause holds the build (running lifter/gripper/camera goals are canceled so the actuators hold;
+  ARS goals keep their place and the ARSs get PAUSE); Resume continues; Stop cancels the work, puts
+  the lifter in Safe, forwards STOP and ends the process with status 0.
+
+The tower model is resumed from ``state_file`` at start-up: a CRS killed mid-bay carries on where
+the model stands and never requests a member the model says is placed. A malformed configuration,
+mission or state file is refused with its reason (exit status 2) before anything moves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+import py_trees
+import rclpy
+from py_trees.common import Status
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+
+from tlt_common import ros_names
+from tlt_common.bt.ros import TreeStatusPublisher
+from tlt_common.bt.status_codec import TreeShape
+from tlt_common.bt.writable_blackboard import WritableBlackboard
+from tlt_common.config_schema import ConfigError
+from tlt_common.mission.schema import Mission, load_mission
+from tlt_common.mission.tower_model import TowerModel, TowerModelError
+from tlt_crs.behaviours.inspection import serve_inspect_part
+from tlt_crs.commands import CommandProcessor, CommandQueue
+from tlt_crs.config import REPO_CONFIG, CrsConfig, load_config
+from tlt_crs.context import CrsContext
+from tlt_crs.index_record import IndexRecord
+from tlt_crs.tree import build_crs_tree
+
+_log = logging.getLogger("tlt_crs")
+
+
+class CrsNode(Node):
+    """The CRS node around one context and tree (built from ``config`` and ``mission``)."""
+
+    def __init__(
+        self,
+        config: CrsConfig,
+        mission: Mission,
+        model: TowerModel,
+        registry: WritableBlackboard,
+        index: IndexRecord,
+        *,
+        node_name: str = "crs",
+        **node_kwargs: Any,
+    ) -> None:
+        super().__init__(node_name, **node_kwargs)
+        from tlt_interfaces.msg import MissionProgress
+        from tlt_interfaces.srv import SetBlackboardValue
+
+        self.ctx = CrsContext(self, config, mission, model, registry, index=index)
+        self.processor = CommandProcessor(self.ctx)
+        self.commands: CommandQueue = self.processor.queue
+        self.root = build_crs_tree(self.ctx, self.processor)
+        # The root is ticked directly: py_trees' BehaviourTree.tick walks every node after each tick
+        # for its visitors (about 10 ms for a 10-bay tree), which the guards are there to avoid.
+        self.tick_count = 0
+        self.shape = TreeShape.of(self.root)
+        self.status_publisher = TreeStatusPublisher(self, "crs", topic=ros_names.tree_status_topic("crs"))
+        self._status_period = 1.0 / config.status_rate_hz
+        self._status_due = 0.0
+        self.finished = False
+        self._interrupt = False
+        self._model_changed = False
+        self.processor.hold = self._hold_motions
+        self.processor.stop_tree = self._request_interrupt
+        self.processor.on_stopped = self._stopped
+        model.listeners.append(self._on_model_change)
+
+        self._progress_type = MissionProgress
+        self._progress_pub = self.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
+        # Ticks never overlap; the clients they use are safe across threads (SerialisedActionClient).
+        tick_group = MutuallyExclusiveCallbackGroup()
+        self._service_group = ReentrantCallbackGroup()
+        self.create_service(
+            SetBlackboardValue,
+            ros_names.CRS_SET_BLACKBOARD,
+            self._on_set_blackboard,
+            callback_group=self._service_group,
+        )
+        serve_inspect_part(self.ctx, self._service_group)
+        self.create_timer(1.0 / config.tick_rate_hz, self.tick, callback_group=tick_group)
+        self.create_timer(1.0 / config.progress_rate_hz, self.publish_progress, callback_group=tick_group)
+        self.ctx.event(
+            1, "CRS_UP", f"mission '{mission.name}': {model.bays_built()}/{mission.bay_count} bay(s) built"
+        )
+
+    # ----- ticking -----
+    def tick(self) -> None:
+        """One tick of the tree, then the asynchronous commands; never raises."""
+        if self.finished:
+            return
+        with self.ctx.lock:
+            self.ctx.clock.begin_tick()
+            try:
+                for _ in self.root.tick():
+                    pass
+            except Exception as exc:  # a behaviour bug becomes a fault with its reason, not a dead CRS
+                _log.exception("tick failed")
+                self.interrupt()
+                self.ctx.raise_fault(f"internal error in the CRS tree: {exc!r}")
+            finally:
+                self.ctx.clock.end_tick()
+            self.tick_count += 1
+            if self._interrupt:
+                self._interrupt = False
+                self.interrupt()
+            self.processor.poll()
+            now = self.ctx.ros_seconds()
+            if now >= self._status_due:
+                self._status_due = now + self._status_period
+                self.status_publisher.publish(self.shape, self.tick_count)
+        if self._model_changed:
+            self._model_changed = False
+            self.publish_progress()
+
+    def interrupt(self) -> None:
+        """Stop every running behaviour (goals in flight are canceled)."""
+        self.root.stop(Status.INVALID)
+
+    def _hold_motions(self) -> None:
+        for behaviour in self.root.iterate():
+            if getattr(behaviour, "hold_on_pause", False) and behaviour.status == Status.RUNNING:
+                behaviour.stop(Status.INVALID)
+
+    def _request_interrupt(self) -> None:
+        self._interrupt = True
+
+    def _stopped(self) -> None:
+        self.finished = True
+
+    def _on_model_change(self, model: TowerModel) -> None:
+        self.ctx.board.set("tower_built", model.tower_built)
+        self._model_changed = True
+
+    # ----- telemetry -----
+    def current_step(self) -> str:
+        tip = self.root.tip()
+        return tip.name if tip is not None and self.root.status == Status.RUNNING else ""
+
+    def progress(self) -> Any:
+        msg = self._progress_type()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        ctx = self.ctx
+        with ctx.model.lock:
+            ctx.model.fill_progress(msg)
+        msg.current_bay = int(ctx.board.get("current_bay", 0) or 0)
+        msg.current_step = self.current_step()
+        msg.run_state = int(ctx.run_state)
+        msg.started = ctx.started
+        msg.fault = ctx.fault
+        return msg
+
+    def publish_progress(self) -> None:
+        self._progress_pub.publish(self.progress())
+
+    # ----- services -----
+    def _on_set_blackboard(self, request: Any, response: Any) -> Any:
+        with self.ctx.lock:
+            result = self.ctx.registry.write_msg(request.key, request.value)
+        response.accepted, response.reason = result.accepted, result.reason
+        if result.accepted:
+            self.ctx.event(1, "BLACKBOARD_SET", f"{request.key} set by service")
+        return response
+
+
+def build_node(config: CrsConfig, **node_kwargs: Any) -> CrsNode:
+    """Load the mission, the tower model, the index record and the registry; build the node.
+
+    Raises ``ConfigError`` (mission, registry) or ``TowerModelError`` (state files) with the reason.
+    """
+    mission = load_mission(config.mission)
+    registry = WritableBlackboard.load(config.writable_blackboard)
+    config.state_file.parent.mkdir(parents=True, exist_ok=True)
+    model = TowerModel.open(mission, config.state_file)
+    index = IndexRecord(mission, config.progress_file)
+    return CrsNode(config, mission, model, registry, index, **node_kwargs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args = []
+    if "--ros-args" in argv:
+        at = argv.index("--ros-args")
+        argv, ros_args = argv[:at], argv[at:]
+    parser = argparse.ArgumentParser(prog="tlt-crs", description="The Construction Robot System node.")
+    parser.add_argument(
+        "--config", type=Path, default=REPO_CONFIG, help="CRS configuration (default: %(default)s)"
+    )
+    parser.add_argument("--mission", type=Path, help="mission file (overrides the configuration)")
+    parser.add_argument(
+        "--state-file", type=Path, help="tower model state file (overrides the configuration)"
+    )
+    parser.add_argument(
+        "--autostart", action="store_true", help="submit Start at start-up (unattended runs, tests)"
+    )
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        config = load_config(args.config, mission=args.mission, state_file=args.state_file)
+    except ConfigError as exc:
+        print(f"tlt-crs: refused: {exc}", file=sys.stderr)
+        return 2
+    rclpy.init(args=["tlt-crs", *ros_args])
+    py_trees.blackboard.Blackboard.clear()
+    try:
+        try:
+            node = build_node(config)
+        except (ConfigError, TowerModelError, OSError) as exc:
+            print(f"tlt-crs: refused: {exc}", file=sys.stderr)
+            return 2
+        if args.autostart:
+            node.commands.submit(
+                "start", {}, lambda stage, reason: _log.info("autostart: %s %s", stage.label, reason)
+            )
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        try:
+            while rclpy.ok() and not node.finished:
+                executor.spin_once(timeout_sec=0.1)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            node.interrupt()
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+        return 0
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""Raise Payload (Fig. 18), Lower Lifter (Fig. 19) and their steps, each ticked on its own against
+stand-ins of the lifter and gripper driver topics, services and trajectory actions."""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from tlt_crs.behaviours.actuators import Actuators
+
+
+def test_raise_payload_follows_fig_18_and_is_confirmed_by_sensors(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    subtree = Actuators(ctx).raise_payload()
+    crs.wait_for(lambda: ctx.cache.latest("/lifter/state") is not None, what="lifter state")
+    assert crs.tick_until(subtree) == Status.SUCCESS
+    assert rig.active.engaged == [True] * 4
+    assert rig.top.engaged == [False] * 4
+    assert rig.lifter.state == 2 and rig.lifter.mode_calls == [2]
+    assert all(abs(p - 0.80) < 1e-9 for p in rig.lifter.positions)
+    # Order of Fig. 18: Active engaged before Top released, lifter moved last.
+    assert rig.active.commands[0] == [1.5] * 4
+    assert rig.top.commands[0] == [0.0] * 4
+
+
+def test_lower_lifter_follows_fig_19(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    rig.top.set_engaged(False)
+    rig.active.set_engaged(True)
+    rig.lifter.positions = [0.8] * 4
+    subtree = Actuators(ctx).lower_lifter()
+    assert crs.tick_until(subtree) == Status.SUCCESS
+    assert rig.top.engaged == [True] * 4 and rig.active.engaged == [False] * 4
+    assert all(abs(p - 0.05) < 1e-9 for p in rig.lifter.positions)
+
+
+def test_steps_already_true_by_the_sensors_are_skipped(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    rig.active.set_engaged(True)
+    rig.top.set_engaged(False)
+    rig.lifter.state = 2
+    rig.lifter.positions = [0.8] * 4
+    subtree = Actuators(ctx).raise_payload()  # subscribes to the sensor topics
+    for topic in ("/lifter/state", "/active_grippers/state", "/top_grippers/state"):
+        crs.wait_for(lambda topic=topic: ctx.cache.latest(topic) is not None, what=topic)
+    assert crs.tick_until(subtree) == Status.SUCCESS
+    assert rig.active.commands == [] and rig.top.commands == []
+    assert rig.lifter.mode_calls == [] and rig.lifter.trajectories.goals == []
+
+
+def test_lifter_that_does_not_move_fails_with_the_sensor_state(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, actuator_s=0.5))
+    rig.lifter.state = 2
+    rig.lifter.trajectories.apply = lambda names, positions: None  # goal "succeeds", nothing moves
+    subtree = Actuators(ctx).lifter_move("Raise", 0.8)
+    crs.wait_for(lambda: ctx.cache.latest("/lifter/state") is not None, what="lifter state")
+    assert crs.tick_until(subtree) == Status.FAILURE
+    wait = subtree.children[1].children[1]
+    assert "did not confirm" in wait.feedback_message and "0.05" in wait.feedback_message
+
+
+def test_missing_gripper_state_is_a_timeout_not_a_hang(ros, crs, tmp_path):
+    rig = crs.Rig(with_drivers=False, with_ars=False)
+    try:
+        ctx = crs.make_context(rig, crs.fast_config(tmp_path, service_s=0.3, actuator_s=0.3))
+        subtree = Actuators(ctx).top_grippers(True)
+        assert crs.tick_until(subtree, timeout=5.0) == Status.FAILURE
+        assert "no message on '/top_grippers/state'" in subtree.children[1].children[1].feedback_message
+    finally:
+        rig.close()

@@ -1,0 +1,511 @@
+"""Stand-ins for what the CRS talks to, on real ROS interfaces, and helpers to tick CRS subtrees.
+
+* ``ArsStandIn``: action servers of one ARS (add_cross_frame, add_member, affix_member,
+  foundation_rivet) and its GroundCommand service. It records every request it gets, presents
+  parts to ``/crs/inspect_part`` as the ARS of §V.C.3 does (fetching another part after a failed
+  inspection), and can be told to fail, to be slow, or to honour Pause. These are what the ARS
+  issue replaces.
+* ``VisionStandIn``: ``/vision/inspect_part`` and ``/vision/inspect_bay`` with scripted verdicts.
+* ``LifterStandIn``, ``GripperStandIn``, ``CameraStandIn``: small stand-ins for the driver nodes'
+  topics, services and trajectory actions (``LifterState`` with encoder positions and the
+  firmware state, ``SetLifterMode``, ``GripperState.engaged`` from the commanded positions).
+  Trajectories finish after ``time_scale`` times their duration so a bay builds in seconds.
+"""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import py_trees
+import pytest
+import rclpy
+from py_trees.common import Status
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+
+from tlt_common import ros_names
+
+REPO = Path(__file__).resolve().parents[2]
+ONE_BAY = REPO / "missions" / "one_bay.yaml"
+TWO_BAY = REPO / "missions" / "two_bay.yaml"
+REGISTRY = REPO / "config" / "crs" / "writable_blackboard.yaml"
+CLOSING = threading.Event()  # set while a rig closes: every stand-in callback returns promptly
+
+
+@dataclass
+class Request:
+    ars: str
+    request: str
+    member_id: str
+    at: float
+    outcome: str = "running"
+
+
+@dataclass
+class Recorder:
+    requests: list[Request] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def add(self, r: Request) -> Request:
+        with self.lock:
+            self.requests.append(r)
+        return r
+
+    def members(self, request: str | None = None, outcome: str | None = None) -> list[str]:
+        with self.lock:
+            return [
+                r.member_id
+                for r in self.requests
+                if (request is None or r.request == request) and (outcome is None or r.outcome == outcome)
+            ]
+
+
+class ArsStandIn:
+    """One ARS's action servers and GroundCommand service (see module docstring)."""
+
+    def __init__(self, node: Node, ars: str, recorder: Recorder, group: ReentrantCallbackGroup) -> None:
+        from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
+        from tlt_interfaces.srv import GroundCommand, InspectPart
+
+        self.node, self.ars, self.recorder = node, ars, recorder
+        self.hold_s = 0.0  # how long each request takes
+        self.fail: dict[str, str] = {}  # member id -> reason to fail with
+        self.present_parts = True
+        self.max_parts = 3
+        self.paused = threading.Event()
+        self.commands: list[int] = []
+        self.inspect = node.create_client(InspectPart, ros_names.CRS_INSPECT_PART, callback_group=group)
+        self.servers = []
+        for request, kind in (
+            ("add_cross_frame", AddCrossFrame),
+            ("add_member", AddMember),
+            ("affix_member", AffixMember),
+            ("foundation_rivet", FoundationRivet),
+        ):
+            self.servers.append(
+                ActionServer(
+                    node,
+                    kind,
+                    ros_names.ars_action(ars, request),
+                    execute_callback=lambda handle, request=request, kind=kind: self._execute(
+                        handle, request, kind
+                    ),
+                    goal_callback=lambda goal: GoalResponse.ACCEPT,
+                    cancel_callback=lambda handle: CancelResponse.ACCEPT,
+                    callback_group=group,
+                )
+            )
+        self.service = node.create_service(
+            GroundCommand, ros_names.ground_command_service(ars), self._on_command, callback_group=group
+        )
+
+    def _on_command(self, request: Any, response: Any) -> Any:
+        self.commands.append(request.command)
+        if request.command == 2:
+            self.paused.set()
+        elif request.command in (0, 3):
+            self.paused.clear()
+        response.accepted = True
+        return response
+
+    def _execute(self, handle: Any, request: str, kind: Any) -> Any:
+        goal = handle.request
+        member = getattr(goal, "member_id", "") or getattr(goal, "joint_id", "")
+        record = self.recorder.add(Request(self.ars, request, member, time.monotonic()))
+        result = kind.Result()
+        discarded = 0
+        feedback = kind.Feedback(step="working", progress=0.5)
+        handle.publish_feedback(feedback)
+        if request in ("add_cross_frame", "add_member") and self.present_parts:
+            from tlt_interfaces.srv import InspectPart
+
+            passed = False
+            for _ in range(self.max_parts):
+                if not handle.is_active or handle.is_cancel_requested or CLOSING.is_set():
+                    break
+                call = InspectPart.Request(member_id=member, part_kind="part", camera="zed_left")
+                if not self.inspect.wait_for_service(timeout_sec=2.0):
+                    break
+                report = self.inspect.call(call, timeout_sec=5.0)
+                if report is not None and report.report.passed:
+                    passed = True
+                    break
+                discarded += 1
+            if not passed:
+                result.success, result.reason = False, f"no part passed inspection ({discarded} discarded)"
+                if hasattr(result, "parts_discarded"):
+                    result.parts_discarded = discarded
+                record.outcome = "failed"
+                handle.abort() if not handle.is_cancel_requested else handle.canceled()
+                return result
+        deadline = time.monotonic() + self.hold_s
+        while (time.monotonic() < deadline or self.paused.is_set()) and not CLOSING.is_set():
+            if handle.is_cancel_requested:
+                record.outcome = "canceled"
+                handle.canceled()
+                return result
+            time.sleep(0.01)
+        if hasattr(result, "parts_discarded"):
+            result.parts_discarded = discarded
+        if member in self.fail:
+            result.success, result.reason = False, self.fail[member]
+            record.outcome = "failed"
+            handle.succeed()
+            return result
+        result.success = True
+        record.outcome = "succeeded"
+        handle.succeed()
+        return result
+
+    def destroy(self) -> None:
+        for server in self.servers:
+            server.destroy()
+        self.node.destroy_service(self.service)
+
+
+class VisionStandIn:
+    def __init__(self, node: Node, group: ReentrantCallbackGroup) -> None:
+        from tlt_interfaces.srv import InspectBay, InspectPart
+
+        self.part_verdicts: dict[str, list[bool]] = {}  # member id -> verdicts of successive parts
+        self.bay_passes = True
+        self.part_calls: list[str] = []
+        self.bay_calls: list[int] = []
+        node.create_service(InspectPart, ros_names.VISION_INSPECT_PART, self._part, callback_group=group)
+        node.create_service(InspectBay, ros_names.VISION_INSPECT_BAY, self._bay, callback_group=group)
+
+    def _part(self, request: Any, response: Any) -> Any:
+        self.part_calls.append(request.member_id)
+        verdicts = self.part_verdicts.get(request.member_id, [])
+        passed = verdicts.pop(0) if verdicts else True
+        response.report.target_id = request.member_id
+        response.report.passed = passed
+        response.report.reasons = [] if passed else ["strut_tube chamfer 0.02 m above threshold"]
+        return response
+
+    def _bay(self, request: Any, response: Any) -> Any:
+        self.bay_calls.append(request.bay)
+        response.report.target_id = f"bay{request.bay}"
+        response.report.passed = self.bay_passes
+        response.report.reasons = [] if self.bay_passes else ["corner x0_y0 misaligned"]
+        return response
+
+
+class _Trajectories:
+    """A FollowJointTrajectory server that jumps to the last point after ``time_scale`` x its duration."""
+
+    def __init__(
+        self, node: Node, action: str, apply: Callable[[list[str], list[float]], None], group: Any
+    ) -> None:
+        from tlt_interfaces.action import FollowJointTrajectory
+
+        self.kind = FollowJointTrajectory
+        self.apply = apply
+        self.time_scale = 0.002
+        self.goals: list[list[float]] = []
+        self.canceled = 0
+        self.server = ActionServer(
+            node,
+            FollowJointTrajectory,
+            action,
+            execute_callback=self._execute,
+            cancel_callback=lambda handle: CancelResponse.ACCEPT,
+            callback_group=group,
+        )
+
+    def _execute(self, handle: Any) -> Any:
+        trajectory = handle.request.trajectory
+        point = trajectory.points[-1]
+        self.goals.append(list(point.positions))
+        duration = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
+        deadline = time.monotonic() + duration * self.time_scale
+        while time.monotonic() < deadline and not CLOSING.is_set():
+            if handle.is_cancel_requested:
+                self.canceled += 1
+                handle.canceled()
+                return self.kind.Result(error_code=-4, error_string="canceled")
+            time.sleep(0.005)
+        self.apply(list(trajectory.joint_names), list(point.positions))
+        handle.succeed()
+        return self.kind.Result(error_code=0)
+
+
+class LifterStandIn:
+    def __init__(self, node: Node, group: Any, joints: tuple[str, ...]) -> None:
+        from tlt_interfaces.msg import LifterState
+        from tlt_interfaces.srv import SetLifterMode
+
+        self.msg_type = LifterState
+        self.state = 1  # HARDWARE_CONTROL
+        self.positions = [0.05] * 4
+        self.joints = list(joints)
+        self.mode_calls: list[int] = []
+        self.publishing = True
+        self.pub = node.create_publisher(LifterState, ros_names.state_topic(ros_names.LIFTER), 10)
+        node.create_service(SetLifterMode, ros_names.LIFTER_SET_MODE, self._mode, callback_group=group)
+        self.trajectories = _Trajectories(
+            node, ros_names.trajectory_action(ros_names.LIFTER), self._apply, group
+        )
+        node.create_timer(0.02, self.publish, callback_group=group)
+
+    def _apply(self, names: list[str], positions: list[float]) -> None:
+        if self.state != 2:
+            return  # the firmware moves only in CRS Control
+        for name, p in zip(names, positions, strict=True):
+            self.positions[self.joints.index(name)] = p
+
+    def _mode(self, request: Any, response: Any) -> Any:
+        self.mode_calls.append(request.mode)
+        self.state = request.mode
+        response.success, response.state = True, self.state
+        return response
+
+    def publish(self) -> None:
+        if not self.publishing:
+            return
+        msg = self.msg_type()
+        msg.state = self.state
+        msg.joint_names = self.joints
+        msg.encoder_positions = [float(p) for p in self.positions]
+        msg.encoder_counts = [int(p * 200000) for p in self.positions]
+        msg.link_ok = True
+        self.pub.publish(msg)
+
+
+class GripperStandIn:
+    def __init__(
+        self, node: Node, group: Any, component: str, joints: tuple[str, ...], threshold: float
+    ) -> None:
+        from std_msgs.msg import Float64MultiArray
+        from tlt_interfaces.msg import GripperState
+
+        self.msg_type = GripperState
+        self.component = component
+        self.joints = list(joints)
+        self.threshold = threshold
+        self.positions = [0.0] * len(joints)
+        self.commands: list[list[float]] = []
+        self.pub = node.create_publisher(GripperState, ros_names.state_topic(component), 10)
+        if component == ros_names.TOP_GRIPPERS:
+            node.create_subscription(
+                Float64MultiArray,
+                ros_names.position_command_topic(component),
+                self._command,
+                10,
+                callback_group=group,
+            )
+            self.trajectories = None
+        else:
+            self.trajectories = _Trajectories(
+                node, ros_names.trajectory_action(component), self._apply, group
+            )
+        node.create_timer(0.02, self.publish, callback_group=group)
+
+    def _command(self, msg: Any) -> None:
+        self.commands.append(list(msg.data))
+        self.positions = list(msg.data)
+
+    def _apply(self, names: list[str], positions: list[float]) -> None:
+        self.commands.append(positions)
+        for name, p in zip(names, positions, strict=True):
+            self.positions[self.joints.index(name)] = p
+
+    def set_engaged(self, engaged: bool) -> None:
+        self.positions = [self.threshold * (1.2 if engaged else 0.0)] * len(self.joints)
+
+    @property
+    def engaged(self) -> list[bool]:
+        return [p >= self.threshold for p in self.positions]
+
+    def publish(self) -> None:
+        msg = self.msg_type()
+        msg.group = self.component
+        msg.joint_names = self.joints
+        msg.position = [float(p) for p in self.positions]
+        msg.engaged = self.engaged
+        self.pub.publish(msg)
+
+
+class CameraStandIn:
+    def __init__(self, node: Node, group: Any) -> None:
+        self.positions: list[float] = [0.0, 0.0]
+        self.trajectories = _Trajectories(
+            node, ros_names.trajectory_action(ros_names.CAMERA_MOUNTS), self._apply, group
+        )
+
+    def _apply(self, names: list[str], positions: list[float]) -> None:
+        self.positions = positions
+
+
+class Rig:
+    """Every stand-in on one node, spun (with any other node added) in a background executor."""
+
+    def __init__(self, with_drivers: bool = True, with_ars: bool = True) -> None:
+        from tlt_crs.config import CrsConfig
+
+        defaults = CrsConfig(mission=ONE_BAY, state_file=Path("unused"), progress_file=Path("unused"))
+        self.node = rclpy.create_node("crs_test_rig")
+        self.group = ReentrantCallbackGroup()
+        self.recorder = Recorder()
+        self.ars: dict[str, ArsStandIn] = {}
+        if with_ars:
+            for name in ros_names.ARS_AGENTS:
+                self.ars[name] = ArsStandIn(self.node, name, self.recorder, self.group)
+        self.vision = VisionStandIn(self.node, self.group)
+        if with_drivers:
+            self.lifter = LifterStandIn(self.node, self.group, defaults.lifter.joints)
+            self.top = GripperStandIn(
+                self.node, self.group, ros_names.TOP_GRIPPERS, defaults.top_grippers.joints, 0.022
+            )
+            self.active = GripperStandIn(
+                self.node, self.group, ros_names.ACTIVE_GRIPPERS, defaults.active_grippers.joints, 1.2
+            )
+            self.cameras = CameraStandIn(self.node, self.group)
+            self.top.set_engaged(True)  # a bay starts with the Top Grippers holding the tower
+        self.nodes: list[Node] = []
+        self.executor = MultiThreadedExecutor(num_threads=8)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # shutting down
+            pass
+
+    def add(self, node: Node) -> None:
+        self.executor.add_node(node)
+        self.nodes.append(node)
+
+    def close(self) -> None:
+        CLOSING.set()
+        try:
+            self.executor.shutdown(timeout_sec=5.0)
+            self._thread.join(timeout=5.0)
+            # Destroyed explicitly: a node left to the garbage collector keeps its DDS participant
+            # alive after rclpy.shutdown, and later tests' cross-process actions then went unanswered.
+            for node in [*self.nodes, self.node]:
+                node.destroy_node()
+        finally:
+            CLOSING.clear()
+
+
+@pytest.fixture
+def ros():
+    rclpy.init()
+    py_trees.blackboard.Blackboard.clear()
+    yield
+    py_trees.blackboard.Blackboard.clear()
+    rclpy.try_shutdown()
+    gc.collect()  # drop the context's participant now, not whenever the collector gets to it
+
+
+@pytest.fixture
+def rig(ros):
+    r = Rig()
+    yield r
+    r.close()
+
+
+def fast_config(tmp_path: Path, mission: Path = ONE_BAY, **timeouts: float):
+    """A CRS configuration with short timeouts and state files under ``tmp_path``."""
+    from tlt_crs.config import CrsConfig, Timeouts
+
+    values = dict(
+        ars_server_s=1.5,
+        service_s=1.5,
+        vision_s=3.0,
+        actuator_s=5.0,
+        part_presented_s=5.0,
+        inspect_handoff_s=5.0,
+        forward_s=1.0,
+        sensor_max_age_s=0.5,
+    )
+    values.update(timeouts)
+    return CrsConfig(
+        mission=mission,
+        state_file=tmp_path / "tower.json",
+        progress_file=tmp_path / "indexed.json",
+        writable_blackboard=REGISTRY,
+        tick_rate_hz=50.0,
+        timeouts=Timeouts(**values),
+    )
+
+
+def make_context(rig: Rig, config: Any, clock: Callable[[], float] | None = None):
+    """A CRS context on its own node (spun by the rig's executor), with its model and registry."""
+    from tlt_common.bt.writable_blackboard import WritableBlackboard
+    from tlt_common.mission.schema import load_mission
+    from tlt_common.mission.tower_model import TowerModel
+    from tlt_crs.behaviours.inspection import serve_inspect_part
+    from tlt_crs.context import CrsContext
+    from tlt_crs.index_record import IndexRecord
+
+    mission = load_mission(config.mission)
+    model = TowerModel.open(mission, config.state_file)
+    registry = WritableBlackboard.load(config.writable_blackboard)
+    registry.initialise_defaults()
+    node = rclpy.create_node("crs_under_test")
+    rig.add(node)
+    ctx = CrsContext(node, config, mission, model, registry, index=IndexRecord(mission, config.progress_file))
+    serve_inspect_part(ctx)
+    return ctx
+
+
+def tick_until(
+    root: py_trees.behaviour.Behaviour,
+    timeout: float = 10.0,
+    until: Callable[[], bool] | None = None,
+    period: float = 0.005,
+) -> Status:
+    """Tick ``root`` in this thread (the executor spins in another, as in the CRS node) until it
+    finishes, or ``until()`` holds; fail the test after ``timeout`` s."""
+    from tlt_common.bt.viewer import render_text
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for _ in root.tick():
+            pass
+        finished = until() if until is not None else root.status in (Status.SUCCESS, Status.FAILURE)
+        if finished:
+            if root.status == Status.FAILURE:  # shown by pytest when the test fails
+                print(render_text(root, collapse_invalid=True))
+            return root.status
+        time.sleep(period)
+    raise AssertionError(f"not done after {timeout} s:\n{render_text(root, collapse_invalid=True)}")
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float = 5.0, what: str = "condition") -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"{what} not reached within {timeout} s")
+
+
+@pytest.fixture
+def crs():
+    """The helpers of this file, for the tests (importlib mode cannot import a conftest)."""
+    import types
+
+    return types.SimpleNamespace(
+        ONE_BAY=ONE_BAY,
+        TWO_BAY=TWO_BAY,
+        REGISTRY=REGISTRY,
+        REPO=REPO,
+        fast_config=fast_config,
+        make_context=make_context,
+        tick_until=tick_until,
+        wait_for=wait_for,
+        Rig=Rig,
+    )

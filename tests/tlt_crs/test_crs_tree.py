@@ -1,0 +1,224 @@
+"""The whole CRS tree (Fig. 13) in a CRS node, against stand-in ARSs, vision and driver topics:
+a one-bay build, pause and resume mid-subtree, faults and help, Stop, and every refusal."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from py_trees.common import Status
+
+from tlt_common.ccsds.reasons import AckStage
+from tlt_crs.context import RunState
+from tlt_crs.index_record import IndexRecord
+from tlt_crs.node import build_node
+
+
+class Acks:
+    def __init__(self) -> None:
+        self.stages: list[tuple[AckStage, str]] = []
+
+    def __call__(self, stage: AckStage, reason: str) -> None:
+        self.stages.append((stage, reason))
+
+    @property
+    def final(self) -> tuple[AckStage, str] | None:
+        return self.stages[-1] if len(self.stages) > 1 or self.rejected else None
+
+    @property
+    def rejected(self) -> bool:
+        return bool(self.stages) and self.stages[0][0] == AckStage.REJECTED
+
+
+@pytest.fixture
+def crs_node(rig, crs, tmp_path):
+    node = build_node(crs.fast_config(tmp_path))
+    rig.add(node)
+    yield node
+    node.interrupt()
+    node.destroy_node()
+
+
+def _submit(node, crs, name, params=None, wait=True):
+    acks = Acks()
+    node.commands.submit(name, params, acks)
+    if wait and not acks.rejected:
+        crs.wait_for(lambda: acks.final is not None, what=f"{name} completion")
+    return acks
+
+
+def test_one_bay_mission_is_built_in_order_and_ends_idle(rig, crs, crs_node):
+    assert crs_node.ctx.run_state == RunState.IDLE
+    time.sleep(0.2)
+    assert rig.recorder.requests == []  # started is false at start-up: nothing moves
+    acks = _submit(crs_node, crs, "start")
+    assert [s for s, _ in acks.stages] == [AckStage.ACCEPTED, AckStage.COMPLETED]
+    crs.wait_for(lambda: crs_node.ctx.model.tower_built, timeout=30.0, what="tower built")
+    members = rig.recorder.members()
+    assert len(members) == 4 + 4 + 4 + 1 + 4  # adds, affixes, diagonals, cross frame, foundation rivets
+    assert rig.recorder.members("add_member") == sorted(
+        set(rig.recorder.members("add_member")), key=members.index
+    )
+    assert all(r.outcome == "succeeded" for r in rig.recorder.requests)
+    assert all(c == 0 for a in rig.ars.values() for c in a.commands)  # START forwarded to each ARS
+    assert set(rig.ars) == {"ars_x", "ars_y"} and all(a.commands for a in rig.ars.values())
+    crs.wait_for(lambda: crs_node.root.status == Status.SUCCESS, what="idle")
+    assert crs_node.ctx.run_state == RunState.DONE and crs_node.ctx.board.get("tower_built") is True
+    progress = crs_node.progress()
+    assert progress.tower_built and progress.bays_built == 1 and progress.run_state == RunState.DONE
+    assert IndexRecord(crs_node.ctx.mission, crs_node.ctx.config.progress_file).indexed(1)
+
+
+def test_pause_holds_the_build_and_resume_continues_where_it_paused(rig, crs, crs_node):
+    rig.ars["ars_x"].hold_s = 0.3
+    rig.lifter.trajectories.time_scale = 0.02  # 75 s raise at 1 cm/s -> 1.5 s
+    _submit(crs_node, crs, "start")
+    crs.wait_for(lambda: rig.lifter.trajectories.goals != [], what="raise started")
+    acks = _submit(crs_node, crs, "pause")
+    assert acks.final[0] == AckStage.COMPLETED
+    assert crs_node.ctx.run_state == RunState.PAUSED
+    crs.wait_for(lambda: rig.lifter.trajectories.canceled == 1, what="lifter motion held")
+    assert all(2 in a.commands for a in rig.ars.values())  # PAUSE forwarded
+    goals_when_paused = len(rig.lifter.trajectories.goals)
+    time.sleep(0.5)
+    assert len(rig.lifter.trajectories.goals) == goals_when_paused and rig.recorder.requests == []
+    hold = next(b for b in crs_node.root.iterate() if b.name == "Hold While Paused")
+    assert hold.status == Status.RUNNING and hold.feedback_message == "paused"
+
+    # Pause again mid-request: the ARS goal stays; the ARS is told to pause and honours it.
+    assert _submit(crs_node, crs, "resume").final[0] == AckStage.COMPLETED
+    crs.wait_for(lambda: rig.recorder.requests != [], timeout=10.0, what="first ARS request")
+    _submit(crs_node, crs, "pause")
+    first = rig.recorder.requests[0]
+    time.sleep(0.6)
+    assert first.outcome == "running" and len(rig.recorder.requests) == 1
+    _submit(crs_node, crs, "resume")
+    crs.wait_for(lambda: crs_node.ctx.model.tower_built, timeout=30.0, what="tower built")
+    assert first.outcome == "succeeded"
+    ids = rig.recorder.members("add_member")
+    assert len(ids) == len(set(ids)) == 8
+
+
+def test_ars_failure_raises_a_fault_that_waits_for_help_until_cleared(rig, crs, crs_node):
+    member = "bay1/vertical/x0_y0"
+    rig.ars["ars_x"].fail[member] = "part slipped from the gripper"
+    _submit(crs_node, crs, "start")
+    crs.wait_for(lambda: crs_node.ctx.fault != "", timeout=20.0, what="fault")
+    assert "part slipped from the gripper" in crs_node.ctx.fault and member in crs_node.ctx.fault
+    assert crs_node.ctx.run_state == RunState.FAULT
+    count = len(rig.recorder.requests)
+    time.sleep(0.3)
+    assert len(rig.recorder.requests) == count  # waiting for help: no new work
+    wait = next(b for b in crs_node.root.iterate() if b.name == "Wait For Help")
+    assert wait.status == Status.RUNNING
+    # Actuator commands are allowed while waiting for help (the operator fixes things).
+    assert _submit(
+        crs_node, crs, "set_actuator_state", {"actuator": "lifter", "state": "crs_control"}
+    ).final == (
+        AckStage.COMPLETED,
+        "",
+    )
+    del rig.ars["ars_x"].fail[member]
+    _submit(crs_node, crs, "set_blackboard_value", {"key": "clear_fault", "value": True})
+    crs.wait_for(lambda: crs_node.ctx.model.tower_built, timeout=30.0, what="tower built")
+    assert crs_node.ctx.fault == "" and crs_node.ctx.board.get("clear_fault") is False
+    placed = rig.recorder.members("add_member", outcome="succeeded")
+    assert len(placed) == len(set(placed)) == 8
+
+
+def test_stop_cancels_work_puts_the_lifter_in_safe_and_ends_the_node(rig, crs, crs_node):
+    rig.ars["ars_x"].hold_s = 5.0
+    _submit(crs_node, crs, "start")
+    crs.wait_for(lambda: rig.vision.part_calls != [], timeout=10.0, what="ARS request past inspection")
+    time.sleep(0.1)
+    acks = _submit(crs_node, crs, "stop")
+    assert acks.final[0] == AckStage.COMPLETED, acks.stages
+    assert rig.lifter.mode_calls[-1] == 3  # Safe
+    assert all(1 in a.commands for a in rig.ars.values())  # STOP forwarded
+    crs.wait_for(lambda: rig.recorder.requests[0].outcome == "canceled", what="ARS goal canceled")
+    assert crs_node.finished and crs_node.ctx.run_state == RunState.STOPPED
+    assert _submit(crs_node, crs, "start").rejected
+
+
+@pytest.mark.parametrize(
+    ("params", "reason"),
+    [
+        ({"key": "no_such_key", "value": 1}, "unknown key 'no_such_key'"),
+        ({"key": "started", "value": True}, "read-only"),
+        ({"key": "tower_built", "value": True}, "read-only"),
+        ({"key": "lifter_speed", "value": "fast"}, "expected float"),
+        ({"key": "lifter_speed", "value": 0.5}, "above the maximum"),
+        ({"key": "inspection_attempts", "value": True}, "expected int"),
+        ({"key": "cross_frame_ars", "value": "ars_z"}, "not one of"),
+        ({"key": "lifter_speed"}, "needs 'key' and 'value'"),
+    ],
+)
+def test_bad_blackboard_writes_are_refused_with_a_reason_and_change_nothing(crs, crs_node, params, reason):
+    before = {k: crs_node.ctx.board.get(k) for k in crs_node.ctx.registry.keys}
+    acks = _submit(crs_node, crs, "set_blackboard_value", params)
+    assert acks.rejected and reason in acks.stages[0][1]
+    assert {k: crs_node.ctx.board.get(k) for k in crs_node.ctx.registry.keys} == before
+
+
+def test_blackboard_service_refuses_and_accepts_like_the_command(rig, crs, crs_node):
+    from tlt_interfaces.msg import BlackboardValue
+    from tlt_interfaces.srv import SetBlackboardValue
+
+    client = rig.node.create_client(SetBlackboardValue, "/crs/set_blackboard_value")
+    assert client.wait_for_service(timeout_sec=5.0)
+
+    def call(key, value):
+        future = client.call_async(SetBlackboardValue.Request(key=key, value=value))
+        crs.wait_for(future.done, what="service answer")
+        return future.result()
+
+    refused = call("fault", BlackboardValue(type=3, string_value=""))
+    assert not refused.accepted and "read-only" in refused.reason
+    wrong = call("lifter_speed", BlackboardValue(type=0, bool_value=True))
+    assert not wrong.accepted and "expected float" in wrong.reason
+    ok = call("lifter_speed", BlackboardValue(type=2, float_value=0.015))
+    assert ok.accepted and crs_node.ctx.board.get("lifter_speed") == 0.015
+
+
+def test_actuator_commands_are_refused_while_building(rig, crs, crs_node):
+    rig.lifter.trajectories.time_scale = 0.02
+    _submit(crs_node, crs, "start")
+    acks = _submit(crs_node, crs, "set_actuator_state", {"actuator": "lifter", "state": "safe"})
+    assert acks.rejected and "refused while building" in acks.stages[0][1]
+    _submit(crs_node, crs, "pause")
+    acks = _submit(crs_node, crs, "set_actuator_state", {"actuator": "top_grippers", "state": "disengage"})
+    assert acks.rejected and "refused while building (run state paused)" in acks.stages[0][1]
+    assert rig.lifter.mode_calls.count(3) == 0
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "reason"),
+    [
+        ("launch", {}, "unknown command 'launch'"),
+        ("resume", {}, "not paused"),
+        ("pause", {}, "not started"),
+        ("set_actuator_state", {"actuator": "ee_x", "state": "open"}, "not driven by the CRS"),
+        ("set_actuator_state", {"actuator": "lifter", "state": "up"}, "has no state 'up'"),
+        ("set_actuator_state", {"actuator": "camera_mounts", "state": "move"}, "needs a numeric value"),
+    ],
+)
+def test_commands_refused_in_the_wrong_state_say_why(rig, crs, crs_node, name, params, reason):
+    acks = _submit(crs_node, crs, name, params)
+    assert acks.rejected and reason in acks.stages[0][1]
+    assert not crs_node.ctx.started and rig.lifter.mode_calls == []
+
+
+def test_actuator_command_when_idle_drives_the_actuator(rig, crs, crs_node):
+    acks = _submit(crs_node, crs, "set_actuator_state", {"actuator": "active_grippers", "state": "engage"})
+    assert acks.final == (AckStage.COMPLETED, "")
+    assert rig.active.engaged == [True] * 4
+    acks = _submit(
+        crs_node, crs, "set_actuator_state", {"actuator": "camera_mounts", "state": "move", "value": 0.3}
+    )
+    assert acks.final == (AckStage.COMPLETED, "") and rig.cameras.positions == [0.3, 0.3]
+
+
+def test_start_twice_is_refused(rig, crs, crs_node):
+    _submit(crs_node, crs, "start")
+    acks = _submit(crs_node, crs, "start")
+    assert acks.rejected and "already started" in acks.stages[0][1]
