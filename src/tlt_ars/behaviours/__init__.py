@@ -1,0 +1,1 @@
+"""Leaf behaviours of the ARS tree: end effector, vision requests, parts and inspection."""

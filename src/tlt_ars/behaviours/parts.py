@@ -1,0 +1,138 @@
+"""Part bookkeeping behaviours: dispenser counts, inspection by the CRS, discarding a part that
+failed it, and fetching a replacement (paper §IV.B "tracking the available components", §V.C.3).
+
+* :class:`DispenserHasParts` (condition) and :class:`TakePart` read and decrease the count of a
+  dispenser in the ARS's :class:`~tlt_ars.mission_state.MissionState`.
+* :func:`request_inspection` calls the CRS's ``InspectPart`` (``ros_names.CRS_INSPECT_PART``), which
+  has vision look at the held part with the lifter camera; it succeeds when the report passed.
+* :class:`CountDiscard` records a discarded part (dispenser's ``discarded``, the request's
+  ``parts_discarded``), then fails with the inspection's reason so the attempt ends.
+* :class:`ReplaceDiscarded` (decorator) runs its child again after an attempt that ended with a
+  discarded part: a replacement comes from the dispenser until one passes or the dispenser is
+  empty (then the request fails with that reason).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import py_trees
+from py_trees.common import Status
+from tlt_interfaces.srv import InspectPart
+
+from tlt_ars.context import ArsContext
+from tlt_ars.mission_state import DispenserEmpty
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Action, Condition
+from tlt_common.bt.ros import ServiceCall
+
+
+class DispenserHasParts(Condition):
+    """True while ``dispenser`` has parts left (the ARS's count). Feedback names the count."""
+
+    def __init__(self, name: str, ctx: ArsContext, dispenser: str) -> None:
+        super().__init__(name)
+        self.ctx, self.dispenser = ctx, dispenser
+
+    def evaluate(self) -> bool:
+        left = self.ctx.state.remaining[self.dispenser]
+        self.feedback_message = f"dispenser '{self.dispenser}' is empty" if left <= 0 else f"{left} left"
+        return left > 0
+
+
+class TakePart(Action):
+    """Count a part (or rivet) taken from ``dispenser``: decreases its count. Writes
+    ``RequestData.holding`` (``kind``, when given) and ``.dispenser``. SUCCESS at once; FAILURE
+    when the dispenser is already empty."""
+
+    def __init__(self, name: str, ctx: ArsContext, dispenser: str, kind: str | None) -> None:
+        super().__init__(name)
+        self.ctx, self.dispenser, self.kind = ctx, dispenser, kind
+
+    def update(self) -> Status:
+        try:
+            left = self.ctx.state.take_part(self.dispenser)
+        except DispenserEmpty as exc:
+            return self.fail(str(exc))
+        if self.kind is not None:
+            self.ctx.data.holding = self.kind
+            self.ctx.data.dispenser = self.dispenser
+        self.feedback_message = f"{left} left in '{self.dispenser}'"
+        return Status.SUCCESS
+
+
+def request_inspection(ctx: ArsContext, name: str = "Request Inspection") -> ServiceCall:
+    """Ask the CRS to inspect the held part; SUCCESS when the report passed, else FAILURE with
+    the report's reasons."""
+
+    def make() -> Any:
+        member = ctx.data.member
+        if member is None:
+            raise RuntimeError("no member to inspect")
+        return InspectPart.Request(
+            member_id=member.id, part_kind=member.kind, camera=ctx.config.cameras["inspection"]
+        )
+
+    def ok(response: Any) -> tuple[bool, str]:
+        report = response.report
+        ctx.data.alignment = None
+        return bool(report.passed), "inspection failed: " + ("; ".join(report.reasons) or "no reason given")
+
+    return ServiceCall(
+        name,
+        ctx.node,
+        InspectPart,
+        ros_names.CRS_INSPECT_PART,
+        make,
+        service_timeout=ctx.config.timeouts["server_s"],
+        timeout=ctx.config.timeouts["service_s"],
+        response_ok=ok,
+        clock=ctx.clock,
+    )
+
+
+class CountDiscard(Action):
+    """Record the part just dropped at the discard pose, then FAIL the attempt with ``reason_of``'s
+    feedback (the failed inspection). Writes the dispenser's ``discarded`` count and
+    ``RequestData.parts_discarded``."""
+
+    def __init__(self, name: str, ctx: ArsContext, reason_of: py_trees.behaviour.Behaviour) -> None:
+        super().__init__(name)
+        self.ctx, self.reason_of = ctx, reason_of
+
+    def update(self) -> Status:
+        data = self.ctx.data
+        if data.dispenser is not None:
+            self.ctx.state.count_discard(data.dispenser)
+        data.parts_discarded += 1
+        data.holding = None
+        reason = self.reason_of.feedback_message or "inspection failed"
+        return self.fail(f"part discarded ({reason})")
+
+
+class ReplaceDiscarded(py_trees.decorators.Decorator):
+    """Re-run the child after an attempt that failed having discarded a part; otherwise pass the
+    child's status through. Bounded by the dispenser: an empty one fails the child for good."""
+
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour, ctx: ArsContext) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx = ctx
+        self._discarded_at_start = 0
+
+    def initialise(self) -> None:
+        self._discarded_at_start = self.ctx.data.parts_discarded
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        if status == Status.FAILURE and self.ctx.data.parts_discarded > self._discarded_at_start:
+            self._discarded_at_start = self.ctx.data.parts_discarded
+            self.feedback_message = (
+                f"{self.ctx.data.parts_discarded} part(s) discarded: fetching a replacement"
+            )
+            self.decorated.stop(Status.INVALID)  # the next tick starts the child afresh
+            return Status.RUNNING
+        self.feedback_message = self.decorated.feedback_message
+        return status
+
+
+__all__ = ["CountDiscard", "DispenserHasParts", "ReplaceDiscarded", "TakePart", "request_inspection"]

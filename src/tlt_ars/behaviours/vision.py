@@ -1,0 +1,205 @@
+"""Vision requests of the ARS (paper §V.C.3, §V.E): a dispenser's AprilTag for the fine approach,
+the alignment of a held or placed part from the EE camera, and the check that a rivet is loaded.
+
+* :class:`LocateDispenser` calls ``LocateTag`` (``ros_names.VISION_LOCATE_TAG``) and stores the
+  dispenser's world pose (the tag marks the dispenser's origin) in ``RequestData.located``; the
+  fine approach then takes its grasp pose from there instead of from the mission.
+* :class:`MeasureAlignment` calls ``CheckAlignment`` (``ros_names.VISION_CHECK_ALIGNMENT``) with
+  the EE camera and stores the response in ``RequestData.alignment``; :class:`PartAligned` reads
+  it; :func:`corrected_target` turns a measured part pose into the tool pose that puts the part
+  where it belongs.
+* :func:`verify_rivet_loaded` asks ``InspectPart`` (``ros_names.VISION_INSPECT_PART``) about the
+  rivet in the gun (part kind ``rivet``, member id ``<ars>/<gun>``, the EE camera).
+
+Poses from vision must be in ``cameras.world_frame``; any other frame fails with that reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
+
+from tlt_ars.context import ArsContext
+from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_from_matrix
+from tlt_ars.planning.targets import Target, dispenser_targets
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Condition
+from tlt_common.bt.ros import ServiceCall
+
+
+def pose_to_matrix(pose: Any) -> np.ndarray:
+    """geometry_msgs/Pose -> 4x4."""
+    x, y, z, w = pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w
+    n = x * x + y * y + z * z + w * w
+    if n < 1e-12:
+        raise ValueError("pose has a zero quaternion")
+    s = 2.0 / n
+    rot = np.array(
+        [
+            [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+            [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+            [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)],
+        ]
+    )
+    return pose_matrix((pose.position.x, pose.position.y, pose.position.z), rot)
+
+
+class LocateDispenser(ServiceCall):
+    """Find ``dispenser``'s AprilTag with the EE camera.
+
+    Writes: ``RequestData.located[dispenser]`` (world pose). RUNNING while vision answers.
+    SUCCESS with a tag found in the world frame. FAILURE when vision is missing or slow, the tag
+    is not found (vision's reason), or the pose is in another frame.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext, dispenser: str) -> None:
+        self.ctx = ctx
+        self.dispenser = dispenser
+        super().__init__(
+            name,
+            ctx.node,
+            LocateTag,
+            ros_names.VISION_LOCATE_TAG,
+            lambda: LocateTag.Request(dispenser=dispenser, camera=ctx.config.cameras["end_effector"]),
+            service_timeout=ctx.config.timeouts["server_s"],
+            timeout=ctx.config.timeouts["service_s"],
+            response_ok=self._ok,
+            clock=ctx.clock,
+        )
+
+    def _ok(self, response: Any) -> tuple[bool, str]:
+        if not response.found:
+            return False, f"tag of '{self.dispenser}' not found: {response.reason or 'no reason given'}"
+        frame = response.pose.header.frame_id
+        if frame != self.ctx.config.cameras["world_frame"]:
+            return (
+                False,
+                f"tag pose is in frame '{frame}', expected '{self.ctx.config.cameras['world_frame']}'",
+            )
+        try:
+            self.ctx.data.located[self.dispenser] = pose_to_matrix(response.pose.pose)
+        except ValueError as exc:
+            return False, str(exc)
+        return True, ""
+
+
+def located_dispenser_targets(ctx: ArsContext, dispenser: str) -> list[Target]:
+    """Grasp candidates for the top part of ``dispenser``, placed where its tag was seen (or where
+    the mission says, before the tag is located)."""
+    disp = ctx.mission.dispensers[dispenser]
+    seen = ctx.data.located.get(dispenser)
+    mission: Any = ctx.mission
+    if seen is not None:
+        origin = np.asarray(ctx.scene.raw["site"]["base_origin"], dtype=float)
+        disp = replace(disp, position=tuple(seen[:3, 3] - origin), rpy=tuple(rpy_from_matrix(seen[:3, :3])))
+        mission = SimpleNamespace(dispensers={dispenser: disp}, bay_width=ctx.mission.bay_width)
+    return dispenser_targets(ctx.scene, mission, dispenser, ctx.ars, remaining=ctx.state.remaining[dispenser])
+
+
+class MeasureAlignment(ServiceCall):
+    """Ask vision for the alignment of the request's member from the EE camera.
+
+    Writes: ``RequestData.alignment`` (the response). SUCCESS when vision answered (aligned or
+    not: :class:`PartAligned` judges); FAILURE when vision is missing or slow.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        self.ctx = ctx
+        super().__init__(
+            name,
+            ctx.node,
+            CheckAlignment,
+            ros_names.VISION_CHECK_ALIGNMENT,
+            self._request,
+            service_timeout=ctx.config.timeouts["server_s"],
+            timeout=ctx.config.timeouts["service_s"],
+            response_ok=self._ok,
+            clock=ctx.clock,
+        )
+
+    def _request(self) -> Any:
+        member = self.ctx.data.member
+        if member is None:
+            raise RuntimeError("no member to align")
+        return CheckAlignment.Request(member_id=member.id, camera=self.ctx.config.cameras["end_effector"])
+
+    def _ok(self, response: Any) -> tuple[bool, str]:
+        self.ctx.data.alignment = response
+        return True, ""
+
+
+class PartAligned(Condition):
+    """True when the latest alignment measurement says aligned. Reads ``RequestData.alignment``."""
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+
+    def evaluate(self) -> bool:
+        a = self.ctx.data.alignment
+        if a is None:
+            self.feedback_message = "not measured"
+            return False
+        self.feedback_message = (
+            f"{'aligned' if a.aligned else 'misaligned'}: {a.position_error * 1000:.1f} mm,"
+            f" {np.degrees(a.angle_error):.2f} deg" + (f" ({a.reason})" if a.reason else "")
+        )
+        return bool(a.aligned)
+
+
+def corrected_target(ctx: ArsContext, key: str) -> Target:
+    """The tool pose that moves the held part from where vision saw it to the chosen placement
+    target ``RequestData.targets[key]`` (the part frame is the tool frame at the grasp)."""
+    a = ctx.data.alignment
+    target = ctx.data.targets.get(key)
+    if a is None or target is None:
+        raise RuntimeError("no alignment measurement or placement target")
+    if not a.pose.certified:
+        raise RuntimeError(f"vision pose of the part is not certified: {a.pose.reason}")
+    if a.pose.header.frame_id != ctx.config.cameras["world_frame"]:
+        raise RuntimeError(f"part pose is in frame '{a.pose.header.frame_id}'")
+    q = ctx.arm_q()
+    if q is None:
+        raise RuntimeError("no fresh joint state")
+    tool = ctx.scene.kinematics(ctx.ars).forward(q)
+    measured = pose_to_matrix(a.pose.pose)
+    pose = target.pose @ invert(measured) @ tool
+    return Target(f"{target.label} corrected", pose, target.pre_pose)
+
+
+def verify_rivet_loaded(ctx: ArsContext, name: str = "Verify Rivet Loaded") -> ServiceCall:
+    """The EE camera confirms a rivet sits in the gun (InspectPart, part kind ``rivet``)."""
+    gun = ctx.config.ee["rivet_gun"]
+
+    def ok(response: Any) -> tuple[bool, str]:
+        report = response.report
+        return bool(report.passed), "; ".join(report.reasons) or "rivet not seen in the gun"
+
+    return ServiceCall(
+        name,
+        ctx.node,
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        lambda: InspectPart.Request(
+            member_id=f"{ctx.ars}/{gun}", part_kind="rivet", camera=ctx.config.cameras["end_effector"]
+        ),
+        service_timeout=ctx.config.timeouts["server_s"],
+        timeout=ctx.config.timeouts["service_s"],
+        response_ok=ok,
+        clock=ctx.clock,
+    )
+
+
+__all__ = [
+    "LocateDispenser",
+    "MeasureAlignment",
+    "PartAligned",
+    "corrected_target",
+    "located_dispenser_targets",
+    "pose_to_matrix",
+    "verify_rivet_loaded",
+]

@@ -1,0 +1,137 @@
+"""Everything the ARS behaviours share: the node, the configuration, the mission state, the sensor
+caches, the planner, and the state of the request being carried out.
+
+One :class:`ArsContext` per ARS process. Behaviours read sensors through it (``arm_q`` from the
+UR driver's JointState, ``ee_state`` from the EE driver's EndEffectorState, the other arm's
+configuration for the collision scene) and keep the request's working data in :class:`RequestData`
+(which part is held, the target chosen for an approach, the dispenser pose found on its tag, the
+parts discarded), which the tree resets for each request.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from tlt_interfaces.msg import EndEffectorState
+
+from tlt_ars.config import ArsConfig
+from tlt_ars.mission_state import MissionState, Request
+from tlt_ars.planning.world import SceneConfig
+from tlt_common import ros_names
+from tlt_common.bt.ros import Clock, TopicCache, node_clock
+from tlt_common.mission.schema import Member, Mission
+
+
+@dataclass
+class RequestData:
+    """Working data of one request; a fresh one for every request."""
+
+    request: Request | None = None
+    member: Member | None = None
+    holding: str | None = None  # part kind in the gripper, for the collision scene
+    dispenser: str | None = None  # the dispenser the held part came from
+    parts_discarded: int = 0
+    targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
+    located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
+    approached_from: dict[str, np.ndarray] = field(default_factory=dict)  # key -> joints before the fine move
+    alignment: Any = None  # the latest CheckAlignment response
+
+
+class ArsContext:
+    """Shared state of one ARS; see the module docstring."""
+
+    def __init__(
+        self,
+        node: Node,
+        config: ArsConfig,
+        mission: Mission,
+        scene: SceneConfig,
+        *,
+        clock: Clock | None = None,
+    ) -> None:
+        self.node = node
+        self.config = config
+        self.mission = mission
+        self.scene = scene
+        self.ars = config.ars
+        self.other_ars = next((a for a in ros_names.ARS_AGENTS if a != self.ars), None)
+        self.state = MissionState(mission, self.ars)
+        self.clock = clock or node_clock(node)
+        self.cache = TopicCache(node, self.clock)
+        self.joint_topic = ros_names.joint_states_topic(ros_names.ur(self.ars))
+        self.other_joint_topic = (
+            ros_names.joint_states_topic(ros_names.ur(self.other_ars)) if self.other_ars else None
+        )
+        self.ee_topic = ros_names.state_topic(ros_names.ee(self.ars))
+        self.cache.watch(self.joint_topic, JointState)
+        if self.other_joint_topic:
+            self.cache.watch(self.other_joint_topic, JointState)
+        self.cache.watch(self.ee_topic, EndEffectorState)
+        # One width-command publisher for every Set Width of every branch the ARS builds.
+        self.width_publisher = node.create_publisher(
+            Float64MultiArray, ros_names.position_command_topic(ros_names.ee(self.ars)), 10
+        )
+        # Planning is CPU work of up to a second: it runs here, never in the tick.
+        self.planning_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.ars}-planner")
+        self.data = RequestData()
+
+    # ----- sensors -----
+    def arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
+        """This arm's joint positions in planning order, or None without a fresh JointState."""
+        return self._joints(self.joint_topic, self.config.arm["joint_names"], max_age)
+
+    def arm_velocity(self, max_age: float = 1.0) -> np.ndarray | None:
+        entry = self.cache.latest(self.joint_topic)
+        if entry is None or self.clock() - entry[1] > max_age:
+            return None
+        msg = entry[0]
+        if len(msg.velocity) != len(msg.name):
+            return None
+        by_name = dict(zip(msg.name, msg.velocity, strict=True))
+        try:
+            return np.array([by_name[n] for n in self.config.arm["joint_names"]], dtype=float)
+        except KeyError:
+            return None
+
+    def other_arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
+        """The other arm's configuration (for the collision scene), or None when not known."""
+        if not self.other_joint_topic:
+            return None
+        names = [
+            n.replace(ros_names.ur(self.ars), ros_names.ur(self.other_ars))
+            for n in self.config.arm["joint_names"]
+        ]
+        return self._joints(self.other_joint_topic, names, max_age)
+
+    def _joints(self, topic: str, names: list[str], max_age: float) -> np.ndarray | None:
+        entry = self.cache.latest(topic)
+        if entry is None or self.clock() - entry[1] > max_age:
+            return None
+        by_name = dict(zip(entry[0].name, entry[0].position, strict=False))
+        try:
+            return np.array([by_name[n] for n in names], dtype=float)
+        except KeyError:
+            return None
+
+    def ee_state(self, max_age: float = 1.0) -> tuple[EndEffectorState, float] | None:
+        """(EndEffectorState, arrival time) when fresh, else None."""
+        entry = self.cache.latest(self.ee_topic)
+        if entry is None or self.clock() - entry[1] > max_age:
+            return None
+        return entry
+
+    # ----- request -----
+    def begin(self, request: Request) -> None:
+        self.data = RequestData(request=request, member=self.state.member(request.member_id))
+
+    def close(self) -> None:
+        self.planning_pool.shutdown(wait=False, cancel_futures=True)
+
+
+__all__ = ["ArsContext", "RequestData"]

@@ -1,0 +1,320 @@
+"""Plan-and-execute motion behaviours (paper §V.D): "Approach Dispenser", "Move To Member
+Inspection" and the rest are sequences of a plan request and its execution.
+
+:class:`MotionPlanner` is the ARS's interface to the planning package (``tlt_ars.planning``): it
+builds the collision scene as the arm stands (tower as placed so far, the other arm where its
+JointState says, the part held), plans with OMPL, time-parameterises under the UR10e limits
+scaled by ``arm.velocity_scale`` and returns a ``trajectory_msgs/JointTrajectory`` of the arm's
+joints, or raises :class:`~tlt_ars.planning.planner.PlanningFailed` with the reason. The arm is
+only ever sent a trajectory that came out of it, so it never moves on a path that was not checked.
+
+:func:`move` returns ``Sequence[Plan <name>, Execute <name>]``:
+
+* :class:`PlanMotion` runs the planning in the context's planning thread (the tick never
+  blocks) and leaves the trajectory in a :class:`TrajectorySlot`.
+* :class:`ExecuteTrajectory` sends it to the UR driver's FollowJointTrajectory action
+  (``ros_names.trajectory_action(ur(ars))``); when pre-empted (cancel, Pause, Stop) it cancels the
+  goal, and the driver's controller holds the arm where it stands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import py_trees
+from builtin_interfaces.msg import Duration
+from py_trees.common import Status
+from tlt_interfaces.action import FollowJointTrajectory
+from tlt_interfaces.msg import JointTolerance
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from tlt_ars.context import ArsContext
+from tlt_ars.planning.planner import Planner, PlanningFailed
+from tlt_ars.planning.reachability import TargetUnreachable, reach_target
+from tlt_ars.planning.targets import Target
+from tlt_ars.planning.time_parameterisation import time_parameterise
+from tlt_ars.planning.world import SceneConfig, build_scene
+from tlt_common import ros_names
+from tlt_common.bt.nodes import Action
+from tlt_common.bt.ros import ActionGoal
+
+# Largest joint offset (rad) between the arm and a trajectory's first point when it is sent.
+START_TOLERANCE = 0.05
+
+
+@dataclass
+class MotionGoal:
+    """Where a motion goes: a joint configuration, or the first usable of candidate targets
+    (``use`` picks the target's ``pose`` or its ``pre_pose``). ``contact`` lets the end effector and
+    the held part touch the tower (the last move onto a joint). ``key`` names the approach, so the
+    fine move after a coarse one takes the same candidate (``RequestData.targets[key]``)."""
+
+    joints: np.ndarray | None = None
+    targets: list[Target] = field(default_factory=list)
+    use: str = "pose"
+    contact: bool = False
+    key: str | None = None
+
+
+@dataclass
+class PlannedMotion:
+    trajectory: JointTrajectory
+    duration: float
+    target: Target | None
+
+
+class MotionPlanner:
+    """Plans for one arm in the scene as it stands; see the module docstring."""
+
+    def __init__(
+        self,
+        scene: SceneConfig,
+        arm: str,
+        mission: Any,
+        joint_names: Sequence[str],
+        *,
+        velocity_scale: float,
+        sample_period: float,
+        time_limit: float | None = None,
+    ) -> None:
+        self.scene = scene
+        self.arm = arm
+        self.mission = mission
+        self.joint_names = list(joint_names)
+        lim = scene.limits
+        self.velocity = np.asarray(lim["velocity"], dtype=float) * velocity_scale
+        self.acceleration = np.asarray(lim["acceleration"], dtype=float) * velocity_scale
+        self.sample_period = sample_period
+        self.time_limit = time_limit
+
+    def plan(
+        self,
+        start: np.ndarray,
+        goal: MotionGoal,
+        *,
+        placed: set[str],
+        bay: int,
+        carrying: str | None,
+        other_q: np.ndarray | None,
+    ) -> PlannedMotion:
+        """A checked, time-parameterised trajectory from ``start`` to ``goal``; PlanningFailed if none."""
+        kwargs = dict(placed=placed, bay=bay, other_arm_q=other_q, carrying=carrying)
+        scene = build_scene(self.scene, self.arm, self.mission, contact=goal.contact, **kwargs)
+        planner = Planner.from_config(scene, self.scene.planning, home=self.scene.home(self.arm))
+        chosen = None
+        if goal.joints is not None:
+            plan = planner.plan_to_joints(start, goal.joints, self.time_limit)
+        else:
+            if not goal.targets:
+                raise PlanningFailed("ik", "no candidate pose to move to")
+            free = build_scene(self.scene, self.arm, self.mission, contact=False, **kwargs)
+            contact = build_scene(self.scene, self.arm, self.mission, contact=True, **kwargs)
+            reasons = []
+            for target in goal.targets:
+                # A candidate counts only when its pose, its pre-pose and the straight move between
+                # them are all free: the coarse approach must not commit to a dead end. The arm then
+                # goes to exactly those configurations, so the final straight move is the one checked.
+                try:
+                    q_pre, q = reach_target(
+                        free, contact, target, start, self.scene.planning["dense_check_resolution"]
+                    )
+                except TargetUnreachable as exc:
+                    reasons.append(f"{target.label}: {exc}")
+                    continue
+                try:
+                    plan = planner.plan_to_joints(
+                        start, q_pre if goal.use == "pre_pose" else q, self.time_limit
+                    )
+                except PlanningFailed as exc:
+                    reasons.append(f"{target.label}: {exc.reason}")
+                    continue
+                chosen = target
+                break
+            else:
+                raise PlanningFailed(
+                    "ik", f"none of {len(goal.targets)} candidate(s) is usable; first: {reasons[0]}"
+                )
+        traj = time_parameterise(plan.path, self.velocity, self.acceleration)
+        return PlannedMotion(self.to_msg(traj), traj.duration, chosen)
+
+    def to_msg(self, traj: Any) -> JointTrajectory:
+        msg = JointTrajectory()
+        msg.joint_names = list(self.joint_names)
+        for p in traj.points(self.sample_period):
+            point = JointTrajectoryPoint()
+            point.positions = [float(v) for v in p.q]
+            point.velocities = [float(v) for v in p.qd]
+            point.accelerations = [float(v) for v in p.qdd]
+            point.time_from_start = duration_msg(p.t)
+            msg.points.append(point)
+        return msg
+
+
+def duration_msg(seconds: float) -> Duration:
+    """builtin_interfaces/Duration of ``seconds`` (>= 0), rounded to the nanosecond."""
+    ns = round(seconds * 1e9)
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class TrajectorySlot:
+    """The planned motion handed from a PlanMotion to its ExecuteTrajectory."""
+
+    def __init__(self) -> None:
+        self.motion: PlannedMotion | None = None
+
+
+class PlanMotion(Action):
+    """Plan one motion in the planning thread.
+
+    Reads: the arm's JointState (start), the mission state (tower), the held part, the other arm.
+    Writes: the slot's trajectory; ``RequestData.targets[goal.key]`` when a candidate is chosen.
+    RUNNING while planning (≤ ``timeouts.planning_s``). SUCCESS with a checked trajectory. FAILURE
+    without a fresh arm state, when the goal cannot be built, or with the planner's reason.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
+                 slot: TrajectorySlot) -> None:  # fmt: skip
+        super().__init__(name)
+        self.ctx, self.planner, self.goal, self.slot = ctx, planner, goal, slot
+        self._future = None
+        self._started = 0.0
+        self._goal: MotionGoal | None = None
+
+    def initialise(self) -> None:
+        self.slot.motion = None
+        self._future = None
+        self._started = self.ctx.clock()
+
+    def update(self) -> Status:
+        if self._future is None:
+            start = self.ctx.arm_q()
+            if start is None:
+                return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
+            try:
+                self._goal = self.goal()
+            except Exception as exc:
+                return self.fail(f"cannot tell where to go: {exc}")
+            data = self.ctx.data
+            bay = data.member.bay if data.member is not None else 1
+            self._future = self.ctx.planning_pool.submit(
+                self.planner.plan,
+                start,
+                self._goal,
+                placed=self.ctx.state.placed(),
+                bay=bay,
+                carrying=data.holding,
+                other_q=self.ctx.other_arm_q(),
+            )
+            self.feedback_message = "planning"
+            return Status.RUNNING
+        if not self._future.done():
+            if self.ctx.clock() - self._started > self.ctx.config.timeouts["planning_s"]:
+                self._future.cancel()
+                self._future = None
+                return self.fail(f"planning took longer than {self.ctx.config.timeouts['planning_s']:g} s")
+            return Status.RUNNING
+        future, self._future = self._future, None
+        try:
+            motion = future.result()
+        except PlanningFailed as exc:
+            return self.fail(f"planning failed ({exc.kind}): {exc.reason}")
+        except Exception as exc:  # a planner bug must fail the request, not kill the tick
+            return self.fail(f"planning failed: {exc!r}")
+        self.slot.motion = motion
+        goal = self._goal
+        if goal is not None and goal.key:
+            if motion.target is not None:
+                self.ctx.data.targets[goal.key] = motion.target
+            if goal.use == "pose" and motion.trajectory.points:
+                # Where the final move onto the part or joint starts: the retreat goes back there
+                # along the same checked straight line instead of searching a narrow gap again.
+                self.ctx.data.approached_from[goal.key] = np.array(motion.trajectory.points[0].positions)
+        self.feedback_message = f"planned {motion.duration:.2f} s"
+        return Status.SUCCESS
+
+    def terminate(self, new_status: Status) -> None:
+        if self._future is not None:
+            self._future.cancel()  # a plan already running finishes in its thread and is dropped
+            self._future = None
+
+
+def _trajectory_ok(result: Any) -> tuple[bool, str]:
+    code = getattr(result, "error_code", 0)
+    return code == 0, f"error {code}: {getattr(result, 'error_string', '')}"
+
+
+class ExecuteTrajectory(ActionGoal):
+    """Send the slot's trajectory to the UR driver and follow it to its end.
+
+    Reads: the slot. Writes: nothing. RUNNING while the arm moves (≤ duration +
+    ``timeouts.trajectory_margin_s``). SUCCESS when the driver reports it reached the goal within
+    tolerance. FAILURE on rejection, abort (tolerance, protective stop) or timeout, with the
+    driver's reason. Pre-empted: the goal is canceled and the driver holds the arm.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext, slot: TrajectorySlot) -> None:
+        self.slot = slot
+        self.ctx = ctx
+        super().__init__(
+            name,
+            ctx.node,
+            FollowJointTrajectory,
+            ros_names.trajectory_action(ros_names.ur(ctx.ars)),
+            self._make_goal,
+            server_timeout=ctx.config.timeouts["server_s"],
+            result_ok=_trajectory_ok,
+            clock=ctx.clock,
+        )
+
+    def _make_goal(self) -> Any:
+        if self.slot.motion is None:
+            raise RuntimeError("nothing was planned")
+        q = self.ctx.arm_q()
+        start = np.asarray(self.slot.motion.trajectory.points[0].positions)
+        if q is None or float(np.max(np.abs(q - start))) > START_TOLERANCE:
+            # The path was checked from where the arm stood when it was planned, and only from there.
+            raise RuntimeError("the arm is not where this trajectory was planned from")
+        arm = self.ctx.config.arm
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory = self.slot.motion.trajectory
+        names = goal.trajectory.joint_names
+        goal.path_tolerance = [JointTolerance(name=n, position=arm["path_tolerance"]) for n in names]
+        goal.goal_tolerance = [JointTolerance(name=n, position=arm["goal_tolerance"]) for n in names]
+        goal.goal_time_tolerance = duration_msg(arm["goal_time_tolerance_s"])
+        return goal
+
+    def initialise(self) -> None:
+        super().initialise()
+        duration = self.slot.motion.duration if self.slot.motion is not None else 0.0
+        self.result_timeout = duration + self.ctx.config.timeouts["trajectory_margin_s"]
+
+
+def move(
+    name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal]
+) -> py_trees.composites.Sequence:
+    """A named motion: ``Sequence[Plan, Execute]`` (memory: a finished plan is not redone)."""
+    slot = TrajectorySlot()
+    seq = py_trees.composites.Sequence(name, memory=True)
+    seq.replan_on_resume = True  # ArsTree.hold() stops the whole motion: Resume plans it afresh
+    seq.add_children(
+        [
+            PlanMotion(f"Plan {name}", ctx, planner, goal, slot),
+            ExecuteTrajectory(f"Execute {name}", ctx, slot),
+        ]
+    )
+    return seq
+
+
+__all__ = [
+    "ExecuteTrajectory",
+    "MotionGoal",
+    "MotionPlanner",
+    "PlanMotion",
+    "PlannedMotion",
+    "TrajectorySlot",
+    "duration_msg",
+    "move",
+]

@@ -1,0 +1,378 @@
+"""The ARS process (paper §IV.C, §V.C.1, §V.C.3): one per arm, ``--ars ars_x|ars_y``.
+
+Serves, for the CRS:
+
+* one action server per request on ``ros_names.ars_action(ars, request)``: ``AddCrossFrame``,
+  ``AddMember``, ``AffixMember``, ``FoundationRivet``. A goal is **accepted** (the
+  acknowledgement of Fig. 21) and then checked: when the ARS is idle, started, not paused, and
+  the request makes sense against the mission (:meth:`MissionState.check_request`), its branch is
+  installed in the tree and run. Otherwise the goal is **aborted at once with the reason in
+  ``result.reason``**: rclpy's goal callback can only accept or reject, and a rejection cannot
+  carry a reason, so "rejected with a reason" is an accepted goal aborted before any motion
+  (``result.success`` false, reason e.g. ``busy: running add_member bay1/vertical/x0_y1``).
+  Feedback is the running leaf's path in the tree (``Add Member/Load Rivet/Approach Rivet
+  Dispenser/Execute Approach Rivet Dispenser``) and the fraction of the branch's leaves done.
+  The result is success, or failure with the failing step and its reason. Cancel pre-empts the
+  branch (the arm's trajectory goal is canceled, the driver holds the arm), waits until the
+  JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal CANCELED.
+* ``GroundCommand`` on ``ros_names.ground_command_service(ars)``: Start (lets requests run; the
+  ARS starts started when ``started_on_launch``), Pause (stops ticking and holds the arm: the
+  running motion is canceled, Resume plans it again from where the arm stands), Resume, Stop
+  (pre-empts everything, fails a running request with "stopped by ground command", waits for
+  the arm to stand still and shuts the process down).
+
+Subscribes to the CRS's ``MissionProgress`` to know what stands and which bay is current;
+publishes the tree's status on ``ros_names.tree_status_topic(ars)``.
+
+Threads: a MultiThreadedExecutor; the tick timer owns the tree; action callbacks hand jobs over
+under a lock and wait for their result; planning runs in the context's planning thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
+from tlt_interfaces.msg import MissionProgress
+from tlt_interfaces.srv import GroundCommand
+
+from tlt_ars.config import ArsConfig, check_against_mission, default_config_path, load_ars_config
+from tlt_ars.context import ArsContext
+from tlt_ars.mission_state import Request
+from tlt_ars.motion import MotionPlanner
+from tlt_ars.tree import ArsTree, Job
+from tlt_common import ros_names
+from tlt_common.bt.ros import TreeStatusPublisher
+from tlt_common.config_schema import ConfigError
+from tlt_common.mission.schema import load_mission
+
+ACTION_TYPES = {
+    "add_cross_frame": AddCrossFrame,
+    "add_member": AddMember,
+    "affix_member": AffixMember,
+    "foundation_rivet": FoundationRivet,
+}
+
+
+def request_of(kind: str, goal: Any) -> Request:
+    """The CRS goal of request ``kind`` as a :class:`Request`."""
+    if kind == "foundation_rivet":
+        return Request(kind, goal.joint_id, goal.ars)
+    return Request(
+        kind,
+        goal.member_id,
+        goal.ars,
+        bay=int(goal.bay),
+        kind=int(getattr(goal, "kind", 0)),
+        position=getattr(goal, "position", ""),
+    )
+
+
+@dataclass
+class ActiveGoal:
+    """The goal the ARS is working on, and how it ends."""
+
+    kind: str
+    handle: Any
+    request: Request
+    done: threading.Event
+    outcome: tuple[str, str] | None = None  # ("succeeded" | "aborted" | "canceled", reason)
+    cancel_requested: bool = False
+    stopping_since: float | None = None
+    parts_discarded: int = 0
+
+
+class ArsNode(Node):
+    """One ARS; see the module docstring."""
+
+    def __init__(self, config: ArsConfig, *, context: Any = None, check_reach: bool | None = None) -> None:
+        super().__init__(config.ars, context=context)
+        self.config = config
+        self.ars = config.ars
+        mission = load_mission(config.mission_path)
+        check_against_mission(config, mission)
+        from tlt_ars.planning.world import load_scene_config
+
+        scene = load_scene_config(config.scene_path)
+        if config.raw["check_reach"] if check_reach is None else check_reach:
+            # A member out of this arm's reach is found now, not mid-build (§V.D).
+            from tlt_ars.planning.reachability import require_reachable
+
+            require_reachable(scene, mission, [self.ars])
+        self.ctx = ArsContext(self, config, mission, scene)
+        self.planner = MotionPlanner(
+            scene,
+            self.ars,
+            mission,
+            config.arm["joint_names"],
+            velocity_scale=config.arm["velocity_scale"],
+            sample_period=config.arm["sample_period_s"],
+            time_limit=config.arm["planning_time_s"],
+        )
+        self._lock = threading.RLock()
+        self.started = bool(config.raw["started_on_launch"])
+        self.paused = False
+        self._held = False
+        self.stop_requested = False
+        self.finished = threading.Event()
+        self._stop_since: float | None = None
+        self.active: ActiveGoal | None = None
+        self._goals: dict[bytes, ActiveGoal] = {}
+        self.tree = ArsTree(self.ctx, self.planner, lambda: self.started)
+        self.status = TreeStatusPublisher(self, self.ars, topic=ros_names.tree_status_topic(self.ars))
+        self.status.attach(self.tree.tree)
+        self.tree.on_change.append(self.status.refresh)
+
+        goals = ReentrantCallbackGroup()
+        self._servers = [
+            ActionServer(
+                self,
+                action_type,
+                ros_names.ars_action(self.ars, kind),
+                execute_callback=lambda handle, kind=kind: self._execute(kind, handle),
+                goal_callback=lambda _goal: GoalResponse.ACCEPT,
+                handle_accepted_callback=lambda handle, kind=kind: self._accepted(kind, handle),
+                cancel_callback=self._cancel,
+                callback_group=goals,
+            )
+            for kind, action_type in ACTION_TYPES.items()
+        ]
+        self.create_service(
+            GroundCommand, ros_names.ground_command_service(self.ars), self._on_ground, callback_group=goals
+        )
+        self.create_subscription(MissionProgress, ros_names.CRS_MISSION_PROGRESS, self._on_progress, 10)
+        self._timer = self.create_timer(
+            1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=MutuallyExclusiveCallbackGroup()
+        )
+
+    # ----- goals -----
+    def _refusal(self, request: Request) -> str | None:
+        if self.stop_requested:
+            return "stopped by ground command"
+        if not self.started:
+            return f"{self.ars} is not started (waiting for the ground's Start)"
+        if self.paused:
+            return f"{self.ars} is paused"
+        if self.active is not None:
+            a = self.active.request
+            return f"busy: {self.ars} is running {a.request} for '{a.member_id}'"
+        return self.ctx.state.check_request(request)
+
+    def _accepted(self, kind: str, handle: Any) -> None:
+        request = request_of(kind, handle.request)
+        with self._lock:
+            reason = self._refusal(request)
+            goal = ActiveGoal(kind, handle, request, threading.Event())
+            if reason is not None:
+                goal.outcome = ("aborted", f"rejected: {reason}")
+                goal.done.set()
+            else:
+                self.active = goal
+                self.tree.submit(Job(request, lambda ok, why, g=goal: self._finish(g, ok, why)))
+        with self._lock:
+            self._goals[bytes(handle.goal_id.uuid)] = goal
+        handle.execute()
+
+    def _execute(self, kind: str, handle: Any) -> Any:
+        with self._lock:
+            goal = self._goals.pop(bytes(handle.goal_id.uuid))
+        result_type = ACTION_TYPES[kind].Result
+        feedback_type = ACTION_TYPES[kind].Feedback
+        last = None
+        # Bounded wait per iteration; the tree's own timeouts bound the request.
+        while not goal.done.wait(0.1):
+            if self.finished.is_set() or not rclpy.ok(context=self.context):
+                goal.outcome = ("aborted", "the ARS shut down")
+                break
+            step, progress = self.tree.step(), self.tree.progress()
+            if step and (step, progress) != last and goal.outcome is None:
+                handle.publish_feedback(feedback_type(step=step, progress=float(progress)))
+                last = (step, progress)
+        state, reason = goal.outcome or ("aborted", "no outcome")
+        result = result_type()
+        result.success = state == "succeeded"
+        result.reason = reason
+        if hasattr(result, "parts_discarded"):
+            result.parts_discarded = goal.parts_discarded
+        if state == "succeeded":
+            handle.succeed()
+        elif state == "canceled" and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        return result
+
+    def _finish(self, goal: ActiveGoal, ok: bool, reason: str) -> None:
+        """Called from the tick (Report Result, or a build failure)."""
+        goal.parts_discarded = self.ctx.data.parts_discarded
+        goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
+        with self._lock:
+            if self.active is goal:
+                self.active = None
+        goal.done.set()
+
+    def _cancel(self, handle: Any) -> CancelResponse:
+        with self._lock:
+            goal = self.active
+            if goal is None or goal.handle is not handle:
+                return CancelResponse.REJECT
+            goal.cancel_requested = True
+        return CancelResponse.ACCEPT
+
+    # ----- ground commands -----
+    def _on_ground(self, request: Any, response: Any) -> Any:
+        cmd = request.command
+        with self._lock:
+            response.accepted, response.reason = True, ""
+            if self.stop_requested:
+                response.accepted, response.reason = False, "stopping"
+            elif cmd == GroundCommand.Request.START:
+                if self.paused:
+                    response.accepted, response.reason = False, "paused: Resume continues"
+                elif self.started:
+                    response.reason = "already started"
+                self.started = self.started or not self.paused
+            elif cmd == GroundCommand.Request.PAUSE:
+                if self.paused:
+                    response.accepted, response.reason = False, "already paused"
+                else:
+                    self.paused, self._held = True, False
+            elif cmd == GroundCommand.Request.RESUME:
+                if not self.paused:
+                    response.accepted, response.reason = False, "not paused"
+                self.paused = False
+            elif cmd == GroundCommand.Request.STOP:
+                self.stop_requested = True
+            else:
+                response.accepted, response.reason = False, f"unknown command {cmd}"
+        return response
+
+    def _on_progress(self, msg: Any) -> None:
+        self.ctx.state.apply_progress(msg)
+
+    # ----- the tick -----
+    def _arm_stopped(self) -> bool:
+        v = self.ctx.arm_velocity()
+        return v is not None and float(np.max(np.abs(v))) <= self.config.arm["stopped_velocity"]
+
+    def _tick(self) -> None:
+        with self._lock:
+            if self.finished.is_set():
+                return
+            now = self.ctx.clock()
+            goal = self.active
+            if self.stop_requested:
+                if self._stop_since is None:
+                    self._stop_since = now
+                    self.tree.interrupt()
+                    self._end(goal, "aborted", "stopped by ground command")
+                if self._arm_stopped() or now - self._stop_since > self.config.timeouts["stop_s"]:
+                    self.finished.set()
+                return
+            if goal is not None and goal.cancel_requested:
+                if goal.stopping_since is None:
+                    goal.stopping_since = now
+                    self.tree.interrupt()
+                if self._arm_stopped():
+                    self._end(goal, "canceled", "canceled by the CRS; the arm is stopped")
+                elif now - goal.stopping_since > self.config.timeouts["stop_s"]:
+                    self._end(
+                        goal,
+                        "canceled",
+                        "canceled; the arm did not report standing still within"
+                        f" {self.config.timeouts['stop_s']:g} s",
+                    )
+                return
+            if self.paused:
+                if not self._held:
+                    self.tree.hold()
+                    self._held = True
+                return
+            try:
+                self.tree.tick()
+            except Exception as exc:  # a behaviour bug fails the request; the ARS keeps serving
+                self.get_logger().error(f"tick failed: {exc!r}")
+                self.tree.interrupt()
+                self._end(goal, "aborted", f"internal error in the behaviour tree: {exc!r}")
+
+    def _end(self, goal: ActiveGoal | None, state: str, reason: str) -> None:
+        if goal is None:
+            return
+        goal.parts_discarded = self.ctx.data.parts_discarded
+        goal.outcome = (state, reason)
+        if self.active is goal:
+            self.active = None
+        goal.done.set()
+
+    def close(self) -> None:
+        self.finished.set()
+        self.ctx.close()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="ars", description="Assistant Robot System: action servers and behaviour tree of one arm"
+    )
+    p.add_argument("--ars", choices=ros_names.ARS_AGENTS, required=True, help="which ARS this process is")
+    p.add_argument("--config", type=Path, help="ARS file (default config/ars/<ars>.yaml)")
+    p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ARS; ``--ros-args ...`` (e.g. ``-p use_sim_time:=true``) go to rclpy."""
+    from rclpy.utilities import remove_ros_args
+
+    full = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(remove_ros_args(["ars", *full])[1:])
+    path = args.config or default_config_path(args.ars)
+    try:
+        config = load_ars_config(path)
+        if config.ars != args.ars:
+            raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
+    except (ConfigError, OSError) as exc:
+        print(f"ars: {exc}", file=sys.stderr)
+        return 2
+    rclpy.init(args=["ars", *full])
+    node = None
+    try:
+        node = ArsNode(config, check_reach=False if args.no_reach_check else None)
+    except (ConfigError, ValueError, OSError) as exc:
+        print(f"ars: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    try:
+        while rclpy.ok() and not node.finished.is_set():
+            executor.spin_once(timeout_sec=0.1)
+        # After a ground Stop, let the last goal results go out before the process ends (after a
+        # signal rclpy has already shut the context down).
+        for _ in range(10):
+            if not rclpy.ok():
+                break
+            executor.spin_once(timeout_sec=0.05)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        executor.shutdown(timeout_sec=2.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

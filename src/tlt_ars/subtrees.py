@@ -1,0 +1,390 @@
+"""The ARS subtrees of paper §V.C.3, Figs. 28-40, each a function that builds it on its own from
+the request's parameters and the mission, so each can be ticked and tested alone.
+
+The pattern of §V.C.3: a hard-coded coarse approach (``poses`` in the ARS file for dispensers and
+inspection; the mission's placement and joint positions for the tower), a fine approach (the
+dispenser's AprilTag, or the vision pose of the part for a placement), the action (grasp, place,
+load, fire), and its verification by a sensor (EE servo feedback for grasps, the EE camera for
+placements and rivet loading).
+
+==========================  =========  ================================================================
+subtree                     figure     children
+==========================  =========  ================================================================
+Add Cross Frame             28         Get Inspected Cross Frame (Get Cross Frame, Inspect Cross Frame,
+                                       replaced after a discard), Place Cross Frame
+Get Cross Frame / Grab      29 / 34    Dispenser Has Parts?, Set Width (Extend Width for a diagonal),
+Member                                 Open Grasp, Approach Dispenser, Locate Dispenser Tag, Fine
+                                       Approach, Grasp (Close Grasp, Verify Grasp), Take Part, Lift Part
+Inspect Cross Frame /       30 / 35    Move To Inspection, Inspection (Inspection Passed, or Discard
+Inspect Member                         Part: Move To Discard, Release, Count Discard)
+Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Retreat,
+                                       Verify Placement, Placed?, Record Placed
+Add Member                  32         Load Rivet, Get Inspected Member, Place Member, Rivet Member
+Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Locate Dispenser Tag,
+                                       Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
+                                       Loaded
+Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
+Rivet Member                37         Fire Rivet Gun, Release, Record Placed, Retreat (Retract Width
+                                       for a diagonal)
+Foundation Rivet            38         Load Rivet, Place Rivet, Record Riveted
+Affix Member                39         Load Rivet, Place Rivet, Record Affixed
+Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Fire Rivet Gun,
+                                       Retreat
+==========================  =========  ================================================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import py_trees
+from py_trees.common import Status
+
+from tlt_ars.behaviours.end_effector import FireRivetGun, MoveGrasp, SetWidth, grasp, release
+from tlt_ars.behaviours.parts import (
+    CountDiscard,
+    DispenserHasParts,
+    ReplaceDiscarded,
+    TakePart,
+    request_inspection,
+)
+from tlt_ars.behaviours.vision import (
+    LocateDispenser,
+    MeasureAlignment,
+    PartAligned,
+    corrected_target,
+    located_dispenser_targets,
+    verify_rivet_loaded,
+)
+from tlt_ars.config import PoseSpec
+from tlt_ars.context import ArsContext
+from tlt_ars.motion import MotionGoal, MotionPlanner, move
+from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
+from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
+from tlt_common.bt.nodes import Action
+from tlt_common.mission.schema import Member
+
+Sequence = py_trees.composites.Sequence
+Fallback = py_trees.composites.Selector
+
+
+def _seq(name: str, children: list[py_trees.behaviour.Behaviour]) -> Sequence:
+    seq = Sequence(name, memory=True)
+    seq.add_children(children)
+    return seq
+
+
+def _fallback(name: str, children: list[py_trees.behaviour.Behaviour]) -> Fallback:
+    # With memory: a fallback's earlier child (an inspection request) is not asked again while a
+    # later one (the discard) runs.
+    sel = Fallback(name, memory=True)
+    sel.add_children(children)
+    return sel
+
+
+def pose_goal(spec: PoseSpec) -> MotionGoal:
+    """A configured coarse pose as a motion goal."""
+    if spec.joints is not None:
+        return MotionGoal(joints=np.asarray(spec.joints, dtype=float))
+    pose = pose_matrix(spec.position, rpy_matrix(spec.rpy))
+    return MotionGoal(targets=[Target("configured pose", pose, pose)])
+
+
+def back_out(ctx: ArsContext, key: str) -> MotionGoal:
+    """Back to where the fine move ``key`` started (its pre-pose configuration), allowed to start
+    in contact with the tower."""
+    q = ctx.data.approached_from.get(key)
+    if q is None:
+        return chosen(ctx, key, use="pre_pose", contact=True)
+    return MotionGoal(joints=q, contact=True)
+
+
+def chosen(ctx: ArsContext, key: str, use: str = "pose", contact: bool = False) -> MotionGoal:
+    """The candidate an earlier approach chose (``key``), for the fine move or the retreat."""
+    target = ctx.data.targets.get(key)
+    if target is None:
+        raise RuntimeError(f"no '{key}' target was chosen by an earlier approach")
+    return MotionGoal(targets=[target], use=use, contact=contact, key=key)
+
+
+class RecordMember(Action):
+    """Record in the ARS's mission state that the request's member is ``what`` (placed, affixed,
+    riveted). Writes the mission state. SUCCESS at once; FAILURE without a member."""
+
+    def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
+        super().__init__(name)
+        self.ctx, self.what = ctx, what
+
+    def update(self) -> Status:
+        member = self.ctx.data.member
+        if member is None:
+            return self.fail("no member in this request")
+        {"placed": self.ctx.state.mark_placed, "affixed": self.ctx.state.mark_affixed,
+         "riveted": self.ctx.state.mark_riveted}[self.what](member.id)  # fmt: skip
+        self.feedback_message = f"{member.id} {self.what}"
+        return Status.SUCCESS
+
+
+class SubtreeBuilder:
+    """Builds the subtrees of one ARS; ``ctx`` and ``planner`` are shared by all of them."""
+
+    def __init__(self, ctx: ArsContext, planner: MotionPlanner) -> None:
+        self.ctx = ctx
+        self.planner = planner
+
+    def _move(self, name: str, goal) -> Sequence:
+        return move(name, self.ctx, self.planner, goal)
+
+    # ----- getting and inspecting parts (Figs. 29, 30, 34, 35) -----
+    def get_part(self, name: str, dispenser: str, kind: str) -> Sequence:
+        """Fig. 29 (cross frame) / Fig. 34 (member): take the top part of ``dispenser``."""
+        ctx = self.ctx
+        width_name = "Extend Width" if kind == "diagonal" else "Set Width"
+        return _seq(
+            name,
+            [
+                DispenserHasParts("Dispenser Has Parts?", ctx, dispenser),
+                SetWidth(width_name, ctx, kind),
+                MoveGrasp("Open Grasp", ctx, close=False),
+                self._move("Approach Dispenser", lambda: pose_goal(self._dispenser_pose(dispenser))),
+                LocateDispenser("Locate Dispenser Tag", ctx, dispenser),
+                self._move(
+                    "Fine Approach",
+                    lambda: MotionGoal(
+                        targets=located_dispenser_targets(ctx, dispenser), use="pre_pose", key="grasp"
+                    ),
+                ),
+                self._move("Reach Part", lambda: chosen(ctx, "grasp")),
+                grasp(ctx),
+                TakePart("Take Part", ctx, dispenser, kind),
+                self._move("Lift Part", lambda: back_out(ctx, "grasp")),
+            ],
+        )
+
+    def _dispenser_pose(self, dispenser: str) -> PoseSpec:
+        try:
+            return self.ctx.config.dispenser_poses[dispenser]
+        except KeyError:
+            raise RuntimeError(f"no coarse pose configured for dispenser '{dispenser}'") from None
+
+    def inspect_part(self, name: str, kind: str) -> Sequence:
+        """Fig. 30 / Fig. 35: show the part to the CRS's camera; discard it if it fails."""
+        ctx = self.ctx
+        passed = request_inspection(ctx, "Inspection Passed")
+        discard = _seq(
+            "Discard Part",
+            [
+                self._move("Move To Discard", lambda: pose_goal(ctx.config.discard_pose)),
+                release(ctx),
+                CountDiscard("Count Discard", ctx, passed),
+            ],
+        )
+        return _seq(
+            name,
+            [
+                self._move("Move To Inspection", lambda: pose_goal(ctx.config.inspection_pose_for(kind))),
+                _fallback("Inspection", [passed, discard]),
+            ],
+        )
+
+    def get_inspected_part(self, name: str, get_name: str, inspect_name: str, dispenser: str, kind: str):
+        """Get and inspect a part; after a discard, a replacement from the same dispenser."""
+        attempt = _seq(
+            f"{name} Attempt",
+            [self.get_part(get_name, dispenser, kind), self.inspect_part(inspect_name, kind)],
+        )
+        return ReplaceDiscarded(name, attempt, self.ctx)
+
+    # ----- placing (Figs. 31, 36) -----
+    def _approach_placement(self, member: Member) -> list[py_trees.behaviour.Behaviour]:
+        ctx = self.ctx
+        return [
+            self._move(
+                "Coarse Approach",
+                lambda: MotionGoal(
+                    targets=placement_targets(ctx.scene, ctx.mission, member, ctx.ars),
+                    use="pre_pose",
+                    key="place",
+                ),
+            ),
+            self._move("Fine Approach", lambda: chosen(ctx, "place", contact=True)),
+            self.fine_alignment(),
+        ]
+
+    def fine_alignment(self) -> Sequence:
+        """Measure the held part with the EE camera; if it is off, move it by the measured error
+        and measure again."""
+        ctx = self.ctx
+
+        def correction() -> MotionGoal:
+            return MotionGoal(targets=[corrected_target(ctx, "place")], contact=True)
+
+        correct = _seq(
+            "Correct Alignment",
+            [
+                self._move("Correct Pose", correction),
+                MeasureAlignment("Measure Again", ctx),
+                PartAligned("Aligned After Correction?", ctx),
+            ],
+        )
+        return _seq(
+            "Fine Alignment",
+            [
+                MeasureAlignment("Measure Alignment", ctx),
+                _fallback("Align", [PartAligned("Aligned?", ctx), correct]),
+            ],
+        )
+
+    def place_cross_frame(self, member: Member) -> Sequence:
+        """Fig. 31: coarse approach, fine alignment, release, placement verified by the EE camera."""
+        ctx = self.ctx
+        transit = []
+        if ctx.config.cross_frame_transit_pose is not None:
+            spec = ctx.config.cross_frame_transit_pose
+            transit = [self._move("Move To Transit", lambda: pose_goal(spec))]
+        return _seq(
+            "Place Cross Frame",
+            [
+                *transit,
+                *self._approach_placement(member),
+                release(ctx),
+                self._move("Retreat", lambda: back_out(ctx, "place")),
+                MeasureAlignment("Verify Placement", ctx),
+                PartAligned("Placed?", ctx),
+                RecordMember("Record Placed", ctx, "placed"),
+            ],
+        )
+
+    def place_member(self, member: Member) -> Sequence:
+        """Fig. 36: coarse approach, fine approach, fine alignment (the part stays held for its rivet)."""
+        return _seq("Place Member", self._approach_placement(member))
+
+    # ----- rivets (Figs. 33, 37, 40) -----
+    def load_rivet(self, dispenser: str) -> Sequence:
+        """Fig. 33: take a rivet into the gun; the EE camera confirms it is loaded."""
+        ctx = self.ctx
+        return _seq(
+            "Load Rivet",
+            [
+                DispenserHasParts("Rivets Left?", ctx, dispenser),
+                self._move("Approach Rivet Dispenser", lambda: pose_goal(self._dispenser_pose(dispenser))),
+                LocateDispenser("Locate Dispenser Tag", ctx, dispenser),
+                self._move(
+                    "Fine Approach",
+                    lambda: MotionGoal(
+                        targets=located_dispenser_targets(ctx, dispenser), use="pre_pose", key="rivet"
+                    ),
+                ),
+                self._move("Insert Gun", lambda: chosen(ctx, "rivet")),
+                TakePart("Take Rivet", ctx, dispenser, None),
+                self._move("Withdraw Gun", lambda: back_out(ctx, "rivet")),
+                verify_rivet_loaded(ctx),
+            ],
+        )
+
+    def rivet_member(self, kind: str, *, holding: bool) -> Sequence:
+        """Fig. 37: fire the gun; with the member held, let go of it and record it placed; retreat;
+        for a diagonal, retract the width afterwards."""
+        ctx = self.ctx
+        key = "place" if holding else "joint"
+        children: list[py_trees.behaviour.Behaviour] = [FireRivetGun("Fire Rivet Gun", ctx)]
+        if holding:
+            children += [release(ctx), RecordMember("Record Placed", ctx, "placed")]
+        children.append(self._move("Retreat", lambda: back_out(ctx, key)))
+        if kind == "diagonal":
+            children.append(SetWidth("Retract Width", ctx, "vertical"))
+        return _seq("Rivet Member", children)
+
+    def place_rivet(self, member: Member, joint: str) -> Sequence:
+        """Fig. 40: coarse approach to the target member's joint, then the rivet as in Fig. 37."""
+        ctx = self.ctx
+        return _seq(
+            "Place Rivet",
+            [
+                self._move(
+                    "Approach Joint",
+                    lambda: MotionGoal(
+                        targets=rivet_targets(ctx.scene, ctx.mission, member, joint, ctx.ars),
+                        use="pre_pose",
+                        key="joint",
+                    ),
+                ),
+                self._move("Fine Approach Joint", lambda: chosen(ctx, "joint", contact=True)),
+                self.rivet_member("rivet", holding=False),
+            ],
+        )
+
+    # ----- request branches (Figs. 28, 32, 38, 39) -----
+    def add_cross_frame(self, member: Member) -> Sequence:
+        """Fig. 28."""
+        return _seq(
+            "Add Cross Frame",
+            [
+                self.get_inspected_part(
+                    "Get Inspected Cross Frame",
+                    "Get Cross Frame",
+                    "Inspect Cross Frame",
+                    member.dispenser,
+                    "cross_frame",
+                ),
+                self.place_cross_frame(member),
+            ],
+        )
+
+    def add_member(self, member: Member) -> Sequence:
+        """Fig. 32: load a rivet, grab, inspect, place and rivet the member."""
+        rivet = _rivet(member, "add")
+        return _seq(
+            "Add Member",
+            [
+                self.load_rivet(rivet.dispenser),
+                self.get_inspected_part(
+                    "Get Inspected Member", "Grab Member", "Inspect Member", member.dispenser, member.kind
+                ),
+                self.place_member(member),
+                self.rivet_member(member.kind, holding=True),
+            ],
+        )
+
+    def affix_member(self, member: Member) -> Sequence:
+        """Fig. 39: load a rivet and place it in the member's affix joint."""
+        rivet = _rivet(member, "affix")
+        return _seq(
+            "Affix Member",
+            [
+                self.load_rivet(rivet.dispenser),
+                self.place_rivet(member, rivet.joint),
+                RecordMember("Record Affixed", self.ctx, "affixed"),
+            ],
+        )
+
+    def foundation_rivet(self, member: Member) -> Sequence:
+        """Fig. 38: like Affix Member, into the foundation joint."""
+        joint = member.joints[0][0]
+        return _seq(
+            "Foundation Rivet",
+            [
+                self.load_rivet(member.dispenser),
+                self.place_rivet(member, joint),
+                RecordMember("Record Riveted", self.ctx, "riveted"),
+            ],
+        )
+
+    def branch(self, request: str, member: Member) -> Sequence:
+        """The branch for a CRS request (one of ``ros_names.ARS_ACTIONS``)."""
+        builders = {
+            "add_cross_frame": self.add_cross_frame,
+            "add_member": self.add_member,
+            "affix_member": self.affix_member,
+            "foundation_rivet": self.foundation_rivet,
+        }
+        return builders[request](member)
+
+
+def _rivet(member: Member, step: str):
+    for r in member.rivets:
+        if r.step == step:
+            return r
+    raise ValueError(f"member '{member.id}' has no {step} rivet in the mission")
+
+
+__all__ = ["RecordMember", "SubtreeBuilder", "back_out", "chosen", "pose_goal"]

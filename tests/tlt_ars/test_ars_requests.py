@@ -1,0 +1,250 @@
+"""Whole CRS requests against an ARS on the real hardware path (tests/tlt_ars/conftest.py): the
+UR emulator and driver, the Dynamixel EE emulator and driver, ground-truth vision and CRS
+stand-ins. The tests share one stack and run in file order (the mission state carries over)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import py_trees
+import pytest
+from action_msgs.msg import GoalStatus
+from tlt_interfaces.action import AddMember
+from tlt_interfaces.srv import GroundCommand
+
+from tlt_ars.mission_state import Request
+from tlt_ars.motion import ExecuteTrajectory, MotionGoal, TrajectorySlot
+from tlt_ars.planning.kinematics import pose_error
+from tlt_ars.planning.targets import placement_targets
+from tlt_ars.tree import failure_reason
+
+pytestmark = pytest.mark.timeout(240)
+VERTICAL, DIAGONAL = AddMember.Goal.KIND_VERTICAL, AddMember.Goal.KIND_DIAGONAL
+
+
+def add_member(stack, member_id: str, kind: int, feedback=None):
+    member = stack.mission.member(member_id)
+    return stack.send(
+        "add_member",
+        feedback,
+        kind=kind,
+        bay=member.bay,
+        member_id=member_id,
+        position=member.position,
+        ars="ars_x",
+    )
+
+
+def test_add_cross_frame_corrects_a_misalignment_and_verifies_the_placement(stack):
+    stack.world.grasp_offset = np.array([0.008, 0.0, 0.0])  # the frame sits 8 mm off in the gripper
+    before = stack.ars.ctx.state.remaining["cross_frame_dispenser"]
+    feedback = []
+    handle = stack.send("add_cross_frame", feedback, bay=1, member_id="bay1/cross_frame", ars="ars_x")
+    result = stack.result(handle)
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    steps = {f.step for f in feedback}
+    assert any("Correct Alignment/Correct Pose" in s for s in steps)
+    # Placed where it belongs: the ground-truth part pose is within the alignment tolerance.
+    part = stack.world.part_pose
+    member = stack.mission.member("bay1/cross_frame")
+    assert (
+        min(
+            pose_error(part, t.pose)[0]
+            for t in placement_targets(stack.scene, stack.mission, member, "ars_x")
+        )
+        < 0.005
+    )
+    assert stack.ars.ctx.state.is_placed("bay1/cross_frame")
+    assert stack.ars.ctx.state.remaining["cross_frame_dispenser"] == before - 1
+
+
+def test_add_member_vertical_loads_rivet_grabs_inspects_places_and_rivets(stack):
+    feedback = []
+    state = stack.ars.ctx.state
+    rivets, struts = state.remaining["rivet_dispenser_x"], state.remaining["vertical_dispenser_x"]
+    fired = len(stack.gpio.fired)
+    handle = add_member(stack, "bay1/vertical/x0_y0", VERTICAL, feedback)
+    assert handle.accepted  # the acknowledgement
+    result = stack.result(handle)
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    assert result.result.success and result.result.reason == "" and result.result.parts_discarded == 0
+    steps = [f.step for f in feedback]
+    # Feedback names the running leaf of each subtree of Fig. 32, in order, with growing progress.
+    firsts = [next(i for i, s in enumerate(steps) if s.startswith(f"Add Member/{sub}")) for sub in
+              ("Load Rivet", "Get Inspected Member", "Place Member", "Rivet Member")]  # fmt: skip
+    assert firsts == sorted(firsts)
+    assert any(s.startswith("Add Member/Load Rivet/Approach Rivet Dispenser/") for s in steps)
+    assert any("/Grab Member/Approach Dispenser/" in s for s in steps)
+    assert any("/Inspect Member/Move To Inspection/" in s for s in steps)
+    progress = [f.progress for f in feedback]
+    assert progress == sorted(progress) and 0 < progress[-1] < 1
+    assert state.is_placed("bay1/vertical/x0_y0")
+    assert state.remaining["rivet_dispenser_x"] == rivets - 1
+    assert state.remaining["vertical_dispenser_x"] == struts - 1
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"]  # the rivet gun fired once, through GPIO
+    assert stack.world.held is None and not stack.ee_states[-1].part_grasped
+    assert stack.inspections[-1] == "bay1/vertical/x0_y0"
+
+
+def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspection(stack):
+    state = stack.ars.ctx.state
+    before = state.remaining["diagonal_dispenser_x"]
+    stack.inspection_verdicts[:] = [False]  # the CRS fails the first part
+    widths = []
+    seen = stack.client.create_subscription(
+        type(stack.ee_states[-1]), "/ee_x/state", lambda m: widths.append(m.position[2]), 10
+    )
+    try:
+        handle = add_member(stack, "bay1/diagonal/face_x0", DIAGONAL)
+        result = stack.result(handle)
+    finally:
+        stack.client.destroy_subscription(seen)
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    assert result.result.parts_discarded == 1
+    assert state.remaining["diagonal_dispenser_x"] == before - 2  # the discarded part and its replacement
+    assert state.discarded["diagonal_dispenser_x"] == 1
+    assert stack.inspections[-2:] == ["bay1/diagonal/face_x0"] * 2
+    assert max(widths) == pytest.approx(0.02, abs=0.002)  # extended before the grasp
+    assert stack.width() == pytest.approx(0.0, abs=0.002)  # retracted after the rivet
+
+
+def test_empty_dispenser_fails_the_request_with_that_reason(stack):
+    state = stack.ars.ctx.state
+    state.remaining["vertical_dispenser_x"] = 1  # one part left, and it fails inspection
+    stack.world.remaining["vertical_dispenser_x"] = 1
+    stack.inspection_verdicts[:] = [False]
+    result = stack.result(add_member(stack, "bay1/vertical/x0_y1", VERTICAL))
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert not result.result.success
+    assert "dispenser 'vertical_dispenser_x' is empty" in result.result.reason
+    assert "Dispenser Has Parts?" in result.result.reason
+    assert result.result.parts_discarded == 1
+    assert state.remaining["vertical_dispenser_x"] == 0
+    assert not state.is_placed("bay1/vertical/x0_y1")
+    state.remaining["vertical_dispenser_x"] = stack.world.remaining["vertical_dispenser_x"] = 3  # refilled
+
+
+def strut(member_id: str, bay: int = 1, kind: int = VERTICAL, ars: str = "ars_x") -> dict:
+    return dict(kind=kind, bay=bay, member_id=member_id, position=member_id.rsplit("/", 1)[-1], ars=ars)
+
+
+@pytest.mark.parametrize(
+    ("request_kind", "fields", "reason"),
+    [
+        ("add_member", strut("bay1/vertical/x9_y9"), "unknown member 'bay1/vertical/x9_y9'"),
+        ("add_member", strut("bay2/vertical/x0_y0", bay=2), "bay 2 has not started"),
+        ("add_member", strut("bay1/vertical/x0_y0"), "already placed"),
+        ("add_member", strut("bay1/vertical/x1_y0", kind=DIAGONAL), "is a vertical"),
+        ("add_member", strut("bay1/vertical/x1_y0", ars="ars_y"), "addressed to 'ars_y'"),
+        ("affix_member", strut("bay1/vertical/x1_y1"), "not placed yet"),
+        ("add_cross_frame", dict(bay=1, member_id="bay1/cross_frame", ars="ars_x"), "already placed"),
+        ("foundation_rivet", dict(joint_id="foundation/x0_y0", ars="ars_x"), "bay 2 has not started"),
+    ],
+)
+def test_bad_requests_are_refused_with_a_reason_and_nothing_moves(stack, request_kind, fields, reason):
+    q = stack.ars.ctx.arm_q()
+    result = stack.result(stack.send(request_kind, None, **fields), timeout=10)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert not result.result.success and reason in result.result.reason
+    assert result.result.reason.startswith("rejected: ")
+    assert np.allclose(stack.ars.ctx.arm_q(), q, atol=1e-3)
+
+
+def test_concurrent_goal_rejected_pause_holds_resume_continues_cancel_stops(stack):
+    feedback = []
+    first = add_member(stack, "bay1/vertical/x1_y0", VERTICAL, feedback)
+    stack.wait(lambda: any("/Execute " in f.step for f in feedback), "the arm moving")
+    second = stack.result(
+        stack.send("add_cross_frame", None, bay=1, member_id="bay1/cross_frame", ars="ars_x"), 10
+    )
+    assert second.status == GoalStatus.STATUS_ABORTED
+    assert "busy: ars_x is running add_member for 'bay1/vertical/x1_y0'" in second.result.reason
+
+    def speed():
+        return float(np.max(np.abs(stack.ars.ctx.arm_velocity())))
+
+    stack.wait(lambda: speed() > 0.2, "the arm at speed")
+    assert _ground(stack, GroundCommand.Request.PAUSE).accepted
+    stack.wait(lambda: speed() < 0.01, "the arm held", timeout=5)
+    q = stack.ars.ctx.arm_q()
+    time.sleep(0.5)
+    assert np.allclose(stack.ars.ctx.arm_q(), q, atol=2e-3)  # paused: the tree does not tick
+    assert not _ground(stack, GroundCommand.Request.PAUSE).accepted  # already paused
+    assert _ground(stack, GroundCommand.Request.RESUME).accepted
+    stack.wait(lambda: speed() > 0.2, "the arm moving again after Resume")
+
+    cancel = first.cancel_goal_async()
+    stack.wait(cancel.done, "cancel response")
+    result = stack.result(first, timeout=20)
+    assert result.status == GoalStatus.STATUS_CANCELED
+    assert "arm is stopped" in result.result.reason
+    q = stack.ars.ctx.arm_q()
+    time.sleep(0.5)
+    assert np.allclose(stack.ars.ctx.arm_q(), q, atol=2e-3)  # it stays where it stopped
+    assert not stack.ars.ctx.state.is_placed("bay1/vertical/x1_y0")
+    assert stack.ars.active is None
+    assert not any(stack.gpio.outputs.values())  # no rivet gun left firing
+
+
+def test_affix_member_loads_and_places_a_rivet(stack):
+    fired = len(stack.gpio.fired)
+    fields = strut("bay1/vertical/x0_y0")
+    result = stack.result(stack.send("affix_member", None, **fields))
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"]
+    again = stack.result(stack.send("affix_member", None, **fields), 10)
+    assert "already affixed" in again.result.reason
+
+
+def _ground(stack, command: int):
+    stack.wait(stack.ground.service_is_ready, "ground command service")
+    future = stack.ground.call_async(GroundCommand.Request(command=command))
+    return stack.wait(future.done, "ground command reply") and future.result()
+
+
+def test_foundation_rivet_subtree_ticks_on_its_own(stack):
+    """Fig. 38 built from its parameters and ticked by itself, outside the request machinery (the
+    mission's foundation rivets come after bay 2, which the ARS refuses to start in this test)."""
+    ctx = stack.ars.ctx
+    member = stack.mission.member("foundation/x0_y0")
+    assert stack.ars.active is None  # the ARS's own tree idles in Wait For Request meanwhile
+    ctx.begin(Request("foundation_rivet", member.id, "ars_x"))
+    tree = py_trees.trees.BehaviourTree(stack.ars.tree.builder.foundation_rivet(member))
+    fired = len(stack.gpio.fired)
+    deadline = time.monotonic() + 120
+    while tree.root.status in (py_trees.common.Status.INVALID, py_trees.common.Status.RUNNING):
+        assert time.monotonic() < deadline, "subtree did not finish"
+        tree.tick()
+        time.sleep(0.05)
+    assert tree.root.status == py_trees.common.Status.SUCCESS, failure_reason(tree.root)
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"]
+    assert ctx.state.is_riveted("foundation/x0_y0")
+
+
+def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
+    ctx = stack.ars.ctx
+    q = ctx.arm_q()
+    stale = stack.ars.planner.plan(
+        q + np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        MotionGoal(joints=q + np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0])),
+        placed=ctx.state.placed(), bay=1, carrying=None, other_q=None,
+    )  # fmt: skip
+    slot = TrajectorySlot()
+    slot.motion = stale
+    execute = ExecuteTrajectory("Execute Stale", ctx, slot)
+    deadline = time.monotonic() + 10
+    execute.tick_once()
+    while execute.status == py_trees.common.Status.RUNNING:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+        execute.tick_once()
+    assert execute.status == py_trees.common.Status.FAILURE
+    assert "not where this trajectory was planned from" in execute.feedback_message
+    assert np.allclose(ctx.arm_q(), q, atol=1e-3)
+
+
+def test_stop_shuts_the_ars_down(stack):
+    assert _ground(stack, GroundCommand.Request.STOP).accepted
+    stack.wait(stack.ars.finished.is_set, "the ARS shut down", timeout=10)
+    assert not _ground(stack, GroundCommand.Request.START).accepted

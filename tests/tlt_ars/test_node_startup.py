@@ -1,0 +1,155 @@
+"""The ARS process without hardware: start-up checks, Start/Pause/Resume/Stop bookkeeping and
+refusals that happen before anything moves."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+import rclpy
+import yaml
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from tlt_interfaces.action import AddMember
+from tlt_interfaces.srv import GroundCommand
+
+from tlt_ars.config import ars_config_from_dict, default_config_path
+from tlt_ars.node import ArsNode, main
+from tlt_ars.planning.reachability import UnreachableMember
+from tlt_common import ros_names
+from tlt_common.config_schema import load_yaml
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_main_refuses_a_bad_config_with_file_key_and_reason(tmp_path, capsys):
+    raw = load_yaml(default_config_path("ars_x"))
+    raw["arm"]["velocity_scale"] = 3.0
+    bad = tmp_path / "ars_x.yaml"
+    bad.write_text(yaml.safe_dump(raw))
+    assert main(["--ars", "ars_x", "--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "arm.velocity_scale" in err
+    assert main(["--ars", "ars_y", "--config", str(default_config_path("ars_x"))]) == 2
+    assert "file is for 'ars_x', not 'ars_y'" in capsys.readouterr().err
+
+
+def test_a_member_out_of_reach_stops_the_start(tmp_path):
+    scene = load_yaml("config/planning/scene.yaml")
+    scene["arms"]["ars_x"]["base"] = [-3.0, -3.0, 0.0]  # the arm moved far from the tower
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    raw = load_yaml(default_config_path("ars_x"))
+    raw["scene"] = str(path)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(UnreachableMember, match="bay1/cross_frame: ars_x cannot place"):
+            ArsNode(ars_config_from_dict(raw), context=context)
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def idle_ars():
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(started_on_launch=False, check_reach=False)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ars = ArsNode(ars_config_from_dict(raw), context=context)
+    client = Node("ars_probe", context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor.add_node(ars)
+    executor.add_node(client)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    yield ars, client
+    executor.shutdown(timeout_sec=5)
+    thread.join(timeout=5)
+    ars.close()
+    ars.destroy_node()
+    client.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+def _wait(future, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while not future.done():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.02)
+    return future.result()
+
+
+def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars):
+    ars, client = idle_ars
+    action = ActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+    ground = client.create_client(GroundCommand, ros_names.ground_command_service("ars_x"))
+    assert action.wait_for_server(timeout_sec=10) and ground.wait_for_service(timeout_sec=10)
+
+    def request(member_id="bay1/vertical/x0_y0"):
+        goal = AddMember.Goal(kind=1, bay=1, member_id=member_id, position="x0_y0", ars="ars_x")
+        handle = _wait(action.send_goal_async(goal))
+        assert handle.accepted  # acknowledged, then checked
+        return _wait(handle.get_result_async())
+
+    def command(code):
+        return _wait(ground.call_async(GroundCommand.Request(command=code)))
+
+    refused = request()
+    assert refused.status == GoalStatus.STATUS_ABORTED
+    assert refused.result.reason == "rejected: ars_x is not started (waiting for the ground's Start)"
+    assert not command(GroundCommand.Request.RESUME).accepted  # not paused
+    start = command(GroundCommand.Request.START)
+    assert start.accepted and ars.started
+    assert command(GroundCommand.Request.START).reason == "already started"
+    assert "unknown member" in request("bay1/vertical/nowhere").result.reason
+    assert command(GroundCommand.Request.PAUSE).accepted
+    assert not command(GroundCommand.Request.PAUSE).accepted
+    assert not command(GroundCommand.Request.START).accepted  # paused: Resume continues
+    assert request().result.reason == "rejected: ars_x is paused"
+    assert command(GroundCommand.Request.RESUME).accepted
+    assert not command(9).accepted
+    assert command(GroundCommand.Request.STOP).accepted
+    deadline = time.monotonic() + 10
+    while not ars.finished.is_set():  # no arm state: it waits timeouts.stop_s, then stops anyway
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert request().result.reason == "rejected: stopped by ground command"
+
+
+def test_process_exits_cleanly_on_ground_stop():
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tlt_ars.node", "--ars", "ars_y", "--no-reach-check"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node("ground_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        ground = node.create_client(GroundCommand, ros_names.ground_command_service("ars_y"))
+        deadline = time.monotonic() + 30
+        while not ground.service_is_ready():
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < deadline, "the ARS process never served its ground commands"
+            executor.spin_once(timeout_sec=0.1)
+        future = ground.call_async(GroundCommand.Request(command=GroundCommand.Request.STOP))
+        executor.spin_until_future_complete(future, timeout_sec=10)
+        assert future.result().accepted
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

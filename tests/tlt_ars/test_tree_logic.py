@@ -1,0 +1,109 @@
+"""Tree mechanics of the ARS without ROS: failure reasons, feedback step and progress, the
+replace-after-discard decorator, and pausing a motion so that it is planned again."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import py_trees
+from py_trees.common import Status
+
+from tlt_ars.behaviours.parts import ReplaceDiscarded
+from tlt_ars.tree import failure_reason, progress, running_step
+from tlt_common.bt.nodes import Action
+
+
+class Scripted(Action):
+    """Answers the statuses in ``script`` one per tick (the last one repeats); counts its starts."""
+
+    def __init__(self, name: str, script: list[Status], reason: str = "", on_tick=None) -> None:
+        super().__init__(name)
+        self.script, self.reason, self.on_tick = script, reason, on_tick
+        self.starts = 0
+        self._i = 0
+
+    def initialise(self) -> None:
+        self.starts += 1
+        self._i = 0
+
+    def update(self) -> Status:
+        status = self.script[min(self._i, len(self.script) - 1)]
+        self._i += 1
+        if self.on_tick:
+            self.on_tick(self)
+        if status == Status.FAILURE:
+            return self.fail(self.reason)
+        return status
+
+
+def seq(name, children):
+    s = py_trees.composites.Sequence(name, memory=True)
+    s.add_children(children)
+    return s
+
+
+S, F, R = Status.SUCCESS, Status.FAILURE, Status.RUNNING
+
+
+def test_failure_reason_names_the_failing_leaf_and_its_reason():
+    grab = seq("Grab Member", [Scripted("Approach", [S]), Scripted("Grasp", [F], "jaws empty")])
+    branch = seq("Add Member", [seq("Load Rivet", [Scripted("Rivets Left?", [S])]), grab])
+    branch.tick_once()
+    assert branch.status == F
+    assert failure_reason(branch) == "Add Member/Grab Member/Grasp: jaws empty"
+
+
+def test_running_step_and_progress_follow_the_branch():
+    branch = seq(
+        "Add Member", [Scripted("A", [S]), seq("Place", [Scripted("B", [R, S]), Scripted("C", [R])])]
+    )
+    assert progress(branch) == 0.0 and running_step(branch) == ""
+    branch.tick_once()
+    assert running_step(branch) == "Add Member/Place/B"
+    assert progress(branch) == 1 / 3
+    branch.tick_once()
+    assert running_step(branch) == "Add Member/Place/C"
+    assert progress(branch) == 2 / 3
+
+
+def test_replace_discarded_reruns_only_after_a_discard_and_gives_up_otherwise():
+    ctx = SimpleNamespace(data=SimpleNamespace(parts_discarded=0))
+
+    def first_part_discarded(node):  # the first part fails inspection and is thrown away
+        if node.starts == 1:
+            ctx.data.parts_discarded += 1
+        node.script = [S]  # the replacement passes
+
+    get = Scripted("Get Part", [S])
+    inspect = Scripted("Inspect", [F], "inspection failed", on_tick=first_part_discarded)
+    attempt = seq("Attempt", [get, inspect])
+    deco = ReplaceDiscarded("Get Inspected", attempt, ctx)
+    deco.tick_once()
+    assert deco.status == R and ctx.data.parts_discarded == 1  # discarded: a replacement follows
+    deco.tick_once()
+    assert deco.status == S and get.starts == 2
+
+    ctx2 = SimpleNamespace(data=SimpleNamespace(parts_discarded=0))
+    broken = seq("Attempt", [Scripted("Get Part", [F], "dispenser 'd' is empty")])
+    deco2 = ReplaceDiscarded("Get Inspected", broken, ctx2)
+    deco2.tick_once()
+    assert deco2.status == F
+    assert failure_reason(deco2) == "Get Inspected/Attempt/Get Part: dispenser 'd' is empty"
+
+
+def test_hold_stops_the_whole_motion_so_resume_plans_again():
+    from tlt_ars.tree import ArsTree
+
+    plan = Scripted("Plan Move", [S])
+    execute = Scripted("Execute Move", [R])
+    motion = seq("Move", [plan, execute])
+    motion.replan_on_resume = True
+    root = seq("ARS", [Scripted("Before", [S]), motion])
+    fake = SimpleNamespace(root=root)
+    root.tick_once()
+    root.tick_once()
+    assert execute.status == R and plan.starts == 1
+    ArsTree.hold(fake)  # what Pause does
+    assert execute.status == Status.INVALID and plan.status == Status.INVALID
+    root.tick_once()  # Resume: the motion starts over with a new plan from where the arm stands
+    assert plan.starts == 2 and execute.starts == 2
