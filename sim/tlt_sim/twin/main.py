@@ -1,0 +1,143 @@
+"""``tlt twin run``: the EDU's digital twin as one ROS process behind the real driver links.
+
+Loads ``config/twin/edu.yaml`` (the machine), a mission and an optional scenario, builds the MuJoCo
+scene and hosts every device emulator bound to it (:mod:`tlt_sim.twin.devices`): the lifter
+firmware, the Dynamixel and MightyZAP chains on pseudo-terminals linked at
+``$TLT_RUN_DIR/<component>``, the two UR controllers on their loopback addresses, the EE GPIO chips.
+The driver nodes open those links exactly as they open the stand-alone emulators or the hardware.
+Once everything answers, the file ``$TLT_RUN_DIR/twin.ready`` appears (launch sets wait on it).
+
+The twin owns time: it publishes ``/clock`` and steps at ``--rtf`` (1 by default, 0 = as fast as
+the CPU allows); the drivers run with ``use_sim_time``. Cameras and ground truth are published
+on demand (:mod:`tlt_sim.twin.ros_streams`). Runs until SIGINT/SIGTERM or ``--duration`` seconds
+of sim time, then withdraws its links. Exit status 0, or 2 for a bad configuration.
+
+    python -m tlt_sim.twin.main --scenario config/twin/scenarios/device_faults.yaml --rtf 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+from tlt_common.config_schema import ConfigError
+from tlt_drivers.gpio.config import run_dir as default_run_dir
+from tlt_sim.model.config import DEFAULT_EDU
+from tlt_sim.model.scene import ModelCompileError, Scene
+from tlt_sim.twin.pacing import Pacer
+from tlt_sim.twin.settings import DEFAULT_SETTINGS, load_settings
+from tlt_sim.twin.simulation import Twin
+
+READY_FILE = "twin.ready"
+# Wall time the loop sleeps at least per sync period, so that the pty and socket threads answer
+# the drivers within their serial timeouts even at --rtf 0 (they share the interpreter's lock).
+YIELD_S = 0.001
+log = logging.getLogger("tlt.twin")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="tlt twin run", description=__doc__.splitlines()[0])
+    p.add_argument("--edu", type=Path, default=DEFAULT_EDU, help="machine description (edu.yaml)")
+    p.add_argument("--mission", type=Path, help="mission YAML (default: the one edu.yaml names)")
+    p.add_argument("--scenario", help="scenario YAML (config/twin/scenarios/); empty for none")
+    p.add_argument("--settings", type=Path, default=DEFAULT_SETTINGS, help="run settings (run.yaml)")
+    p.add_argument("--rtf", type=float, help="real-time factor (0: as fast as possible)")
+    p.add_argument("--run-dir", type=Path,
+                   help="where device links go (default $TLT_RUN_DIR or /tmp/tlt-run)")
+    p.add_argument("--ur-x-host", help="loopback address of ARS X's UR controller")
+    p.add_argument("--ur-y-host", help="loopback address of ARS Y's UR controller")
+    p.add_argument("--camera-rate", type=float, help="camera frames per simulated second")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this much sim time (0: never)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the twin until a signal or ``--duration``. Returns the exit status."""
+    import rclpy
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = _parser().parse_args(rclpy.utilities.remove_ros_args(["twin", *argv])[1:])
+    logging.basicConfig(level=logging.INFO, format="twin: %(message)s", stream=sys.stdout, force=True)
+    try:
+        settings = load_settings(args.settings)
+        changes: dict = {}
+        if args.rtf is not None:
+            if args.rtf < 0:
+                raise ConfigError("--rtf", "", f"must be >= 0, got {args.rtf}")
+            changes["rtf"] = args.rtf
+        if args.camera_rate is not None:
+            if args.camera_rate <= 0:
+                raise ConfigError("--camera-rate", "", f"must be > 0, got {args.camera_rate}")
+            changes["camera_rate_hz"] = args.camera_rate
+        hosts = dict(settings.ur_hosts)
+        hosts.update({k: v for k, v in (("ur_x", args.ur_x_host), ("ur_y", args.ur_y_host)) if v})
+        settings = settings.replace(ur_hosts=hosts, **changes)
+        # An empty --scenario (a launch set's unset variable) means the nominal run.
+        scene = Scene(args.edu, args.mission, args.scenario or None)
+        run_dir = args.run_dir or default_run_dir()
+        twin = Twin(scene, settings, run_dir)
+    except (ConfigError, ModelCompileError, ValueError) as exc:
+        print(f"tlt twin run: {exc}", file=sys.stderr)
+        return 2
+
+    # rclpy's own handler would invalidate the context under a publish in the loop: the loop stops
+    # on a flag instead (a list append: a signal handler must not take locks, see lifter_main).
+    rclpy.init(args=["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    stop: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop.append(signum))
+    from rclpy.node import Node
+
+    from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
+
+    node = Node("twin")
+    ready = Path(run_dir) / READY_FILE
+    try:
+        clock = ClockPublisher(node)
+        cameras = CameraStreams(node, scene, settings)
+        truth = GroundTruth(node, scene, settings.ground_truth_rate_hz)
+        try:
+            twin.start()
+        except OSError as exc:  # a UR address already served by another emulator, a pty refused
+            print(f"tlt twin run: cannot serve the device links: {exc}", file=sys.stderr)
+            return 1
+        clock.publish(scene.time)
+        ready.write_text(f"{os.getpid()}\n")
+        log.info("links up in %s (rtf %s, scenario %s)", run_dir, settings.rtf or "max", scene.scenario.name)
+        # Hand the interpreter lock to a device thread quickly when one has bytes to answer.
+        sys.setswitchinterval(0.0005)
+        pacer = Pacer(settings.rtf, min_sleep_s=YIELD_S)
+        pacer.rebase(scene.time)
+        wall0 = time.monotonic()
+        while not stop and rclpy.ok():
+            if twin.hold_for_drivers():
+                pacer.rebase(scene.time)
+            t = twin.tick()
+            clock.publish(t)
+            cameras.publish_due(t)
+            truth.publish_due(t)
+            pacer.wait(t)
+            if args.duration and t >= args.duration - 1e-9:
+                break
+        wall = time.monotonic() - wall0
+        log.info("stopped at %.2f s of sim time after %.2f s of wall time (%.2fx), %d waits for drivers",
+                 scene.time, wall, scene.time / wall if wall > 0 else 0.0, twin.holds)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            ready.unlink()
+        twin.close()
+        scene.close()
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

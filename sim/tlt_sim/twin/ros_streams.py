@@ -1,0 +1,183 @@
+"""What the twin publishes besides its device links: /clock, camera images and ground-truth poses.
+
+Topics (names in :mod:`tlt_sim.twin.topics`):
+
+* ``/clock`` (``rosgraph_msgs/Clock``): the sim time after every sync period;
+* per camera (``zed_1``, ``zed_2``, ``ars_x/d405_a`` ...) under ``/cameras/<camera>/``: ``rgb``
+  (``sensor_msgs/Image`` rgb8), ``depth`` (32FC1, metres along the optical axis, 0 where nothing),
+  ``segmentation`` (32SC1 instance ids, -1 where nothing) and ``camera_info``
+  (``sensor_msgs/CameraInfo``, plumb-bob with zero distortion). A camera renders only while one
+  of its image topics has a subscriber (the publisher's subscription count), at most
+  ``rate_hz`` frames per simulated second, and only the images someone subscribes to;
+* ``/cameras/segmentation_labels`` (``std_msgs/String``, transient local): JSON
+  ``{"instances": [...], "classes": [...]}``, instance id -> geom instance name and its class;
+* ``/twin/ground_truth`` (``geometry_msgs/TransformStamped``, one message per object, while
+  subscribed, ``ground_truth_rate_hz`` per simulated second): ``header.frame_id`` ``world``,
+  ``child_frame_id`` the payload (``tower``), every part body (``part/<dispenser>/<index>``), each
+  EE (``ars_x/ee``) and each camera's optical frame (``<camera>_optical``).
+
+All stamps are sim time. Everything here runs on the simulation thread (the Scene is not
+thread-safe).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+
+import numpy as np
+from geometry_msgs.msg import TransformStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
+
+from tlt_sim.model import names
+from tlt_sim.model.geometry import mat_to_quat
+from tlt_sim.model.scene import Scene
+from tlt_sim.twin import topics
+from tlt_sim.twin.settings import TwinSettings
+
+IMAGE_STREAMS = ("rgb", "depth", "segmentation")
+
+
+def _next_due(due: float, period: float, t: float) -> float:
+    """The next time on the rate's grid; after a pause (nobody subscribed) a new grid from ``t``."""
+    due += period
+    return due if due > t + 1e-9 else t + period
+
+
+def _stamp(msg_stamp, t: float) -> None:
+    sec = int(t)
+    msg_stamp.sec, msg_stamp.nanosec = sec, round((t - sec) * 1e9) % 1_000_000_000
+
+
+class ClockPublisher:
+    def __init__(self, node: Node) -> None:
+        self._pub = node.create_publisher(Clock, topics.CLOCK, 10)
+        self._msg = Clock()
+
+    def publish(self, t: float) -> None:
+        _stamp(self._msg.clock, t)
+        self._pub.publish(self._msg)
+
+
+class CameraStreams:
+    """Renders and publishes the model's cameras on demand. ``renders`` counts frames per camera."""
+
+    def __init__(self, node: Node, scene: Scene, settings: TwinSettings) -> None:
+        self.scene = scene
+        self.settings = settings
+        self.period = 1.0 / settings.camera_rate_hz
+        self.renders: Counter[str] = Counter()
+        qos = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)
+        self._pubs: dict[str, dict[str, object]] = {}
+        self._next: dict[str, float] = {}
+        for camera in names.cameras():
+            self._pubs[camera] = {
+                stream: node.create_publisher(
+                    CameraInfo if stream == "camera_info" else Image, topics.camera_topic(camera, stream), qos
+                )
+                for stream in topics.CAMERA_STREAMS
+            }
+            self._next[camera] = 0.0
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._labels = node.create_publisher(String, topics.SEGMENTATION_LABELS, latched)
+        self._labels_sent = False
+
+    def _publish_labels(self) -> None:
+        labels = self.scene.renderer().labels
+        self._labels.publish(String(data=json.dumps(
+            {"instances": labels.instance_names, "classes": labels.classes})))
+        self._labels_sent = True
+
+    def publish_due(self, t: float) -> None:
+        """Render and publish every camera that is subscribed and due at sim time ``t``."""
+        for camera, pubs in self._pubs.items():
+            wanted = {s for s in IMAGE_STREAMS if pubs[s].get_subscription_count() > 0}
+            if not wanted or t + 1e-9 < self._next[camera]:
+                continue
+            self._next[camera] = _next_due(self._next[camera], self.period, t)
+            if not self._labels_sent:
+                self._publish_labels()
+            width, height = self.settings.camera_size(camera)
+            frame = self.scene.render(camera, width, height,
+                                      depth="depth" in wanted, segmentation="segmentation" in wanted)
+            self.renders[camera] += 1
+            frame_id = topics.camera_frame(camera)
+            if "rgb" in wanted:
+                pubs["rgb"].publish(_image(frame.rgb, "rgb8", 3 * width, t, frame_id))
+            if "depth" in wanted:
+                pubs["depth"].publish(_image(frame.depth.astype(np.float32), "32FC1", 4 * width, t, frame_id))
+            if "segmentation" in wanted:
+                pubs["segmentation"].publish(
+                    _image(frame.segmentation.astype(np.int32), "32SC1", 4 * width, t, frame_id))
+            pubs["camera_info"].publish(_camera_info(frame.intrinsics, t, frame_id))
+
+
+def _image(array: np.ndarray, encoding: str, step: int, t: float, frame_id: str) -> Image:
+    msg = Image()
+    _stamp(msg.header.stamp, t)
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = int(array.shape[0]), int(array.shape[1])
+    msg.encoding = encoding
+    msg.is_bigendian = 0
+    msg.step = step
+    msg.data = np.ascontiguousarray(array).tobytes()
+    return msg
+
+
+def _camera_info(k, t: float, frame_id: str) -> CameraInfo:
+    msg = CameraInfo()
+    _stamp(msg.header.stamp, t)
+    msg.header.frame_id = frame_id
+    msg.width, msg.height = k.width, k.height
+    msg.distortion_model = "plumb_bob"
+    msg.d = [0.0] * 5
+    msg.k = [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0]
+    msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return msg
+
+
+class GroundTruth:
+    """Poses of the payload, the parts, the EEs and the cameras, while subscribed."""
+
+    def __init__(self, node: Node, scene: Scene, rate_hz: float) -> None:
+        self.scene = scene
+        self.period = 1.0 / rate_hz
+        self._pub = node.create_publisher(TransformStamped, topics.GROUND_TRUTH, 100)
+        self._next = 0.0
+
+    def poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Object name -> (world position, rotation matrix), as published."""
+        s = self.scene
+        out = {"tower": s.tower_pose()}
+        for part in s.info.parts.values():
+            out[part.body] = s.body_pose(part.body)
+        for arm in names.ARMS:
+            out[names.ee_body(arm)] = s.body_pose(names.ee_body(arm))
+        for camera in names.cameras():
+            out[topics.camera_frame(camera)] = s.camera_pose(camera)
+        return out
+
+    def publish_due(self, t: float) -> None:
+        if self._pub.get_subscription_count() == 0 or t + 1e-9 < self._next:
+            return
+        self._next = _next_due(self._next, self.period, t)
+        for name, (pos, rot) in self.poses().items():
+            msg = TransformStamped()
+            _stamp(msg.header.stamp, t)
+            msg.header.frame_id = topics.WORLD_FRAME
+            msg.child_frame_id = name
+            msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (
+                float(v) for v in pos)
+            w, x, y, z = (float(v) for v in mat_to_quat(rot))
+            q = msg.transform.rotation
+            q.w, q.x, q.y, q.z = w, x, y, z
+            self._pub.publish(msg)
+
+
+__all__ = ["IMAGE_STREAMS", "CameraStreams", "ClockPublisher", "GroundTruth"]
