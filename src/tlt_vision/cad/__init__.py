@@ -1,0 +1,1 @@
+"""CAD models of the part classes as surface point samplers with annotated semantic keypoints."""

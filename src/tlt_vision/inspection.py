@@ -1,0 +1,355 @@
+"""Part and bay inspection from the pose pipeline's results (paper §V.E; Figs. 22, 26).
+
+Reads :class:`Observation` s, one per segmented instance: its class and either a C-3PO
+:class:`~tlt_vision.pose.estimator.PoseEstimate` (with its certificate) or the reason no estimate
+could be made (empty mask, no depth, too few points, from :mod:`tlt_vision.pointcloud`). Returns an
+:class:`InspectionReport` (tlt_interfaces/msg/InspectionReport): pass, or fail with every reason.
+Only certified poses are trusted for geometry; an uncertified one is reported with its reason and
+never counted as a found part.
+
+* Strut: one straight strut tube and an end fitting at each end, on the tube's axis, at the
+  strut's layout positions (:func:`tlt_vision.cad.models.strut_layout`), parallel to it. A tube
+  that does not fit a straight tube (not observably correct although well seen) is a bent tube.
+* Cross frame: the frame itself (its four sides) and a corner joint at each of its four corners.
+* Placement alignment: a placed part's centre and axis, moved into the tower frame, against the
+  mission's joint positions of its member.
+* Bay: the corner joints found match the mission's joint positions up to one rigid motion (the
+  camera's pose drops out) within the position tolerance.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tlt_vision.cad.models import strut_layout
+from tlt_vision.pose.estimator import PoseEstimate
+
+MAX_BAY_CANDIDATES = 6  # certified corner joints tried in the bay match (6P4 = 360 assignments)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A segmented instance: its class, and its pose estimate or the reason there is none."""
+
+    object_class: str
+    estimate: PoseEstimate | None = None
+    reason: str = ""
+    object_id: str = ""
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    position: float  # m
+    angle: float  # rad
+
+    @classmethod
+    def from_mission(cls, mission: Any) -> Tolerances:
+        return cls(
+            float(mission.inspection["position_tolerance"]), float(mission.inspection["angle_tolerance"])
+        )
+
+
+@dataclass(frozen=True)
+class InspectionReport:
+    target_id: str
+    target_kind: str
+    passed: bool
+    reasons: tuple[str, ...]
+    poses: tuple[PoseEstimate, ...] = field(default=())
+
+
+def _split(observations: Sequence[Observation], cls: str) -> tuple[list[PoseEstimate], list[str]]:
+    """Certified estimates of a class, and the reasons its other instances were not trusted."""
+    good, bad = [], []
+    for o in observations:
+        if o.object_class != cls:
+            continue
+        if o.estimate is None:
+            bad.append(f"{cls}: {o.reason or 'no pose estimate'}")
+        elif not o.estimate.certified:
+            bad.append(f"{cls}: pose not certified ({o.estimate.certificate.reason})")
+        else:
+            good.append(o.estimate)
+    return good, bad
+
+
+def _axis(e: PoseEstimate) -> np.ndarray:
+    return np.asarray(e.rotation)[:, 2]
+
+
+def _angle_between_axes(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two undirected axes, rad."""
+    return math.acos(min(1.0, abs(float(np.dot(a, b)))))
+
+
+def _coaxial(f1: PoseEstimate, f2: PoseEstimate) -> tuple[float, float]:
+    """Angle (rad) between two fittings' axes, and the larger angle of either axis from the line
+    joining their centres: a straight strut's end fittings share one axis, the line between them.
+
+    Angles rather than distances: a degree of axis error on a short fitting moves a point 0.65 m
+    along its axis by 11 mm, which a distance tolerance would take for a defect.
+    """
+    a1, a2 = _axis(f1), _axis(f2)
+    d = np.asarray(f2.translation) - np.asarray(f1.translation)
+    chord = d / max(float(np.linalg.norm(d)), 1e-9)
+    return _angle_between_axes(a1, a2), max(_angle_between_axes(a1, chord), _angle_between_axes(a2, chord))
+
+
+def inspect_strut(
+    target_id: str,
+    kind: str,
+    length: float,
+    observations: Sequence[Observation],
+    parts: Mapping[str, Any],
+    tol: Tolerances,
+) -> InspectionReport:
+    """A strut (``kind`` vertical or diagonal, ``length`` m): one straight tube, two end fittings.
+
+    Straightness is judged two ways: the tube must fit the straight-tube model (its certificate),
+    and the two end fittings must share one axis (a kink turns one end, and its fitting, away).
+    """
+    reasons: list[str] = []
+    used = tuple(o.estimate for o in observations if o.estimate is not None)
+    tube_obs = [o for o in observations if o.object_class == "strut_tube"]
+    if not tube_obs:
+        return InspectionReport(target_id, kind, False, ("part not in view: no strut tube detected",), used)
+    tubes, tube_bad = _split(observations, "strut_tube")
+    for o in tube_obs:
+        e = o.estimate
+        c = e.certificate if e is not None else None
+        if c is not None and not c.certified and c.non_degenerate and not c.observably_correct:
+            reasons.append(
+                f"bent tube: the tube does not fit a straight tube ({c.chamfer_p90 * 1000:.1f} mm "
+                f"> {c.chamfer_threshold * 1000:.1f} mm at the 90th percentile)"
+            )
+    reasons.extend(r for r in tube_bad if not (reasons and "not observably correct" in r))
+    if len(tubes) > 1:
+        reasons.append(f"expected one strut tube, found {len(tubes)}: a broken or bent tube")
+    fittings, fitting_bad = _split(observations, "end_fitting")
+    if len(fittings) == 2:
+        between, to_chord = _coaxial(*fittings)
+        if between > tol.angle or to_chord > tol.angle:
+            reasons.append(
+                f"bent tube: the end fittings are not coaxial ({math.degrees(between):.1f} deg between "
+                f"their axes, {math.degrees(to_chord):.1f} deg from the line joining them)"
+            )
+    elif len(fittings) > 2:
+        reasons.append(f"expected two end fittings, found {len(fittings)}")
+    if len(tubes) == 1:
+        reasons.extend(_fittings_on_tube(tubes[0], fittings, length, parts, tol))
+    elif len(fittings) < 2:
+        reasons.append(f"missing end fitting: {len(fittings)} of 2 found")
+    reasons.extend(fitting_bad)
+    return InspectionReport(target_id, kind, not reasons, tuple(reasons), used)
+
+
+def _fittings_on_tube(
+    tube: PoseEstimate, fittings: list[PoseEstimate], length: float, parts: Mapping[str, Any], tol: Tolerances
+) -> list[str]:
+    """Reasons why the fittings are not one at each end of ``tube``, on its axis, parallel to it."""
+    reasons = []
+    axis = _axis(tube)
+    lay = strut_layout(length, parts)
+    offset = lay["fitting_b"] - lay["tube_centre"]  # fittings at -offset (end a) and +offset (end b)
+    found: dict[str, PoseEstimate] = {}
+    for f in fittings:
+        rel = np.asarray(f.translation) - np.asarray(tube.translation)
+        axial = float(rel @ axis)
+        radial = float(np.linalg.norm(rel - axial * axis))
+        end = "a" if axial < 0 else "b"
+        axial_err = abs(abs(axial) - offset)
+        if radial > tol.position or axial_err > tol.position:
+            reasons.append(
+                f"end fitting out of place: {radial * 1000:.1f} mm off the tube axis, "
+                f"{axial_err * 1000:.1f} mm off its position along it (bent tube or loose fitting)"
+            )
+            continue
+        if end in found:
+            reasons.append(f"two end fittings at end {end}")
+            continue
+        angle = _angle_between_axes(_axis(f), axis)
+        if angle > tol.angle:
+            reasons.append(f"end fitting at end {end} misaligned by {math.degrees(angle):.1f} deg")
+        found[end] = f
+    for end, sign in (("a", -1.0), ("b", 1.0)):
+        if end not in found:
+            # A tube is the same end for end: "a" and "b" follow the estimated axis, so the
+            # reason also says where the fitting should be.
+            where = np.asarray(tube.translation) + sign * offset * axis
+            xyz = ", ".join(f"{v:.3f}" for v in where)
+            reasons.append(
+                f"missing end fitting: {len(found)} of 2 found, none at ({xyz}) m in the camera frame"
+            )
+    return reasons
+
+
+def inspect_cross_frame(
+    target_id: str,
+    bay_width: float,
+    observations: Sequence[Observation],
+    tol: Tolerances,
+) -> InspectionReport:
+    """A cross frame: the certified frame and a certified corner joint at each of its corners."""
+    used = tuple(o.estimate for o in observations if o.estimate is not None)
+    if not any(o.object_class == "cross_frame" for o in observations):
+        return InspectionReport(
+            target_id, "cross_frame", False, ("part not in view: no cross frame detected",), used
+        )
+    frames, frame_bad = _split(observations, "cross_frame")
+    reasons: list[str] = list(frame_bad)
+    if len(frames) != 1:
+        if len(frames) > 1:
+            reasons.append(f"expected one cross frame, found {len(frames)}")
+        return InspectionReport(target_id, "cross_frame", False, tuple(reasons), used)
+    frame = frames[0]
+    rot, t = np.asarray(frame.rotation), np.asarray(frame.translation)
+    hw = bay_width / 2
+    corners = [rot @ np.array([x, y, 0.0]) + t for x, y in ((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))]
+    joints, joint_bad = _split(observations, "corner_joint")
+    taken: set[int] = set()
+    for i, c in enumerate(corners):
+        dists = [np.linalg.norm(np.asarray(j.translation) - c) for j in joints]
+        order = [k for k in np.argsort(dists) if k not in taken] if joints else []
+        if not order or dists[order[0]] > tol.position * 4:
+            reasons.append(f"missing corner joint at corner {i}")
+        elif dists[order[0]] > tol.position:
+            taken.add(int(order[0]))
+            reasons.append(f"corner joint at corner {i} off by {dists[order[0]] * 1000:.1f} mm")
+        else:
+            taken.add(int(order[0]))
+    if any(r.startswith("missing corner joint") for r in reasons):
+        reasons.extend(joint_bad)
+    return InspectionReport(target_id, "cross_frame", not reasons, tuple(reasons), used)
+
+
+def _rigid_residuals(expected: np.ndarray, observed: np.ndarray) -> np.ndarray:
+    """Residual distances after the best rigid fit of ``expected`` (n, 3) onto ``observed``."""
+    ce, co = expected.mean(0), observed.mean(0)
+    h = (expected - ce).T @ (observed - co)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return np.linalg.norm((expected - ce) @ r.T + co - observed, axis=1)
+
+
+def inspect_bay(
+    bay: int,
+    expected: Mapping[str, Sequence[float]],
+    observations: Sequence[Observation],
+    tol: Tolerances,
+) -> InspectionReport:
+    """The bay's corner joints against ``expected`` joint positions (name -> xyz, mission frame).
+
+    Every expected joint must be matched by a certified corner joint pose (all in one frame); the
+    assignment of poses to joints is the one with the smallest worst residual after a rigid fit.
+    """
+    target = f"bay{bay}"
+    used = tuple(o.estimate for o in observations if o.estimate is not None)
+    joints, bad = _split(observations, "corner_joint")
+    names = list(expected)
+    exp = np.array([expected[n] for n in names], dtype=float)
+    if len(joints) < len(names):
+        reasons = [f"only {len(joints)} of {len(names)} corner joints certified", *bad]
+        if not any(o.object_class == "corner_joint" for o in observations):
+            reasons[0] = "part not in view: no corner joint detected"
+        return InspectionReport(target, "bay", False, tuple(reasons), used)
+    joints = sorted(joints, key=lambda e: e.certificate.chamfer_p90)[:MAX_BAY_CANDIDATES]
+    obs = np.array([np.asarray(j.translation) for j in joints])
+    best: tuple[float, np.ndarray] | None = None
+    for perm in itertools.permutations(range(len(joints)), len(names)):
+        res = _rigid_residuals(exp, obs[list(perm)])
+        if best is None or res.max() < best[0]:
+            best = (float(res.max()), res)
+    assert best is not None
+    reasons = [
+        f"corner joint {n} off by {r * 1000:.1f} mm"
+        for n, r in zip(names, best[1], strict=True)
+        if r > tol.position
+    ]
+    return InspectionReport(target, "bay", not reasons, tuple(reasons), used)
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Answer of a placement alignment check (tlt_interfaces/srv/CheckAlignment's response)."""
+
+    aligned: bool
+    position_error: float  # m
+    angle_error: float  # rad
+    estimate: PoseEstimate | None
+    reason: str = ""
+
+
+def check_alignment(
+    member_kind: str,
+    joints: Sequence[Sequence[float]],
+    estimate: PoseEstimate | None,
+    camera_to_tower: np.ndarray,
+    tol: Tolerances,
+    reason: str = "",
+) -> Alignment:
+    """Whether a placed part sits where the mission puts it, from its pose seen by an EE camera.
+
+    ``joints`` are the member's joint positions in the tower frame (the mission's); a strut
+    (``vertical``, ``diagonal``; its tube's pose) must have its centre at their midpoint and its axis
+    along them; a cross frame (its frame's pose) its centre at their mean and its plane normal
+    vertical. ``camera_to_tower`` (4x4) is the camera's pose in the tower frame, from the
+    transform tree. Errors are the centre's distance and the axis' angle (undirected).
+    """
+    if estimate is None or not estimate.certified:
+        why = reason or (estimate.certificate.reason if estimate is not None else "no pose estimate")
+        return Alignment(False, float("inf"), float("inf"), estimate, f"no certified pose: {why}")
+    tf = np.asarray(camera_to_tower, dtype=float)
+    centre = tf[:3, :3] @ np.asarray(estimate.translation) + tf[:3, 3]
+    axis = tf[:3, :3] @ _axis(estimate)
+    pts = np.asarray(joints, dtype=float)
+    if member_kind == "cross_frame":
+        want_centre, want_axis = pts.mean(0), np.array([0.0, 0.0, 1.0])
+    elif member_kind in ("vertical", "diagonal") and len(pts) == 2:
+        want_centre, want_axis = pts.mean(0), (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0])
+    else:
+        return Alignment(
+            False,
+            float("inf"),
+            float("inf"),
+            estimate,
+            f"cannot check a {member_kind} with {len(pts)} joints",
+        )
+    pos_err = float(np.linalg.norm(centre - want_centre))
+    ang_err = _angle_between_axes(axis, want_axis)
+    reasons = []
+    if pos_err > tol.position:
+        reasons.append(f"{pos_err * 1000:.1f} mm from its place (tolerance {tol.position * 1000:.1f} mm)")
+    if ang_err > tol.angle:
+        reasons.append(
+            f"turned {math.degrees(ang_err):.1f} deg (tolerance {math.degrees(tol.angle):.1f} deg)"
+        )
+    return Alignment(not reasons, pos_err, ang_err, estimate, "; ".join(reasons))
+
+
+def bay_joints(mission: Any, bay: int) -> dict[str, tuple[float, float, float]]:
+    """The four corner joints of bay ``bay``'s bottom cross frame (``bay<N>/x?_y?``) from the mission."""
+    prefix = f"bay{bay}/"
+    out = {k: v for k, v in mission.joints.items() if k.startswith(prefix)}
+    if not out:
+        raise KeyError(f"mission {mission.name} has no joints for bay {bay}")
+    return out
+
+
+__all__ = [
+    "Alignment",
+    "InspectionReport",
+    "Observation",
+    "Tolerances",
+    "bay_joints",
+    "check_alignment",
+    "inspect_bay",
+    "inspect_cross_frame",
+    "inspect_strut",
+]

@@ -1,0 +1,105 @@
+"""From a camera frame to inspection observations: masks -> point clouds -> certified poses.
+
+Reads detections (an instance mask and class per segmented instance, from Mask R-CNN or, for
+checks on the twin, its ground-truth segmentation), the depth image, optional RGB and the camera
+intrinsics; returns one :class:`~tlt_vision.inspection.Observation` per instance with a C-3PO
+estimate, or the reason there is none (empty mask, no depth, too few points, no pose model for the
+class). It never raises on image content.
+
+The twin (and a segmentation model trained on it) labels each side of a cross frame as its own
+instance, while the cross-frame CAD model is the whole square: instances of the classes in
+``merge`` are joined into one before the pose is estimated (one part is inspected at a time).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from tlt_vision.inspection import Observation
+from tlt_vision.pointcloud import MIN_POINTS, PinholeIntrinsics, masked_point_cloud
+from tlt_vision.pose.estimator import PoseEstimator
+
+
+@dataclass(frozen=True)
+class Detection:
+    object_class: str
+    mask: np.ndarray  # (H, W) bool
+    score: float = 1.0
+    object_id: str = ""
+
+
+def detections_from_mask_rcnn(
+    result: Mapping[str, torch.Tensor], classes: Sequence[str], min_score: float = 0.5
+) -> list[Detection]:
+    """Detections of one image's Mask R-CNN output (labels are 1-based indices into ``classes``)."""
+    out = []
+    for label, score, mask in zip(result["labels"], result["scores"], result["masks"], strict=True):
+        if float(score) >= min_score:
+            out.append(Detection(classes[int(label) - 1], mask.numpy().astype(bool), float(score)))
+    return out
+
+
+def merge_instances(detections: Sequence[Detection], classes: Sequence[str]) -> list[Detection]:
+    """Detections with every instance of each class in ``classes`` joined into one."""
+    out = [d for d in detections if d.object_class not in classes]
+    for cls in classes:
+        parts = [d for d in detections if d.object_class == cls]
+        if parts:
+            mask = np.logical_or.reduce([d.mask for d in parts])
+            out.append(
+                Detection(cls, mask, min(d.score for d in parts), "+".join(d.object_id for d in parts))
+            )
+    return out
+
+
+class PartPipeline:
+    """Poses for the detections of one frame, with one estimator per object class."""
+
+    def __init__(
+        self,
+        estimators: Mapping[str, PoseEstimator],
+        max_points: int = 1024,
+        min_points: int = MIN_POINTS,
+        merge: Sequence[str] = ("cross_frame",),
+        seed: int = 0,
+    ) -> None:
+        self.estimators = dict(estimators)
+        self.max_points = max_points
+        self.min_points = min_points
+        self.merge = tuple(merge)
+        self.rng = np.random.default_rng(seed)
+
+    def observe(
+        self,
+        detections: Sequence[Detection],
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None = None,
+    ) -> list[Observation]:
+        dets = merge_instances(detections, self.merge)
+        out: list[Observation | None] = [None] * len(dets)
+        pending: dict[str, list[tuple[int, np.ndarray]]] = {}
+        for i, d in enumerate(dets):
+            cloud = masked_point_cloud(
+                d.mask, depth, intrinsics, rgb, self.min_points, max_points=self.max_points, rng=self.rng
+            )
+            if not cloud.ok:
+                out[i] = Observation(d.object_class, None, cloud.reason, d.object_id)
+            elif d.object_class not in self.estimators:
+                out[i] = Observation(
+                    d.object_class, None, f"no pose model for class {d.object_class}", d.object_id
+                )
+            else:
+                pending.setdefault(d.object_class, []).append((i, cloud.points))
+        for cls, items in pending.items():
+            estimates = self.estimators[cls].estimate_batch([p for _, p in items])
+            for (i, _), e in zip(items, estimates, strict=True):
+                out[i] = Observation(cls, e, "", dets[i].object_id)
+        return [o for o in out if o is not None]
+
+
+__all__ = ["Detection", "PartPipeline", "detections_from_mask_rcnn", "merge_instances"]

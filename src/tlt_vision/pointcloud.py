@@ -1,0 +1,134 @@
+"""Instance masks applied to RGB and depth, back-projected to a point cloud in the camera frame.
+
+Reads a boolean mask (H, W), a depth image (H, W) in metres along the optical axis (0, NaN or inf
+for "no depth", as the twin and the RealSense/ZED drivers give it), optionally the RGB image
+(H, W, 3), and pinhole intrinsics ``fx, fy, cx, cy`` in the OpenCV convention (pixel (u, v) has its
+centre at column u, row v; x right, y down, z forward):
+``x = (u - cx) z / fx``, ``y = (v - cy) z / fy``.
+
+Pixels on a mask's border are dropped first (``erode``, 1 px by default): their depth mixes the
+part and what lies behind it ("flying pixels", on the twin's renders as on real depth cameras), and
+on a small part they are a large share of the mask; one such pixel a metre behind the part is
+enough to fail its certificate.
+
+It never raises on bad data and never returns points it could not trust: an empty mask, a mask
+with no valid depth, too few points, or images whose shapes disagree give a :class:`MaskedCloud`
+with no points and ``reason`` saying which.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import cv2
+import numpy as np
+
+MIN_POINTS = 32
+
+
+class PinholeIntrinsics(Protocol):
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels (the twin's ``tlt_sim.model.cameras.Intrinsics`` fits too)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_matrix(cls, k: np.ndarray) -> Intrinsics:
+        k = np.asarray(k, dtype=float)
+        return cls(float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]))
+
+
+@dataclass(frozen=True)
+class MaskedCloud:
+    """Points (N, 3) in metres, their colours (N, 3) uint8 or None, and why it failed (or "")."""
+
+    points: np.ndarray
+    colours: np.ndarray | None
+    mask_pixels: int
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.reason
+
+
+def _failed(reason: str, mask_pixels: int = 0) -> MaskedCloud:
+    return MaskedCloud(np.zeros((0, 3), dtype=np.float32), None, mask_pixels, reason)
+
+
+def masked_point_cloud(
+    mask: np.ndarray,
+    depth: np.ndarray | None,
+    intrinsics: PinholeIntrinsics,
+    rgb: np.ndarray | None = None,
+    min_points: int = MIN_POINTS,
+    depth_range: tuple[float, float] = (0.05, 20.0),
+    max_points: int | None = None,
+    rng: np.random.Generator | None = None,
+    erode: int = 1,
+) -> MaskedCloud:
+    """Back-project the masked pixels with valid depth; ``max_points`` draws a random subset."""
+    if depth is None:
+        return _failed("no depth image")
+    mask = np.asarray(mask)
+    depth = np.asarray(depth)
+    if mask.ndim != 2 or depth.shape != mask.shape:
+        return _failed(f"mask shape {mask.shape} does not match depth shape {depth.shape}")
+    if rgb is not None and np.asarray(rgb).shape[:2] != mask.shape:
+        return _failed(f"RGB shape {np.asarray(rgb).shape} does not match mask shape {mask.shape}")
+    if not (intrinsics.fx > 0 and intrinsics.fy > 0):
+        return _failed(f"invalid intrinsics fx={intrinsics.fx}, fy={intrinsics.fy}")
+    sel = mask.astype(bool)
+    pixels = int(sel.sum())
+    if pixels == 0:
+        return _failed("empty mask: part not in view")
+    core = (
+        cv2.erode(sel.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=erode).astype(bool)
+        if erode
+        else sel
+    )
+    with np.errstate(invalid="ignore"):
+        valid = core & np.isfinite(depth) & (depth >= depth_range[0]) & (depth <= depth_range[1])
+    n = int(valid.sum())
+    if n == 0 and core.any():
+        return _failed(f"no depth: none of the {pixels} mask pixels has a valid depth", pixels)
+    if n == 0:
+        return _failed(f"too few points: the mask of {pixels} px has no pixel off its border", pixels)
+    if n < min_points:
+        return _failed(f"too few points: {n} with valid depth < {min_points}", pixels)
+    v, u = np.nonzero(valid)
+    if max_points is not None and n > max_points:
+        pick = (rng or np.random.default_rng(0)).choice(n, max_points, replace=False)
+        v, u = v[pick], u[pick]
+    z = depth[v, u].astype(np.float64)
+    x = (u - intrinsics.cx) * z / intrinsics.fx
+    y = (v - intrinsics.cy) * z / intrinsics.fy
+    pts = np.stack([x, y, z], axis=1).astype(np.float32)
+    colours = np.asarray(rgb)[v, u].astype(np.uint8) if rgb is not None else None
+    return MaskedCloud(pts, colours, pixels)
+
+
+def project(points: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """Pixel coordinates (N, 2) ``(u, v)`` of camera-frame points (N, 3); the inverse of the above."""
+    p = np.asarray(points, dtype=float)
+    return np.stack(
+        [
+            p[:, 0] / p[:, 2] * intrinsics.fx + intrinsics.cx,
+            p[:, 1] / p[:, 2] * intrinsics.fy + intrinsics.cy,
+        ],
+        1,
+    )
+
+
+__all__ = ["MIN_POINTS", "Intrinsics", "MaskedCloud", "masked_point_cloud", "project"]

@@ -1,0 +1,1 @@
+"""C-3PO (paper §V.E): keypoints on the point cloud, corrector, registration and certificate."""

@@ -1,0 +1,1 @@
+"""Mask R-CNN instance segmentation in plain torch, sized for the CPU (paper §V.E)."""

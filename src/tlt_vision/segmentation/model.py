@@ -1,0 +1,77 @@
+"""Mask R-CNN: backbone + FPN, RPN, box and mask heads; training losses and detections.
+
+``model(images, targets)`` in training mode returns the loss terms; in eval mode
+``model(images)`` returns, per image, ``boxes`` (D, 4), ``labels`` (D,) (1-based class index,
+``cfg.classes[label - 1]``), ``scores`` (D,) and ``masks`` (D, H, W) bool. Images are float
+(B, 3, H, W) in [0, 1]; targets are dicts of ``boxes`` (G, 4) pixels, ``labels`` (G,) and
+``masks`` (G, H, W) bool.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from tlt_vision.segmentation.backbone import FPN, Backbone
+from tlt_vision.segmentation.config import MaskRCNNConfig
+from tlt_vision.segmentation.roi_heads import RoIHeads
+from tlt_vision.segmentation.rpn import RPN
+
+
+class MaskRCNN(nn.Module):
+    def __init__(self, cfg: MaskRCNNConfig | None = None) -> None:
+        super().__init__()
+        self.cfg = cfg or MaskRCNNConfig()
+        self.backbone = Backbone(self.cfg.backbone_channels)
+        self.fpn = FPN(self.cfg.backbone_channels, self.cfg.fpn_channels)
+        self.rpn = RPN(self.cfg)
+        self.roi_heads = RoIHeads(self.cfg)
+        self.register_buffer("pixel_mean", torch.tensor(self.cfg.pixel_mean).view(1, 3, 1, 1))
+        self.register_buffer("pixel_std", torch.tensor(self.cfg.pixel_std).view(1, 3, 1, 1))
+
+    def features(self, images: torch.Tensor) -> list[torch.Tensor]:
+        return self.fpn(self.backbone((images - self.pixel_mean) / self.pixel_std))
+
+    def forward(
+        self, images: torch.Tensor, targets: list[dict[str, torch.Tensor]] | None = None
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        if images.dim() != 4 or images.shape[1] != 3:
+            raise ValueError(f"expected images (B, 3, H, W), got {tuple(images.shape)}")
+        size = (int(images.shape[-2]), int(images.shape[-1]))
+        feats = self.features(images)
+        if self.training:
+            if targets is None or len(targets) != images.shape[0]:
+                raise ValueError("training needs one target dict per image")
+            proposals, losses = self.rpn(feats, size, [t["boxes"] for t in targets])
+            losses.update(self.roi_heads.losses(feats, proposals, targets))
+            return losses
+        proposals, _ = self.rpn(feats, size)
+        return self.roi_heads.detect(feats, proposals, size)
+
+
+def train_step(
+    model: MaskRCNN,
+    optimizer: torch.optim.Optimizer,
+    images: torch.Tensor,
+    targets: list[dict[str, torch.Tensor]],
+) -> dict[str, float]:
+    """One optimisation step on a batch; returns each loss term and their ``total``."""
+    model.train()
+    losses = model(images, targets)
+    total = sum(losses.values())
+    optimizer.zero_grad()
+    total.backward()
+    optimizer.step()
+    out = {k: float(v.detach()) for k, v in losses.items()}
+    out["total"] = float(total.detach())
+    return out
+
+
+@torch.no_grad()
+def predict(model: MaskRCNN, images: torch.Tensor) -> list[dict[str, torch.Tensor]]:
+    """Detections for a batch of images (eval mode)."""
+    model.eval()
+    return model(images)
+
+
+__all__ = ["MaskRCNN", "predict", "train_step"]

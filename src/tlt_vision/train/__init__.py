@@ -1,0 +1,1 @@
+"""Training commands of the vision models (paper §V.E), each runnable on its own with progress shown."""

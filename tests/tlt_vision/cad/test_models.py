@@ -1,0 +1,121 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from tlt_common.config_schema import ConfigError
+from tlt_common.mission.schema import load_mission
+from tlt_vision.cad.models import (
+    KEYPOINTS_FILE,
+    PARTS_FILE,
+    build_models,
+    load_keypoints,
+    load_parts,
+    models_for_mission,
+    strut_layout,
+)
+from tlt_vision.cad.views import random_rotation, visible_points
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def models():
+    return models_for_mission(load_mission(ROOT / "missions" / "one_bay.yaml"))
+
+
+def test_models_of_every_class(models):
+    assert sorted(models) == sorted(
+        ["strut_tube/vertical", "strut_tube/diagonal", "end_fitting", "cross_frame", "corner_joint", "rivet"]
+    )
+    parts = load_parts()
+    # Vertical 0.75 m: tube between 0.025 + 0.05 from each end -> half length 0.3 m.
+    assert models["strut_tube/vertical"].dims["half_length"] == pytest.approx(0.3)
+    assert models["strut_tube/vertical"].keypoints[0].tolist() == pytest.approx([0, 0, -0.3])
+    assert models["cross_frame"].keypoints[0].tolist() == pytest.approx([-0.375, -0.375, 0.0])
+    assert models["end_fitting"].dims["radius"] == parts["fitting_radius"]
+
+
+def test_strut_layout_hand_computed():
+    lay = strut_layout(0.75, {"corner_size": 0.05, "fitting_length": 0.05})
+    assert lay == pytest.approx(
+        {"tube_a": 0.075, "tube_b": 0.675, "fitting_a": 0.05, "fitting_b": 0.7, "tube_centre": 0.375}
+    )
+
+
+def test_parts_config_matches_the_twin():
+    twin = ROOT / "config" / "twin" / "edu.yaml"
+    if not twin.exists():
+        pytest.skip("the twin's configuration is not in this checkout")
+    twin_parts = yaml.safe_load(twin.read_text())["parts"]
+    ours = load_parts()
+    for key in ("tube_radius", "fitting_radius", "fitting_length", "corner_size", "rivet_radius"):
+        assert ours[key] == pytest.approx(twin_parts[key]), key
+    assert ours["cross_frame_tube_radius"] == pytest.approx(1.2 * twin_parts["tube_radius"])
+
+
+def test_symmetries_found(models):
+    assert len(models["strut_tube/vertical"].symmetries) == 2  # flip end for end
+    assert len(models["cross_frame"].symmetries) == 8  # square: 4 turns x flip
+    assert len(models["corner_joint"].symmetries) == 24  # cube
+    for m in models.values():
+        assert m.symmetries[0].tolist() == list(range(len(m.keypoint_names)))
+
+
+def test_symmetry_rotations_map_the_surface_onto_itself(models):
+    rng = np.random.default_rng(0)
+    for m in models.values():
+        pts = torch.tensor(m.sample(300, rng)[0])
+        for rot in m.symmetry_rotations:
+            moved = pts @ torch.tensor(rot).T
+            assert float(m.surface(moved.float()).max()) < 1e-5, m.name
+
+
+def test_samples_lie_on_the_surface(models):
+    rng = np.random.default_rng(1)
+    for m in models.values():
+        pts, nrm = m.sample(500, rng)
+        assert pts.shape == (500, 3)
+        assert np.allclose(np.linalg.norm(nrm, axis=1), 1.0)
+        assert float(m.surface(torch.tensor(pts, dtype=torch.float32)).max()) < 1e-5, m.name
+
+
+def test_surface_distance_hand_computed(models):
+    tube = models["strut_tube/vertical"]  # capsule r 0.0125, axis z from -0.3 to 0.3
+    pts = torch.tensor([[0.1, 0.0, 0.0], [0.0, 0.0, 0.4], [0.0, 0.0, 0.0]])
+    assert tube.surface(pts).tolist() == pytest.approx([0.0875, 0.0875, 0.0125], abs=1e-6)
+    cube = models["corner_joint"]  # half 0.025
+    assert cube.surface(torch.tensor([[0.125, 0.0, 0.0]])).item() == pytest.approx(0.1, abs=1e-6)
+    fitting = models["end_fitting"]  # cylinder r 0.02, z in [-0.025, 0.025]
+    p = torch.tensor([[0.05, 0.0, 0.065]])  # 0.03 out radially, 0.04 beyond the face: 0.05
+    assert fitting.surface(p).item() == pytest.approx(0.05, abs=1e-6)
+
+
+def test_visible_points_face_the_camera(models):
+    cube = models["corner_joint"]
+    pts = visible_points(cube, np.eye(3), np.array([0.0, 0.0, 0.5]), np.random.default_rng(0))
+    # Looking straight at the -z face: every visible point is on it.
+    assert np.allclose(pts[:, 2], 0.5 - 0.025, atol=1e-9)
+    r = random_rotation(np.random.default_rng(3))
+    assert np.allclose(r @ r.T, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
+
+
+def test_bad_configs_name_the_key(tmp_path):
+    data = yaml.safe_load(KEYPOINTS_FILE.read_text())
+    data["classes"]["rivet"]["groups"]["body"] = ["end_a", "nope"]
+    bad = tmp_path / "kp.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"classes\.rivet\.groups\.body"):
+        load_keypoints(bad)
+    parts = yaml.safe_load(PARTS_FILE.read_text())
+    parts["tube_radius"] = -1.0
+    bad.write_text(yaml.safe_dump(parts))
+    with pytest.raises(ConfigError, match="tube_radius"):
+        load_parts(bad)
+
+
+def test_strut_too_short_is_refused():
+    with pytest.raises(ValueError, match="too short"):
+        build_models(0.75, {"vertical": 0.1})

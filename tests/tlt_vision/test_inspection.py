@@ -1,0 +1,245 @@
+"""Inspection logic on poses certified from synthetic views of good and defective parts."""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from tlt_common.mission.schema import load_mission
+from tlt_vision.cad.models import load_parts, models_for_mission, strut_layout
+from tlt_vision.cad.primitives import Segment
+from tlt_vision.cad.views import synthetic_view
+from tlt_vision.inspection import (
+    Observation,
+    Tolerances,
+    bay_joints,
+    check_alignment,
+    inspect_bay,
+    inspect_cross_frame,
+    inspect_strut,
+)
+from tlt_vision.ops.registration import transform
+from tlt_vision.pointcloud import Intrinsics, masked_point_cloud
+from tlt_vision.pose.certificate import certify
+from tlt_vision.pose.corrector import correct, model_frame
+from tlt_vision.pose.estimator import PoseEstimate
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
+MODELS = models_for_mission(MISSION)
+PARTS = load_parts()
+TOL = Tolerances.from_mission(MISSION)
+THRESH = MISSION.inspection["chamfer_thresholds"]
+LENGTH = MISSION.strut_lengths["vertical"]
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1.0, 0], [-s, 0, c]])
+
+
+# The strut lies across the view 1 m in front of the camera, turned a little towards it.
+STRUT_R = _rx(0.3) @ _ry(math.pi / 2)
+STRUT_T = np.array([-LENGTH / 2, 0.0, 1.0])
+
+
+def _estimate(model, cloud, rot, t, fit: bool = False) -> PoseEstimate:
+    """Certify the pose (rot, t) of ``model`` on ``cloud``; with ``fit`` refine it by the corrector first."""
+    o = torch.tensor(cloud, dtype=torch.float32)
+    r, tt = torch.tensor(rot, dtype=torch.float32), torch.tensor(t, dtype=torch.float32)
+    kp = transform(torch.tensor(model.keypoints, dtype=torch.float32), r, tt)
+    if fit:
+        res = correct(
+            o[None], kp[None], model.surface, torch.tensor(model.keypoints).float(), model.diameter / 2
+        )
+        r, tt = res.rotation[0], res.translation[0]
+        kp = transform(torch.tensor(model.keypoints, dtype=torch.float32), r, tt)
+    dist = model.surface(model_frame(o[None], r[None], tt[None]))[0]
+    cert = certify(o, dist, kp, model.visibility, THRESH[model.object_class])
+    return PoseEstimate(
+        model.object_class,
+        model.name,
+        r.double().numpy(),
+        tt.double().numpy(),
+        kp.numpy(),
+        cert,
+        len(cloud),
+        0.0,
+    )
+
+
+def _part(model, local_z: float, rng, cloud_model=None, fit=False) -> Observation:
+    rot, t = STRUT_R, STRUT_R @ np.array([0.0, 0.0, local_z]) + STRUT_T
+    cloud = synthetic_view(cloud_model or model, rot, t, 600, rng, noise=0.0007)
+    return Observation(model.object_class, _estimate(model, cloud, rot, t, fit))
+
+
+def _strut(rng, missing: str | None = None, bend_deg: float = 0.0) -> list[Observation]:
+    lay = strut_layout(LENGTH, PARTS)
+    tube = MODELS["strut_tube/vertical"]
+    cloud_model = None
+    centre = lay["tube_centre"]
+    fitting_b = np.array([0.0, 0.0, lay["fitting_b"]])
+    if bend_deg:
+        # The twin's bent tube: the half towards end b turns about x at mid-length (tube frame).
+        half = tube.dims["half_length"]
+        bend = _rx(math.radians(bend_deg))
+        end_b = bend @ np.array([0.0, 0.0, half])
+        r = PARTS["tube_radius"]
+        cloud_model = dataclasses.replace(
+            tube, primitives=(Segment((0, 0, -half), (0, 0, 0), r), Segment((0, 0, 0), tuple(end_b), r))
+        )
+        fitting_b = np.array([0.0, 0.0, centre]) + bend @ (fitting_b - [0.0, 0.0, centre])
+    obs = [_part(tube, centre, rng, cloud_model, fit=bool(bend_deg))]
+    fitting = MODELS["end_fitting"]
+    if missing != "a":
+        obs.append(_part(fitting, lay["fitting_a"], rng))
+    if missing != "b":
+        rot = STRUT_R
+        t = STRUT_R @ fitting_b + STRUT_T
+        cloud = synthetic_view(fitting, rot, t, 300, rng, noise=0.0007)
+        obs.append(Observation("end_fitting", _estimate(fitting, cloud, rot, t)))
+    return obs
+
+
+def test_good_strut_passes():
+    rep = inspect_strut(
+        "bay1/vertical/x0_y0", "vertical", LENGTH, _strut(np.random.default_rng(0)), PARTS, TOL
+    )
+    assert rep.passed, rep.reasons
+    assert rep.reasons == () and len(rep.poses) == 3
+
+
+@pytest.mark.parametrize("end", ["a", "b"])
+def test_missing_end_fitting_caught(end):
+    rep = inspect_strut("s", "vertical", LENGTH, _strut(np.random.default_rng(1), missing=end), PARTS, TOL)
+    assert not rep.passed
+    assert len(rep.reasons) == 1 and rep.reasons[0].startswith("missing end fitting: 1 of 2 found, none at (")
+    lay = strut_layout(LENGTH, PARTS)
+    where = STRUT_R @ [0.0, 0.0, lay["fitting_a" if end == "a" else "fitting_b"]] + STRUT_T
+    got = np.array([float(v) for v in rep.reasons[0].split("(")[1].split(")")[0].split(",")])
+    assert np.linalg.norm(got - where) < 0.005
+
+
+def test_bent_tube_caught():
+    rep = inspect_strut("s", "vertical", LENGTH, _strut(np.random.default_rng(2), bend_deg=8.0), PARTS, TOL)
+    assert not rep.passed
+    text = " ".join(rep.reasons)
+    assert "bent tube" in text
+
+
+def test_part_not_in_view_and_too_few_points():
+    rep = inspect_strut("s", "vertical", LENGTH, [], PARTS, TOL)
+    assert not rep.passed and rep.reasons == ("part not in view: no strut tube detected",)
+    mask = np.zeros((8, 8), bool)
+    mask[0, :3] = True
+    cloud = masked_point_cloud(mask, np.ones((8, 8)), Intrinsics(100, 100, 4, 4))
+    assert not cloud.ok
+    obs = [Observation("strut_tube", None, cloud.reason)]
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and any("too few points" in r for r in rep.reasons)
+
+
+def _cross_frame(rng, drop_corner: int | None = None, shift_corner: int | None = None) -> list[Observation]:
+    frame = MODELS["cross_frame"]
+    rot, t = _rx(-2.3), np.array([0.05, 0.1, 1.3])  # seen from above at an angle
+    cloud = synthetic_view(frame, rot, t, 800, rng, noise=0.0007)
+    obs = [Observation("cross_frame", _estimate(frame, cloud, rot, t))]
+    hw = MISSION.bay_width / 2
+    joint = MODELS["corner_joint"]
+    for i, (x, y) in enumerate(((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))):
+        if i == drop_corner:
+            continue
+        offset = np.array([0.02, 0.0, 0.0]) if i == shift_corner else np.zeros(3)
+        tj = rot @ (np.array([x, y, 0.0]) + offset) + t
+        c = synthetic_view(joint, rot, tj, 200, rng, noise=0.0005)
+        obs.append(Observation("corner_joint", _estimate(joint, c, rot, tj)))
+    return obs
+
+
+def test_cross_frame_inspection():
+    good = inspect_cross_frame(
+        "bay1/cross_frame", MISSION.bay_width, _cross_frame(np.random.default_rng(3)), TOL
+    )
+    assert good.passed, good.reasons
+    missing = inspect_cross_frame(
+        "c", MISSION.bay_width, _cross_frame(np.random.default_rng(3), drop_corner=2), TOL
+    )
+    assert not missing.passed and "missing corner joint at corner 2" in missing.reasons
+    moved = inspect_cross_frame(
+        "c", MISSION.bay_width, _cross_frame(np.random.default_rng(3), shift_corner=1), TOL
+    )
+    assert not moved.passed and moved.reasons[0].startswith("corner joint at corner 1 off by 20.")
+    none = inspect_cross_frame("c", MISSION.bay_width, [], TOL)
+    assert none.reasons == ("part not in view: no cross frame detected",)
+
+
+def _bay(rng, shift: str | None = None, drop: str | None = None) -> list[Observation]:
+    joint = MODELS["corner_joint"]
+    cam_r, cam_t = _rx(2.5) @ _ry(0.4), np.array([-0.3, 0.2, 1.2])  # tower frame -> camera frame
+    obs = []
+    for name, p in bay_joints(MISSION, 1).items():
+        if name == drop:
+            continue
+        p = np.array(p) + (np.array([0.02, 0.0, 0.0]) if name == shift else 0.0)  # a sheared bay
+        t = cam_r @ p + cam_t
+        c = synthetic_view(joint, cam_r, t, 200, rng, noise=0.0005)
+        obs.append(Observation("corner_joint", _estimate(joint, c, cam_r, t)))
+    return obs[::-1]  # the order of detections says nothing about which joint is which
+
+
+def test_bay_inspection():
+    expected = bay_joints(MISSION, 1)
+    assert sorted(expected) == ["bay1/x0_y0", "bay1/x0_y1", "bay1/x1_y0", "bay1/x1_y1"]
+    good = inspect_bay(1, expected, _bay(np.random.default_rng(4)), TOL)
+    assert good.passed, good.reasons
+    bad = inspect_bay(1, expected, _bay(np.random.default_rng(4), shift="bay1/x1_y1"), TOL)
+    # A rigid fit spreads one joint's error over the square: the bay fails, naming joints off.
+    assert not bad.passed and all(r.startswith("corner joint bay1/") and "off by" in r for r in bad.reasons)
+    three = inspect_bay(1, expected, _bay(np.random.default_rng(4), drop="bay1/x0_y0"), TOL)
+    assert not three.passed and three.reasons[0] == "only 3 of 4 corner joints certified"
+    assert inspect_bay(1, expected, [], TOL).reasons[0] == "part not in view: no corner joint detected"
+    with pytest.raises(KeyError):
+        bay_joints(MISSION, 7)
+
+
+def test_placement_alignment():
+    member = MISSION.member("bay1/vertical/x0_y0")
+    joints = [p for _, p in member.joints]
+    lay_centre = (np.array(joints[0]) + np.array(joints[1])) / 2
+    # The EE camera 0.5 m from the strut, looking at it along tower +y; camera -> tower transform.
+    cam_r = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+    cam_t = lay_centre - cam_r @ [0.0, 0.0, 0.5]
+    tf = np.eye(4)
+    tf[:3, :3], tf[:3, 3] = cam_r, cam_t
+    tube = MODELS["strut_tube/vertical"]
+    rng = np.random.default_rng(7)
+
+    def seen(offset_tower, tilt):
+        rot_tower = _ry(tilt)  # strut along tower z, tilted about y
+        rot_c = cam_r.T @ rot_tower
+        t_c = cam_r.T @ (lay_centre + offset_tower - cam_t)
+        cloud = synthetic_view(tube, rot_c, t_c, 600, rng, noise=0.0005)
+        return _estimate(tube, cloud, rot_c, t_c)
+
+    good = check_alignment("vertical", joints, seen(np.zeros(3), 0.0), tf, TOL)
+    assert good.aligned and good.position_error < 1e-6 and good.angle_error < 1e-6 and good.reason == ""
+    off = check_alignment("vertical", joints, seen(np.array([0.01, 0.0, 0.0]), 0.0), tf, TOL)
+    assert not off.aligned and off.position_error == pytest.approx(0.01, abs=1e-6)
+    assert off.reason.startswith("10.0 mm from its place")
+    tilted = check_alignment("vertical", joints, seen(np.zeros(3), 0.06), tf, TOL)
+    assert (
+        not tilted.aligned
+        and tilted.angle_error == pytest.approx(0.06, abs=1e-6)
+        and "turned 3.4 deg" in tilted.reason
+    )
+    none = check_alignment("vertical", joints, None, tf, TOL, reason="empty mask: part not in view")
+    assert not none.aligned and none.reason == "no certified pose: empty mask: part not in view"

@@ -1,0 +1,84 @@
+"""The frame-to-observations plumbing on a depth image rendered by z-buffered point splatting."""
+
+import math
+
+import numpy as np
+import torch
+
+from tlt_vision.cad.models import build_models
+from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn, merge_instances
+from tlt_vision.pointcloud import Intrinsics
+from tlt_vision.pose.detector import KeypointDetector
+from tlt_vision.pose.estimator import PoseEstimator
+
+K = Intrinsics(300.0, 300.0, 79.5, 59.5)
+SIZE = (120, 160)
+MODELS = build_models(0.75, {"vertical": 0.75})
+
+
+def _render(parts):
+    """Depth (H, W) and instance ids (-1 none) of posed models, by splatting dense surface samples."""
+    depth = np.full(SIZE, np.inf)
+    ids = np.full(SIZE, -1)
+    rng = np.random.default_rng(0)
+    for k, (model, rot, t) in enumerate(parts):
+        pts = model.sample(60000, rng)[0] @ rot.T + t
+        u = np.round(pts[:, 0] / pts[:, 2] * K.fx + K.cx).astype(int)
+        v = np.round(pts[:, 1] / pts[:, 2] * K.fy + K.cy).astype(int)
+        ok = (u >= 0) & (u < SIZE[1]) & (v >= 0) & (v < SIZE[0])
+        u, v, z = u[ok], v[ok], pts[ok, 2]
+        before = depth.copy()
+        np.minimum.at(depth, (v, u), z)
+        ids[depth < before] = k
+    depth[~np.isfinite(depth)] = 0.0
+    return depth, ids
+
+
+def _rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def test_observations_for_every_detection_with_reasons():
+    joint, fitting = MODELS["corner_joint"], MODELS["end_fitting"]
+    depth, ids = _render(
+        [(joint, _rz(0.4), np.array([-0.05, 0.0, 0.6])), (fitting, _rz(0.1), np.array([0.06, 0.0, 0.6]))]
+    )
+    torch.manual_seed(0)
+    est = PoseEstimator(joint, KeypointDetector(8, joint.diameter / 2, width=8), threshold=0.006)
+    pipe = PartPipeline({"corner_joint": est}, max_points=300)
+    dets = [
+        Detection("corner_joint", ids == 0, 0.9, "j"),
+        Detection("end_fitting", ids == 1, 0.8, "f"),
+        Detection("rivet", np.zeros(SIZE, bool), 0.7, "r"),
+    ]
+    obs = pipe.observe(dets, depth, K)
+    by_id = {o.object_id: o for o in obs}
+    assert by_id["j"].estimate is not None and by_id["j"].estimate.num_points == 300
+    # Whatever an untrained detector makes of it, the certificate is what decides, and it says why.
+    assert by_id["j"].estimate.certified or by_id["j"].estimate.certificate.reason
+    assert by_id["f"].estimate is None and by_id["f"].reason == "no pose model for class end_fitting"
+    assert by_id["r"].estimate is None and by_id["r"].reason == "empty mask: part not in view"
+    no_depth = pipe.observe(dets[:1], np.zeros(SIZE), K)
+    assert no_depth[0].estimate is None and no_depth[0].reason.startswith("no depth")
+    assert pipe.observe(dets[:1], None, K)[0].reason == "no depth image"
+
+
+def test_cross_frame_sides_are_merged_and_mask_rcnn_output_converted():
+    a = np.zeros((4, 4), bool)
+    a[0] = True
+    b = np.zeros((4, 4), bool)
+    b[3] = True
+    merged = merge_instances(
+        [Detection("cross_frame", a, 0.9, "s0"), Detection("cross_frame", b, 0.8, "s1")], ["cross_frame"]
+    )
+    assert len(merged) == 1 and merged[0].mask.sum() == 8 and merged[0].object_id == "s0+s1"
+    result = {
+        "labels": torch.tensor([2, 5]),
+        "scores": torch.tensor([0.9, 0.3]),
+        "masks": torch.stack([torch.from_numpy(a), torch.from_numpy(b)]),
+    }
+    dets = detections_from_mask_rcnn(
+        result, ("strut_tube", "end_fitting", "cross_frame", "corner_joint", "rivet")
+    )
+    assert [d.object_class for d in dets] == ["end_fitting"]

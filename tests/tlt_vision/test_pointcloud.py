@@ -1,0 +1,66 @@
+import numpy as np
+import pytest
+
+from tlt_vision.pointcloud import Intrinsics, masked_point_cloud, project
+
+K = Intrinsics(fx=100.0, fy=200.0, cx=1.5, cy=1.0)
+
+
+def test_hand_computed_back_projection():
+    mask = np.zeros((3, 4), dtype=bool)
+    mask[0, 3] = mask[2, 0] = True
+    depth = np.full((3, 4), 2.0)
+    rgb = np.zeros((3, 4, 3), dtype=np.uint8)
+    rgb[0, 3] = (10, 20, 30)
+    out = masked_point_cloud(mask, depth, K, rgb, min_points=2, erode=0)
+    assert out.ok and out.mask_pixels == 2
+    # (u=3, v=0): x = 1.5 * 2 / 100 = 0.03, y = -1 * 2 / 200 = -0.01; (u=0, v=2): -0.03, 0.01.
+    assert out.points.tolist() == [pytest.approx([0.03, -0.01, 2.0]), pytest.approx([-0.03, 0.01, 2.0])]
+    assert out.colours[0].tolist() == [10, 20, 30]
+    assert project(out.points, K) == pytest.approx(np.array([[3.0, 0.0], [0.0, 2.0]]), abs=1e-5)
+
+
+def test_invalid_depth_pixels_dropped():
+    mask = np.ones((4, 4), dtype=bool)
+    depth = np.full((4, 4), 1.0)
+    depth[0, 0], depth[0, 1], depth[0, 2] = 0.0, np.nan, np.inf
+    out = masked_point_cloud(mask, depth, K, min_points=4, erode=0)
+    assert out.ok and len(out.points) == 13
+    assert np.isfinite(out.points).all()
+
+
+@pytest.mark.parametrize(
+    ("mask", "depth", "reason"),
+    [
+        (np.zeros((4, 4), bool), np.ones((4, 4)), "empty mask"),
+        (np.ones((4, 4), bool), np.zeros((4, 4)), "no depth"),
+        (np.ones((4, 4), bool), np.full((4, 4), np.nan), "no depth"),
+        (np.ones((4, 4), bool), np.ones((4, 4)), "too few points: 16"),  # the image edge is not a silhouette
+        (np.ones((4, 4), bool), np.ones((4, 5)), "does not match"),
+        (np.ones((4, 4), bool), None, "no depth image"),
+    ],
+)
+def test_bad_input_gives_a_reason_not_an_exception(mask, depth, reason):
+    out = masked_point_cloud(mask, depth, K, min_points=32)
+    assert not out.ok and reason in out.reason
+    assert out.points.shape == (0, 3)
+
+
+def test_border_pixels_with_mixed_depth_are_dropped():
+    mask = np.zeros((7, 7), bool)
+    mask[1:6, 1:6] = True  # 25 px, 9 of them off the border
+    depth = np.full((7, 7), 1.0)
+    depth[1, 3] = 3.0  # a flying pixel on the silhouette, depth of the background
+    out = masked_point_cloud(mask, depth, K, min_points=9)
+    assert out.ok and len(out.points) == 9 and np.allclose(out.points[:, 2], 1.0)
+    thin = np.zeros((7, 7), bool)
+    thin[3, :] = True
+    out = masked_point_cloud(thin, np.ones((7, 7)), K, min_points=1)
+    assert not out.ok and out.reason == "too few points: the mask of 7 px has no pixel off its border"
+
+
+def test_max_points_and_matrix_intrinsics():
+    k = Intrinsics.from_matrix(np.array([[100.0, 0, 1.5], [0, 200.0, 1.0], [0, 0, 1]]))
+    assert k == K
+    out = masked_point_cloud(np.ones((10, 10), bool), np.ones((10, 10)), k, min_points=5, max_points=20)
+    assert len(out.points) == 20
