@@ -49,6 +49,8 @@ from tlt_crs.context import CrsContext
 from tlt_crs.index_record import IndexRecord
 from tlt_crs.tree import build_crs_tree
 
+LINK_CONFIG = Path(__file__).resolve().parents[2] / "config" / "ccsds" / "link.yaml"
+
 _log = logging.getLogger("tlt_crs")
 
 
@@ -216,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--autostart", action="store_true", help="submit Start at start-up (unattended runs, tests)"
     )
+    parser.add_argument(
+        "--ground-link", type=Path, nargs="?", const=LINK_CONFIG, metavar="LINK_YAML",
+        help="serve the CCSDS ground link (settings: %(const)s; key file from it or $TLT_GROUND_KEY_FILE)",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
@@ -231,6 +237,22 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, TowerModelError, OSError) as exc:
             print(f"tlt-crs: refused: {exc}", file=sys.stderr)
             return 2
+        link = None
+        if args.ground_link is not None:
+            from tlt_common.ccsds.auth import KeyFileError, ReplayStateError
+            from tlt_common.ccsds.link_config import load_link_config
+            from tlt_crs.ground_bridge import GroundBridge
+            from tlt_crs.ground_link.link import GroundLink
+
+            try:
+                link = GroundLink.from_config(load_link_config(args.ground_link))
+            except (ConfigError, KeyFileError, ReplayStateError, OSError) as exc:
+                print(f"tlt-crs: refused: ground link: {exc}", file=sys.stderr)
+                node.destroy_node()
+                return 2
+            GroundBridge(node, link)
+            link.start()
+            _log.info("ground link on %s:%d", *link.address)
         if args.autostart:
             node.commands.submit(
                 "start", {}, lambda stage, reason: _log.info("autostart: %s %s", stage.label, reason)
@@ -244,6 +266,8 @@ def main(argv: list[str] | None = None) -> int:
             pass
         finally:
             node.interrupt()
+            if link is not None:
+                link.close()
             executor.shutdown(timeout_sec=1.0)
             node.destroy_node()
         return 0

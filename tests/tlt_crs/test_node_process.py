@@ -248,3 +248,97 @@ def test_state_file_of_another_mission_is_refused(tmp_path, crs):
 
 def test_processes_run_in_a_domain_of_their_own():
     assert PROCESS_ENV["ROS_DOMAIN_ID"] != os.environ["ROS_DOMAIN_ID"]
+
+
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
+    """End to end from the ground: authenticated Start, Pause, Set Blackboard Value, Resume and
+    Stop over CCSDS/UDP act on the CRS process's tree; bad commands are refused and never act."""
+    from tlt_common.ccsds.auth import KeyRing, write_key_file
+    from tlt_common.ccsds.codec import Packet
+    from tlt_common.ccsds.definitions import load_definitions
+    from tlt_common.ccsds.reasons import AckStage, Reason
+    from tlt_gsw.link import GswLink
+
+    rig_process("--hold-s", "3.0")  # each ARS request takes a while: the build is mid-way throughout
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    port = _free_udp_port()
+    link_yaml = tmp_path / "link.yaml"
+    link_yaml.write_text(yaml.safe_dump({
+        "key_file": str(key_file), "key_id": 1,
+        "crs": {"bind_host": "127.0.0.1", "bind_port": port, "gsw_host": "", "gsw_port": 0,
+                "replay_state": str(tmp_path / "replay.json")},
+        "gsw": {"crs_host": "127.0.0.1", "crs_port": port, "bind_host": "127.0.0.1", "bind_port": 0,
+                "archive": str(tmp_path / "archive.sqlite"), "command_state": str(tmp_path / "seq.json")},
+    }))
+    proc = _start(_config(tmp_path, crs), "--ground-link", str(link_yaml))
+    packets: list[Packet] = []
+    gsw = GswLink(load_definitions(), KeyRing.load(key_file), 1, ("127.0.0.1", port),
+                  on_packet=lambda result: packets.append(result) if isinstance(result, Packet) else None)
+
+    def command(name, params=None, timeout=15.0):
+        sent = gsw.send_command(name, params)
+        ack = gsw.wait_ack(sent, final=True, timeout=timeout)
+        assert ack is not None, f"no final acknowledgement of {name}"
+        return ack
+
+    def mission(predicate, what, timeout=20.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            gsw.poll(0.2)
+            for packet in reversed(packets):
+                if packet.kind == "hk_mission":
+                    if predicate(packet.fields):
+                        return packet.fields
+                    break
+        last = next((p.fields for p in reversed(packets) if p.kind == "hk_mission"), None)
+        raise AssertionError(f"{what}: not seen in hk_mission telemetry (last: {last})")
+
+    try:
+        # The CRS process takes a moment to bind; until then a Start goes unheard.
+        deadline = time.monotonic() + 60
+        while True:
+            sent = gsw.send_command("start")
+            ack = gsw.wait_ack(sent, final=True, timeout=2.0)
+            if ack is not None:
+                break
+            assert time.monotonic() < deadline and proc.poll() is None, "the CRS never answered Start"
+        assert ack.stage is AckStage.COMPLETED, ack
+        mission(lambda f: f["started"] and f["run_state"] == "running", "started and running")
+
+        assert command("pause").stage is AckStage.COMPLETED
+        mission(lambda f: f["run_state"] == "paused", "paused")
+        refused = command("pause")
+        assert (refused.stage, refused.reason) == (AckStage.REJECTED, Reason.REFUSED)
+        assert "already paused" in refused.detail
+
+        assert command("set_blackboard_value", {"key": "inspection_attempts", "value": 4}).stage \
+            is AckStage.COMPLETED
+        out_of_range = command("set_blackboard_value", {"key": "inspection_attempts", "value": 9})
+        assert out_of_range.stage is AckStage.REJECTED and "inspection_attempts" in out_of_range.detail
+        read_only = command("set_blackboard_value", {"key": "tower_built", "value": True})
+        assert read_only.stage is AckStage.REJECTED
+        gsw.send_raw(b"\x18\x10\xc0\x00\x00\x05not a command")  # no ack, no action, the CRS goes on
+        deadline = time.monotonic() + 10
+        while not any(p.kind == "event" and p.fields["code"] == "BLACKBOARD_SET" for p in packets):
+            assert time.monotonic() < deadline, "no BLACKBOARD_SET event reached the ground"
+            gsw.poll(0.2)
+        (event,) = [p for p in packets if p.kind == "event" and p.fields["code"] == "BLACKBOARD_SET"]
+        assert event.fields["text"] == "inspection_attempts = 4"
+
+        assert command("resume").stage is AckStage.COMPLETED
+        mission(lambda f: f["run_state"] == "running", "running again")
+        assert any(p.kind == "tree_status" and p.fields["agent"] == "crs" for p in packets)
+
+        assert command("stop").stage is AckStage.COMPLETED
+        assert proc.wait(timeout=20) == 0
+    finally:
+        gsw.close()
+        _stop(proc)
