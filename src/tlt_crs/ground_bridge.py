@@ -6,8 +6,11 @@ writable registry or an actuator command while building is refused with the reas
 acts), then queued for the tree, which processes it on its next tick (Fig. 13); the outcome goes
 back to the ground as the completed or failed acknowledgement.
 
-Telemetry: the CRS tree's encoded status (``tree_status``, one packet per part) and mission
-progress (``hk_mission``), each at its rate in the definitions file, and every CRS event.
+Telemetry, each packet at its rate in the definitions file: the CRS tree's encoded status
+(``tree_status``, one packet per part), mission progress (``hk_mission``), the tower model
+(``hk_tower``), and housekeeping from the mechanisms' state topics (``hk_lifter``,
+``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once its topic has been heard);
+and every CRS event.
 """
 
 from __future__ import annotations
@@ -15,8 +18,10 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+from tlt_common import ros_names
 from tlt_common.bt.status_codec import encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
+from tlt_common.mission.member_states import pack_member_states
 from tlt_crs.ground_link.link import GroundCommand, GroundLink
 from tlt_crs.node import CrsNode
 
@@ -44,7 +49,17 @@ class GroundBridge:
                 _log.warning("event %s not sent to the ground: %s", code, exc)
 
         node.ctx.event = event
-        for kind, send in (("tree_status", self.send_tree_status), ("hk_mission", self.send_progress)):
+        self._latest: dict[str, Any] = {}
+        self._watch_devices()
+        for kind, send in (
+            ("tree_status", self.send_tree_status),
+            ("hk_mission", self.send_progress),
+            ("hk_tower", self.send_tower),
+            ("hk_lifter", self.send_lifter),
+            ("hk_grippers", self.send_grippers),
+            ("hk_ee", self.send_end_effectors),
+            ("hk_arm_joints", self.send_arm_joints),
+        ):
             rate = link.defs.packet(kind).rate_hz
             if rate:
                 node.create_timer(1.0 / rate, send)
@@ -63,6 +78,114 @@ class GroundBridge:
                 self.link.complete(command, False, Reason.EXECUTION_FAILED, reason)
 
         self.node.commands.submit(command.name, command.params, on_ack)
+
+    def _watch_devices(self) -> None:
+        """Keep the latest state of every mechanism the housekeeping packets report."""
+        from sensor_msgs.msg import JointState
+        from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, LifterState
+
+        topics = [
+            (LifterState, ros_names.state_topic(ros_names.LIFTER)),
+            (GripperState, ros_names.state_topic(ros_names.TOP_GRIPPERS)),
+            (GripperState, ros_names.state_topic(ros_names.ACTIVE_GRIPPERS)),
+        ]
+        for ars in ros_names.ARS_AGENTS:
+            topics += [
+                (EndEffectorState, ros_names.state_topic(ros_names.ee(ars))),
+                (JointState, ros_names.joint_states_topic(ros_names.ur(ars))),
+                (HardwareStatus, ros_names.hardware_status_topic(ros_names.ur(ars))),
+            ]
+        for msg_type, topic in topics:
+            self.node.create_subscription(
+                msg_type, topic, lambda m, t=topic: self._latest.__setitem__(t, m), 10
+            )
+
+    def _send(self, kind: str, values: dict[str, Any]) -> None:
+        try:
+            self.link.send_telemetry(kind, values)
+        except (KeyError, ValueError) as exc:  # a value outside its definition: say so, keep going
+            _log.warning("%s not sent: %s", kind, exc)
+
+    def send_lifter(self) -> None:
+        msg = self._latest.get(ros_names.state_topic(ros_names.LIFTER))
+        if msg is None:
+            return
+        switches = sum(1 << i for i, pressed in enumerate(msg.limit_switches) if pressed)
+        self._send(
+            "hk_lifter",
+            {
+                "state": int(msg.state),
+                **{f"position_{i}": float(p) for i, p in enumerate(msg.encoder_positions)},
+                # One figure for a glance at the lifter: the fastest motor.
+                "velocity": int(max(msg.motor_velocities, key=abs)),
+                "limit_switches": switches,
+                "watchdog_tripped": bool(msg.watchdog_tripped),
+                "link_ok": bool(msg.link_ok),
+            },
+        )
+
+    def send_grippers(self) -> None:
+        top = self._latest.get(ros_names.state_topic(ros_names.TOP_GRIPPERS))
+        active = self._latest.get(ros_names.state_topic(ros_names.ACTIVE_GRIPPERS))
+        lifter = self._latest.get(ros_names.state_topic(ros_names.LIFTER))
+        if top is None and active is None:
+            return
+
+        def bits(flags) -> int:
+            return sum(1 << i for i, on in enumerate(flags) if on)
+
+        self._send(
+            "hk_grippers",
+            {
+                "top_engaged": bits(top.engaged) if top else 0,
+                "top_position_mean": sum(top.position) / len(top.position) if top and top.position else 0.0,
+                "top_fault": bool(top.fault) if top else True,
+                "active_engaged": bits(active.engaged) if active else 0,
+                # The Active Grippers ride the lead screws: their height is the lifter's position.
+                "active_height": (sum(lifter.encoder_positions) / 4.0) if lifter else 0.0,
+                "active_fault": bool(active.fault) if active else True,
+            },
+        )
+
+    def send_end_effectors(self) -> None:
+        for ars in ros_names.ARS_AGENTS:
+            msg = self._latest.get(ros_names.state_topic(ros_names.ee(ars)))
+            if msg is None or len(msg.position) < 3:
+                continue
+            self._send(
+                "hk_ee",
+                {
+                    "ars": ars,
+                    "grasp_left": float(msg.position[0]),
+                    "grasp_right": float(msg.position[1]),
+                    "width": float(msg.position[2]),
+                    "max_load": float(max(msg.effort, key=abs)) if len(msg.effort) else 0.0,
+                    "calibrated": bool(msg.calibrated),
+                    "part_grasped": bool(msg.part_grasped),
+                    "rivet_guns": sum(1 << i for i, on in enumerate(msg.rivet_gun_output) if on),
+                    "fault": bool(msg.fault),
+                },
+            )
+
+    def send_arm_joints(self) -> None:
+        for ars in ros_names.ARS_AGENTS:
+            joints = self._latest.get(ros_names.joint_states_topic(ros_names.ur(ars)))
+            if joints is None or len(joints.position) != 6:
+                continue
+            status = self._latest.get(ros_names.hardware_status_topic(ros_names.ur(ars)))
+            self._send(
+                "hk_arm_joints",
+                {
+                    "ars": ars,
+                    **{f"q{i}": float(q) for i, q in enumerate(joints.position)},
+                    "protective_stop": bool(status and "protective stop" in status.fault.lower()),
+                },
+            )
+
+    def send_tower(self) -> None:
+        with self.node.ctx.model.lock:
+            states = [m.state for m in self.node.ctx.model.member_states()]
+        self._send("hk_tower", {"member_count": len(states), "member_states": pack_member_states(states)})
 
     def send_tree_status(self) -> None:
         node = self.node

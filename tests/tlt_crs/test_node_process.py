@@ -336,6 +336,10 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
         assert command("resume").stage is AckStage.COMPLETED
         mission(lambda f: f["run_state"] == "running", "running again")
         assert any(p.kind == "tree_status" and p.fields["agent"] == "crs" for p in packets)
+        tower = next(p for p in reversed(packets) if p.kind == "hk_tower")
+        assert tower.fields["member_count"] == 13 and len(tower.fields["member_states"]) == 4
+        lifter = next(p for p in reversed(packets) if p.kind == "hk_lifter")
+        assert lifter.fields["link_ok"] is True
 
         assert command("stop").stage is AckStage.COMPLETED
         assert proc.wait(timeout=20) == 0

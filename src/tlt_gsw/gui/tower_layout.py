@@ -3,8 +3,7 @@
 ``hk_tower.member_states`` carries one 2-bit state per member in mission build order (0 not
 placed, 1 placed, 2 riveted, 3 inspected: ``tlt_interfaces/MemberState``), packed like the tree
 status codec: the first member in the two high bits (7-6) of the first byte, the next in bits 5-4,
-unused low bits of the last byte zero. :func:`pack_member_states` is the sender's half (the CRS),
-:func:`unpack_member_states` the ground's.
+unused low bits of the last byte zero (``tlt_common.mission.member_states``).
 
 The layout comes from the mission file when its member count matches the packet; otherwise from
 the standard mission of the reported bay count (``tlt_common.mission.generate``: 9 members per bay
@@ -13,38 +12,24 @@ and 4 foundation rivets); otherwise the members are only numbered.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from tlt_common.mission.generate import build as build_standard_mission
+from tlt_common.mission.member_states import (
+    INSPECTED,
+    NOT_PLACED,
+    PLACED,
+    RIVETED,
+    TowerStateError,
+    pack_member_states,
+    unpack_member_states,
+)
 from tlt_common.mission.schema import Mission, load_mission, parse_mission
 
-NOT_PLACED, PLACED, RIVETED, INSPECTED = 0, 1, 2, 3
 STATE_LABELS = {NOT_PLACED: "not placed", PLACED: "placed", RIVETED: "riveted", INSPECTED: "inspected"}
 MEMBERS_PER_STANDARD_BAY = 9
 STANDARD_FOUNDATION_RIVETS = 4
-
-
-class TowerStateError(ValueError):
-    """``member_states`` bytes that do not hold exactly the announced member count."""
-
-
-def pack_member_states(states: Sequence[int]) -> bytes:
-    """2 bits per member, first member in the two high bits of the first byte."""
-    out = bytearray((len(states) + 3) // 4)
-    for i, state in enumerate(states):
-        if not 0 <= state <= 3:
-            raise TowerStateError(f"member {i}: state {state} is not 0..3")
-        out[i >> 2] |= state << (6 - 2 * (i & 3))
-    return bytes(out)
-
-
-def unpack_member_states(data: bytes, count: int) -> list[int]:
-    """The states of ``count`` members; raise TowerStateError if ``data`` has the wrong length."""
-    if len(data) != (count + 3) // 4:
-        raise TowerStateError(f"{len(data)} state bytes cannot hold exactly {count} members")
-    return [(data[i >> 2] >> (6 - 2 * (i & 3))) & 3 for i in range(count)]
 
 
 @dataclass(frozen=True)
