@@ -7,10 +7,10 @@ acts), then queued for the tree, which processes it on its next tick (Fig. 13); 
 back to the ground as the completed or failed acknowledgement.
 
 Telemetry, each packet at its rate in the definitions file: the CRS tree's encoded status
-(``tree_status``, one packet per part), mission progress (``hk_mission``), the tower model
-(``hk_tower``), and housekeeping from the mechanisms' state topics (``hk_lifter``,
-``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once its topic has been heard);
-and every CRS event.
+(``tree_status``, one packet per part; the ARSs' as their TreeStatus messages arrive), mission
+progress (``hk_mission``), the tower model (``hk_tower``), and housekeeping from the mechanisms'
+state topics (``hk_lifter``, ``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once
+its topic has been heard); and every CRS event.
 """
 
 from __future__ import annotations
@@ -95,6 +95,13 @@ class GroundBridge:
                 (JointState, ros_names.joint_states_topic(ros_names.ur(ars))),
                 (HardwareStatus, ros_names.hardware_status_topic(ros_names.ur(ars))),
             ]
+        # The ARSs' encoded tree statuses go to the ground as they come, part by part.
+        from tlt_interfaces.msg import TreeStatus
+
+        for ars in ros_names.ARS_AGENTS:
+            self.node.create_subscription(
+                TreeStatus, ros_names.tree_status_topic(ars), self.forward_tree_status, 10
+            )
         for msg_type, topic in topics:
             self.node.create_subscription(
                 msg_type, topic, lambda m, t=topic: self._latest.__setitem__(t, m), 10
@@ -186,6 +193,23 @@ class GroundBridge:
         with self.node.ctx.model.lock:
             states = [m.state for m in self.node.ctx.model.member_states()]
         self._send("hk_tower", {"member_count": len(states), "member_states": pack_member_states(states)})
+
+    def forward_tree_status(self, msg: Any) -> None:
+        if msg.agent not in ros_names.ARS_AGENTS:
+            return
+        self._send(
+            "tree_status",
+            {
+                "agent": msg.agent,
+                "shape_hash": msg.shape_hash,
+                "tick": msg.tick_count,
+                "node_count": msg.node_count,
+                "part_index": msg.part_index,
+                "part_count": msg.part_count,
+                "first_node": msg.first_node,
+                "status": bytes(msg.status),
+            },
+        )
 
     def send_tree_status(self) -> None:
         node = self.node

@@ -258,6 +258,34 @@ def _free_udp_port() -> int:
         return sock.getsockname()[1]
 
 
+def _ars_tree_status_reaches_the_ground(gsw, packets) -> None:
+    """An ARS's TreeStatus, published in the CRS processes' domain, is forwarded as tree_status."""
+    import rclpy
+    from rclpy.node import Node
+    from tlt_interfaces.msg import TreeStatus
+
+    from tlt_common import ros_names
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(PROCESS_ENV["ROS_DOMAIN_ID"]))
+    node = Node("ars_x_stand_in", context=context)
+    pub = node.create_publisher(TreeStatus, ros_names.tree_status_topic("ars_x"), 10)
+    sent = TreeStatus(agent="ars_x", shape_hash=0xC0FFEE, tick_count=7, node_count=5, part_index=0,
+                      part_count=1, first_node=0, status=[0b01101100, 0b11000000])
+    try:
+        deadline = time.monotonic() + 15
+        while not any(p.kind == "tree_status" and p.fields["agent"] == "ars_x" for p in packets):
+            assert time.monotonic() < deadline, "the ARS tree status never reached the ground"
+            pub.publish(sent)
+            gsw.poll(0.2)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    got = next(p for p in packets if p.kind == "tree_status" and p.fields["agent"] == "ars_x").fields
+    assert (got["shape_hash"], got["tick"], got["node_count"]) == (0xC0FFEE, 7, 5)
+    assert bytes(got["status"]) == bytes([0b01101100, 0b11000000])
+
+
 def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
     """End to end from the ground: authenticated Start, Pause, Set Blackboard Value, Resume and
     Stop over CCSDS/UDP act on the CRS process's tree; bad commands are refused and never act."""
@@ -336,6 +364,7 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
         assert command("resume").stage is AckStage.COMPLETED
         mission(lambda f: f["run_state"] == "running", "running again")
         assert any(p.kind == "tree_status" and p.fields["agent"] == "crs" for p in packets)
+        _ars_tree_status_reaches_the_ground(gsw, packets)
         tower = next(p for p in reversed(packets) if p.kind == "hk_tower")
         assert tower.fields["member_count"] == 13 and len(tower.fields["member_states"]) == 4
         lifter = next(p for p in reversed(packets) if p.kind == "hk_lifter")
