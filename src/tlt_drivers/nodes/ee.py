@@ -28,6 +28,7 @@ from tlt_interfaces.srv import SetActuatorState
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
 from tlt_drivers.dynamixel.ee_calibration import WidthCalibration
+from tlt_drivers.gpio.lines import open_gpio
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
 from tlt_drivers.nodes.node_main import HARDWARE_CONFIG_DIR, run_node
@@ -180,10 +181,6 @@ def open_ee_gpio(config: dict[str, Any]) -> DigitalIO:
     path = Path(name)
     if not path.is_absolute():
         path = HARDWARE_CONFIG_DIR / path
-    try:
-        from tlt_drivers.gpio.lines import open_gpio
-    except ImportError as exc:
-        raise GpioUnavailable(f"{config['component']}: the GPIO driver is not available: {exc}") from exc
     try:
         return open_gpio(path)
     except OSError as exc:
