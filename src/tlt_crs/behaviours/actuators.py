@@ -32,6 +32,7 @@ from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCondition
 from tlt_crs.context import CrsContext
 
 Predicate = Callable[[Any], bool]
+LIFTER_INITIALIZING = 0  # LifterState.STATE_INITIALIZING
 LIFTER_CRS_CONTROL = 2  # LifterState.STATE_CRS_CONTROL / SetLifterMode.MODE_CRS_CONTROL
 LIFTER_SAFE = 3
 
@@ -267,6 +268,15 @@ class Actuators:
             "Lifter CRS Control",
             self._condition("Lifter In CRS Control?", self.lifter_state, self.LifterState, predicate),
             [
+                # Fig. 41: the firmware takes no mode request until it has finished initializing.
+                WaitFor(
+                    "Wait Lifter Initialized",
+                    self.ctx,
+                    self.lifter_state,
+                    self.LifterState,
+                    lambda msg: bool(msg.link_ok) and msg.state != LIFTER_INITIALIZING,
+                    self.ctx.config.timeouts.actuator_s,
+                ),
                 ServiceCall(
                     "Request CRS Control",
                     self.ctx.node,
