@@ -32,11 +32,8 @@ PARTS = load_parts()
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    try:
-        scene = scene_mod.Scene(out_dir=tmp_path_factory.mktemp("twin"), scenario=SCENARIO)
-        scene.render(names.zed_camera(0), 32, 24)
-    except Exception as exc:  # no OpenGL back end on this machine
-        pytest.skip(f"the twin cannot render here: {exc}")
+    # Set-up installs OSMesa, so the twin renders wherever the tests run; a failure here is real.
+    scene = scene_mod.Scene(out_dir=tmp_path_factory.mktemp("twin"), scenario=SCENARIO)
     with scene:
         yield scene, models_for_mission(scene.mission)
 
