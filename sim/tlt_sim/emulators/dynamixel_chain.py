@@ -18,19 +18,18 @@ status packets carry a wrong CRC), hardware error bits and overload through the 
 from __future__ import annotations
 
 import struct
-import threading
 import time
 from collections.abc import Callable, Iterable
 
 from tlt_sim.emulators import dynamixel_protocol as proto
 from tlt_sim.emulators.dynamixel_servo import DynamixelServo, ServoError
-from tlt_sim.emulators.pty_device import PtyDevice
+from tlt_sim.emulators.serial_chain import SerialChain
 
 
-class DynamixelChain:
+class DynamixelChain(SerialChain):
     """Servos on one bus; answer packets with :meth:`handle`, or serve them on a pty with :meth:`start`."""
 
-    MAX_STEP_S = 0.005
+    PTY_NAME = "dynamixel-chain"
     REBOOT_TIME_S = 0.05
 
     def __init__(
@@ -43,43 +42,13 @@ class DynamixelChain:
         for servo in servos:
             servo = servo if isinstance(servo, DynamixelServo) else DynamixelServo(int(servo))
             self.servos[servo.dxl_id] = servo
-        self._clock = clock
-        self._last = clock() if clock else 0.0
-        self._lock = threading.RLock()
+        super().__init__(clock)
         self._parser = proto.PacketParser()
-        self._silenced: set[int] = set()
-        self._link_dropped = False
-        self._corrupt_remaining = 0
         self._rebooting_until: dict[int, float] = {}
         self._pending_reboots: list[DynamixelServo] = []
         self._elapsed = 0.0
         self.packets_seen = 0
         self.crc_errors_seen = 0
-        self._device: PtyDevice | None = None
-
-    # --- serving ----------------------------------------------------------------------------------
-    def start(self) -> str:
-        """Serve on a new pty; returns the slave path for the driver to open."""
-        self._device = PtyDevice(self.handle, name="dynamixel-chain").start()
-        return self._device.path
-
-    @property
-    def port(self) -> str:
-        if self._device is None:
-            raise RuntimeError("the chain is not being served; call start()")
-        return self._device.path
-
-    def stop(self) -> None:
-        if self._device is not None:
-            self._device.stop()
-            self._device = None
-
-    def __enter__(self) -> DynamixelChain:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     # --- physical side --------------------------------------------------------------------------------
     def servo(self, dxl_id: int) -> DynamixelServo:
@@ -93,32 +62,6 @@ class DynamixelChain:
                 for servo in self.servos.values():
                     servo.step(dt / steps)
             self._elapsed += dt
-
-    def catch_up(self) -> None:
-        """Advance the servos to the clock (done on every packet; call it to read them between packets)."""
-        if self._clock is None:
-            return
-        with self._lock:
-            now = self._clock()
-            dt, self._last = now - self._last, now
-            if dt > 0:
-                self.advance(dt)
-
-    # --- faults ---------------------------------------------------------------------------------------
-    def silence(self, dxl_id: int, silent: bool = True) -> None:
-        """Make one servo stop (or resume) answering."""
-        with self._lock:
-            (self._silenced.add if silent else self._silenced.discard)(dxl_id)
-
-    def drop_link(self, dropped: bool = True) -> None:
-        """Drop (or restore) the whole link: no servo answers."""
-        with self._lock:
-            self._link_dropped = dropped
-
-    def corrupt_next(self, count: int) -> None:
-        """Send the next ``count`` status packets with a wrong CRC."""
-        with self._lock:
-            self._corrupt_remaining = count
 
     # --- protocol ---------------------------------------------------------------------------------
     def handle(self, data: bytes) -> bytes:

@@ -22,11 +22,10 @@ turns Force off, as the actuator's overload protection does. Faults for tests: :
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Iterable
 
-from tlt_sim.emulators.pty_device import PtyDevice
+from tlt_sim.emulators.serial_chain import SerialChain
 
 HEADER = b"\xff\xff\xff"
 BROADCAST_ID = 0xFE
@@ -194,10 +193,10 @@ class MightyZapActuator:
         self._set(ADDR_PRESENT_POSITION, max(0, min(self.FULL_SCALE, round(self.position))))
 
 
-class MightyZapChain:
+class MightyZapChain(SerialChain):
     """Actuators on one IR-USB02 port; ``handle`` bytes in/out, ``start`` serves them on a pty."""
 
-    MAX_STEP_S = 0.005
+    PTY_NAME = "mightyzap-chain"
 
     def __init__(
         self,
@@ -209,37 +208,9 @@ class MightyZapChain:
         for act in actuators:
             act = act if isinstance(act, MightyZapActuator) else MightyZapActuator(int(act))
             self.actuators[act.act_id] = act
-        self._clock = clock
-        self._last = clock() if clock else 0.0
-        self._lock = threading.RLock()
+        super().__init__(clock)
         self._buf = bytearray()
-        self._silenced: set[int] = set()
-        self._dropped = False
-        self._corrupt = 0
         self.packets_seen = 0
-        self._device: PtyDevice | None = None
-
-    def start(self) -> str:
-        self._device = PtyDevice(self.handle, name="mightyzap-chain").start()
-        return self._device.path
-
-    @property
-    def port(self) -> str:
-        if self._device is None:
-            raise RuntimeError("the chain is not being served; call start()")
-        return self._device.path
-
-    def stop(self) -> None:
-        if self._device is not None:
-            self._device.stop()
-            self._device = None
-
-    def __enter__(self) -> MightyZapChain:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def actuator(self, act_id: int) -> MightyZapActuator:
         return self.actuators[act_id]
@@ -251,28 +222,9 @@ class MightyZapChain:
                 for act in self.actuators.values():
                     act.step(dt / steps)
 
-    def silence(self, act_id: int, silent: bool = True) -> None:
-        with self._lock:
-            (self._silenced.add if silent else self._silenced.discard)(act_id)
-
-    def drop_link(self, dropped: bool = True) -> None:
-        with self._lock:
-            self._dropped = dropped
-
-    def corrupt_next(self, count: int) -> None:
-        with self._lock:
-            self._corrupt = count
-
-    def _catch_up(self) -> None:
-        if self._clock is not None:
-            now = self._clock()
-            dt, self._last = now - self._last, now
-            if dt > 0:
-                self.advance(dt)
-
     def handle(self, data: bytes) -> bytes:
         with self._lock:
-            self._catch_up()
+            self.catch_up()
             self._buf.extend(data)
             out = bytearray()
             while True:
@@ -298,14 +250,14 @@ class MightyZapChain:
                 self.packets_seen += 1
                 reply = self._dispatch(packet)
                 if reply is not None:
-                    if self._corrupt > 0:
-                        self._corrupt -= 1
+                    if self._corrupt_remaining > 0:
+                        self._corrupt_remaining -= 1
                         reply = reply[:-1] + bytes([reply[-1] ^ 0x3C])
                     out += reply
             return bytes(out)
 
     def _answers(self, act_id: int) -> bool:
-        return not self._dropped and act_id in self.actuators and act_id not in self._silenced
+        return not self._link_dropped and act_id in self.actuators and act_id not in self._silenced
 
     def _dispatch(self, packet: bytes) -> bytes | None:
         act_id, command = packet[3], packet[5]

@@ -3,17 +3,13 @@
 from __future__ import annotations
 
 import ctypes
-import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 
 from tlt_drivers.gpio import uapi
 from tlt_drivers.gpio.chardev import line_flags, request_for
 from tlt_drivers.gpio.config import LineSpec
-
-HEADER = Path("/usr/include/linux/gpio.h")
 
 _PROBE = r"""
 #include <stdio.h>
@@ -50,9 +46,6 @@ def test_sizes_and_ioctl_numbers_match_the_published_abi() -> None:
     assert uapi.GPIO_GET_CHIPINFO_IOCTL == 0x8044B401
 
 
-@pytest.mark.skipif(
-    not HEADER.exists() or shutil.which("cc") is None, reason="needs linux/gpio.h and a C compiler"
-)
 def test_layout_matches_the_kernel_header_compiled_here(tmp_path) -> None:
     src = tmp_path / "probe.c"
     src.write_text(_PROBE)
