@@ -72,6 +72,7 @@ class LifterNode(Node):
         self._goal: _Goal | None = None
         self._reported: tuple[Lifecycle, str] | None = None
         self._last_reconnect = time.monotonic()
+        self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
         self._state_pub = self.create_publisher(LifterState, STATE_TOPIC, 10)
         self._status_pub = self.create_publisher(HardwareStatus, STATUS_TOPIC, 10)
         self.create_service(SetLifterMode, MODE_SERVICE, self._on_set_mode)
@@ -101,6 +102,9 @@ class LifterNode(Node):
     def _cycle(self) -> None:
         hw = self.hw
         now = time.monotonic()
+        # The link watchdog counts in the time base of this cycle's timer: on the twin that is sim
+        # time, which stands still while the simulation waits for a late driver.
+        loop_now = self._ros_now() if self._use_sim_time else now
         if hw.state == Lifecycle.ERROR:
             self._end_goal("abort", Result.HARDWARE_FAULT, f"lifter link fault: {hw.fault}")
             if now - self._last_reconnect >= self.config.reconnect_period_s:
@@ -109,14 +113,14 @@ class LifterNode(Node):
                     self.get_logger().info("lifter link recovered")
             self._publish_state()
             return
-        hw.read(now)
+        hw.read(loop_now)
         if hw.state == Lifecycle.ERROR:
             self._last_reconnect = now
             self._end_goal("abort", Result.HARDWARE_FAULT, f"lifter link fault: {hw.fault}")
             self._publish_state()
             return
         self._run_controller()
-        hw.write(now)
+        hw.write(loop_now)
         self._publish_state()
 
     def _run_controller(self) -> None:

@@ -4,9 +4,11 @@ A ros2_control-style :class:`~tlt_drivers.hardware_interface.HardwareInterface` 
 
 * ``configure`` opens the port and succeeds only when the firmware answers a state request within
   ``answer_timeout_s``;
-* ``read`` takes every byte waiting, decodes the firmware's frames (bad CRCs are counted and
+* ``read(now)`` takes every byte waiting, decodes the firmware's frames (bad CRCs are counted and
   skipped) and keeps the newest telemetry; when no telemetry has arrived for ``link_timeout_s``
-  it fails, which puts the interface in ERROR with the reason, so motion stops being commanded;
+  of the caller's ``now`` it fails, which puts the interface in ERROR with the reason, so motion
+  stops being commanded. ``now`` is the control loop's own time base: on the twin that is sim
+  time, so a simulation that pauses (and answers nothing meanwhile) is not a dead link;
 * ``write`` sends the velocity command (counts/s, one per motor) every control cycle, which is
   what keeps the firmware's watchdog from tripping;
 * ``recover`` (base class) closes and reopens the port: the node calls it every
@@ -62,7 +64,9 @@ class LifterSerialInterface(HardwareInterface):
         self.port: serial.Serial | None = None
         self.decoder = FrameDecoder()
         self.telemetry: StateTelemetry | None = None
-        self.last_rx = -float("inf")
+        self.frames_received = 0  # telemetry and mode replies since the port was opened
+        self._frames_at_read = 0
+        self._last_rx_at: float | None = None  # caller's ``now`` when a read last found telemetry
         self.link_ok = False
         self.command: list[int] = [0] * NUM_MOTORS
         self.bad_frames = 0
@@ -151,6 +155,7 @@ class LifterSerialInterface(HardwareInterface):
         self.port.reset_input_buffer()
         self.decoder.reset()
         self.telemetry = None
+        self._last_rx_at = None
         self._send(StateRequest())
         deadline = self.clock() + cfg.answer_timeout_s
         while self.telemetry is None and self.clock() < deadline:
@@ -174,7 +179,10 @@ class LifterSerialInterface(HardwareInterface):
 
     def on_read(self, now: float) -> None:
         self._drain()
-        if self.clock() - self.last_rx > self.config.link_timeout_s:
+        if self.frames_received != self._frames_at_read or self._last_rx_at is None:
+            self._frames_at_read = self.frames_received
+            self._last_rx_at = now
+        if now - self._last_rx_at > self.config.link_timeout_s:
             self.link_ok = False
             raise LinkError(
                 f"no telemetry from the lifter firmware for more than {self.config.link_timeout_s} s"
@@ -219,10 +227,10 @@ class LifterSerialInterface(HardwareInterface):
                 continue
             if isinstance(msg, StateTelemetry):
                 self.telemetry = msg
-                self.last_rx = self.clock()
+                self.frames_received += 1
             elif isinstance(msg, ModeReply):
                 self._mode_replies.append(msg)
-                self.last_rx = self.clock()
+                self.frames_received += 1
 
     def _close(self) -> None:
         self.link_ok = False
