@@ -48,14 +48,20 @@ from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, Foundat
 from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
-from tlt_ars.config import ArsConfig, check_against_mission, default_config_path, load_ars_config
+from tlt_ars.config import (
+    ArsConfig,
+    ars_config_from_dict,
+    check_against_mission,
+    default_config_path,
+    load_ars_config,
+)
 from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
 from tlt_ars.motion import MotionPlanner
 from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
-from tlt_common.config_schema import ConfigError
+from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.mission.schema import load_mission
 
 ACTION_TYPES = {
@@ -327,6 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--ars", choices=ros_names.ARS_AGENTS, required=True, help="which ARS this process is")
     p.add_argument("--config", type=Path, help="ARS file (default config/ars/<ars>.yaml)")
+    p.add_argument("--mission", type=Path, help="mission file (overrides the ARS file; the same as the CRS)")
     p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
     return p
 
@@ -339,7 +346,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(remove_ros_args(["ars", *full])[1:])
     path = args.config or default_config_path(args.ars)
     try:
-        config = load_ars_config(path)
+        if args.mission is not None:
+            raw = {**load_yaml(path), "mission": str(args.mission.resolve())}
+            config = ars_config_from_dict(raw, str(path))
+        else:
+            config = load_ars_config(path)
         if config.ars != args.ars:
             raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
     except (ConfigError, OSError) as exc:

@@ -34,8 +34,12 @@ class Timeouts:
 @dataclass(frozen=True)
 class LifterSetup:
     joints: tuple[str, ...] = ("lifter_joint_0", "lifter_joint_1", "lifter_joint_2", "lifter_joint_3")
-    raised_m: float = 0.80  # lead-screw position of Raise Payload (one bay above lowered)
-    lowered_m: float = 0.05  # lead-screw position of Lower Lifter
+    # Lead-screw position of Raise Payload; None: lowered_m + the mission's bay height.
+    raised_m: float | None = None
+    lowered_m: float = 0.1  # lead-screw position of Lower Lifter: the Active Grippers at the build level
+    # True when the machine starts with the payload already one bay up on the Top Grippers (the
+    # twin's start): bay 1 is then built without indexing first.
+    indexed_at_start: bool = False
     tolerance_m: float = 0.003  # encoder positions within this of the target count as there
     compression_stiffness_n_per_m: float = 50000.0  # compression_force / this = travel of Test Bay
 
@@ -90,6 +94,7 @@ _LIFTER = {
     "joints": opt("list", None, item=Field("str"), min_items=1),
     "raised_m": opt("float", None),
     "lowered_m": opt("float", None),
+    "indexed_at_start": opt("bool", None),
     "tolerance_m": _positive(),
     "compression_stiffness_n_per_m": _positive(),
 }
@@ -172,7 +177,7 @@ def load_config(path: str | Path, **overrides: Any) -> CrsConfig:
     cam = config.camera_mounts
     if not len(cam.inward) == len(cam.outward) == len(cam.joints):
         raise ConfigError(path, "camera_mounts", "inward, outward and joints must have the same length")
-    if config.lifter.raised_m <= config.lifter.lowered_m:
+    if config.lifter.raised_m is not None and config.lifter.raised_m <= config.lifter.lowered_m:
         raise ConfigError(path, "lifter.raised_m", "must be above lifter.lowered_m")
     return config
 

@@ -11,6 +11,12 @@ Telemetry, each packet at its rate in the definitions file: the CRS tree's encod
 progress (``hk_mission``), the tower model (``hk_tower``), and housekeeping from the mechanisms'
 state topics (``hk_lifter``, ``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once
 its topic has been heard); and every CRS event.
+
+A ``CRS_UP`` event goes to the ground when the bridge starts (a restarted CRS is seen as one).
+``mission_step`` goes out whenever the tree's running leaf, the current bay or the run state
+changes (checked at the tick rate), with the CRS's ROS time: the ground's record of when each step
+of each member ran. Every bay inspection verdict is also reported as an event
+(``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``), as Inspection Check reports each part's.
 """
 
 from __future__ import annotations
@@ -18,10 +24,13 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+from py_trees.common import Status
+
 from tlt_common import ros_names
 from tlt_common.bt.status_codec import encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.mission.member_states import pack_member_states
+from tlt_common.mission.tower_model import PLACED, RIVETED
 from tlt_crs.ground_link.link import GroundCommand, GroundLink
 from tlt_crs.node import CrsNode
 
@@ -49,6 +58,14 @@ class GroundBridge:
                 _log.warning("event %s not sent to the ground: %s", code, exc)
 
         node.ctx.event = event
+        # The node announced itself (CRS_UP) before this bridge existed; the ground hears it here,
+        # so a GSW following the build knows that a CRS (re)started and needs its Start again.
+        mission, model = node.ctx.mission, node.ctx.model
+        built = f"{model.bays_built()}/{mission.bay_count} bay(s) built"
+        try:
+            link.send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
+        except Exception as exc:
+            _log.warning("CRS_UP not sent to the ground: %s", exc)
         self._latest: dict[str, Any] = {}
         self._watch_devices()
         for kind, send in (
@@ -63,6 +80,11 @@ class GroundBridge:
             rate = link.defs.packet(kind).rate_hz
             if rate:
                 node.create_timer(1.0 / rate, send)
+        self._member_ids = {m.id for m in node.ctx.mission.members}
+        self._last_step: tuple[Any, ...] | None = None
+        self._last_progress: tuple[int, ...] | None = None
+        node.create_timer(1.0 / node.ctx.config.tick_rate_hz, self.send_step_if_changed)
+        self._report_bay_inspections()
 
     def _validate(self, command: GroundCommand) -> tuple[Reason, str] | None:
         refusal = self.node.commands.check(command.name, command.params)
@@ -231,6 +253,87 @@ class GroundBridge:
                     "status": part.status,
                 },
             )
+
+    def _report_bay_inspections(self) -> None:
+        """Wrap the verdict check of every ``Inspect Bay n`` call so each verdict becomes an event
+        (the tree's Test Bay only fails on a bad bay; a pass would otherwise leave no trace)."""
+        for behaviour in self.node.root.iterate():
+            check = getattr(behaviour, "response_ok", None)
+            if check is None or not behaviour.name.startswith("Inspect Bay "):
+                continue
+            bay = behaviour.name.removeprefix("Inspect Bay ")
+
+            def reported(response: Any, check=check, bay=bay) -> tuple[bool, str]:
+                ok, reason = check(response)
+                if ok:
+                    self.node.ctx.event(1, "BAY_INSPECTION_PASSED", f"bay {bay} passed inspection")
+                else:
+                    self.node.ctx.event(2, "BAY_INSPECTION_FAILED", f"bay {bay} failed inspection: {reason}")
+                return ok, reason
+
+            behaviour.response_ok = reported
+
+    def _step_of(self, tip: Any) -> tuple[int | None, str, str]:
+        """(bay, member or phase, step) of the running leaf ``tip``; bay None outside a bay's
+        subtree (foundation rivets, Wait For Help)."""
+        if tip is None:
+            return None, "", ""
+        bay: int | None = None
+        member = ""
+        node = tip
+        while node is not None:
+            parent = node.parent
+            last = node.name.rsplit(" ", 1)[-1]
+            if not member and last in self._member_ids:
+                member = last
+            if parent is not None and parent.name.startswith("Construct Bay "):
+                # A step outside any member's subtree belongs to its bay's phase (Index Payload n, ...).
+                member = member or node.name
+                bay = int(parent.name.rsplit(" ", 1)[-1])
+                break
+            node = parent
+        return bay, member, tip.name
+
+    def send_step_if_changed(self) -> None:
+        ctx = self.node.ctx
+        with ctx.lock:
+            root = self.node.root
+            tip = root.tip() if root.status == Status.RUNNING else None
+            bay, member, step = self._step_of(tip)
+            if bay is None:
+                bay = int(ctx.board.get("current_bay", 0) or 0)
+            run_state = ctx.run_state
+            with ctx.model.lock:
+                bays_built = ctx.model.bays_built()
+                placed = sum(state >= PLACED for state in ctx.model.states.values())
+                riveted = sum(state >= RIVETED for state in ctx.model.states.values())
+                discarded = sum(ctx.model.discarded.values())
+        key = (int(run_state), bay, member, step, bays_built, placed, discarded)
+        if key == self._last_step:
+            return
+        progressed = (
+            self._last_step is None
+            or (int(run_state), bays_built, placed, discarded, riveted) != self._last_progress
+        )
+        self._last_step = key
+        self._last_progress = (int(run_state), bays_built, placed, discarded, riveted)
+        self._send(
+            "mission_step",
+            {
+                "sim_time": ctx.ros_seconds(),
+                "run_state": int(run_state),
+                "bay": bay,
+                "member": member[:64],
+                "step": step[:80],
+                "bays_built": bays_built,
+                "members_placed": placed,
+                "parts_discarded": discarded,
+            },
+        )
+        if progressed:
+            # The ground's view of the tower follows each change, not only the next periodic packet.
+            self.send_progress()
+            self.send_tower()
 
     def send_progress(self) -> None:
         msg: Any = self.node.progress()

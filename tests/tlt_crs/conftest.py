@@ -245,7 +245,7 @@ class LifterStandIn:
 
         self.msg_type = LifterState
         self.state = 1  # HARDWARE_CONTROL
-        self.positions = [0.05] * 4
+        self.positions = [0.1] * 4  # the build position (crs.yaml lifter.lowered_m)
         self.joints = list(joints)
         self.mode_calls: list[int] = []
         self.publishing = True

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from tlt_common.config_schema import ConfigError
+from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_common.mission.tower_model import TowerModelError
 from tlt_crs.config import REPO_CONFIG, load_config
@@ -18,7 +18,11 @@ def test_shipped_configuration_loads_with_paths_relative_to_it():
     assert config.mission == REPO_CONFIG.parents[2] / "missions" / "one_bay.yaml"
     assert config.mission.exists() and config.writable_blackboard.exists()
     assert config.progress_file.name == "tower_model.indexed.json"
-    assert config.lifter.raised_m > config.lifter.lowered_m
+    # The lifter targets are the twin's machine: lowered = the build position, raised = one bay up
+    # (from the mission), and the payload starts on the Top Grippers one bay up (indexed for bay 1).
+    edu = load_yaml(REPO_CONFIG.parents[1] / "twin" / "edu.yaml")
+    assert config.lifter.lowered_m == edu["lifter"]["build_position"]
+    assert config.lifter.raised_m is None and config.lifter.indexed_at_start
 
 
 def test_overrides_are_relative_to_the_working_directory(tmp_path, monkeypatch):

@@ -105,7 +105,7 @@ class _Builder:
         self.outward = [np.array(v, dtype=float) for v in ((0, -1), (1, 0), (0, 1), (-1, 0))]
         self.diagonal = [(c - centre) / np.linalg.norm(c - centre) for c in self.corner_xy]
         off = edu["lifter"]["post_offset"]
-        self.post_xy = [c + off * o for c, o in zip(self.corner_xy, self.outward, strict=True)]
+        self.post_xy = [c + off * d for c, d in zip(self.corner_xy, self.diagonal, strict=True)]
         self.info.post_xy = self.post_xy
 
     # -- document skeleton -------------------------------------------------------------------

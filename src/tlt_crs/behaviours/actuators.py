@@ -377,9 +377,14 @@ class Actuators:
                 self.active_grippers(True),
                 self.top_grippers(False),
                 self.lifter_crs_control(),
-                self.lifter_move("Raise", self.ctx.config.lifter.raised_m),
+                self.lifter_move("Raise", self.raised_m()),
             ],
         )
+
+    def raised_m(self) -> float:
+        """Raise Payload's target: configured, or one of the mission's bay heights above lowered."""
+        setup = self.ctx.config.lifter
+        return setup.raised_m if setup.raised_m is not None else setup.lowered_m + self.ctx.mission.bay_height
 
     def lower_lifter(self) -> py_trees.behaviour.Behaviour:
         """Fig. 19: engage Top, disengage Active, lifter to CRS Control, lower."""

@@ -167,7 +167,9 @@ class WaitForPart(Action):
 class ForwardResult(Action):
     """Answer the ARS's waiting call with vision's report (the forwarded result).
 
-    Reads: the report of ``inspect`` and the call found by ``wait``. Writes: ``passed``, ``reasons``.
+    Reads: the report of ``inspect`` and the call found by ``wait``. Writes: ``passed``, ``reasons``;
+    an event ``INSPECTION_PASSED`` (info) or ``INSPECTION_FAILED`` (warning) whose text starts with
+    the member id, so the ground can count inspections per member.
     SUCCESS when forwarded, whether the part passed or not; FAILURE if there is nothing to forward.
     """
 
@@ -188,6 +190,12 @@ class ForwardResult(Action):
         self.reasons = list(report.reasons)
         self.ctx.desk.answer(pending, report)
         self.feedback_message = "passed" if self.passed else "failed: " + "; ".join(self.reasons)
+        member = self.wait.req.member.id
+        if self.passed:
+            self.ctx.event(1, "INSPECTION_PASSED", f"{member}: part passed inspection")
+        else:
+            reasons = "; ".join(self.reasons) or "no reason given"
+            self.ctx.event(2, "INSPECTION_FAILED", f"{member}: part failed inspection: {reasons}")
         return Status.SUCCESS
 
 

@@ -57,9 +57,10 @@ class BayBuilt(Condition):
 
 
 class BayIndexed(Condition):
-    """True when the payload was indexed for bay ``bay``: recorded, or a member of the bay is placed.
+    """True when the payload was indexed for bay ``bay``: recorded, a member of the bay is placed,
+    or it is bay 1 on a machine that starts indexed (``lifter.indexed_at_start``).
 
-    Reads: the index record and the tower model. SUCCESS/FAILURE accordingly.
+    Reads: the index record, the tower model and the configuration. SUCCESS/FAILURE accordingly.
     """
 
     def __init__(self, ctx: CrsContext, bay: int) -> None:
@@ -70,6 +71,8 @@ class BayIndexed(Condition):
 
     def evaluate(self) -> bool:
         states = self.ctx.model.states
+        if self.bay == 1 and self.ctx.config.lifter.indexed_at_start:
+            return True
         return self.ctx.index.indexed(self.bay) or any(states[i] >= PLACED for i in self.ids)
 
 

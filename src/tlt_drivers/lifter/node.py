@@ -36,6 +36,7 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_drivers.hardware_interface import Lifecycle
+from tlt_drivers.loop_time import loop_clock
 
 from .config import DEFAULT_CONFIG, LifterConfig, load_lifter_config
 from .protocol import FirmwareState
@@ -72,7 +73,7 @@ class LifterNode(Node):
         self._goal: _Goal | None = None
         self._reported: tuple[Lifecycle, str] | None = None
         self._last_reconnect = time.monotonic()
-        self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
+        self._loop_clock = loop_clock(self)
         self._state_pub = self.create_publisher(LifterState, STATE_TOPIC, 10)
         self._status_pub = self.create_publisher(HardwareStatus, STATUS_TOPIC, 10)
         self.create_service(SetLifterMode, MODE_SERVICE, self._on_set_mode)
@@ -102,9 +103,7 @@ class LifterNode(Node):
     def _cycle(self) -> None:
         hw = self.hw
         now = time.monotonic()
-        # The link watchdog counts in the time base of this cycle's timer: on the twin that is sim
-        # time, which stands still while the simulation waits for a late driver.
-        loop_now = self._ros_now() if self._use_sim_time else now
+        loop_now = self._loop_clock()  # the link watchdog's time base (tlt_drivers.loop_time)
         if hw.state == Lifecycle.ERROR:
             self._end_goal("abort", Result.HARDWARE_FAULT, f"lifter link fault: {hw.fault}")
             if now - self._last_reconnect >= self.config.reconnect_period_s:

@@ -44,6 +44,7 @@ class URHardware(HardwareInterface):
         link: URLink | None = None,
         *,
         clock: Callable[[], float] = time.monotonic,
+        data_clock: Callable[[], float] | None = None,
     ) -> None:
         super().__init__(config.component)
         self.config = config
@@ -53,6 +54,7 @@ class URHardware(HardwareInterface):
             link_timeout=config.link_timeout_s,
             probe_timeout=config.probe_timeout_s,
             clock=clock,
+            data_clock=data_clock,
         )
         self.reading: ArmReading | None = None
         self.link_ok = False

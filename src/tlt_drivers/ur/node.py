@@ -43,6 +43,7 @@ from tlt_common.config_schema import ConfigError
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
+from tlt_drivers.loop_time import loop_clock
 
 from .config import DEFAULT_CONFIG, URConfig, load_ur_config
 from .hardware import URHardware
@@ -55,7 +56,7 @@ class URNode(Node):
     def __init__(self, config: URConfig, *, hardware: URHardware | None = None, **node_kwargs) -> None:
         super().__init__(node_kwargs.pop("node_name", config.component), **node_kwargs)
         self.config = config
-        self.hw = hardware or URHardware(config)
+        self.hw = hardware or URHardware(config, data_clock=loop_clock(self))
         c = config.component
         self.controller = JointTrajectoryController(
             config.joint_names,

@@ -140,6 +140,7 @@ class URLink:
         program_timeout: float = 5.0,
         control_settle_s: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
+        data_clock: Callable[[], float] | None = None,
         receive_factory: Callable[[str, float], Any] = _default_receive,
         control_factory: Callable[[str, float], Any] = _default_control,
         dashboard_factory: Callable[[str], Any] = _default_dashboard,
@@ -152,6 +153,8 @@ class URLink:
         self.control_settle_s = control_settle_s
         self._control_down_since: float | None = None
         self._clock = clock
+        # Staleness of the state stream counts in the control loop's time base (tlt_drivers.loop_time).
+        self._data_clock = data_clock or clock
         self._receive_factory = receive_factory
         self._control_factory = control_factory
         self._dashboard_factory = dashboard_factory
@@ -176,7 +179,7 @@ class URLink:
                 self.receive = self._receive_factory(self.host, self.frequency)
         except RuntimeError as exc:
             raise LinkDown(f"ur-rtde receive interface: {exc}") from exc
-        self._last_stamp, self._last_change = None, self._clock()
+        self._last_stamp, self._last_change = None, self._data_clock()
         self.read()
 
     def open_control(self) -> None:
@@ -243,7 +246,7 @@ class URLink:
         r = self.receive
         if r is None or not r.isConnected():
             raise LinkDown(f"no RTDE connection to {self.host}")
-        now = self._clock()
+        now = self._data_clock()
         stamp = r.getTimestamp()
         if stamp != self._last_stamp:
             self._last_stamp, self._last_change = stamp, now

@@ -16,7 +16,8 @@ def test_raise_payload_follows_fig_18_and_is_confirmed_by_sensors(rig, crs, tmp_
     assert rig.active.engaged == [True] * 4
     assert rig.top.engaged == [False] * 4
     assert rig.lifter.state == 2 and rig.lifter.mode_calls == [2]
-    assert all(abs(p - 0.80) < 1e-9 for p in rig.lifter.positions)
+    raised = ctx.config.lifter.lowered_m + ctx.mission.bay_height  # one bay above the build level
+    assert all(abs(p - raised) < 1e-9 for p in rig.lifter.positions)
     # Order of Fig. 18: Active engaged before Top released, lifter moved last.
     assert rig.active.commands[0] == [1.5] * 4
     assert rig.top.commands[0] == [0.0] * 4
@@ -30,7 +31,7 @@ def test_lower_lifter_follows_fig_19(rig, crs, tmp_path):
     subtree = Actuators(ctx).lower_lifter()
     assert crs.tick_until(subtree) == Status.SUCCESS
     assert rig.top.engaged == [True] * 4 and rig.active.engaged == [False] * 4
-    assert all(abs(p - 0.05) < 1e-9 for p in rig.lifter.positions)
+    assert all(abs(p - ctx.config.lifter.lowered_m) < 1e-9 for p in rig.lifter.positions)
 
 
 def test_steps_already_true_by_the_sensors_are_skipped(rig, crs, tmp_path):
@@ -38,7 +39,7 @@ def test_steps_already_true_by_the_sensors_are_skipped(rig, crs, tmp_path):
     rig.active.set_engaged(True)
     rig.top.set_engaged(False)
     rig.lifter.state = 2
-    rig.lifter.positions = [0.8] * 4
+    rig.lifter.positions = [ctx.config.lifter.lowered_m + ctx.mission.bay_height] * 4
     subtree = Actuators(ctx).raise_payload()  # subscribes to the sensor topics
     for topic in ("/lifter/state", "/active_grippers/state", "/top_grippers/state"):
         crs.wait_for(lambda topic=topic: ctx.cache.latest(topic) is not None, what=topic)
@@ -55,7 +56,7 @@ def test_lifter_that_does_not_move_fails_with_the_sensor_state(rig, crs, tmp_pat
     crs.wait_for(lambda: ctx.cache.latest("/lifter/state") is not None, what="lifter state")
     assert crs.tick_until(subtree) == Status.FAILURE
     wait = subtree.children[1].children[1]
-    assert "did not confirm" in wait.feedback_message and "0.05" in wait.feedback_message
+    assert "did not confirm" in wait.feedback_message and "0.1" in wait.feedback_message
 
 
 def test_missing_gripper_state_is_a_timeout_not_a_hang(ros, crs, tmp_path):

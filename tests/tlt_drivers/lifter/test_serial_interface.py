@@ -190,3 +190,18 @@ def test_closed_port_is_reported_and_reopened_when_it_returns(hw, firmware, serv
         assert hw.recover(), hw.fault
         run_cycles(hw, 0.1)
         assert hw.state == Lifecycle.ACTIVE and hw.link_ok
+
+
+def test_link_watchdog_counts_in_the_callers_time_base(hw, firmware) -> None:
+    """On the twin ``now`` is sim time: while it stands still (the simulation waits for a late
+    driver) no amount of wall time is a dead link; once it moves on past the timeout with nothing
+    heard, it is."""
+    bring_up(hw, firmware)
+    firmware.faults.no_answer = True
+    sim_now = time.monotonic()  # bring_up ran on the monotonic clock: carry on from there, then stop
+    hw.read(sim_now)  # takes whatever was still in flight
+    hw.read(sim_now)
+    time.sleep(hw.config.link_timeout_s + 0.3)  # wall time passes, the caller's time does not
+    assert hw.read(sim_now) and hw.state == Lifecycle.ACTIVE
+    assert not hw.read(sim_now + hw.config.link_timeout_s + 0.01)
+    assert hw.state == Lifecycle.ERROR and "no telemetry" in hw.fault

@@ -31,7 +31,8 @@ def test_strut_is_picked_carried_placed_riveted_and_holds_under_compression(scen
     start = scene.body_pose(scene.part(part).body)[0]
     scene.stage_member("bay1/cross_frame")
     top, bottom = scene.joint_position_world("bay0/x0_y0"), scene.joint_position_world("bay1/x0_y0")
-    placing = frame(bottom - top, [0.45, 0.25, 0.0])
+    # Tool turned off the arm's diagonal: the lifter post stands on it, between the arm and the corner.
+    placing = frame(bottom - top, [-0.3, 1.0, 0.0])
     m.to((top + bottom) / 2, placing)
     assert np.linalg.norm(scene.body_pose(scene.part(part).body)[0] - start) > 1.0  # carried
     assert np.linalg.norm(scene.part_end(part, "a") - top) < 2e-3
@@ -149,6 +150,6 @@ def test_last_bay_is_riveted_to_the_foundation(scene, mover):
     m.to(scene.site_position("dispenser/rivet_dispenser_x/pickup"), frame([1, -1, 0], [0, 0, -1]), "gun_a")
     assert scene.load_rivet(arm, "a")
     corner = scene.site_position(names.corner_site(frame_body, 0))
-    m.to(corner, frame([0, 0, 1], [0.45, 0.25, 0]), "gun_a")
+    m.to(corner, frame([0, 0, 1], [-0.3, 1.0, 0]), "gun_a")
     shot = scene.fire_rivet(arm, "a")
     assert shot.joined == [f"foundation/0/{frame_body}"]
