@@ -5,6 +5,8 @@
 ``query``   list archived packets, totals, or one field's series.
 ``export``  write the fields of one packet kind to CSV.
 ``keygen``  create a shared key file (mode 0600) for both ends.
+``mission`` start a build and follow it to tower built; ``summary`` summarize an archive
+            (both in :mod:`tlt_gsw.mission_job`, with their own exit codes).
 
 Settings come from ``config/ccsds/link.yaml`` (``--config``) and the definitions file
 (``--definitions``); options override them. Exit status: 0 success, 1 command rejected or failed,
@@ -32,6 +34,9 @@ from tlt_common.config_schema import ConfigError
 from tlt_gsw.archive import query as archive_query
 from tlt_gsw.archive.recorder import Recorder
 from tlt_gsw.link import GswLink
+from tlt_gsw.mission_job import ACTIONS as MISSION_ACTIONS
+from tlt_gsw.mission_job import add_mission_parser, add_summary_parser
+from tlt_gsw.mission_job import run as run_mission_action
 
 EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
 
@@ -364,6 +369,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--kind", required=True)
     e.add_argument("--fields", help="comma-separated field names (default: all)")
     e.add_argument("-o", "--output", help="CSV file (default: standard output)")
+
+    add_mission_parser(sub)
+    add_summary_parser(sub)
     return parser
 
 
@@ -386,6 +394,9 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
         return gui_main(argv[1:])
     args = build_parser().parse_args(argv)
+    if args.action in MISSION_ACTIONS:
+        # The mission job handles Ctrl-C itself (exit 130, after printing the summary).
+        return run_mission_action(args, out)
     try:
         return _ACTIONS[args.action](args, out)
     except (

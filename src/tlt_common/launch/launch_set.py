@@ -16,10 +16,21 @@ starts, so a typo never leaves half a system running. Example::
         max_restarts: 3
         required: true           # if it dies for good, the whole set stops with a non-zero exit
         wait_for_path: /tmp/tlt/lifter  # start only once this exists (an emulator's pty link)
+        host: crs                # run inside this emulated host (see hosts below)
       - name: exercise
         executable: python
         args: [-m, some.job]
         on_exit: shutdown        # when it ends, stop the set and exit with its exit code
+
+A set may declare emulated hosts (network namespaces on one machine, ``tlt_common.launch.hosts``)
+and place processes into them, by ``host:`` or, for processes of included sets, ``placement:``::
+
+    hosts:
+      - {name: crs, address: 10.77.0.11/24}
+      - {name: twin, address: 10.77.0.10/24, extra_addresses: [10.77.0.21/24]}
+    placement: {lifter: crs}     # process name -> host
+    dds_profile: ../dds/emulated_hosts.xml   # Fast DDS profile template (this one by default)
+    host_multicast: false        # the emulated switch drops multicast unless this is true
 
 ``${VAR}`` (or ``${VAR:-default}``) in ``executable``, ``args``, ``cwd``, ``env`` and
 ``wait_for_path`` values expands from the launcher's
@@ -40,6 +51,8 @@ from typing import Any
 import yaml
 
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_common.launch.dds_profile import DEFAULT_PROFILE
+from tlt_common.launch.hosts import HostsError, HostSpec, check_addresses, check_host_name
 
 RESTART_POLICIES = ("never", "on-failure", "always")
 ON_EXIT = ("continue", "shutdown")
@@ -75,6 +88,13 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "wait_timeout_s": opt("float", 30.0, minimum=0.0),
     "startup_s": opt("float", 3.0, minimum=0.0,
                      doc="an exit within this long after start is reported as a failure to start"),
+    "host": opt("str", None, doc="the emulated host (a name under hosts:) the process runs in"),
+}
+
+HOST_SCHEMA: dict[str, Field] = {
+    "name": Field("str", check=check_host_name, doc="the host's name; its namespace is tlt-<run>-<name>"),
+    "address": Field("str", doc="IPv4 address with prefix length, e.g. 10.77.0.11/24"),
+    "extra_addresses": opt("list", [], item=Field("str"), doc="more addresses on the host's eth0"),
 }
 
 LAUNCH_SET_SCHEMA: dict[str, Field] = {
@@ -84,6 +104,11 @@ LAUNCH_SET_SCHEMA: dict[str, Field] = {
     "env": opt("map", {}, item=_SCALAR),
     "include": opt("list", [], item=Field("str"), doc="launch sets whose processes join this one"),
     "processes": opt("list", [], item=Field("dict", schema=PROCESS_SCHEMA)),
+    "hosts": opt("list", [], item=Field("dict", schema=HOST_SCHEMA),
+                 doc="emulated hosts (network namespaces) the processes can be placed in"),
+    "placement": opt("map", {}, item=Field("str"), doc="process name -> host, for included processes"),
+    "dds_profile": opt("str", None, doc="Fast DDS profile template for processes in hosts"),
+    "host_multicast": opt("bool", False, doc="whether the hosts' emulated switch forwards multicast"),
 }
 
 
@@ -103,6 +128,7 @@ class ProcessSpec:
     startup_s: float
     wait_for_path: str | None = None
     wait_timeout_s: float = 30.0
+    host: str | None = None
 
 
 @dataclass(frozen=True)
@@ -111,6 +137,9 @@ class LaunchSet:
     source: str
     grace_period_s: float
     processes: tuple[ProcessSpec, ...] = field(default_factory=tuple)
+    hosts: tuple[HostSpec, ...] = field(default_factory=tuple)
+    dds_profile: str | None = None
+    host_multicast: bool = False
 
     def __post_init__(self) -> None:
         if sum(p.on_exit == "shutdown" for p in self.processes) > 1:
@@ -158,6 +187,11 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
     data = validate(load_yaml(path), LAUNCH_SET_SCHEMA, source=source)
     if not data["processes"] and not data["include"]:
         raise ConfigError(source, "processes", "no processes and nothing included")
+    if _including:
+        for key in ("hosts", "placement", "dds_profile", "host_multicast"):
+            if data[key]:
+                raise ConfigError(source, key, f"only the top-level launch set may declare {key} "
+                                  f"(this set is included by {_including[-1]})")
     base = dict(os.environ if base_env is None else base_env)
     base.pop("LAUNCH_DIR", None)
     set_env = {k: _expand(str(v), {**base, "LAUNCH_DIR": str(path.resolve().parent)}, source, f"env.{k}")
@@ -212,10 +246,65 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
                 proc["wait_for_path"], variables, source, f"{key}.wait_for_path"),
             wait_timeout_s=proc["wait_timeout_s"],
             startup_s=proc["startup_s"],
+            host=proc["host"],
         ))
+    if _including:
+        return LaunchSet(name=data["name"] or path.stem, source=source,
+                         grace_period_s=data["grace_period_s"], processes=tuple(specs))
+    hosts = _hosts(data, source)
+    specs = _place(specs, data["placement"], hosts, source)
+    dds_profile = None
+    if hosts:
+        dds_profile = str(DEFAULT_PROFILE)
+        if data["dds_profile"]:
+            expanded = Path(_expand(data["dds_profile"], base, source, "dds_profile"))
+            dds_profile = str(expanded if expanded.is_absolute() else path.resolve().parent / expanded)
+        if not Path(dds_profile).is_file():
+            raise ConfigError(source, "dds_profile", f"no Fast DDS profile at {dds_profile}")
     return LaunchSet(
         name=data["name"] or path.stem,
         source=source,
         grace_period_s=data["grace_period_s"],
         processes=tuple(specs),
+        hosts=hosts,
+        dds_profile=dds_profile,
+        host_multicast=data["host_multicast"],
     )
+
+
+def _hosts(data: dict[str, Any], source: str) -> tuple[HostSpec, ...]:
+    hosts = tuple(HostSpec(h["name"], h["address"], tuple(h["extra_addresses"])) for h in data["hosts"])
+    names = [h.name for h in hosts]
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            raise ConfigError(source, f"hosts[{i}].name", f"duplicate host name {name!r}")
+    try:
+        check_addresses(hosts)
+    except HostsError as exc:
+        raise ConfigError(source, "hosts", str(exc)) from None
+    return hosts
+
+
+def _place(specs: list[ProcessSpec], placement: dict[str, str], hosts: tuple[HostSpec, ...],
+           source: str) -> list[ProcessSpec]:
+    """Apply ``placement`` and check that every host a process names is declared."""
+    names = {spec.name for spec in specs}
+    declared = [h.name for h in hosts]
+    undeclared = f"declared under hosts (hosts: {', '.join(declared) or 'none'})"
+    for process, host in placement.items():
+        if process not in names:
+            raise ConfigError(source, f"placement.{process}", f"no process {process!r} in this set")
+        if host not in declared:
+            raise ConfigError(source, f"placement.{process}",
+                              f"no host {host!r} {undeclared}")
+    placed = []
+    for i, spec in enumerate(specs):
+        host = placement.get(spec.name, spec.host)
+        if spec.host and host != spec.host:
+            raise ConfigError(source, f"placement.{spec.name}",
+                              f"{spec.name} already runs on host {spec.host!r}")
+        if host and host not in declared:
+            raise ConfigError(source, f"processes[{i}].host",
+                              f"no host {host!r} {undeclared}")
+        placed.append(dataclasses.replace(spec, host=host))
+    return placed

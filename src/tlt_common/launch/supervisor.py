@@ -5,11 +5,16 @@ also asks the kernel to send it SIGTERM if the launcher dies, so even a SIGKILLe
 no orphan. Output lines are prefixed with the process name. Shutdown (Ctrl-C, SIGTERM, or a
 required process that died for good) sends SIGINT, then SIGTERM, then SIGKILL, each after the set's
 grace period; a second Ctrl-C skips the waiting.
+
+A set that declares hosts gets its emulated network (``hosts.HostNetwork``) before any process
+starts and loses it after every process has stopped; a process with a host is moved into that
+host's network namespace between fork and exec and given the Fast DDS profile of the network.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
 import ctypes
 import os
 import signal
@@ -17,9 +22,12 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TextIO
 
+from tlt_common.launch.dds_profile import host_environment, render_profile
+from tlt_common.launch.hosts import HostNetwork, HostsError, default_run_name, enter_namespace, namespace_name
 from tlt_common.launch.launch_set import LaunchSet, ProcessSpec
 
 _POLL_S = 0.05
@@ -35,6 +43,15 @@ def _die_with_parent() -> None:
     # Runs in the child between fork and exec; PR_SET_PDEATHSIG = 1.
     if _prctl is not None:
         _prctl(1, signal.SIGTERM)
+
+
+def _in_host(namespace: str) -> Callable[[], None]:
+    """A preexec_fn: die with the launcher, and run inside the host's network namespace."""
+
+    def preexec() -> None:
+        _die_with_parent()
+        enter_namespace(namespace)
+    return preexec
 
 
 def describe_exit(returncode: int) -> str:
@@ -67,9 +84,12 @@ class _Proc:
 class Supervisor:
     """Runs one launch set until it ends, is stopped, or a required process dies."""
 
-    def __init__(self, launch_set: LaunchSet, out: TextIO | None = None) -> None:
+    def __init__(self, launch_set: LaunchSet, out: TextIO | None = None, run_name: str | None = None) -> None:
         self.launch_set = launch_set
         self.out = out or sys.stdout
+        self.run_name = run_name or default_run_name(os.environ)
+        self.network: HostNetwork | None = None
+        self._profile: str | None = None
         self._procs = [_Proc(spec) for spec in launch_set.processes]
         self._out_lock = threading.Lock()
         self._shutdown = threading.Event()
@@ -83,6 +103,8 @@ class Supervisor:
         try:
             self._say(f"launch set '{self.launch_set.name}' ({self.launch_set.source}): "
                       f"{len(self._procs)} process(es)")
+            if self.launch_set.hosts and not self._create_hosts():
+                return 1
             for proc in self._procs:
                 if proc.spec.wait_for_path:
                     proc.waiting_since = time.monotonic()
@@ -100,6 +122,7 @@ class Supervisor:
             return self._exit_code
         finally:
             self._stop_all()
+            self._remove_hosts()
             if installed:
                 for sig, handler in installed.items():
                     signal.signal(sig, handler)
@@ -114,10 +137,52 @@ class Supervisor:
         """PIDs of the processes now running, by name."""
         return {p.spec.name: p.popen.pid for p in self._procs if p.running and p.popen}
 
+    # --- hosts ---------------------------------------------------------------------------------------
+    def _create_hosts(self) -> bool:
+        """Create the set's emulated hosts and render its DDS profile; False (said why) on failure."""
+        network = HostNetwork(self.run_name, self.launch_set.hosts, multicast=self.launch_set.host_multicast)
+        try:
+            network.create()
+            assert self.launch_set.dds_profile is not None
+            self._profile = str(render_profile(self.launch_set.dds_profile, [h.ip for h in network.hosts],
+                                               network.lock_dir / f"{self.run_name}-fastdds.xml"))
+        except (HostsError, OSError) as exc:
+            network.teardown()
+            self._say(f"cannot create the hosts: {exc}")
+            self._exit_code = 1
+            return False
+        self.network = network
+        if network.removed_stale:
+            self._say(f"removed namespaces a previous run left: {', '.join(network.removed_stale)}")
+        for host in network.hosts:
+            extra = f" (+ {', '.join(host.extra_addresses)})" if host.extra_addresses else ""
+            self._say(f"host {host.name}: {host.address}{extra} in netns {network.namespace(host.name)}")
+        self._say(f"DDS profile for the hosts: {self._profile}")
+        return True
+
+    def _remove_hosts(self) -> None:
+        if self.network is None:
+            return
+        try:
+            self.network.teardown()
+            self._say(f"removed the hosts of run {self.run_name}")
+        except HostsError as exc:
+            self._say(f"could not remove every host: {exc}")
+        finally:
+            self.network = None
+        if self._profile:
+            with contextlib.suppress(OSError):
+                os.unlink(self._profile)
+
     # --- starting and watching ----------------------------------------------------------------------
     def _start(self, proc: _Proc) -> None:
         spec = proc.spec
         env = {**os.environ, **spec.env}
+        preexec = _die_with_parent
+        if spec.host:
+            assert self._profile is not None
+            env = host_environment(self._profile, env)
+            preexec = _in_host(namespace_name(self.run_name, spec.host))
         proc.restart_at = None
         proc.returncode = None
         proc.last_lines.clear()
@@ -130,19 +195,22 @@ class Supervisor:
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 start_new_session=True,
-                preexec_fn=_die_with_parent,
+                preexec_fn=preexec,
             )
-        except OSError as exc:
+        except (OSError, subprocess.SubprocessError) as exc:
             proc.popen = None
             proc.returncode = 127
-            self._say(f"{spec.name} cannot start: {' '.join(spec.argv)}: {exc.strerror or exc}")
+            reason = getattr(exc, "strerror", None) or exc
+            where = f" in host {spec.host}" if spec.host else ""
+            self._say(f"{spec.name} cannot start{where}: {' '.join(spec.argv)}: {reason}")
             self._after_exit(proc, early=True)
             return
         proc.started_at = time.monotonic()
         proc.reader = threading.Thread(target=self._pump, args=(proc, proc.popen), daemon=True,
                                        name=f"launch-{spec.name}")
         proc.reader.start()
-        self._say(f"started {spec.name} (pid {proc.popen.pid})")
+        where = f" on host {spec.host}" if spec.host else ""
+        self._say(f"started {spec.name} (pid {proc.popen.pid}){where}")
 
     def _pump(self, proc: _Proc, popen: subprocess.Popen[bytes]) -> None:
         assert popen.stdout is not None

@@ -1,0 +1,462 @@
+"""The headless mission job of the ground station: ``tlt gsw mission`` and ``tlt gsw summary``.
+
+``tlt gsw mission`` supervises one build over the CCSDS ground link (paper §III, §V.A):
+
+1. records every packet, sent and received, in the SQLite archive for the whole run;
+2. sends an authenticated Start and waits for its accepted and completed acknowledgements (a
+   rejection is printed with its reason and the job exits 1; so is a rejection the CRS reports
+   only as an event, as it does for a command it cannot authenticate);
+3. prints progress: a line whenever the CRS's bay or step changes (``mission_step``), the CRS
+   tree's running node when it changes (decoded from ``tree_status`` with ``--tree``, else status
+   counts), and every event of severity warning or above, and every fault as it is raised or cleared;
+4. ends when the telemetry says the tower is built (exit 0), when a fault has stood for
+   ``--fault-timeout`` s without being cleared (exit 1), at ``--timeout`` (exit 3) or on Ctrl-C
+   (exit 130); the archive is flushed and closed in every case;
+5. prints the summary computed from the archive (:mod:`tlt_gsw.summary`) and writes the timeline
+   PNG next to it (:mod:`tlt_gsw.timeline_plot`).
+
+``tlt gsw summary --archive FILE [--plot PNG]`` prints the same summary from any archive.
+
+Exit status: 0 tower built (summary: an archive was read), 1 Start rejected or failed, or a fault
+not cleared in time, 2 bad usage, configuration, key or archive, 3 no acknowledgement or
+``--timeout``, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+from tlt_common.bt.status_codec import Reassembler, StatusCodecError, StatusPart, TreeShape, unpack_statuses
+from tlt_common.ccsds.auth import CommandSequencer, KeyFileError, KeyRing, ReplayStateError
+from tlt_common.ccsds.codec import Packet
+from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.ccsds.link_config import expand_path, load_link_config
+from tlt_common.ccsds.reasons import AckStage
+from tlt_common.config_schema import ConfigError
+from tlt_gsw.archive import query as archive_query
+from tlt_gsw.archive.recorder import Recorder
+from tlt_gsw.link import GswLink, SentCommand
+from tlt_gsw.summary import format_summary, summarize_file
+
+EXIT_BUILT, EXIT_FAULT, EXIT_USAGE, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_REJECTED = EXIT_FAULT
+# How often the job re-sends Start while the CRS has not answered (it may still be starting).
+START_RETRY_S = 2.0
+REJECTION_CODES = ("COMMAND_REJECTED", "DATAGRAM_REJECTED")
+REJECTION_ACK_GRACE_S = 0.5
+
+
+class JobError(ValueError):
+    """Bad usage or settings; the message says what to change."""
+
+
+def _address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit():
+        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
+    return host, int(port)
+
+
+class Progress:
+    """Turns telemetry into progress lines: one per change of bay or step, tree or fault."""
+
+    def __init__(self, out: IO[str], tree: TreeShape | None = None, tree_every_s: float = 5.0) -> None:
+        self.out = out
+        self.tree = tree
+        self.tree_every_s = tree_every_s
+        self._reassembler = Reassembler(tree) if tree is not None else None
+        self._bay: int | None = None
+        self._step: tuple[str, str] | None = None
+        self._tree_line = ""
+        self._tree_printed_at = -float("inf")
+        self._tree_tick = -1
+        self._tree_parts: dict[int, tuple[int, bytes]] = {}
+        self._tree_error = ""
+        self.fault = ""  # the fault standing now ("" none)
+        self.fault_since: float | None = None
+        self.tower_built = False
+        self.sim_start: float | None = None
+        self.last_mission: dict[str, Any] = {}
+        self.crs_up = 0  # CRS_UP events seen: the CRS (re)started
+
+    def say(self, text: str) -> None:
+        print(text, file=self.out, flush=True)
+
+    def _sim(self, fields: dict[str, Any]) -> str:
+        sim = float(fields["sim_time"])
+        if self.sim_start is None:
+            self.sim_start = sim
+        return f"[sim {sim - self.sim_start:8.2f} s]"
+
+    def packet(self, packet: Packet, now: float) -> None:
+        kind, f = packet.kind, packet.fields
+        if kind == "mission_step":
+            if f["run_state"] == "done":
+                self.tower_built = True
+            if self._bay != f["bay"]:
+                self._bay = f["bay"]
+                self.say(f"{self._sim(f)} bay {f['bay']} (bays built {f['bays_built']})")
+            step = (f["member"], f["step"])
+            if step != self._step and f["step"]:
+                self._step = step
+                member = f" {f['member']}:" if f["member"] and f["member"] not in f["step"] else ""
+                self.say(
+                    f"{self._sim(f)}   {f['run_state']:<7}{member} {f['step']}  "
+                    f"(placed {f['members_placed']}, discarded {f['parts_discarded']})"
+                )
+        elif kind == "hk_mission":
+            self.last_mission = dict(f)
+            if f["run_state"] == "done":
+                self.tower_built = True
+            self._fault_state(f["fault"], now)
+        elif kind == "event":
+            code = f["code"]
+            if code == "CRS_UP":
+                self.crs_up += 1
+            if code == "CRS_FAULT":
+                self._fault_state(f["text"], now)
+            elif code == "FAULT_CLEARED":
+                self._fault_state("", now)
+            if f["severity"] in ("warning", "error", "critical") or code in (
+                "FAULT_CLEARED", "INSPECTION_FAILED", "BAY_INSPECTION_PASSED", "STARTED", "CRS_UP",
+            ):  # fmt: skip
+                self.say(f"  EVENT {f['severity'].upper()} {code}: {f['text']}")
+        elif kind == "tree_status" and f["agent"] == "crs":
+            self._tree_status(f, now)
+
+    def _fault_state(self, fault: str, now: float) -> None:
+        if fault and not self.fault:
+            self.fault, self.fault_since = fault, now
+            self.say(f"  FAULT raised: {fault}")
+        elif not fault and self.fault:
+            self.say(f"  FAULT cleared after {now - (self.fault_since or now):.1f} s: {self.fault}")
+            self.fault, self.fault_since = "", None
+
+    def _tree_status(self, f: dict[str, Any], now: float) -> None:
+        if self._reassembler is not None:
+            part = StatusPart(
+                "crs", f["shape_hash"], f["tick"], f["node_count"], f["part_index"], f["part_count"],
+                f["first_node"], bytes(f["status"]),
+            )  # fmt: skip
+            try:
+                decoded = self._reassembler.add(part)
+            except StatusCodecError as exc:
+                if str(exc) != self._tree_error:
+                    self._tree_error = str(exc)
+                    self.say(f"  tree: cannot decode ({exc})")
+                return
+            if decoded is None:
+                return
+            running = [path for path, status in decoded.nodes if status.name == "RUNNING"]
+            line = " > ".join(running[-1].split("/")[-3:]) if running else "(nothing running)"
+            if line != self._tree_line:
+                self._tree_line = line
+                self.say(f"  tree crs tick {decoded.tick_count}: {line}")
+            return
+        # Without the tree's definition the nodes have no names: count the statuses of a whole tick.
+        if f["tick"] != self._tree_tick:
+            self._tree_tick, self._tree_parts = f["tick"], {}
+        self._tree_parts[f["part_index"]] = (f["first_node"], bytes(f["status"]))
+        if len(self._tree_parts) < f["part_count"]:
+            return
+        statuses = []
+        for first, data in sorted(self._tree_parts.values()):
+            statuses += unpack_statuses(data, max(0, min(f["node_count"] - first, len(data) * 4)))
+        counts = {name: sum(s.name == name for s in statuses) for name in ("RUNNING", "SUCCESS", "FAILURE")}
+        line = ", ".join(f"{n.lower()} {c}" for n, c in counts.items())
+        if line != self._tree_line and now - self._tree_printed_at >= self.tree_every_s:
+            self._tree_line, self._tree_printed_at = line, now
+            self.say(f"  tree crs tick {f['tick']}: {line} of {f['node_count']} nodes")
+
+
+def _rejected_by_event(packet: Packet, own: tuple[str, int]) -> str | None:
+    """The reason of a CRS rejection report about a datagram from ``own`` address, else None."""
+    if packet.kind != "event" or packet.fields["code"] not in REJECTION_CODES:
+        return None
+    text = packet.fields["text"]
+    # Bound to every interface, the job does not know which address the CRS saw; the port tells.
+    where = f":{own[1]} rejected: " if own[0] in ("0.0.0.0", "") else f" from {own[0]}:{own[1]} rejected: "
+    if where not in text:
+        return None
+    return f"{packet.fields['reason']}: {packet.fields['text']}"
+
+
+def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> tuple[int, SentCommand | None]:
+    """Send Start (again while the CRS is silent) and wait for its final ack; (exit code, command)."""
+    deadline = time.monotonic() + timeout
+    sent: list[SentCommand] = []
+    last_sent = 0.0
+    checked = len(seen)  # only rejections reported from now on can be about this Start
+    rejected_event: tuple[str, float] | None = None
+    while time.monotonic() < deadline:
+        silent = not any(s.acks for s in sent)
+        if not sent or (silent and time.monotonic() - last_sent >= START_RETRY_S):
+            command = link.send_command("start")
+            last_sent = time.monotonic()
+            sent.append(command)
+            print(f"sent start (security_seq {command.security_seq})", file=out, flush=True)
+        link.poll(0.1)
+        for packet in seen[checked:]:
+            reason = _rejected_by_event(packet, link.address)
+            if reason is not None and rejected_event is None:
+                # An authenticated command's rejection also comes as an ack, with the CRS's words.
+                rejected_event = (reason, time.monotonic() + REJECTION_ACK_GRACE_S)
+        checked = len(seen)
+        if rejected_event is not None and time.monotonic() >= rejected_event[1]:
+            print(f"start rejected: {rejected_event[0]}", file=out, flush=True)
+            return EXIT_REJECTED, None
+        # Start may have been sent more than once while the CRS was coming up: one that completed
+        # wins, and a later copy refused as "already started" is no rejection of the job's Start.
+        done = next((c for c in sent if c.final is not None and c.final.stage is AckStage.COMPLETED), None)
+        accepted = any(a.stage is AckStage.ACCEPTED for c in sent for a in c.acks)
+        for command in [done] if done is not None else sent:
+            final = command.final
+            if final is not None:
+                if final.stage in (AckStage.REJECTED, AckStage.FAILED):
+                    if accepted and final.stage is AckStage.REJECTED:
+                        continue
+                    detail = f" ({final.detail})" if final.detail else ""
+                    print(f"start {final.stage.label}: {final.reason.label}{detail}", file=out, flush=True)
+                    return EXIT_REJECTED, command
+                print("start accepted and completed", file=out, flush=True)
+                return EXIT_BUILT, command
+    answered = any(s.acks for s in sent)
+    what = "no completion of start" if answered else "no acknowledgement of start"
+    print(f"{what} within {timeout:g} s", file=out, flush=True)
+    return EXIT_TIMEOUT, None
+
+
+def run_mission(
+    link: GswLink,
+    out: IO[str],
+    *,
+    timeout: float,
+    fault_timeout: float,
+    start_timeout: float,
+    tree: TreeShape | None = None,
+    restart_start: bool = True,
+    clock: Callable[[], float] = time.monotonic,
+) -> int:
+    """Start the build through ``link`` and follow it to its end; return the exit code.
+
+    With ``restart_start``, a CRS that announces itself again (``CRS_UP``: it was restarted)
+    while the tower is not built gets Start again.
+    """
+    seen: list[Packet] = []
+    progress = Progress(out, tree)
+    link.on_packet = lambda result: (
+        (seen.append(result), progress.packet(result, clock())) if isinstance(result, Packet) else None
+    )
+    started = clock()
+    code, _ = _start(link, out, start_timeout, seen)
+    if code != EXIT_BUILT:
+        return code
+    crs_up = progress.crs_up
+    while True:
+        if restart_start and progress.crs_up > crs_up and not progress.tower_built:
+            # A CRS restarted mid-build resumes its tower model but waits for Start (§V.C.2).
+            crs_up = progress.crs_up
+            progress.say("the CRS restarted: sending Start again")
+            code, command = _start(link, out, start_timeout, seen)
+            refused = command.final if command is not None else None
+            if refused is not None and refused.detail == "already started":
+                progress.say("the restarted CRS was already started")
+            elif code != EXIT_BUILT:
+                return code
+        link.poll(0.2)
+        del seen[:-100]  # the archive has them all; keep the list small
+        if link.recorder is not None and link.recorder.last_error:
+            progress.say(f"  ARCHIVE: {link.recorder.last_error}")
+        if progress.tower_built:
+            progress.say("tower built")
+            # The packets the CRS sent along with "done" (progress, tower model) belong in the archive.
+            link.poll(0.3)
+            return EXIT_BUILT
+        now = clock()
+        since = progress.fault_since
+        if progress.fault and since is not None and now - since >= fault_timeout:
+            progress.say(f"fault not cleared within {fault_timeout:g} s: {progress.fault}")
+            return EXIT_FAULT
+        if now - started >= timeout:
+            state = progress.last_mission.get("run_state", "unknown")
+            progress.say(f"timeout: the tower was not built within {timeout:g} s (run state {state})")
+            return EXIT_TIMEOUT
+
+
+def default_plot_path(archive: Path) -> Path:
+    return archive.with_name(archive.stem + "_timeline.png")
+
+
+def _print_summary(archive: Path, plot: Path | None, out: IO[str]) -> None:
+    summary = summarize_file(archive)
+    print(format_summary(summary), file=out, flush=True)
+    if plot is not None:
+        from tlt_gsw.timeline_plot import plot_timeline
+
+        plot_timeline(summary, plot)
+        print(f"  timeline plot:    {plot}", file=out, flush=True)
+    print(f"  archive:          {archive}", file=out, flush=True)
+
+
+def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
+    defs = load_definitions(args.definitions)
+    conf = load_link_config(args.config)
+    gsw = conf["gsw"]
+    key_file = args.key_file or conf["key_file"]
+    keyring = KeyRing.load(expand_path(key_file) if key_file else None)
+    key_id = args.key_id if args.key_id is not None else conf["key_id"]
+    if keyring.get(key_id) is None:
+        raise JobError(f"key id {key_id} is not in the key file (it has {keyring.key_ids})")
+    tree = None
+    if args.tree:
+        from tlt_gsw.gui.tree_definitions import load_tree_definition
+
+        tree = load_tree_definition(args.tree)
+    archive = expand_path(args.archive or gsw["archive"])
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    plot = None if args.no_plot else Path(args.plot) if args.plot else default_plot_path(archive)
+    recorder = Recorder(archive)
+    try:
+        link = GswLink(
+            defs,
+            keyring,
+            key_id,
+            args.crs or (gsw["crs_host"], gsw["crs_port"]),
+            bind=args.bind or (gsw["bind_host"], gsw["bind_port"]),
+            recorder=recorder,
+            close_recorder=True,
+            sequencer=CommandSequencer(expand_path(gsw["command_state"])),
+            recv_buffer_bytes=4 << 20,
+        )
+    except BaseException:
+        recorder.close()
+        raise
+    code = EXIT_INTERRUPTED
+    started = time.monotonic()
+    try:
+        print(
+            f"mission job: archive {archive}, listening on {link.address[0]}:{link.address[1]}, "
+            f"CRS at {link.crs_address[0]}:{link.crs_address[1]}",
+            file=out,
+            flush=True,
+        )
+        code = run_mission(
+            link,
+            out,
+            timeout=args.timeout,
+            fault_timeout=args.fault_timeout,
+            start_timeout=args.start_timeout,
+            tree=tree,
+            restart_start=not args.no_restart_start,
+        )
+    except KeyboardInterrupt:
+        print("interrupted", file=out, flush=True)
+        code = EXIT_INTERRUPTED
+    finally:
+        # A last short listen so the packets in flight at the end are archived too.
+        try:
+            link.poll(0.2)
+        except (OSError, KeyboardInterrupt):
+            pass
+        link.close()
+        print(f"wall time {time.monotonic() - started:.1f} s, exit status {code}", file=out, flush=True)
+    _print_summary(archive, plot, out)
+    return code
+
+
+def _cmd_summary(args: argparse.Namespace, out: IO[str]) -> int:
+    if args.archive:
+        archive = expand_path(args.archive)
+    else:
+        archive = expand_path(load_link_config(args.config)["gsw"]["archive"])
+    plot = Path(args.plot) if args.plot else None
+    _print_summary(archive, plot, out)
+    return EXIT_BUILT
+
+
+def add_mission_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add ``mission`` to the subcommands ``sub`` of a ``tlt gsw`` parser."""
+    p = sub.add_parser("mission", help="start a build and follow it to tower built, then summarize")
+    p.add_argument("--crs", type=_address, help="CRS host:port (default: link.yaml)")
+    p.add_argument("--bind", type=_address, help="local host:port for telemetry (default: link.yaml)")
+    p.add_argument("--key-file", help="key file (default: link.yaml key_file or $TLT_GROUND_KEY_FILE)")
+    p.add_argument("--key-id", type=int)
+    p.add_argument("--archive", help="archive SQLite file (default: link.yaml gsw.archive)")
+    p.add_argument("--timeout", type=float, default=3600.0, help="give up after this many s (exit 3)")
+    p.add_argument(
+        "--fault-timeout", type=float, default=300.0,
+        help="end when a fault stands this many s without being cleared (exit 1)",
+    )  # fmt: skip
+    p.add_argument(
+        "--start-timeout", type=float, default=60.0,
+        help="how long to wait for the CRS to acknowledge Start (it may still be starting)",
+    )  # fmt: skip
+    p.add_argument("--tree", help="CRS tree definition JSON, to name the running node of tree_status")
+    p.add_argument(
+        "--no-restart-start", action="store_true",
+        help="do not send Start again to a CRS that restarted mid-build",
+    )  # fmt: skip
+    p.add_argument("--plot", help="timeline PNG (default: <archive>_timeline.png)")
+    p.add_argument("--no-plot", action="store_true", help="do not write the timeline plot")
+    return p
+
+
+def add_summary_parser(sub: Any) -> argparse.ArgumentParser:
+    """Add ``summary`` to the subcommands ``sub`` of a ``tlt gsw`` parser."""
+    p = sub.add_parser("summary", help="print the mission summary of an archive (and plot its timeline)")
+    p.add_argument("--archive", help="archive SQLite file (default: link.yaml gsw.archive)")
+    p.add_argument("--plot", help="also write the timeline PNG here")
+    return p
+
+
+ACTIONS = {"mission": _cmd_mission, "summary": _cmd_summary}
+ERRORS = (
+    JobError,
+    ConfigError,
+    KeyFileError,
+    ReplayStateError,
+    archive_query.ArchiveError,
+    OSError,
+)
+
+
+def run(args: argparse.Namespace, out: IO[str] | None = None) -> int:
+    """Run a parsed ``mission`` or ``summary`` subcommand; errors become exit status 2."""
+    out = out or sys.stdout
+    try:
+        return ACTIONS[args.action](args, out)
+    except ERRORS as exc:
+        print(f"tlt gsw {args.action}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tlt gsw", description="TLT ground station: the mission job.")
+    parser.add_argument("--config", help="link settings YAML (default config/ccsds/link.yaml)")
+    parser.add_argument("--definitions", help="command/telemetry definitions YAML")
+    sub = parser.add_subparsers(dest="action", required=True)
+    add_mission_parser(sub)
+    add_summary_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None, out: IO[str] | None = None) -> int:
+    """``tlt gsw mission ...`` / ``tlt gsw summary ...`` (argv starts with the subcommand)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
+    try:
+        return run(args, out)
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

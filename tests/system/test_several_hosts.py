@@ -1,0 +1,205 @@
+"""Several hosts (issue "whole system", paper §IV): the CRS and each ARS on computers of their own,
+emulated as network namespaces joined by virtual Ethernet, with the Fast DDS profile of
+config/dds/emulated_hosts.xml and the host layout of config/launch/system_hosts_twin.yaml.
+
+The real CRS process (tree, tower model, ground link) runs on the CRS host with the stand-ins of
+its drivers and vision; each ARS host runs that ARS's action servers (the stand-ins of the CRS
+tests); the ground host sends ground commands over CCSDS/UDP. It shows:
+- a build proceeds across hosts: the one-bay tower is built, every ARS request crossing the network;
+- cutting ARS X's link while it works on a request takes the fault path: the CRS finds ARS X gone
+  and faults; when the link heals the operator clears the fault from the ground, and the build
+  completes with every member of the tower model placed once.
+
+Where this machine cannot create network namespaces the test skips with the reason it gave."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tlt_common.ccsds.auth import write_key_file
+from tlt_common.launch.hosts import (
+    cut_link,
+    enter_namespace,
+    heal_link,
+    namespace_name,
+    run_namespaces,
+    unavailable_reason,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).parent
+TLT = Path(sys.executable).with_name("tlt")
+DOMAIN = os.environ.get("ROS_DOMAIN_ID", "0")
+RUN = f"s{DOMAIN}"
+
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module", autouse=True)
+def namespaces_available():
+    reason = unavailable_reason(f"{RUN}probe")
+    if reason:
+        pytest.skip(f"network namespaces are not available here: {reason}")
+
+
+def edu_hosts() -> dict[str, str]:
+    """Host name -> address of the EDU's emulated hosts, as the project's twin launch set has them."""
+    data = yaml.safe_load((ROOT / "config/launch/system_hosts_twin.yaml").read_text())
+    return {h["name"]: h["address"] for h in data["hosts"] if h["name"] != "twin"}
+
+
+class Output:
+    """The launcher's output, read in the background, searchable while it runs."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self.lines: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def matching(self, pattern: str, after: int = 0) -> list[str]:
+        return [line for line in self.lines[after:] if re.search(pattern, line)]
+
+    def tail(self, n: int = 80) -> str:
+        return "\n".join(self.lines[-n:])
+
+
+def wait(predicate, timeout: float, what: str, output: Output) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout:g} s; launcher output:\n{output.tail()}")
+        if output.proc.poll() is not None:
+            raise AssertionError(f"{what}: the launcher ended; output:\n{output.tail()}")
+        time.sleep(0.1)
+
+
+def records(path: Path, kind: str) -> list[dict]:
+    try:
+        lines = path.read_text().splitlines()
+    except OSError:
+        return []
+    entries = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue  # a line being written
+        if entry["kind"] == kind:
+            entries.append(entry)
+    return entries
+
+
+def members(state_file: Path) -> dict[str, str]:
+    try:
+        return json.loads(state_file.read_text())["members"]
+    except (OSError, ValueError, KeyError):
+        return {}
+
+
+def ground(link_yaml: Path, *command: str) -> str:
+    """Run the ground station's command inside the ground host; its acknowledgement line."""
+    result = subprocess.run([sys.executable, str(HERE / "several_hosts_ground.py"), str(link_yaml), *command],
+                            capture_output=True, text=True, timeout=60,
+                            preexec_fn=lambda: enter_namespace(namespace_name(RUN, "ground")))
+    return (result.stdout + result.stderr).strip()
+
+
+def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
+    hosts = edu_hosts()
+    crs_ip, ground_ip = hosts["crs"].split("/")[0], hosts["ground"].split("/")[0]
+    state = tmp_path / "state" / "tower.json"
+    record = tmp_path / "requests.jsonl"
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    link_yaml = tmp_path / "link.yaml"
+    link_yaml.write_text(yaml.safe_dump({
+        "key_file": str(key_file), "key_id": 1,
+        "crs": {"bind_host": crs_ip, "bind_port": 52001, "gsw_host": "", "gsw_port": 0,
+                "replay_state": str(tmp_path / "replay.json")},
+        "gsw": {"crs_host": crs_ip, "crs_port": 52001, "bind_host": ground_ip, "bind_port": 0,
+                "archive": str(tmp_path / "archive.sqlite"), "command_state": str(tmp_path / "seq.json")},
+    }))
+    crs_yaml = tmp_path / "crs.yaml"
+    crs_yaml.write_text(yaml.safe_dump({
+        "mission": str(ROOT / "missions/one_bay.yaml"),
+        "state_file": str(state),
+        "writable_blackboard": str(ROOT / "config/crs/writable_blackboard.yaml"),
+        "tick_rate_hz": 50.0,
+        "timeouts": {"ars_server_s": 4.0, "service_s": 10.0, "forward_s": 1.0, "sensor_max_age_s": 1.0},
+    }))
+    rig = HERE / "several_hosts_rig.py"
+    host_lines = "\n".join(f"  - {{name: {name}, address: {address}}}" for name, address in hosts.items())
+    launch_set = tmp_path / "several_hosts.yaml"
+    header = f"name: several_hosts\ngrace_period_s: 5\nhosts:\n{host_lines}\n"
+    launch_set.write_text(header + textwrap.dedent(f"""
+        processes:
+          - {{name: crs_drivers, executable: python, args: ["{rig}", drivers, "{record}"], host: crs}}
+          - {{name: ars_x, executable: python, host: ars_x,
+             args: ["{rig}", ars_x, "{record}", --hold-first-s, "4"]}}
+          - {{name: ars_y, executable: python, args: ["{rig}", ars_y, "{record}"], host: ars_y}}
+          - name: crs
+            executable: python
+            args: [-m, tlt_crs.node, --config, "{crs_yaml}", --ground-link, "{link_yaml}", --autostart]
+            host: crs
+            required: true
+        """))
+    env = {**os.environ, "TLT_HOSTS_RUN": RUN}
+    proc = subprocess.Popen([str(TLT), "launch", str(launch_set)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    out = Output(proc)
+    try:
+        # ARS X gets its first request from the CRS, across the network, and holds it.
+        wait(lambda: any(r["ars"] == "ars_x" for r in records(record, "request")), 90,
+             "a first request reaches ARS X", out)
+        held = next(r for r in records(record, "request") if r["ars"] == "ars_x")
+        cut_link(RUN, "ars_x")
+        # The CRS loses ARS X from its graph (lease 3 s) and, ars_server_s (4 s) later, faults.
+        wait(lambda: out.matching(r"CRS_FAULT.*ars_x"), 40, "the CRS faults on the lost ARS X", out)
+        fault = out.matching(r"CRS_FAULT.*ars_x")[0]
+        assert "gone while running" in fault and held["member"] in fault, fault
+        assert members(state).get(held["member"]) == "NOT_PLACED"
+        heal_link(RUN, "ars_x")
+        mark = len(out.lines)
+        # The operator clears the fault from the ground (again if ARS X was not back in time).
+        for _attempt in range(3):
+            ack = ground(link_yaml, "set_blackboard_value", "clear_fault", "true")
+            assert ack.startswith("ack COMPLETED"), ack
+            wait(lambda m=mark: (members(state) and "NOT_PLACED" not in members(state).values())
+                 or out.matching("CRS_FAULT", after=m), 90, "the tower built or another fault", out)
+            if "NOT_PLACED" not in members(state).values():
+                break
+            mark = len(out.lines)
+        built = members(state)
+        assert built and set(built.values()) <= {"INSPECTED", "RIVETED"}, built
+        # Both ARS hosts worked on the tower, and ARS X again after its link healed.
+        requests = records(record, "request")
+        assert {r["ars"] for r in requests} == {"ars_x", "ars_y"}
+        assert [r for r in requests if r["ars"] == "ars_x" and r["wall"] > held["wall"]]
+        assert len(out.matching(r"\[launch\] (crs|ars_x|ars_y|crs_drivers) exited")) == 0
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, out.tail()
+    assert out.matching(rf"\[launch\] removed the hosts of run {RUN}")
+    assert run_namespaces(RUN) == []
