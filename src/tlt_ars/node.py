@@ -86,6 +86,11 @@ def request_of(kind: str, goal: Any) -> Request:
     )
 
 
+# How long a goal the mission check refuses waits for a fresher MissionProgress (the CRS sends one
+# on every model change and at progress_rate_hz), wall seconds.
+FRESH_PROGRESS_WAIT_S = 2.0
+
+
 @dataclass
 class ActiveGoal:
     """The goal the ARS is working on, and how it ends."""
@@ -158,7 +163,12 @@ class ArsNode(Node):
         self.create_service(
             GroundCommand, ros_names.ground_command_service(self.ars), self._on_ground, callback_group=goals
         )
-        self.create_subscription(MissionProgress, ros_names.CRS_MISSION_PROGRESS, self._on_progress, 10)
+        self._progress_changed = threading.Condition()
+        self._progress_count = 0
+        self.create_subscription(
+            MissionProgress, ros_names.CRS_MISSION_PROGRESS, self._on_progress, 10,
+            callback_group=MutuallyExclusiveCallbackGroup(),
+        )
         self._timer = self.create_timer(
             1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=MutuallyExclusiveCallbackGroup()
         )
@@ -178,6 +188,11 @@ class ArsNode(Node):
 
     def _accepted(self, kind: str, handle: Any) -> None:
         request = request_of(kind, handle.request)
+        if self.ctx.state.check_request(request) is not None:
+            # The CRS sends a request right after the model change that allows it (an affix after
+            # the placement), and the MissionProgress carrying that change travels on its own
+            # topic: the mission check is made on a progress message newer than the goal.
+            self._await_progress(FRESH_PROGRESS_WAIT_S)
         with self._lock:
             reason = self._refusal(request)
             goal = ActiveGoal(kind, handle, request, threading.Event())
@@ -267,6 +282,15 @@ class ArsNode(Node):
 
     def _on_progress(self, msg: Any) -> None:
         self.ctx.state.apply_progress(msg)
+        with self._progress_changed:
+            self._progress_count += 1
+            self._progress_changed.notify_all()
+
+    def _await_progress(self, timeout_s: float) -> bool:
+        """Wait (at most ``timeout_s``) for a MissionProgress received after this call."""
+        with self._progress_changed:
+            seen = self._progress_count
+            return self._progress_changed.wait_for(lambda: self._progress_count > seen, timeout_s)
 
     # ----- the tick -----
     def _arm_stopped(self) -> bool:

@@ -13,7 +13,8 @@ from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
-from tlt_interfaces.action import AddMember
+from tlt_interfaces.action import AddMember, AffixMember
+from tlt_interfaces.msg import MemberState, MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.config import ars_config_from_dict, default_config_path
@@ -153,3 +154,27 @@ def test_process_exits_cleanly_on_ground_stop():
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):
+    """The CRS sends AffixMember right after the placement; the MissionProgress saying so may
+    arrive just after the goal: the ARS judges the goal on that newer message, not the old one."""
+    ars, client = idle_ars
+    ars.started = True
+    action = ActionClient(client, AffixMember, ros_names.ars_action("ars_x", "affix_member"))
+    progress = client.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
+    assert action.wait_for_server(timeout_sec=10)
+    member = "bay1/vertical/x0_y0"
+    goal = AffixMember.Goal(kind=1, member_id=member, bay=1, position="x0_y0", ars="ars_x")
+
+    stale = _wait(_wait(action.send_goal_async(goal)).get_result_async())  # no news: not placed
+    assert stale.result.reason == f"rejected: member '{member}' is not placed yet: nothing to affix"
+
+    handle = _wait(action.send_goal_async(goal))
+    time.sleep(0.3)
+    placed = MissionProgress(mission=ars.ctx.state.mission.name, current_bay=1, started=True)
+    placed.members = [MemberState(member_id=member, kind=MemberState.KIND_VERTICAL, bay=1,
+                                  state=MemberState.STATE_PLACED)]
+    progress.publish(placed)
+    result = _wait(handle.get_result_async(), timeout=60.0)
+    assert "not placed" not in result.result.reason  # taken: it went on to the tree (no arm here)
