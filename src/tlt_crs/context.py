@@ -131,6 +131,32 @@ class CrsContext:
         self.lock = threading.RLock()
         self._event_pub = node.create_publisher(Event, ros_names.EVENTS, 50)
         self._event_type = Event
+        from tlt_interfaces.msg import GripperState, LifterState
+
+        self._hardware_topics = {
+            ros_names.LIFTER: (ros_names.state_topic(ros_names.LIFTER), LifterState),
+            ros_names.TOP_GRIPPERS: (ros_names.state_topic(ros_names.TOP_GRIPPERS), GripperState),
+            ros_names.ACTIVE_GRIPPERS: (ros_names.state_topic(ros_names.ACTIVE_GRIPPERS), GripperState),
+        }
+        for topic, msg_type in self._hardware_topics.values():
+            self.cache.watch(topic, msg_type)
+
+    def hardware_not_ready(self) -> str:
+        """Why the CRS's own mechanisms cannot be trusted to build now ('' when they can): a
+        driver whose state is missing or older than ``timeouts.sensor_max_age_s``, or a lifter
+        whose link is down. Start is refused while this says anything."""
+        max_age = self.config.timeouts.sensor_max_age_s
+        missing = []
+        for name, (topic, _) in self._hardware_topics.items():
+            age = self.cache.age(topic)
+            entry = self.cache.latest(topic)
+            if age is None or entry is None:
+                missing.append(f"{name}: no state yet")
+            elif age > max_age:
+                missing.append(f"{name}: state {age:.1f} s old")
+            elif name == ros_names.LIFTER and not entry[0].link_ok:
+                missing.append(f"{name}: link down ({entry[0].fault or 'no reason'})")
+        return "; ".join(missing)
 
     # ----- blackboard -----
     @property

@@ -32,6 +32,7 @@ import py_trees
 import rclpy
 from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 
@@ -201,6 +202,27 @@ def build_node(config: CrsConfig, **node_kwargs: Any) -> CrsNode:
     return CrsNode(config, mission, model, registry, index, **node_kwargs)
 
 
+def _autostart_when_ready(node: CrsNode) -> None:
+    """Submit Start as soon as the CRS would accept it: its drivers may still be coming up."""
+    waiting: list[str] = []
+
+    def attempt() -> None:
+        reason = node.commands.check("start", {})
+        if reason is not None and reason.startswith("hardware not ready"):
+            if not waiting:
+                _log.info("autostart: waiting (%s)", reason)
+            waiting.append(reason)
+            return
+        timer.cancel()
+        node.destroy_timer(timer)
+        node.commands.submit(
+            "start", {}, lambda stage, why: _log.info("autostart: %s %s", stage.label, why)
+        )
+
+    # Wall time: under sim time nothing ticks before the twin's /clock does.
+    timer = node.create_timer(0.5, attempt, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args = []
@@ -254,9 +276,7 @@ def main(argv: list[str] | None = None) -> int:
             link.start()
             _log.info("ground link on %s:%d", *link.address)
         if args.autostart:
-            node.commands.submit(
-                "start", {}, lambda stage, reason: _log.info("autostart: %s %s", stage.label, reason)
-            )
+            _autostart_when_ready(node)
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
         try:

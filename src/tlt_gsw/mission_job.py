@@ -48,6 +48,9 @@ EXIT_REJECTED = EXIT_FAULT
 # How often the job re-sends Start while the CRS has not answered (it may still be starting).
 START_RETRY_S = 2.0
 REJECTION_CODES = ("COMMAND_REJECTED", "DATAGRAM_REJECTED")
+# A Start the CRS refuses with this in the reason is asked again: its drivers are still coming up.
+NOT_READY = "hardware not ready"
+
 REJECTION_ACK_GRACE_S = 0.5
 
 
@@ -193,9 +196,11 @@ def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> t
     last_sent = 0.0
     checked = len(seen)  # only rejections reported from now on can be about this Start
     rejected_event: tuple[str, float] | None = None
+    not_ready = ""
     while time.monotonic() < deadline:
         silent = not any(s.acks for s in sent)
-        if not sent or (silent and time.monotonic() - last_sent >= START_RETRY_S):
+        retry_due = time.monotonic() - last_sent >= START_RETRY_S
+        if (not sent and (not not_ready or retry_due)) or (silent and retry_due):
             command = link.send_command("start")
             last_sent = time.monotonic()
             sent.append(command)
@@ -203,7 +208,7 @@ def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> t
         link.poll(0.1)
         for packet in seen[checked:]:
             reason = _rejected_by_event(packet, link.address)
-            if reason is not None and rejected_event is None:
+            if reason is not None and rejected_event is None and NOT_READY not in reason:
                 # An authenticated command's rejection also comes as an ack, with the CRS's words.
                 rejected_event = (reason, time.monotonic() + REJECTION_ACK_GRACE_S)
         checked = len(seen)
@@ -214,11 +219,19 @@ def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> t
         # wins, and a later copy refused as "already started" is no rejection of the job's Start.
         done = next((c for c in sent if c.final is not None and c.final.stage is AckStage.COMPLETED), None)
         accepted = any(a.stage is AckStage.ACCEPTED for c in sent for a in c.acks)
-        for command in [done] if done is not None else sent:
+        for command in [done] if done is not None else list(sent):
             final = command.final
             if final is not None:
                 if final.stage in (AckStage.REJECTED, AckStage.FAILED):
                     if accepted and final.stage is AckStage.REJECTED:
+                        continue
+                    if final.stage is AckStage.REJECTED and NOT_READY in (final.detail or ""):
+                        # The CRS is up but its drivers are not yet: ask again until start_timeout.
+                        if final.detail != not_ready:
+                            print(f"start refused for now ({final.detail}); asking again",
+                                  file=out, flush=True)
+                        not_ready = final.detail
+                        sent.remove(command)
                         continue
                     detail = f" ({final.detail})" if final.detail else ""
                     print(f"start {final.stage.label}: {final.reason.label}{detail}", file=out, flush=True)

@@ -34,6 +34,7 @@ class Acks:
 def crs_node(rig, crs, tmp_path):
     node = build_node(crs.fast_config(tmp_path))
     rig.add(node)
+    crs.wait_for(lambda: not node.ctx.hardware_not_ready(), what="driver states")
     yield node
     node.interrupt()
     node.destroy_node()
@@ -67,6 +68,17 @@ def test_one_bay_mission_is_built_in_order_and_ends_idle(rig, crs, crs_node):
     progress = crs_node.progress()
     assert progress.tower_built and progress.bays_built == 1 and progress.run_state == RunState.DONE
     assert IndexRecord(crs_node.ctx.mission, crs_node.ctx.config.progress_file).indexed(1)
+
+
+def test_start_is_refused_while_a_driver_is_silent_and_taken_once_it_reports(rig, crs, crs_node):
+    rig.lifter.publishing = False
+    crs.wait_for(lambda: "lifter" in crs_node.ctx.hardware_not_ready(), what="lifter state gone stale")
+    refused = _submit(crs_node, crs, "start")
+    assert refused.rejected and refused.stages[0][1].startswith("hardware not ready: lifter: state ")
+    assert not crs_node.ctx.started and rig.recorder.requests == []
+    rig.lifter.publishing = True
+    crs.wait_for(lambda: not crs_node.ctx.hardware_not_ready(), what="lifter state back")
+    assert _submit(crs_node, crs, "start").final[0] == AckStage.COMPLETED
 
 
 def test_pause_holds_the_build_and_resume_continues_where_it_paused(rig, crs, crs_node):

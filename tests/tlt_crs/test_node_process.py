@@ -330,13 +330,16 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
         raise AssertionError(f"{what}: not seen in hk_mission telemetry (last: {last})")
 
     try:
-        # The CRS process takes a moment to bind; until then a Start goes unheard.
+        # The CRS process takes a moment to bind (until then a Start goes unheard) and to hear
+        # from its drivers (until then Start is refused: hardware not ready).
         deadline = time.monotonic() + 60
         while True:
             sent = gsw.send_command("start")
             ack = gsw.wait_ack(sent, final=True, timeout=2.0)
-            if ack is not None:
+            if ack is not None and not ack.detail.startswith("hardware not ready"):
                 break
+            if ack is not None:
+                time.sleep(0.5)
             assert time.monotonic() < deadline and proc.poll() is None, "the CRS never answered Start"
         assert ack.stage is AckStage.COMPLETED, ack
         mission(lambda f: f["started"] and f["run_state"] == "running", "started and running")
