@@ -1,12 +1,40 @@
 #!/usr/bin/env bash
-# Sets up whatever is missing, then runs the main job. Today that is the largest part of the
-# system that runs end to end: the MuJoCo twin behind every driver's real link, every driver
-# node, and the bring-up check moving each mechanism through its driver (README, "What the main
-# job does today").
+# Sets up whatever is missing, then runs the main job: the whole system on the MuJoCo twin (every
+# driver node behind its real link, the CRS, ARS X, ARS Y, the MCAP recorder) supervised by the
+# ground station, which sends an authenticated Start over CCSDS, shows progress, and prints the
+# summary at the end (docs/system.md).
+#
+#   scripts/main.sh [--mission NAME] [--gui] [--bringup]
+#     --mission NAME   missions/NAME.yaml (default two_bay)
+#     --gui            the Qt ground station instead of the headless job
+#     --bringup        only the hardware layer on the twin and the bring-up check of every driver
+#
+# The run's files (archive, timeline plot, recording, tower model, logs) stay in $TLT_RUN_DIR.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+SET=mission_twin
+MISSION=two_bay
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --mission) MISSION="${2:?--mission needs a name}"; shift 2 ;;
+        --gui) SET=mission_twin_gui; shift ;;
+        --bringup) SET=bringup_twin; shift ;;
+        -h|--help) sed -n 2,12p "$0"; exit 0 ;;
+        *) echo "main.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
+    esac
+done
+if [ ! -f "$ROOT/missions/$MISSION.yaml" ]; then
+    echo "main.sh: no mission missions/$MISSION.yaml" >&2
+    exit 2
+fi
 bash "$ROOT/scripts/setup.sh"
 VENV="${TLT_VENV:-$ROOT/.venv}"
 # A private device folder and ROS domain, so the job does not meet another run on this machine.
 export TLT_RUN_DIR="${TLT_RUN_DIR:-$(mktemp -d /tmp/tlt-run.XXXXXX)}"
-exec "$VENV/bin/tlt" launch --isolated "$ROOT/config/launch/bringup_twin.yaml"
+export TLT_MISSION="$MISSION"
+echo "main.sh: mission $MISSION, run files in $TLT_RUN_DIR"
+status=0
+"$VENV/bin/tlt" launch --isolated "$ROOT/config/launch/$SET.yaml" || status=$?
+echo "main.sh: run files in $TLT_RUN_DIR:"
+ls "$TLT_RUN_DIR"
+exit "$status"

@@ -63,18 +63,38 @@ def main(argv: list[str] | None = None) -> int:
                 return 2
             camera = args.camera
         else:
-            camera = mujoco.MjvCamera()
-            camera.lookat[:] = view["lookat"]
-            camera.distance = args.distance or view["distance"]
-            camera.azimuth = view["azimuth"] if args.azimuth is None else args.azimuth
-            camera.elevation = view["elevation"] if args.elevation is None else args.elevation
-        frame = scene.render(camera, width, height, depth=False, segmentation=False)
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.output), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)):
+            camera = overview_camera(scene, args.distance, args.azimuth, args.elevation)
+        ok = write_png(scene, camera, args.output, width, height)
+    if not ok:
         print(f"tlt twin render: cannot write {args.output}", file=sys.stderr)
         return 2
     print(args.output)
     return 0
+
+
+def overview_camera(
+    scene: Scene, distance: float | None = None, azimuth: float | None = None, elevation: float | None = None
+) -> mujoco.MjvCamera:
+    """The free overview camera of ``edu.yaml`` (``render``), with any of its settings replaced."""
+    view = scene.edu["render"]
+    camera = mujoco.MjvCamera()
+    camera.lookat[:] = view["lookat"]
+    camera.distance = distance or view["distance"]
+    camera.azimuth = view["azimuth"] if azimuth is None else azimuth
+    camera.elevation = view["elevation"] if elevation is None else elevation
+    return camera
+
+
+def write_png(
+    scene: Scene, camera: mujoco.MjvCamera | str, path: Path, width: int | None = None,
+    height: int | None = None,
+) -> bool:
+    """Render ``scene`` as it stands from ``camera`` to ``path``; False when it cannot be written."""
+    view = scene.edu["render"]
+    frame = scene.render(camera, width or view["width"], height or view["height"], depth=False,
+                         segmentation=False)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return bool(cv2.imwrite(str(path), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)))
 
 
 if __name__ == "__main__":

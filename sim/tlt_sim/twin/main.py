@@ -53,8 +53,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--ur-x-host", help="loopback address of ARS X's UR controller")
     p.add_argument("--ur-y-host", help="loopback address of ARS Y's UR controller")
     p.add_argument("--camera-rate", type=float, help="camera frames per simulated second")
+    p.add_argument("--final-png", type=Path, help="on the way out, a PNG of the scene as it stands")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this much sim time (0: never)")
     return p
+
+
+def _write_final_png(scene, path: Path) -> None:
+    from tlt_sim.model.render_png import overview_camera, write_png
+
+    try:
+        if write_png(scene, overview_camera(scene), path):
+            log.info("the scene as it stands: %s", path)
+        else:
+            log.warning("cannot write %s", path)
+    except Exception as exc:  # a renderer that fails must not cost the run its clean shutdown
+        log.warning("no final picture: %s", exc)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -128,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         wall = time.monotonic() - wall0
         log.info("stopped at %.2f s of sim time after %.2f s of wall time (%.2fx), %d waits for drivers",
                  scene.time, wall, scene.time / wall if wall > 0 else 0.0, twin.holds)
+        if args.final_png:
+            _write_final_png(scene, args.final_png)
     finally:
         with contextlib.suppress(FileNotFoundError):
             ready.unlink()

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from tlt_common.config_schema import Field, load_validated, opt
+from tlt_common.config_schema import ConfigError, Field, load_validated, opt
 
 DEFAULT_PATH = Path(__file__).resolve().parents[3] / "config" / "ccsds" / "link.yaml"
 ENV_PATH = "TLT_CCSDS_LINK_CONFIG"
@@ -49,10 +49,27 @@ def expand_path(text: str) -> Path:
     return Path(os.path.expandvars(os.path.expanduser(text)))
 
 
+# Environment overrides of the UDP ports, so that runs side by side (tests, a main job) each have
+# their own link without a file apiece: the CRS's command port and the GSW's telemetry port.
+ENV_CRS_PORT = "TLT_GROUND_CRS_PORT"
+ENV_GSW_PORT = "TLT_GROUND_GSW_PORT"
+
+
 def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
-    """Load the link settings: ``path``, else ``$TLT_CCSDS_LINK_CONFIG``, else the project's file."""
+    """Load the link settings: ``path``, else ``$TLT_CCSDS_LINK_CONFIG``, else the project's file;
+    then ``$TLT_GROUND_CRS_PORT`` / ``$TLT_GROUND_GSW_PORT`` replace the ports when set."""
     chosen = Path(path or os.environ.get(ENV_PATH) or DEFAULT_PATH)
-    return load_validated(chosen, SCHEMA)
+    conf = load_validated(chosen, SCHEMA)
+    for var, keys in ((ENV_CRS_PORT, (("crs", "bind_port"), ("gsw", "crs_port"))),
+                      (ENV_GSW_PORT, (("crs", "gsw_port"), ("gsw", "bind_port")))):
+        text = os.environ.get(var, "")
+        if not text:
+            continue
+        if not text.isdigit() or not 0 < int(text) < 65536:
+            raise ConfigError(f"${var}", "", f"{text!r} is not a UDP port")
+        for section, key in keys:
+            conf[section][key] = int(text)
+    return conf
 
 
 __all__ = ["expand_path", "load_link_config"]

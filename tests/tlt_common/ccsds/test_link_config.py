@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from tlt_common.ccsds.link_config import DEFAULT_PATH, expand_path, load_link_config
@@ -30,3 +32,16 @@ def test_mistakes_are_named(tmp_path):
     with pytest.raises(ConfigError) as info:
         load_link_config(bad)
     assert (info.value.key, info.value.reason) == ("crs.bind_port", "expected at most 65535, got 70000")
+
+
+def test_port_overrides_from_the_environment_give_a_run_its_own_link(monkeypatch):
+    monkeypatch.setenv("TLT_GROUND_CRS_PORT", "53001")
+    monkeypatch.setenv("TLT_GROUND_GSW_PORT", "53002")
+    conf = load_link_config(DEFAULT_PATH.with_name("link_twin.yaml"))
+    assert conf["crs"]["bind_port"] == conf["gsw"]["crs_port"] == 53001
+    assert conf["crs"]["gsw_port"] == conf["gsw"]["bind_port"] == 53002
+    monkeypatch.setenv("RUN", "/tmp/run-x")
+    assert expand_path(conf["key_file"]) == Path("/tmp/run-x/ground.key")
+    monkeypatch.setenv("TLT_GROUND_CRS_PORT", "http")
+    with pytest.raises(ConfigError, match=r"\$TLT_GROUND_CRS_PORT: 'http' is not a UDP port"):
+        load_link_config()
