@@ -169,9 +169,12 @@ class ArsNode(Node):
             MissionProgress, ros_names.CRS_MISSION_PROGRESS, self._on_progress, 10,
             callback_group=MutuallyExclusiveCallbackGroup(),
         )
-        self._timer = self.create_timer(
-            1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=MutuallyExclusiveCallbackGroup()
-        )
+        ticks = MutuallyExclusiveCallbackGroup()
+        self._timer = self.create_timer(1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=ticks)
+        # A request starts on a tick at once, not at the next period (the CRS waits on it), and its
+        # feedback goes out after the tick that changed it.
+        self._kick = self.create_guard_condition(self._tick, callback_group=ticks)
+        self._ticked = threading.Condition()
 
     # ----- goals -----
     def _refusal(self, request: Request) -> str | None:
@@ -202,6 +205,7 @@ class ArsNode(Node):
             else:
                 self.active = goal
                 self.tree.submit(Job(request, lambda ok, why, g=goal: self._finish(g, ok, why)))
+                self._kick.trigger()
         with self._lock:
             self._goals[bytes(handle.goal_id.uuid)] = goal
         handle.execute()
@@ -213,7 +217,11 @@ class ArsNode(Node):
         feedback_type = ACTION_TYPES[kind].Feedback
         last = None
         # Bounded wait per iteration; the tree's own timeouts bound the request.
-        while not goal.done.wait(0.1):
+        while not goal.done.is_set():
+            with self._ticked:
+                self._ticked.wait(0.1)
+            if goal.done.is_set():
+                break
             if self.finished.is_set() or not rclpy.ok(context=self.context):
                 goal.outcome = ("aborted", "the ARS shut down")
                 break
@@ -243,6 +251,8 @@ class ArsNode(Node):
             if self.active is goal:
                 self.active = None
         goal.done.set()
+        with self._ticked:
+            self._ticked.notify_all()
 
     def _cancel(self, handle: Any) -> CancelResponse:
         with self._lock:
@@ -336,6 +346,8 @@ class ArsNode(Node):
                 self.get_logger().error(f"tick failed: {exc!r}")
                 self.tree.interrupt()
                 self._end(goal, "aborted", f"internal error in the behaviour tree: {exc!r}")
+        with self._ticked:
+            self._ticked.notify_all()
 
     def _end(self, goal: ActiveGoal | None, state: str, reason: str) -> None:
         if goal is None:
