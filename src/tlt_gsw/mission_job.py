@@ -225,7 +225,7 @@ def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> t
                 if final.stage in (AckStage.REJECTED, AckStage.FAILED):
                     if accepted and final.stage is AckStage.REJECTED:
                         continue
-                    if final.stage is AckStage.REJECTED and NOT_READY in (final.detail or ""):
+                    if NOT_READY in (final.detail or ""):  # refused, or failed when its turn came
                         # The CRS is up but its drivers are not yet: ask again until start_timeout.
                         if final.detail != not_ready:
                             print(f"start refused for now ({final.detail}); asking again",
