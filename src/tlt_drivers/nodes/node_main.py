@@ -39,6 +39,11 @@ def run_node(
         "--config", type=Path, default=HARDWARE_CONFIG_DIR / default_config, help="hardware YAML"
     )
     parser.add_argument("--port", help="serial port to use instead of the YAML's")
+    parser.add_argument(
+        "--latency-timer-ms", type=float,
+        help="Dynamixel chains: the latency the packet timeout allows for, instead of the YAML's (comm."
+        "latency_timer_ms); on the twin the far end is a process sharing the CPU, not a USB adapter",
+    )
     args = parser.parse_args(user_args)
     try:
         config = load(args.config)
@@ -47,6 +52,11 @@ def run_node(
         return 2
     if args.port:
         config["port"] = args.port
+    if args.latency_timer_ms is not None:
+        if "latency_timer_ms" not in config.get("comm", {}):
+            print(f"{name}: --latency-timer-ms applies to Dynamixel chains only", file=sys.stderr)
+            return 2
+        config["comm"]["latency_timer_ms"] = args.latency_timer_ms
     rclpy.init(args=["prog", *argv])
     node = None
     try:
