@@ -157,9 +157,15 @@ def _fittings_on_tube(
     axis = _axis(tube)
     lay = strut_layout(length, parts)
     offset = lay["fitting_b"] - lay["tube_centre"]  # fittings at -offset (end a) and +offset (end b)
+    centre = np.asarray(tube.translation, dtype=float)
+    if len(fittings) == 2:
+        # The tube's ends are hidden inside the fittings, so its position along its own axis is
+        # seen only to a few millimetres; with both fittings found, their midpoint fixes it.
+        mid = (np.asarray(fittings[0].translation) + np.asarray(fittings[1].translation)) / 2
+        centre = centre + float((mid - centre) @ axis) * axis
     found: dict[str, PoseEstimate] = {}
     for f in fittings:
-        rel = np.asarray(f.translation) - np.asarray(tube.translation)
+        rel = np.asarray(f.translation) - centre
         axial = float(rel @ axis)
         radial = float(np.linalg.norm(rel - axial * axis))
         end = "a" if axial < 0 else "b"
@@ -181,7 +187,7 @@ def _fittings_on_tube(
         if end not in found:
             # A tube is the same end for end: "a" and "b" follow the estimated axis, so the
             # reason also says where the fitting should be.
-            where = np.asarray(tube.translation) + sign * offset * axis
+            where = centre + sign * offset * axis
             xyz = ", ".join(f"{v:.3f}" for v in where)
             reasons.append(
                 f"missing end fitting: {len(found)} of 2 found, none at ({xyz}) m in the camera frame"

@@ -1,0 +1,174 @@
+"""The vision system's transform tree: where each camera is in the world, from joint states.
+
+Reads joint positions (with their ROS-time stamps) as the drivers publish them, and the fixed
+extrinsics of ``config/vision/node.yaml``:
+
+* a lifter ZED: world <- hinge frame (fixed) <- rotation about the hinge's z by the camera-mount
+  joint (``/camera_mounts/joint_states``, e.g. ``camera_mount_1``) <- optical frame (fixed);
+* an EE D405: world <- arm base (fixed) <- UR10e flange by the published DH forward kinematics of
+  the six joints (``/ur_x/joint_states``, ``ur_x_shoulder_pan_joint`` ...;
+  :class:`tlt_ars.planning.kinematics.Ur10eKinematics`) <- slide along flange x by the EE width
+  joint for a camera on gripper b (``/ee_x/state``, ``ee_x_width``) <- optical frame (fixed).
+
+Optical frames are ROS camera frames (x right, y down, z forward). :meth:`CameraRig.camera_pose`
+answers the 4x4 pose of a camera at a ROS time, or raises :class:`FrameUnavailable` saying which
+joint state is missing or how old it is; it never guesses.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tlt_ars.planning.kinematics import JOINT_NAMES, Ur10eKinematics, pose_matrix, rot_z
+from tlt_common import ros_names
+from tlt_vision.node_config import VisionConfig, pose_of
+
+
+class FrameUnavailable(RuntimeError):
+    """A camera pose cannot be given now; the message says why."""
+
+
+def arm_joint_names(arm: str) -> list[str]:
+    """The UR driver's joint names of ``arm`` (``ars_x`` -> ``ur_x_shoulder_pan_joint`` ...)."""
+    component = ros_names.ur(arm)
+    return [f"{component}_{j}_joint" for j in JOINT_NAMES]
+
+
+def width_joint_name(arm: str) -> str:
+    """The EE driver's width joint of ``arm`` (``ars_x`` -> ``ee_x_width``)."""
+    return f"{ros_names.ee(arm)}_width"
+
+
+class JointStates:
+    """Latest position and stamp (ROS time, s) of every joint heard of; thread-safe."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._state: dict[str, tuple[float, float]] = {}
+
+    def update(self, names: Sequence[str], positions: Sequence[float], stamp: float) -> None:
+        with self._lock:
+            for n, p in zip(names, positions, strict=False):
+                self._state[n] = (float(p), float(stamp))
+
+    def get(self, names: Sequence[str], at: float, max_age: float) -> list[float]:
+        """Positions of ``names``, each stamped within ``max_age`` of ``at``; else FrameUnavailable."""
+        with self._lock:
+            out = []
+            for n in names:
+                if n not in self._state:
+                    raise FrameUnavailable(f"no joint state for {n} yet")
+                value, stamp = self._state[n]
+                if abs(at - stamp) > max_age:
+                    gap = abs(at - stamp)
+                    raise FrameUnavailable(
+                        f"joint state of {n} is {gap:.2f} s from the frame (limit {max_age:.2f} s)"
+                    )
+                out.append(value)
+            return out
+
+
+@dataclass(frozen=True)
+class LifterCamera:
+    name: str
+    joint: str
+    hinge: np.ndarray  # 4x4, world
+    optical: np.ndarray  # 4x4, hinge frame
+
+    def pose(self, angle: float) -> np.ndarray:
+        return self.hinge @ pose_matrix((0.0, 0.0, 0.0), rot_z(angle)) @ self.optical
+
+
+@dataclass(frozen=True)
+class EeCamera:
+    name: str
+    arm: str
+    kinematics: Ur10eKinematics  # base = the arm's base in the world, tool = identity (flange)
+    on_width_slide: bool
+    optical: np.ndarray  # 4x4, flange frame at width 0
+    gun_name: str
+    gun_position: np.ndarray  # (3,) flange frame at width 0
+
+    def slide(self, width: float) -> np.ndarray:
+        return pose_matrix((width if self.on_width_slide else 0.0, 0.0, 0.0))
+
+    def pose(self, q: Sequence[float], width: float = 0.0) -> np.ndarray:
+        return self.kinematics.forward(q) @ self.slide(width) @ self.optical
+
+    def gun_in_camera(self) -> np.ndarray:
+        """The rivet gun's muzzle in this camera's optical frame (both ride the same gripper)."""
+        p = np.append(self.gun_position, 1.0)
+        return (np.linalg.inv(self.optical) @ p)[:3]
+
+
+class CameraRig:
+    """Every configured camera and the joint states that place it."""
+
+    def __init__(self, config: VisionConfig, joints: JointStates | None = None) -> None:
+        raw = config.raw
+        self.joints = joints or JointStates()
+        self.max_age = raw["timeouts"]["joint_state_age_s"]
+        self.lifter: dict[str, LifterCamera] = {
+            name: LifterCamera(name, c["joint"], pose_of(c["hinge"]), pose_of(c["optical"]))
+            for name, c in raw["lifter_cameras"].items()
+        }
+        self.ee: dict[str, EeCamera] = {
+            name: EeCamera(
+                name,
+                c["arm"],
+                Ur10eKinematics(base=pose_of(raw["arms"][c["arm"]]["base"])),
+                c["on_width_slide"],
+                pose_of(c["optical"]),
+                c["rivet_gun"]["name"],
+                np.asarray(c["rivet_gun"]["position"], dtype=float),
+            )
+            for name, c in raw["ee_cameras"].items()
+        }
+
+    def joint_names(self, camera: str) -> list[str]:
+        """The joints whose states place ``camera``."""
+        if camera in self.lifter:
+            return [self.lifter[camera].joint]
+        cam = self.ee[camera]
+        return arm_joint_names(cam.arm) + ([width_joint_name(cam.arm)] if cam.on_width_slide else [])
+
+    def pose_from_joints(self, camera: str, positions: Mapping[str, float]) -> np.ndarray:
+        """Pose (4x4, world) of ``camera`` for the given joint positions (driver names)."""
+        if camera in self.lifter:
+            cam = self.lifter[camera]
+            return cam.pose(positions[cam.joint])
+        if camera not in self.ee:
+            raise FrameUnavailable(f"unknown camera {camera!r}")
+        ee = self.ee[camera]
+        q = [positions[n] for n in arm_joint_names(ee.arm)]
+        width = positions[width_joint_name(ee.arm)] if ee.on_width_slide else 0.0
+        return ee.pose(q, width)
+
+    def camera_pose(self, camera: str, at: float) -> np.ndarray:
+        """Pose (4x4, world) of ``camera`` at ROS time ``at`` from the latest joint states."""
+        if camera not in self.lifter and camera not in self.ee:
+            raise FrameUnavailable(f"unknown camera {camera!r}")
+        names = self.joint_names(camera)
+        values = self.joints.get(names, at, self.max_age)
+        return self.pose_from_joints(camera, dict(zip(names, values, strict=True)))
+
+    def tool_pose(self, camera: str, at: float, tool: np.ndarray) -> np.ndarray:
+        """World pose of the tool frame (``tool`` in the flange) of the arm carrying EE ``camera``."""
+        ee = self.ee[camera]
+        q = self.joints.get(arm_joint_names(ee.arm), at, self.max_age)
+        return ee.kinematics.forward(q) @ tool
+
+
+__all__ = [
+    "CameraRig",
+    "EeCamera",
+    "FrameUnavailable",
+    "JointStates",
+    "LifterCamera",
+    "arm_joint_names",
+    "width_joint_name",
+]

@@ -1,0 +1,681 @@
+"""``tlt-vision``: the vision node serving part and bay inspection, alignment and dispenser tags.
+
+Services (names from :mod:`tlt_common.ros_names`; paper §V.E):
+
+* ``VISION_INSPECT_PART`` (``InspectPart``): a strut (``vertical``, ``diagonal``) or a
+  ``cross_frame`` held in front of a lifter ZED, or ``rivet`` with member id ``<ars>/<gun>``: is a
+  rivet in that EE gun (seen by the D405 beside it). The report passes or fails with every reason.
+* ``VISION_INSPECT_BAY`` (``InspectBay``): the four corner joints of bay N seen by the inward ZEDs,
+  placed in the world through the transform tree and matched to the mission's joints.
+* ``VISION_CHECK_ALIGNMENT`` (``CheckAlignment``): the member's part seen by an EE camera, in the
+  world, against the mission's joint positions; the answered pose is the part's pose in the world
+  frame as the tool that holds it (the ARS's convention, see node.yaml ``tool``).
+* ``VISION_LOCATE_TAG`` (``LocateTag``): the dispenser's AprilTag (cv2.aruco, IPPE square) in the
+  named camera's RGB; the answered pose is the dispenser's frame in the world (the tag marks it).
+
+Each request takes one fresh frame of its camera (:mod:`tlt_vision.camera_frames`: subscribed
+only while it waits, at most ``timeouts.frame_s``), segments it (``segmentation.source``: the
+twin's labels or Mask R-CNN), turns the part's instances into point clouds and certified C-3PO
+poses (:mod:`tlt_vision.pipeline`), and decides (:mod:`tlt_vision.inspection`). Camera poses come
+from :mod:`tlt_vision.frames`. Every failure (unknown camera, no frame in time, part not in view,
+no certified pose, no joint state) is an answer with the reason, never an exception or a hang.
+Each service has its own callback group, so one slow request does not hold the others' replies.
+The node runs on ROS time (``--ros-args -p use_sim_time:=true`` under the twin).
+
+Weights files are checked when the node is built: a missing or mismatched file stops it there,
+with the path and the expected shape named.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Pose
+from rclpy._rclpy_pybind11 import InvalidHandle
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
+from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
+
+from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_matrix
+from tlt_common import ros_names
+from tlt_common.config_schema import ConfigError
+from tlt_common.mission.schema import Mission, load_mission
+from tlt_vision import inspection
+from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
+from tlt_vision.cad.models import load_parts, models_for_mission
+from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
+from tlt_vision.frames import CameraRig, FrameUnavailable
+from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
+from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.pose.corrector import CorrectorConfig
+from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, rotation_to_quaternion
+from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
+from tlt_vision.train.c3po_supervised import load_detector
+from tlt_vision.weights import WeightsError, read_manifest
+
+log = logging.getLogger("tlt.vision")
+STRUT_KINDS = ("vertical", "diagonal")
+BAY_DUPLICATE_M = 0.02  # corner joints seen by both ZEDs closer than this are one joint
+
+
+def pose_msg(t: np.ndarray) -> Pose:
+    p = Pose()
+    p.position.x, p.position.y, p.position.z = (float(v) for v in t[:3, 3])
+    x, y, z, w = rotation_to_quaternion(t[:3, :3])
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = x, y, z, w
+    return p
+
+
+def _stamp(header: Any, t: float) -> None:
+    sec = math.floor(t)
+    header.stamp.sec, header.stamp.nanosec = int(sec), round((t - sec) * 1e9) % 1_000_000_000
+
+
+def _estimate_matrix(e: PoseEstimate) -> np.ndarray:
+    return pose_matrix(e.translation, e.rotation)
+
+
+def _in_world(e: PoseEstimate, camera_pose: np.ndarray) -> PoseEstimate:
+    """The estimate moved from the camera frame to the world."""
+    r, t = camera_pose[:3, :3], camera_pose[:3, 3]
+    return replace(
+        e,
+        rotation=r @ e.rotation,
+        translation=r @ e.translation + t,
+        keypoints=e.keypoints @ r.T + t,
+    )
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector ``a`` onto unit vector ``b`` (not opposite)."""
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    if c < -1 + 1e-9:
+        raise ValueError("opposite vectors")
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
+def held_pose(kind: str, part: PoseEstimate, tool: np.ndarray, bay_width: float) -> np.ndarray:
+    """The tool pose (world) that holds ``part`` (world) where it is seen, in the ARS convention.
+
+    The part's axis (a strut's) or plane normal (a cross frame's) is observed; its roll about that
+    axis is not (rotation about a tube's axis is arbitrary in the estimate), so the tool's own
+    roll is kept: the tool frame is turned by the smallest rotation that brings tool x onto the
+    strut's axis (tool z onto the frame's normal). A strut is held at its middle; a cross frame at
+    the middle of the side the tool's -y points to.
+    """
+    r_tool = tool[:3, :3]
+    axis = np.asarray(part.rotation)[:, 2]
+    ref = r_tool[:, 0] if kind in STRUT_KINDS else r_tool[:, 2]
+    if np.dot(axis, ref) < 0:
+        axis = -axis
+    rot = _rotation_between(ref, axis) @ r_tool
+    centre = np.asarray(part.translation, dtype=float)
+    if kind == "cross_frame":
+        centre = centre - rot[:, 1] * bay_width / 2
+    return pose_matrix(centre, rot)
+
+
+class VisionNode(Node):
+    """The vision services (see the module docstring). ``close()`` before ``destroy_node()``."""
+
+    def __init__(
+        self, config: VisionConfig, mission: Mission | None = None, name: str = "vision", **node_kwargs: Any
+    ) -> None:
+        super().__init__(name, **node_kwargs)
+        self.config = config
+        raw = config.raw
+        self.mission = mission or load_mission(config.mission_path)
+        self.parts = load_parts()
+        self.tol = inspection.Tolerances.from_mission(self.mission)
+        self.rig = CameraRig(config)
+        self.estimators = self._load_estimators()
+        self._warm_up()
+        ms = raw["max_points"]
+        self.pipelines = {
+            kind: PartPipeline(
+                {
+                    "strut_tube": self.estimators[f"strut_tube/{kind}"],
+                    "end_fitting": self.estimators["end_fitting"],
+                },
+                max_points=ms,
+            )
+            for kind in STRUT_KINDS
+        }
+        self.pipelines["cross_frame"] = PartPipeline(
+            {"cross_frame": self.estimators["cross_frame"], "corner_joint": self.estimators["corner_joint"]},
+            max_points=ms,
+        )
+        self.pipelines["bay"] = PartPipeline({"corner_joint": self.estimators["corner_joint"]}, max_points=ms)
+        self.pipelines["rivet"] = PartPipeline({"rivet": self.estimators["rivet"]}, max_points=ms)
+        self._pipeline_locks = {k: threading.Lock() for k in self.pipelines}
+        self.tags = TagLocator(TagConfig.load())
+        self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
+        self.tool = pose_of(raw["tool"])
+
+        sensors = MutuallyExclusiveCallbackGroup()
+        self.labels = SegmentationLabels(self, raw["topics"]["segmentation_labels"], sensors)
+        seg = raw["segmentation"]
+        if seg["source"] == "mask_rcnn":
+            from tlt_vision.node_config import repo_path
+
+            self.segmenter: Any = MaskRcnnSegmenter(repo_path(seg["weights"]), seg["min_score"])
+        else:
+            self.segmenter = TwinLabels(lambda: self.labels.wait(0.0))
+        self.grabber = FrameGrabber(self, raw["topics"]["image"])
+        self._subscribe_joint_states(sensors)
+        self.vision_services = [
+            self.create_service(srv, name, cb, callback_group=MutuallyExclusiveCallbackGroup())
+            for srv, name, cb in (
+                (InspectPart, ros_names.VISION_INSPECT_PART, self._inspect_part),
+                (InspectBay, ros_names.VISION_INSPECT_BAY, self._inspect_bay),
+                (CheckAlignment, ros_names.VISION_CHECK_ALIGNMENT, self._check_alignment),
+                (LocateTag, ros_names.VISION_LOCATE_TAG, self._locate_tag),
+            )
+        ]
+        self.get_logger().info(
+            f"vision ready: mission {self.mission.name}, segmentation {seg['source']}, "
+            f"cameras {', '.join(config.cameras)}"
+        )
+
+    # ----- set-up -----
+    @staticmethod
+    def _warm_up() -> None:
+        """torch imports its compiler stack on the first optimiser made (seconds of CPU): do it at
+        start-up rather than inside the first request's time."""
+        import torch
+
+        torch.optim.Adam([torch.zeros(1, requires_grad=True)])
+
+    def _load_estimators(self) -> dict[str, PoseEstimator]:
+        models = models_for_mission(self.mission)
+        thresholds = self.mission.inspection["chamfer_thresholds"]
+        corrector = CorrectorConfig(**self.config.raw["corrector"])
+        out = {}
+        for name in self.config.raw["detectors"]:
+            path = self.config.detector_path(name)
+            manifest = read_manifest(path)
+            width = manifest["settings"].get("width")
+            if not isinstance(width, int):
+                raise WeightsError(path, "manifest settings lack the detector width")
+            model = models[name]
+            out[name] = PoseEstimator(
+                model, load_detector(path, model, width), thresholds[model.object_class], corrector
+            )
+        return out
+
+    def _subscribe_joint_states(self, group: Any) -> None:
+        def on_joints(msg: JointState) -> None:
+            self.rig.joints.update(list(msg.name), list(msg.position), self._msg_time(msg))
+
+        def on_ee(msg: EndEffectorState) -> None:
+            self.rig.joints.update(list(msg.joint_names), list(msg.position), self._msg_time(msg))
+
+        components = {ros_names.CAMERA_MOUNTS} if self.rig.lifter else set()
+        arms = {c.arm for c in self.rig.ee.values()}
+        components |= {ros_names.ur(a) for a in arms}
+        for c in sorted(components):
+            self.create_subscription(
+                JointState, ros_names.joint_states_topic(c), on_joints, 10, callback_group=group
+            )
+        for a in sorted(arms):
+            self.create_subscription(
+                EndEffectorState, ros_names.state_topic(ros_names.ee(a)), on_ee, 10, callback_group=group
+            )
+
+    def _msg_time(self, msg: Any) -> float:
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        return t if t > 0 else self._now()
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ----- shared steps -----
+    def _camera(self, name: str) -> str:
+        camera = self.config.resolve_camera(name)
+        if camera is None:
+            known = ", ".join([*self.config.cameras, *self.config.raw["camera_aliases"]])
+            raise NoFrame(f"unknown camera {name!r} (known: {known})")
+        return camera
+
+    def _grab(self, camera: str, streams: Sequence[str], deadline: float) -> CameraFrame:
+        timeout = min(self.config.raw["timeouts"]["frame_s"], deadline - time.monotonic())
+        if timeout <= 0:
+            raise NoFrame(f"no time left for a frame from {camera}")
+        return self.grabber.grab(camera, streams, self._now(), timeout)
+
+    def _deadline(self) -> float:
+        return time.monotonic() + self.config.raw["timeouts"]["request_s"]
+
+    def _segment(self, frame: CameraFrame) -> list[Detection]:
+        try:
+            return self.segmenter.detect(frame)
+        except ValueError as exc:
+            raise NoFrame(f"segmentation failed: {exc}") from exc
+
+    def _frame_streams(self) -> tuple[str, ...]:
+        return ("depth", *self.segmenter.streams)
+
+    def _observe(
+        self, pipeline: str, detections: list[Detection], frame: CameraFrame
+    ) -> list[inspection.Observation]:
+        with self._pipeline_locks[pipeline]:  # one pipeline's random draws are not shared by threads
+            return self.pipelines[pipeline].observe(
+                detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
+            )
+
+    def select_part(
+        self,
+        detections: list[Detection],
+        frame: CameraFrame,
+        classes: Sequence[str],
+        anchor: str,
+        reach: float,
+    ) -> list[Detection]:
+        """The instances of one part: the biggest ``anchor`` instance in the working depth range (of
+        at least ``min_part_pixels``) and the instances of ``classes`` whose centre lies within
+        ``reach`` (m) of it. None when no such anchor: the part is not in view."""
+        depth = frame.get("depth")
+        near, far = self.config.raw["part_depth_range"]
+        k = frame.intrinsics
+        centres: list[tuple[Detection, np.ndarray]] = []
+        for d in detections:
+            if d.object_class not in classes or depth is None:
+                continue
+            with np.errstate(invalid="ignore"):
+                valid = d.mask & np.isfinite(depth) & (depth > 0)
+            if not valid.any():
+                continue
+            v, u = np.nonzero(valid)
+            z = depth[v, u].astype(float)
+            zc = float(np.median(z))
+            if not near <= zc <= far:
+                continue
+            c = np.array([(np.median(u) - k.cx) * zc / k.fx, (np.median(v) - k.cy) * zc / k.fy, zc])
+            centres.append((d, c))
+        least = self.config.raw["min_part_pixels"]
+        anchors = [(d, c) for d, c in centres if d.object_class == anchor and int(d.mask.sum()) >= least]
+        if not anchors:
+            return []
+        _, centre = max(anchors, key=lambda dc: int(dc[0].mask.sum()))
+        return [d for d, c in centres if np.linalg.norm(c - centre) <= reach]
+
+    def _report_msg(
+        self, report: inspection.InspectionReport, stamp: float, frame_id: str, object_ids: dict[int, str]
+    ) -> InspectionReport:
+        msg = InspectionReport()
+        _stamp(msg.header, stamp)
+        msg.header.frame_id = frame_id
+        msg.target_id, msg.target_kind = report.target_id, report.target_kind
+        msg.passed = bool(report.passed)
+        msg.reasons = list(report.reasons)
+        msg.poses = [
+            self._certified_pose(e, stamp, frame_id, object_ids.get(id(e), "")) for e in report.poses
+        ]
+        return msg
+
+    @staticmethod
+    def _certified_pose(e: PoseEstimate, stamp: float, frame_id: str, object_id: str = "") -> CertifiedPose:
+        f = e.certified_pose_fields(object_id)
+        p = CertifiedPose()
+        _stamp(p.header, stamp)
+        p.header.frame_id = frame_id
+        p.object_class, p.object_id = f["object_class"], f["object_id"]
+        p.pose.position.x, p.pose.position.y, p.pose.position.z = f["position"]
+        o = p.pose.orientation
+        o.x, o.y, o.z, o.w = f["orientation"]
+        p.certified = f["certified"]
+        p.chamfer_p90, p.chamfer_threshold = f["chamfer_p90"], f["chamfer_threshold"]
+        p.keypoint_groups_visible = f["keypoint_groups_visible"]
+        p.keypoint_groups_required = f["keypoint_groups_required"]
+        p.reason = f["reason"]
+        return p
+
+    def _failed(self, target: str, kind: str, reason: str) -> InspectionReport:
+        msg = InspectionReport()
+        _stamp(msg.header, self._now())
+        msg.target_id, msg.target_kind, msg.passed, msg.reasons = target, kind, False, [reason]
+        return msg
+
+    # ----- InspectPart -----
+    def _inspect_part(self, request: Any, response: Any) -> Any:
+        try:
+            response.report = self.inspect_part(request.member_id, request.part_kind, request.camera)
+        except Exception as exc:  # a service must answer: an unexpected error is a failed report
+            log.exception("inspect_part failed")
+            response.report = self._failed(request.member_id, request.part_kind, f"vision error: {exc}")
+        return response
+
+    def inspect_part(self, member_id: str, kind: str, camera_name: str) -> InspectionReport:
+        deadline = self._deadline()
+        if kind == "rivet":
+            return self._inspect_rivet(member_id, camera_name, deadline)
+        if kind not in (*STRUT_KINDS, "cross_frame"):
+            return self._failed(
+                member_id, kind, f"unknown part kind {kind!r} (vertical, diagonal, cross_frame, rivet)"
+            )
+        try:
+            camera = self._camera(camera_name)
+            frame = self._grab(camera, self._frame_streams(), deadline)
+            detections = self._segment(frame)
+        except NoFrame as exc:
+            return self._failed(member_id, kind, str(exc))
+        w = self.mission.bay_width
+        if kind == "cross_frame":
+            part = self.select_part(
+                detections, frame, ("cross_frame", "corner_joint"), "cross_frame", w * 1.2
+            )
+            obs = self._observe("cross_frame", part, frame)
+            report = inspection.inspect_cross_frame(member_id, w, obs, self.tol)
+        else:
+            length = self.mission.strut_lengths[kind]
+            part = self.select_part(
+                detections, frame, ("strut_tube", "end_fitting"), "strut_tube", length / 2 + 0.1
+            )
+            obs = self._observe(kind, part, frame)
+            report = inspection.inspect_strut(member_id, kind, length, obs, self.parts, self.tol)
+        ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
+        return self._report_msg(report, frame.stamp, frame.frame_id, ids)
+
+    def _inspect_rivet(self, member_id: str, camera_name: str, deadline: float) -> InspectionReport:
+        """Is a rivet in gun ``<ars>/<gun>``: a certified rivet pose at the gun's muzzle, seen by the
+        EE camera beside that gun (the request's camera must be on that arm)."""
+        ars, _, gun = member_id.partition("/")
+        cams = [c for c in self.rig.ee.values() if c.arm == ars and c.gun_name == gun]
+        if not cams:
+            return self._failed(member_id, "rivet", f"no EE camera watches rivet gun {member_id!r}")
+        cam = cams[0]
+        try:
+            asked = self._camera(camera_name)
+            if asked not in self.rig.ee or self.rig.ee[asked].arm != ars:
+                raise NoFrame(f"camera {camera_name!r} is not on {ars}'s end effector")
+            frame = self._grab(cam.name, self._frame_streams(), deadline)
+            detections = [d for d in self._segment(frame) if d.object_class == "rivet"]
+        except NoFrame as exc:
+            return self._failed(member_id, "rivet", str(exc))
+        obs = self._observe("rivet", detections, frame)
+        muzzle = cam.gun_in_camera()
+        radius = self.config.raw["rivet_in_gun_radius"]
+        certified = [o.estimate for o in obs if o.estimate is not None and o.estimate.certified]
+        near = [e for e in certified if np.linalg.norm(e.translation - muzzle) <= radius]
+        used = tuple(o.estimate for o in obs if o.estimate is not None)
+        if near:
+            report = inspection.InspectionReport(member_id, "rivet", True, (), used)
+        else:
+            why = [f"no rivet in the gun: none certified within {radius * 1000:.0f} mm of {gun}"]
+            why += [f"rivet: {o.reason}" for o in obs if o.estimate is None]
+            why += [f"rivet: pose not certified ({e.certificate.reason})" for e in used if not e.certified]
+            report = inspection.InspectionReport(member_id, "rivet", False, tuple(why), used)
+        return self._report_msg(report, frame.stamp, frame.frame_id, {})
+
+    # ----- InspectBay -----
+    def _inspect_bay(self, request: Any, response: Any) -> Any:
+        try:
+            response.report = self.inspect_bay(int(request.bay))
+        except Exception as exc:
+            log.exception("inspect_bay failed")
+            response.report = self._failed(f"bay{request.bay}", "bay", f"vision error: {exc}")
+        return response
+
+    def inspect_bay(self, bay: int) -> InspectionReport:
+        deadline = self._deadline()
+        target = f"bay{bay}"
+        try:
+            expected = inspection.bay_joints(self.mission, bay)
+        except KeyError as exc:
+            return self._failed(target, "bay", str(exc.args[0]))
+        world = self.config.raw["world_frame"]
+        found: list[tuple[inspection.Observation, str]] = []
+        problems: list[str] = []
+        stamp = self._now()
+        for camera in self.config.raw["bay_cameras"]:
+            try:
+                frame = self._grab(camera, self._frame_streams(), deadline)
+                pose = self.rig.camera_pose(camera, frame.stamp)
+                detections = [d for d in self._segment(frame) if d.object_class == "corner_joint"]
+            except (NoFrame, FrameUnavailable) as exc:
+                problems.append(f"{camera}: {exc}")
+                continue
+            stamp = frame.stamp
+            for o in self._observe("bay", detections, frame):
+                est = _in_world(o.estimate, pose) if o.estimate is not None else None
+                found.append((replace(o, estimate=est), o.object_id))
+        merged: list[tuple[inspection.Observation, str]] = []
+        for o, oid in sorted(
+            found,
+            key=lambda x: (
+                x[0].estimate.certificate.chamfer_p90
+                if x[0].estimate and x[0].estimate.certified
+                else math.inf
+            ),
+        ):
+            e = o.estimate
+            if (
+                e is not None
+                and e.certified
+                and any(
+                    m.estimate is not None
+                    and m.estimate.certified
+                    and np.linalg.norm(m.estimate.translation - e.translation) < BAY_DUPLICATE_M
+                    for m, _ in merged
+                )
+            ):
+                continue  # the same joint seen by the other camera
+            merged.append((o, oid))
+        report = inspection.inspect_bay(bay, expected, [o for o, _ in merged], self.tol)
+        if not report.passed and problems:
+            report = replace(report, reasons=(*report.reasons, *problems))
+        ids = {id(o.estimate): oid for o, oid in merged if o.estimate is not None}
+        return self._report_msg(report, stamp, world, ids)
+
+    # ----- CheckAlignment -----
+    def _check_alignment(self, request: Any, response: Any) -> Any:
+        try:
+            self.check_alignment(request, response)
+        except Exception as exc:
+            log.exception("check_alignment failed")
+            response.aligned, response.reason = False, f"vision error: {exc}"
+        return response
+
+    def check_alignment(self, request: Any, response: Any) -> Any:
+        deadline = self._deadline()
+        response.aligned = False
+        response.position_error = response.angle_error = math.inf
+        try:
+            member = self.mission.member(request.member_id)
+        except KeyError:
+            response.reason = f"unknown member {request.member_id!r}"
+            return response
+        if member.kind not in (*STRUT_KINDS, "cross_frame"):
+            response.reason = f"cannot check the alignment of a {member.kind}"
+            return response
+        tol = inspection.Tolerances(
+            request.position_tolerance if request.position_tolerance > 0 else self.tol.position,
+            request.angle_tolerance if request.angle_tolerance > 0 else self.tol.angle,
+        )
+        try:
+            camera = self._camera(request.camera)
+            if camera not in self.rig.ee:
+                raise NoFrame(f"camera {request.camera!r} is not an end-effector camera")
+            frame = self._grab(camera, self._frame_streams(), deadline)
+            cam_pose = self.rig.camera_pose(camera, frame.stamp)
+            tool = self.rig.tool_pose(camera, frame.stamp, self.tool)
+            detections = self._segment(frame)
+        except (NoFrame, FrameUnavailable) as exc:
+            response.reason = str(exc)
+            return response
+        w = self.mission.bay_width
+        if member.kind == "cross_frame":
+            part = self.select_part(
+                detections, frame, ("cross_frame", "corner_joint"), "cross_frame", w * 1.2
+            )
+            obs = self._observe("cross_frame", part, frame)
+        else:
+            length = self.mission.strut_lengths[member.kind]
+            part = self.select_part(
+                detections, frame, ("strut_tube", "end_fitting"), "strut_tube", length / 2 + 0.1
+            )
+            obs = self._observe(member.kind, part, frame)
+        main = "cross_frame" if member.kind == "cross_frame" else "strut_tube"
+        mine = [o for o in obs if o.object_class == main]
+        good = [o for o in mine if o.estimate is not None and o.estimate.certified]
+        pick = good or [o for o in mine if o.estimate is not None]
+        estimate = pick[0].estimate if pick else None
+        why = "" if mine else "part not in view"
+        if mine and estimate is None:
+            why = mine[0].reason
+        site = self.config.raw["site"]
+        origin = np.asarray(site["base_origin"]) + np.array(
+            [0.0, 0.0, site["build_level"] + member.bay * self.mission.bay_height]
+        )
+        joints = [origin + np.asarray(p, dtype=float) for _, p in member.joints]
+        result = inspection.check_alignment(member.kind, joints, estimate, cam_pose, tol, why)
+        response.aligned = bool(result.aligned)
+        response.position_error, response.angle_error = (
+            float(result.position_error),
+            float(result.angle_error),
+        )
+        response.reason = result.reason
+        world = self.config.raw["world_frame"]
+        if estimate is not None:
+            seen = _in_world(estimate, cam_pose)
+            response.pose = self._certified_pose(seen, frame.stamp, world, member.id)
+            if estimate.certified:
+                response.pose.pose = pose_msg(held_pose(member.kind, seen, tool, w))
+        else:
+            response.pose.header.frame_id = world
+            response.pose.reason = why or "no pose estimate"
+        return response
+
+    # ----- LocateTag -----
+    def tag_mount(self, dispenser: str) -> np.ndarray:
+        """The tag's frame in its dispenser's frame, where the twin mounts it (node.yaml ``tag_mount``)."""
+        m = self.config.raw["tag_mount"]
+        disp = self.mission.dispensers[dispenser]
+        size = self.tags.config.tag_side * 10 / 8  # printed size, quiet zone included
+        if disp.part_kind == "rivet":
+            extent, top = m["rivet_extent"], m["rivet_top"]
+        else:
+            extent = (
+                self.mission.bay_width
+                if disp.part_kind == "cross_frame"
+                else self.mission.strut_lengths[disp.part_kind]
+            )
+            top = m["first_slot_height"] + max(disp.count - 1, 0) * m["slot_pitch"]
+        return pose_matrix(
+            (-(extent / 2 + m["end_gap"] + size / 2), 0.0, top + m["above_top"]), rpy_matrix(m["rpy"])
+        )
+
+    def _locate_tag(self, request: Any, response: Any) -> Any:
+        try:
+            self.locate_tag(request, response)
+        except Exception as exc:
+            log.exception("locate_tag failed")
+            response.found, response.reason = False, f"vision error: {exc}"
+        return response
+
+    def locate_tag(self, request: Any, response: Any) -> Any:
+        deadline = self._deadline()
+        response.found = False
+        if request.dispenser not in self.tag_ids:
+            response.reason = f"unknown dispenser {request.dispenser!r}"
+            return response
+        tag_id = self.tag_ids[request.dispenser]
+        response.tag_id = tag_id
+        try:
+            camera = self._camera(request.camera)
+            frame = self._grab(camera, ("rgb",), deadline)
+            cam_pose = self.rig.camera_pose(camera, frame.stamp)
+        except (NoFrame, FrameUnavailable) as exc:
+            response.reason = str(exc)
+            return response
+        result = self.tags.locate(frame.get("rgb"), tag_id, frame.camera_matrix)
+        if result.pose is not None:
+            response.reprojection_error = float(result.pose.reprojection_error)
+        if not result.found:
+            response.reason = result.reason
+            return response
+        tag = pose_matrix(result.pose.translation, result.pose.rotation)
+        dispenser = cam_pose @ tag @ invert(self.tag_mount(request.dispenser))
+        response.found = True
+        _stamp(response.pose.header, frame.stamp)
+        response.pose.header.frame_id = self.config.raw["world_frame"]
+        response.pose.pose = pose_msg(dispenser)
+        return response
+
+
+def spin(executor: Any, context: Any = None, stop: threading.Event | None = None) -> None:
+    """Spin ``executor`` until its context shuts down or ``stop`` is set. A wait set built while a
+    request destroys its frame subscriptions can meet a destroyed handle; the next wait is clean,
+    so carry on."""
+    while rclpy.ok(context=context) and not (stop is not None and stop.is_set()):
+        try:
+            executor.spin_once(timeout_sec=0.2)
+        except InvalidHandle:
+            continue
+
+
+def build_node(
+    config_path: str | Path = DEFAULT_CONFIG, mission: str | Path | None = None, **kw: Any
+) -> VisionNode:
+    """Load the configuration and build the node; ConfigError or WeightsError when refused."""
+    return VisionNode(load_config(config_path, mission), **kw)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``tlt-vision [--config node.yaml] [--mission M.yaml] [--ros-args ...]``; 2 when refused."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args: list[str] = []
+    if "--ros-args" in argv:
+        at = argv.index("--ros-args")
+        argv, ros_args = argv[:at], argv[at:]
+    parser = argparse.ArgumentParser(prog="tlt-vision", description="The TLT vision node (paper §V.E).")
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="vision node configuration")
+    parser.add_argument("--mission", type=Path, help="mission file (overrides the configuration's)")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        config = load_config(args.config, args.mission)
+        mission = load_mission(config.mission_path)
+    except ConfigError as exc:
+        print(f"tlt-vision: refused: {exc}", file=sys.stderr)
+        return 2
+    rclpy.init(args=["tlt-vision", *ros_args])
+    node = None
+    try:
+        try:
+            node = VisionNode(config, mission)
+        except (ConfigError, WeightsError, KeyError) as exc:
+            print(f"tlt-vision: refused: {exc}", file=sys.stderr)
+            return 2
+        executor = MultiThreadedExecutor(num_threads=8)
+        executor.add_node(node)
+        try:
+            spin(executor)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            executor.shutdown(timeout_sec=2.0)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

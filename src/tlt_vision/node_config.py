@@ -1,0 +1,199 @@
+"""The vision node's configuration: ``config/vision/node.yaml``, validated on load.
+
+Reads the YAML file (with ``tlt_common.config_schema``) and checks what the schema cannot: every
+alias names a configured camera, every EE camera's arm has a base, the bay cameras exist, the depth
+range is ordered, and the segmentation source is known. Paths are resolved against the repository
+root. Any problem raises :class:`~tlt_common.config_schema.ConfigError` naming the file, the key and
+the reason; nothing is returned half-checked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
+from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_CONFIG = REPO_ROOT / "config" / "vision" / "node.yaml"
+SEGMENTATION_SOURCES = ("twin_labels", "mask_rcnn")
+MODEL_NAMES = (
+    "strut_tube/vertical",
+    "strut_tube/diagonal",
+    "end_fitting",
+    "cross_frame",
+    "corner_joint",
+    "rivet",
+)
+
+
+def _vec(n: int) -> Field:
+    return Field(
+        "list", item=Field("float"), check=lambda v: None if len(v) == n else f"expected {n} numbers"
+    )
+
+
+_POSE = Field("dict", schema={"position": _vec(3), "rpy": _vec(3)})
+_POSITIVE = {"minimum": 1e-6}
+
+SCHEMA = {
+    "format": Field("int", choices=(1,)),
+    "mission": Field("str"),
+    "world_frame": opt("str", "world"),
+    "segmentation": Field(
+        "dict",
+        schema={
+            "source": Field("str", choices=SEGMENTATION_SOURCES),
+            "weights": opt("str", ""),
+            "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
+        },
+    ),
+    "detectors": Field("dict", schema={name: Field("str", doc="weights file (.pt)") for name in MODEL_NAMES}),
+    "max_points": opt("int", 1024, minimum=32),
+    "corrector": Field(
+        "dict",
+        schema={
+            "max_iterations": Field("int", minimum=1, maximum=2000),
+            "step": Field("float", **_POSITIVE),
+            "decay": Field("float", minimum=0.5, maximum=1.0),
+            "patience": Field("int", minimum=1),
+        },
+    ),
+    "timeouts": Field(
+        "dict",
+        schema={
+            "frame_s": Field("float", **_POSITIVE),
+            "request_s": Field("float", **_POSITIVE),
+            "joint_state_age_s": Field("float", **_POSITIVE),
+        },
+    ),
+    "topics": Field(
+        "dict",
+        schema={
+            "image": Field(
+                "str",
+                check=lambda v: (
+                    None if "{camera}" in v and "{stream}" in v else "must contain {camera} and {stream}"
+                ),
+            ),
+            "segmentation_labels": Field("str"),
+        },
+    ),
+    "camera_aliases": opt("map", {}, item=Field("str")),
+    "part_depth_range": _vec(2),
+    "min_part_pixels": Field("int", minimum=1),
+    "lifter_cameras": Field(
+        "map", item=Field("dict", schema={"joint": Field("str"), "hinge": _POSE, "optical": _POSE})
+    ),
+    "arms": Field("map", item=Field("dict", schema={"base": _POSE})),
+    "ee_cameras": Field(
+        "map",
+        item=Field(
+            "dict",
+            schema={
+                "arm": Field("str"),
+                "on_width_slide": Field("bool"),
+                "optical": _POSE,
+                "rivet_gun": Field("dict", schema={"name": Field("str"), "position": _vec(3)}),
+            },
+        ),
+    ),
+    "tool": _POSE,
+    "site": Field("dict", schema={"base_origin": _vec(3), "build_level": Field("float")}),
+    "rivet_in_gun_radius": Field("float", **_POSITIVE),
+    "bay_cameras": Field("list", item=Field("str"), min_items=1),
+    "tag_mount": Field(
+        "dict",
+        schema={
+            "end_gap": Field("float", minimum=0.0),
+            "above_top": Field("float"),
+            "first_slot_height": Field("float"),
+            "slot_pitch": Field("float", minimum=0.0),
+            "rivet_top": Field("float"),
+            "rivet_extent": Field("float", minimum=0.0),
+            "rpy": _vec(3),
+        },
+    ),
+}
+
+
+def pose_of(entry: dict[str, Any]) -> np.ndarray:
+    """4x4 pose of a ``{position, rpy}`` entry (rpy as URDF: R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    return pose_matrix(entry["position"], rpy_matrix(entry["rpy"]))
+
+
+def repo_path(path: str) -> Path:
+    p = Path(path)
+    return p if p.is_absolute() else REPO_ROOT / p
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    """The validated file; ``raw`` holds every key with defaults filled in."""
+
+    raw: dict[str, Any]
+    source: str
+
+    @property
+    def cameras(self) -> list[str]:
+        return [*self.raw["lifter_cameras"], *self.raw["ee_cameras"]]
+
+    def resolve_camera(self, name: str) -> str | None:
+        """The configured camera ``name`` means (directly or through an alias), or None."""
+        name = self.raw["camera_aliases"].get(name, name)
+        return name if name in self.cameras else None
+
+    def detector_path(self, model: str) -> Path:
+        return repo_path(self.raw["detectors"][model])
+
+    @property
+    def mission_path(self) -> Path:
+        return repo_path(self.raw["mission"])
+
+
+def _check(raw: dict[str, Any], source: str) -> None:
+    cameras = set(raw["lifter_cameras"]) | set(raw["ee_cameras"])
+    for alias, target in raw["camera_aliases"].items():
+        if target not in cameras:
+            raise ConfigError(source, f"camera_aliases.{alias}", f"names unknown camera {target!r}")
+    for name, cam in raw["ee_cameras"].items():
+        if cam["arm"] not in raw["arms"]:
+            raise ConfigError(source, f"ee_cameras.{name}.arm", f"no base for arm {cam['arm']!r} under arms")
+    for i, name in enumerate(raw["bay_cameras"]):
+        if name not in raw["lifter_cameras"]:
+            raise ConfigError(source, f"bay_cameras[{i}]", f"{name!r} is not a lifter camera")
+    near, far = raw["part_depth_range"]
+    if not 0 <= near < far:
+        raise ConfigError(source, "part_depth_range", f"expected 0 <= near < far, got [{near}, {far}]")
+    if raw["segmentation"]["source"] == "mask_rcnn" and not raw["segmentation"]["weights"]:
+        raise ConfigError(source, "segmentation.weights", "mask_rcnn needs a weights file")
+
+
+def config_from_dict(data: Any, source: str = "<vision config>") -> VisionConfig:
+    raw = validate(data, SCHEMA, source=source)
+    _check(raw, source)
+    return VisionConfig(raw, source)
+
+
+def load_config(path: str | Path = DEFAULT_CONFIG, mission: str | Path | None = None) -> VisionConfig:
+    """Load and check ``path``; ``mission`` replaces the file's mission. Raises ConfigError."""
+    cfg = config_from_dict(load_yaml(path), str(path))
+    if mission is not None:
+        cfg.raw["mission"] = str(mission)
+    return cfg
+
+
+__all__ = [
+    "DEFAULT_CONFIG",
+    "MODEL_NAMES",
+    "SEGMENTATION_SOURCES",
+    "VisionConfig",
+    "config_from_dict",
+    "load_config",
+    "pose_of",
+    "repo_path",
+]

@@ -1,0 +1,77 @@
+"""Where the vision node's instance masks come from (``segmentation.source`` of node.yaml).
+
+* :class:`TwinLabels` reads the twin's ground-truth instance segmentation image (instance id per
+  pixel) and its label table (id -> geom instance name and class). Each instance of a part class
+  (``tlt_vision.cad.models.CLASSES``) becomes a :class:`~tlt_vision.pipeline.Detection` with
+  score 1; the machine, tags and anything else are dropped. It needs the ``segmentation`` stream.
+* :class:`MaskRcnnSegmenter` runs the plain-torch Mask R-CNN on the RGB image with trained
+  weights; it needs the ``rgb`` stream. Weights that are missing or do not fit the model are
+  refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the path and the
+  tensor shape expected).
+
+Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
+labels received, no image).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tlt_vision.cad.models import CLASSES
+from tlt_vision.camera_frames import CameraFrame
+from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
+
+MASK_RCNN_KIND = "mask_rcnn"
+
+
+class TwinLabels:
+    streams = ("segmentation",)
+
+    def __init__(self, labels: Callable[[], tuple[list[str], list[str]] | None]) -> None:
+        self.labels = labels
+
+    def detect(self, frame: CameraFrame) -> list[Detection]:
+        seg = frame.get("segmentation")
+        if seg is None:
+            raise ValueError("no segmentation image")
+        table = self.labels()
+        if table is None:
+            raise ValueError("no segmentation labels received from the twin")
+        names, classes = table
+        out = []
+        for i in np.unique(seg[seg >= 0]):
+            if i >= len(names) or classes[i] not in CLASSES:
+                continue
+            out.append(Detection(classes[i], seg == i, 1.0, names[i]))
+        return out
+
+
+class MaskRcnnSegmenter:
+    streams = ("rgb",)
+
+    def __init__(self, weights: str | Path, min_score: float) -> None:
+        from tlt_vision.segmentation.config import MaskRCNNConfig
+        from tlt_vision.segmentation.model import MaskRCNN
+        from tlt_vision.weights import load_weights
+
+        self.cfg = MaskRCNNConfig()
+        self.model = MaskRCNN(self.cfg)
+        load_weights(self.model, weights, MASK_RCNN_KIND, list(self.cfg.classes))
+        self.model.eval()
+        self.min_score = min_score
+
+    def detect(self, frame: CameraFrame) -> list[Detection]:
+        rgb = frame.get("rgb")
+        if rgb is None:
+            raise ValueError("no RGB image")
+        image = torch.from_numpy(rgb.astype(np.float32) / 255.0).permute(2, 0, 1)[None]
+        with torch.no_grad():
+            result = self.model(image)[0]
+        return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
+
+
+__all__ = ["MASK_RCNN_KIND", "MaskRcnnSegmenter", "TwinLabels"]

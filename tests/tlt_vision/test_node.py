@@ -1,0 +1,331 @@
+"""The vision node against the twin: real service calls answered from the twin's rendered cameras.
+
+The twin here is the real model (``tlt_sim.model.Scene``, scenario ``defective_parts``) with the
+twin process's own stream publishers (``tlt_sim.twin.ros_streams``: ``/clock``, camera images
+rendered only while subscribed, segmentation labels), stepped on a thread of this process so a
+test can stage parts between steps. The drivers' joint states (``/camera_mounts/joint_states``,
+``/ur_x/joint_states``, ``/ee_x/state``) are published from the model's joints, stamped with sim
+time, as the driver nodes publish them on the twin. The vision node runs on sim time.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from tlt_interfaces.msg import EndEffectorState
+from tlt_interfaces.srv import InspectPart, LocateTag
+from tlt_sim.model import names
+from tlt_sim.model.scene import Scene
+from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
+from tlt_sim.twin.settings import load_settings
+
+from tlt_ars.planning.kinematics import pose_error, pose_matrix
+from tlt_common import ros_names
+from tlt_common.config_schema import load_yaml
+from tlt_vision.frames import arm_joint_names, width_joint_name
+from tlt_vision.node import VisionNode, main, spin
+from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "config" / "twin" / "scenarios" / "defective_parts.yaml"
+CALL_S = 120.0
+
+
+class TwinHost:
+    """The model stepped on its own thread, with the twin's publishers and the drivers' joint states."""
+
+    def __init__(self, context: Context, out_dir: Path) -> None:
+        self.scene = Scene(scenario=SCENARIO, out_dir=out_dir)
+        self.node = Node("twin", context=context)
+        self.clock = ClockPublisher(self.node)
+        self.cameras = CameraStreams(self.node, self.scene, load_settings())
+        self.rendering = True
+        self.mounts = self.node.create_publisher(
+            JointState, ros_names.joint_states_topic("camera_mounts"), 10
+        )
+        self.arm = self.node.create_publisher(JointState, ros_names.joint_states_topic("ur_x"), 10)
+        self.ee = self.node.create_publisher(EndEffectorState, ros_names.state_topic("ee_x"), 10)
+        self.calls: queue.Queue = queue.Queue()
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        # The first render makes the GL context, which holds the interpreter for seconds on a
+        # loaded machine; made here, it does not eat into the requests' frame timeout.
+        self.do(lambda s: s.render(names.zed_camera(0), 320, 240), timeout=120.0)
+
+    def do(self, fn, timeout: float = 30.0):
+        """Run ``fn(scene)`` on the simulation thread between steps; returns its result."""
+        done: queue.Queue = queue.Queue()
+        self.calls.put((fn, done))
+        ok, value = done.get(timeout=timeout)
+        if not ok:
+            raise value
+        return value
+
+    def _run(self) -> None:
+        tick = 0
+        while not self._stop.is_set():
+            while not self.calls.empty():
+                fn, done = self.calls.get()
+                try:
+                    done.put((True, fn(self.scene)))
+                except Exception as exc:  # handed to the caller
+                    done.put((False, exc))
+            self.scene.step(5)  # one 10 ms sync period
+            t = self.scene.time
+            self.clock.publish(t)
+            if self.rendering:
+                self.cameras.publish_due(t)
+            if tick % 5 == 0:
+                self._joint_states(t)
+            tick += 1
+            time.sleep(0.002)  # let the other threads of this process in
+
+    def _joint_states(self, t: float) -> None:
+        s = self.scene
+        stamp = rclpy.time.Time(seconds=t).to_msg()
+        msg = JointState()
+        msg.header.stamp = stamp
+        msg.name = [names.camera_mount(i) for i in range(2)]
+        msg.position = [s.position(n) for n in msg.name]
+        self.mounts.publish(msg)
+        arm = JointState()
+        arm.header.stamp = stamp
+        arm.name = arm_joint_names("ars_x")
+        arm.position = [s.position(j) for j in names.arm_joints("ars_x")]
+        self.arm.publish(arm)
+        ee = EndEffectorState()
+        ee.header.stamp = stamp
+        ee.ars = "ars_x"
+        ee.joint_names = [width_joint_name("ars_x")]
+        ee.position = [s.position(names.width_joint("ars_x"))]
+        self.ee.publish(ee)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.thread.join(timeout=10)
+        self.scene.close()
+        self.node.destroy_node()
+
+
+def vision_config(**changes) -> dict:
+    raw = load_yaml(DEFAULT_CONFIG)
+    raw["timeouts"]["frame_s"] = 10.0
+    raw.update(changes)
+    return raw
+
+
+class Rig:
+    def __init__(self, tmp: Path) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.twin = TwinHost(self.context, tmp)
+        config = config_from_dict(vision_config(), "test vision config")
+        self.vision = VisionNode(
+            config,
+            self.twin.scene.mission,
+            context=self.context,
+            parameter_overrides=[Parameter("use_sim_time", value=True)],
+        )
+        self.client = Node("vision_test_client", context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=6, context=self.context)
+        for n in (self.vision, self.client):
+            self.executor.add_node(n)
+        self.stop = threading.Event()
+        self.spin = threading.Thread(target=spin, args=(self.executor, self.context, self.stop), daemon=True)
+        self.spin.start()
+
+    def call(self, srv_type, name: str, request):
+        client = self.client.create_client(srv_type, name)
+        try:
+            assert client.wait_for_service(timeout_sec=20.0), f"{name} not served"
+            future = client.call_async(request)
+            deadline = time.monotonic() + CALL_S
+            while not future.done() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert future.done(), f"{name} did not answer in {CALL_S} s"
+            return future.result()
+        finally:
+            self.client.destroy_client(client)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.spin.join(timeout=10)
+        self.executor.shutdown(timeout_sec=5)
+        self.twin.close()
+        self.vision.destroy_node()
+        self.client.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    r = Rig(tmp_path_factory.mktemp("vision_twin"))
+    yield r
+    r.close()
+
+
+AWAY = np.array([5.0, 5.0, -3.0])  # out of every camera's view
+
+
+def _show(rig: Rig, part: str, camera: str = "zed_1", distance: float = 0.9) -> None:
+    """Put ``part`` in front of ``camera`` and every other vertical out of view."""
+
+    def stage(scene: Scene) -> None:
+        for p in scene.info.parts.values():
+            if p.kind == "vertical" and p.name != part:
+                scene.place_part(p.name, AWAY - np.array([0.0, 0.0, p.index]), np.eye(3))
+        scene.place_in_view(part, camera, distance)
+
+    rig.twin.do(stage)
+
+
+def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
+    member = "bay1/vertical/x0_y1"
+    _show(rig, "vertical_dispenser_x/2")
+    good = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id=member, part_kind="vertical", camera="zed_left"),
+    ).report
+    assert good.passed, list(good.reasons)
+    assert good.target_id == member and good.header.frame_id == "zed_1_optical"
+    classes = sorted(p.object_class for p in good.poses)
+    assert classes == ["end_fitting", "end_fitting", "strut_tube"]
+    assert all(p.certified for p in good.poses)
+
+    _show(rig, "vertical_dispenser_x/0")  # built without end fitting b
+    missing = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id=member, part_kind="vertical", camera="zed_left"),
+    ).report
+    assert not missing.passed
+    assert any(r.startswith("missing end fitting: 1 of 2 found") for r in missing.reasons), list(
+        missing.reasons
+    )
+
+
+def test_a_part_out_of_view_fails_with_that_reason(rig):
+    rig.twin.do(
+        lambda s: [
+            s.place_part(p.name, AWAY, np.eye(3)) for p in s.info.parts.values() if p.kind == "vertical"
+        ]
+    )
+    report = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+    ).report
+    assert not report.passed and report.reasons[0].startswith("part not in view"), list(report.reasons)
+
+
+def _look_down_at(scene: Scene, rig: Rig, target: np.ndarray, height: float) -> bool:
+    """Put ARS X's arm so that its D405 a looks straight down at ``target`` from ``height``."""
+    cam = rig.vision.rig.ee["ars_x/d405_a"]
+    optical = pose_matrix(
+        target + np.array([0.0, 0.0, height]), np.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]])
+    )
+    flange = optical @ np.linalg.inv(cam.optical)
+    try:
+        q = cam.kinematics.nearest(flange, scene.edu["arms"]["ars_x"]["home"])
+    except ValueError:
+        return False
+    for joint, value in zip(names.arm_joints("ars_x"), q, strict=True):
+        scene.set_joint_state(joint, float(value))
+    scene.set_joint_state(names.width_joint("ars_x"), 0.0)
+    return True
+
+
+def test_dispenser_tag_is_located_within_millimetres_of_the_twin(rig):
+    name = "vertical_dispenser_x"
+
+    def aim(scene: Scene):
+        tag = scene.site_position(f"dispenser/{name}/tag")
+        assert _look_down_at(scene, rig, tag, 0.45), "no arm pose looks at the tag"
+        return scene.body_pose(f"dispenser/{name}")
+
+    pos, rot = rig.twin.do(aim)
+    time.sleep(0.5)  # joint states of the new pose reach the vision node
+    res = rig.call(
+        LocateTag, ros_names.VISION_LOCATE_TAG, LocateTag.Request(dispenser=name, camera="ars_x/d405")
+    )
+    assert res.found, res.reason
+    assert res.tag_id == list(rig.twin.scene.mission.dispensers).index(name)
+    assert res.pose.header.frame_id == "world"
+    p, q = res.pose.pose.position, res.pose.pose.orientation
+    x, y, z, w = q.x, q.y, q.z, q.w
+    got = pose_matrix(
+        (p.x, p.y, p.z),
+        np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        ),
+    )
+    dp, da = pose_error(got, pose_matrix(pos, rot))
+    assert dp < 0.005, f"dispenser located {dp * 1000:.1f} mm from the twin's"
+    assert da < np.radians(1.0), f"dispenser turned {np.degrees(da):.2f} deg from the twin's"
+    res = rig.call(
+        LocateTag,
+        ros_names.VISION_LOCATE_TAG,
+        LocateTag.Request(dispenser="diagonal_dispenser_y", camera="ars_x/d405"),
+    )
+    assert not res.found and "not in view" in res.reason
+
+
+def test_no_frame_in_time_answers_with_the_reason(rig):
+    rig.twin.rendering = False  # a stalled twin: nothing is rendered
+    try:
+        t0 = time.monotonic()
+        report = rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+        ).report
+        waited = time.monotonic() - t0
+    finally:
+        rig.twin.rendering = True
+    assert not report.passed
+    assert report.reasons[0].startswith("no camera frame from zed_1 within 10.0 s"), list(report.reasons)
+    assert waited < CALL_S
+    report = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id="x", part_kind="vertical", camera="zed_9"),
+    ).report
+    assert not report.passed and report.reasons[0].startswith("unknown camera 'zed_9'")
+
+
+def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path, capsys):
+    bad = vision_config(part_depth_range=[2.0, 0.5])
+    path = tmp_path / "bad.yaml"
+    path.write_text(__import__("yaml").safe_dump(bad))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "part_depth_range" in err
+    wrong = vision_config()
+    wrong["segmentation"]["source"] = "labels"
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.source" in err and "'labels'" in err
+    missing = vision_config()
+    missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
+    path.write_text(__import__("yaml").safe_dump(missing))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "none.pt" in err and "weights file not found" in err
