@@ -349,6 +349,10 @@ class Assembly:
         self.m.body_contype[b] = PART_BIT if falling else 0  # the broadphase filters by body first
 
     # -- rivets ------------------------------------------------------------------------------
+    def _show_loaded_rivet(self, arm: str, side: str, shown: bool) -> None:
+        # A geom with zero alpha is left out of rendering and of segmentation alike.
+        self.m.geom_rgba[self.m.geom(names.loaded_rivet_geom(arm, side)).id, 3] = 1.0 if shown else 0.0
+
     def load_rivet(self, arm: str, side: str) -> bool:
         """Take a rivet into gun ``side`` if it is at a rivet dispenser that has one."""
         if self.loaded[(arm, side)]:
@@ -360,6 +364,7 @@ class Assembly:
             if np.linalg.norm(self.site_pos(f"dispenser/{name}/pickup") - gun) <= 2 * self.ee["rivet_reach"]:
                 self.rivets_left[name] -= 1
                 self.loaded[(arm, side)] = True
+                self._show_loaded_rivet(arm, side, True)
                 return True
         return False
 
@@ -370,6 +375,7 @@ class Assembly:
         if not shot.loaded:
             return shot
         self.loaded[(arm, side)] = False
+        self._show_loaded_rivet(arm, side, False)
         gun = self.site_pos(names.rivet_gun_site(arm, side))
         reach = self.ee["rivet_reach"]
         corners = [

@@ -883,6 +883,18 @@ class _Builder:
             mass=0.1,
         )
         _sub(body, "site", name=names.rivet_gun_site(arm, side), pos=(gx, 0, depth), size=(0.008,))
+        # The rivet in the gun's muzzle: drawn (and seen by the D405) only while the gun is loaded;
+        # the assembly physics shows and hides it (alpha), it touches nothing.
+        _sub(
+            body,
+            "geom",
+            name=names.loaded_rivet_geom(arm, side),
+            class_="deco",
+            type="cylinder",
+            size=(0.006, 0.012),
+            pos=(gx, 0, depth),
+            rgba=(0.9, 0.1, 0.1, 0.0),
+        )
         cam_pos = np.array([sign * 0.06, 0.075, 0.07])
         tilt = math.radians(self.edu["cameras"]["d405_tilt_deg"])
         target = np.array([gx - sign * depth * math.tan(tilt), 0.0, depth])

@@ -52,6 +52,11 @@ def grasp_joint(arm: str, side: str) -> str:
     return f"{arm}/grasp_{side}"
 
 
+def loaded_rivet_geom(arm: str, side: str) -> str:
+    """The rivet drawn in gun ``side`` of ``arm`` while it is loaded (vision class ``rivet``)."""
+    return f"{arm}/rivet_gun_{side}/rivet_loaded"
+
+
 def width_joint(arm: str) -> str:
     return f"{arm}/width"
 
