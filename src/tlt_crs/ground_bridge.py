@@ -86,6 +86,15 @@ class GroundBridge:
         node.create_timer(1.0 / node.ctx.config.tick_rate_hz, self.send_step_if_changed)
         self._report_bay_inspections()
 
+    def send_housekeeping(self) -> None:
+        """Every housekeeping packet now (the last word of a stopping CRS)."""
+        for send in (self.send_progress, self.send_lifter, self.send_grippers, self.send_end_effectors,
+                     self.send_arm_joints, self.send_tower):
+            try:
+                send()
+            except Exception as exc:  # one packet that cannot be built must not cost the others
+                _log.warning("housekeeping not sent: %s", exc)
+
     def _validate(self, command: GroundCommand) -> tuple[Reason, str] | None:
         refusal = self.node.commands.check(command.name, command.params)
         return (Reason.REFUSED, refusal) if refusal else None

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -202,6 +203,9 @@ def build_node(config: CrsConfig, **node_kwargs: Any) -> CrsNode:
     return CrsNode(config, mission, model, registry, index, **node_kwargs)
 
 
+# How long a stopped CRS keeps listening to its devices before it sends their last states home, s.
+FINAL_STATES_S = 0.5
+
 def _autostart_when_ready(node: CrsNode) -> None:
     """Submit Start as soon as the CRS would accept it: its drivers may still be coming up."""
     waiting: list[str] = []
@@ -259,7 +263,7 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, TowerModelError, OSError) as exc:
             print(f"tlt-crs: refused: {exc}", file=sys.stderr)
             return 2
-        link = None
+        link = bridge = None
         if args.ground_link is not None:
             from tlt_common.ccsds.auth import KeyFileError, ReplayStateError
             from tlt_common.ccsds.link_config import load_link_config
@@ -272,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"tlt-crs: refused: ground link: {exc}", file=sys.stderr)
                 node.destroy_node()
                 return 2
-            GroundBridge(node, link)
+            bridge = GroundBridge(node, link)
             link.start()
             _log.info("ground link on %s:%d", *link.address)
         if args.autostart:
@@ -282,6 +286,13 @@ def main(argv: list[str] | None = None) -> int:
         try:
             while rclpy.ok() and not node.finished:
                 executor.spin_once(timeout_sec=0.1)
+            if node.finished and bridge is not None:
+                # After a ground Stop: the devices' states that followed it (the lifter in Safe,
+                # the arms standing) reach the ground before the process ends.
+                deadline = time.monotonic() + FINAL_STATES_S
+                while rclpy.ok() and time.monotonic() < deadline:
+                    executor.spin_once(timeout_sec=0.05)
+                bridge.send_housekeeping()
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:

@@ -41,9 +41,10 @@ def test_stop_during_the_build_makes_everything_safe_and_exits_cleanly(tmp_path)
         assert run.events(since=mark, code="STOPPING"), run.events(since=mark)
         run.wait_kind("hk_mission", lambda f: f["run_state"] == "stopped" and not f["started"], 10,
                       "run state stopped", since=mark)
-        # The CRS completes Stop once the lifter driver answered the Safe request, and exits at
-        # once: its 2 Hz hk_lifter rarely gets out in between, so Safe is read from the lifter
-        # driver's own state in the recording below.
+        # The stopping CRS sends its devices' last states home before it exits: the operator
+        # sees the lifter in Safe.
+        run.wait_kind("hk_lifter", lambda f: f["state"] in ("safe", 3), 30, "the lifter in Safe (ground)",
+                      since=mark)
         lifter_after = [f["state"] for f in run.of_kind("hk_lifter", since=mark)]
 
         for name in ("crs", "ars_x", "ars_y"):
