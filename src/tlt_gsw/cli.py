@@ -33,7 +33,7 @@ from tlt_common.ccsds.reasons import AckStage
 from tlt_common.config_schema import ConfigError
 from tlt_gsw.archive import query as archive_query
 from tlt_gsw.archive.recorder import Recorder
-from tlt_gsw.link import GswLink
+from tlt_gsw.link import GswLink, host_port
 from tlt_gsw.mission_job import ACTIONS as MISSION_ACTIONS
 from tlt_gsw.mission_job import add_mission_parser, add_summary_parser
 from tlt_gsw.mission_job import run as run_mission_action
@@ -43,13 +43,6 @@ EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
 
 class UsageError(ValueError):
     """Bad command-line input; the message says what to change."""
-
-
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    if not host or not port.isdigit():
-        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
-    return host, int(port)
 
 
 def _parse_typed(text: str) -> Any:
@@ -320,8 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="action", required=True)
 
     def link_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--crs", type=_address, help="CRS host:port")
-        p.add_argument("--bind", type=_address, help="local host:port to receive on")
+        p.add_argument("--crs", type=host_port, help="CRS host:port")
+        p.add_argument("--bind", type=host_port, help="local host:port to receive on")
         p.add_argument("--key-file", help="key file (default: link.yaml key_file or $TLT_GROUND_KEY_FILE)")
         p.add_argument("--key-id", type=int)
         p.add_argument("--archive", help="archive SQLite file")

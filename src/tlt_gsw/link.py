@@ -9,6 +9,7 @@ for a stage with a bounded timeout. Nothing here blocks without a timeout.
 
 from __future__ import annotations
 
+import argparse
 import socket
 import time
 from collections.abc import Callable, Mapping
@@ -25,6 +26,14 @@ from tlt_gsw.archive.recorder import Recorder
 
 RECV_BUFFER = 65535
 MAX_TRACKED_COMMANDS = 1000
+
+
+def host_port(text: str) -> tuple[str, int]:
+    """``host:port`` from the command line (an argparse ``type``)."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit():
+        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
+    return host, int(port)
 
 
 @dataclass(frozen=True)

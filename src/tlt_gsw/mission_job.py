@@ -40,7 +40,7 @@ from tlt_common.ccsds.reasons import AckStage
 from tlt_common.config_schema import ConfigError
 from tlt_gsw.archive import query as archive_query
 from tlt_gsw.archive.recorder import Recorder
-from tlt_gsw.link import GswLink, SentCommand
+from tlt_gsw.link import GswLink, SentCommand, host_port
 from tlt_gsw.summary import format_summary, summarize_file
 
 EXIT_BUILT, EXIT_FAULT, EXIT_USAGE, EXIT_TIMEOUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -56,13 +56,6 @@ REJECTION_ACK_GRACE_S = 0.5
 
 class JobError(ValueError):
     """Bad usage or settings; the message says what to change."""
-
-
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    if not host or not port.isdigit():
-        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
-    return host, int(port)
 
 
 class Progress:
@@ -395,8 +388,8 @@ def _cmd_summary(args: argparse.Namespace, out: IO[str]) -> int:
 def add_mission_parser(sub: Any) -> argparse.ArgumentParser:
     """Add ``mission`` to the subcommands ``sub`` of a ``tlt gsw`` parser."""
     p = sub.add_parser("mission", help="start a build and follow it to tower built, then summarize")
-    p.add_argument("--crs", type=_address, help="CRS host:port (default: link.yaml)")
-    p.add_argument("--bind", type=_address, help="local host:port for telemetry (default: link.yaml)")
+    p.add_argument("--crs", type=host_port, help="CRS host:port (default: link.yaml)")
+    p.add_argument("--bind", type=host_port, help="local host:port for telemetry (default: link.yaml)")
     p.add_argument("--key-file", help="key file (default: link.yaml key_file or $TLT_GROUND_KEY_FILE)")
     p.add_argument("--key-id", type=int)
     p.add_argument("--archive", help="archive SQLite file (default: link.yaml gsw.archive)")

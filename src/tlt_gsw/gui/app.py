@@ -31,15 +31,9 @@ from tlt_gsw.gui.link_process import LinkProcess, LinkSettings, LinkStartError
 from tlt_gsw.gui.main_window import TABS, MainWindow
 from tlt_gsw.gui.tower_layout import load_layout_mission
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
+from tlt_gsw.link import host_port
 
 EXIT_OK, EXIT_USAGE = 0, 2
-
-
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    if not host or not port.isdigit():
-        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
-    return host, int(port)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -59,8 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--play", action="store_true", help="replay: start playing at once")
     parser.add_argument("--speed", type=float, default=1.0, help="replay speed factor (default 1)")
     parser.add_argument("--archive", help="live: archive SQLite file (default from link.yaml)")
-    parser.add_argument("--crs", type=_address, help="live: CRS host:port")
-    parser.add_argument("--bind", type=_address, help="live: local host:port to receive telemetry on")
+    parser.add_argument("--crs", type=host_port, help="live: CRS host:port")
+    parser.add_argument("--bind", type=host_port, help="live: local host:port to receive telemetry on")
     parser.add_argument(
         "--key-file", help="live: key file (default link.yaml key_file or $TLT_GROUND_KEY_FILE)"
     )
