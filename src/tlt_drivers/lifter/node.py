@@ -19,6 +19,7 @@ the fault on both topics and tries to reopen the port every ``reconnect_period_s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -281,6 +282,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="lifter hardware YAML")
     parser.add_argument("--port", help="serial device, overriding the configured port")
+    parser.add_argument(
+        "--answer-timeout-s", type=float,
+        help="how long the firmware has to answer a state or mode request, overriding the YAML's (the "
+        "twin answers from a busy process)",
+    )
     own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-lifter", *args])[1:])
     try:
         config = load_lifter_config(own.config)
@@ -289,6 +295,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if own.port:
         config = config.with_port(own.port)
+    if own.answer_timeout_s is not None:
+        if not 0.0 < own.answer_timeout_s <= 10.0:
+            print("tlt-lifter: --answer-timeout-s must be in (0, 10] s", file=sys.stderr)
+            return 2
+        config = dataclasses.replace(config, answer_timeout_s=own.answer_timeout_s)
     rclpy.init(args=["tlt-lifter", *args])
     node = LifterNode(config)
     try:

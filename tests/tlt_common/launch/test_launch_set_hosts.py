@@ -189,9 +189,11 @@ def test_the_twin_on_hosts_places_every_process_like_the_edu():
     # A process system_twin.yaml gains must be placed too: outside the hosts it would hear none of them.
     assert [name for name, host in placed.items() if host is None] == []
     assert placed["twin"] == "twin"
+    # ground_key makes a key for one twin run; on the EDU the key is provisioned (docs/deployment.md).
+    run_only = {"ground_key"}
     for host in ("crs", "ars_x", "ars_y"):
         real = {p.name for p in load_launch_set(LAUNCH / f"host_{host}.yaml").processes}
-        assert real == {name for name, h in placed.items() if h == host}, host
+        assert real == {name for name, h in placed.items() if h == host} - run_only, host
     # The arms' controllers answer on the twin host, where the drivers on the ARS hosts reach them.
     twin = next(h for h in hosts_set.hosts if h.name == "twin")
     ur_x = next(p for p in hosts_set.processes if p.name == "ur_x")

@@ -153,6 +153,7 @@ def recording(ros_node, tmp_path_factory) -> dict:
         wait_until(lambda: all(flushed_counts(out)[t] >= n for t, n in expected.items()),
                    "every published message to reach the file")
         subscribers_of_excluded = sum(p.get_subscription_count() for p in (image, rgb, noise))
+        time.sleep(2.5)  # progress is logged every second (FAST): let a loaded machine log one
         returncode = recorder.stop(signal.SIGINT)
     finally:
         recorder.stop(signal.SIGKILL)
