@@ -388,8 +388,23 @@ class Stack:
         self.handles.append(handle)
         return handle
 
+    def ground_command(self, command: int) -> GroundCommand.Response:
+        self.wait(self.ground.service_is_ready, "ground command service")
+        future = self.ground.call_async(GroundCommand.Request(command=command))
+        return self.wait(future.done, "ground command reply") and future.result()
+
+    def arm_standing_still(self, window_s: float = 0.3, atol: float = 1e-3) -> bool:
+        """True once the arm moved less than ``atol`` in every joint over ``window_s``: a speed
+        sample alone can be taken at the turn of a settling oscillation."""
+        q = self.ars.ctx.arm_q()
+        time.sleep(window_s)
+        return bool(np.allclose(self.ars.ctx.arm_q(), q, atol=atol))
+
     def settle(self) -> None:
-        """Cancel whatever goal a failed test left running, so the next test finds the ARS idle."""
+        """Resume and cancel whatever a failed test left paused or running, so the next test finds
+        the ARS idle."""
+        if self.ars.paused:
+            self.ground_command(GroundCommand.Request.RESUME)
         for handle in self.handles:
             if handle.accepted and handle.status in (GoalStatus.STATUS_ACCEPTED, GoalStatus.STATUS_EXECUTING):
                 handle.cancel_goal_async()

@@ -165,13 +165,14 @@ def test_concurrent_goal_rejected_pause_holds_resume_continues_cancel_stops(stac
         return float(np.max(np.abs(stack.ars.ctx.arm_velocity())))
 
     stack.wait(lambda: speed() > 0.2, "the arm at speed")
-    assert _ground(stack, GroundCommand.Request.PAUSE).accepted
+    assert stack.ground_command(GroundCommand.Request.PAUSE).accepted
     stack.wait(lambda: speed() < 0.01, "the arm held", timeout=5)
+    stack.wait(stack.arm_standing_still, "the arm settled", timeout=5)
     q = stack.ars.ctx.arm_q()
     time.sleep(0.5)
     assert np.allclose(stack.ars.ctx.arm_q(), q, atol=2e-3)  # paused: the tree does not tick
-    assert not _ground(stack, GroundCommand.Request.PAUSE).accepted  # already paused
-    assert _ground(stack, GroundCommand.Request.RESUME).accepted
+    assert not stack.ground_command(GroundCommand.Request.PAUSE).accepted  # already paused
+    assert stack.ground_command(GroundCommand.Request.RESUME).accepted
     stack.wait(lambda: speed() > 0.2, "the arm moving again after Resume")
 
     cancel = first.cancel_goal_async()
@@ -179,6 +180,7 @@ def test_concurrent_goal_rejected_pause_holds_resume_continues_cancel_stops(stac
     result = stack.result(first, timeout=20)
     assert result.status == GoalStatus.STATUS_CANCELED
     assert "arm is stopped" in result.result.reason
+    stack.wait(stack.arm_standing_still, "the arm settled", timeout=5)
     q = stack.ars.ctx.arm_q()
     time.sleep(0.5)
     assert np.allclose(stack.ars.ctx.arm_q(), q, atol=2e-3)  # it stays where it stopped
@@ -195,12 +197,6 @@ def test_affix_member_loads_and_places_a_rivet(stack):
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"]
     again = stack.result(stack.send("affix_member", None, **fields), 10)
     assert "already affixed" in again.result.reason
-
-
-def _ground(stack, command: int):
-    stack.wait(stack.ground.service_is_ready, "ground command service")
-    future = stack.ground.call_async(GroundCommand.Request(command=command))
-    return stack.wait(future.done, "ground command reply") and future.result()
 
 
 def test_foundation_rivet_subtree_ticks_on_its_own(stack):
@@ -245,6 +241,6 @@ def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
 
 
 def test_stop_shuts_the_ars_down(stack):
-    assert _ground(stack, GroundCommand.Request.STOP).accepted
+    assert stack.ground_command(GroundCommand.Request.STOP).accepted
     stack.wait(stack.ars.finished.is_set, "the ARS shut down", timeout=10)
-    assert not _ground(stack, GroundCommand.Request.START).accepted
+    assert not stack.ground_command(GroundCommand.Request.START).accepted
