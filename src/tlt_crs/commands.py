@@ -199,9 +199,9 @@ class CommandProcessor:
                 return "the CRS is paused; send resume"
             if ctx.started:
                 return "already started"
-            not_ready = ctx.hardware_not_ready()
+            not_ready = ctx.not_ready()
             if not_ready:
-                return f"hardware not ready: {not_ready}"
+                return f"not ready: {not_ready}"
         elif name == "pause":
             if not ctx.started:
                 return "not started; nothing to pause"

@@ -140,11 +140,51 @@ class CrsContext:
         }
         for topic, msg_type in self._hardware_topics.values():
             self.cache.watch(topic, msg_type)
+        self._servers = self._build_server_checks()
+
+    def _build_server_checks(self) -> list[tuple[str, Callable[[], bool]]]:
+        """(what, is it up) for every server the CRS calls in a build: each ARS's ground command
+        service and action servers, and vision's inspection services (the vision node offers the
+        ARSs' tag and alignment services along with them). The clients are the ones the tree
+        shares, made here on the node's thread rather than in a service callback."""
+        from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
+        from tlt_interfaces.srv import GroundCommand, InspectBay, InspectPart
+
+        from tlt_common.bt.ros import shared_action_client, shared_service_client
+
+        actions = dict(zip(ros_names.ARS_ACTIONS, (AddCrossFrame, AddMember, AffixMember, FoundationRivet),
+                           strict=True))
+        node = self.node
+        checks: list[tuple[str, Callable[[], bool]]] = []
+        for ars in ros_names.ARS_AGENTS:
+            name = ros_names.ground_command_service(ars)
+            client = shared_service_client(node, GroundCommand, name)
+            checks.append((f"{ars}: {name}", client.service_is_ready))
+            for request, action_type in actions.items():
+                name = ros_names.ars_action(ars, request)
+                action = shared_action_client(node, action_type, name)
+                checks.append((f"{ars}: {name}", action.server_is_ready))
+        for srv_type, name in ((InspectPart, ros_names.VISION_INSPECT_PART),
+                               (InspectBay, ros_names.VISION_INSPECT_BAY)):
+            checks.append((f"vision: {name}", shared_service_client(node, srv_type, name).service_is_ready))
+        return checks
+
+    def not_ready(self) -> str:
+        """Why a build cannot start now ('' when it can): a CRS driver whose state is missing or
+        older than ``timeouts.sensor_max_age_s``, a lifter whose link is down, or an ARS or vision
+        server not up yet. Start is refused while this says anything."""
+        return "; ".join(filter(None, (self.hardware_not_ready(), self._servers_not_up())))
+
+    def _servers_not_up(self) -> str:
+        down = [what for what, is_up in self._servers if not is_up()]
+        if len(down) > 3:
+            return f"{', '.join(down[:3])} and {len(down) - 3} more not up"
+        return f"{', '.join(down)} not up" if down else ""
 
     def hardware_not_ready(self) -> str:
         """Why the CRS's own mechanisms cannot be trusted to build now ('' when they can): a
         driver whose state is missing or older than ``timeouts.sensor_max_age_s``, or a lifter
-        whose link is down. Start is refused while this says anything."""
+        whose link is down."""
         max_age = self.config.timeouts.sensor_max_age_s
         missing = []
         for name, (topic, _) in self._hardware_topics.items():

@@ -212,7 +212,7 @@ def _autostart_when_ready(node: CrsNode) -> None:
 
     def attempt() -> None:
         reason = node.commands.check("start", {})
-        if reason is not None and reason.startswith("hardware not ready"):
+        if reason is not None and reason.startswith("not ready"):
             if not waiting:
                 _log.info("autostart: waiting (%s)", reason)
             waiting.append(reason)

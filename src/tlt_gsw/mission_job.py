@@ -49,7 +49,7 @@ EXIT_REJECTED = EXIT_FAULT
 START_RETRY_S = 2.0
 REJECTION_CODES = ("COMMAND_REJECTED", "DATAGRAM_REJECTED")
 # A Start the CRS refuses with this in the reason is asked again: its drivers are still coming up.
-NOT_READY = "hardware not ready"
+NOT_READY = "not ready"
 
 REJECTION_ACK_GRACE_S = 0.5
 

@@ -6,7 +6,7 @@ process group of its own, with a private run directory (``TLT_RUN_DIR``), the tw
 controllers on private loopback addresses, free UDP ports for the ground link and, optionally, a
 twin scenario. The launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
 CRS's ``hk_mission`` telemetry arrives over the ground link, and ``start_build()`` until an
-authenticated Start is accepted (the CRS refuses Start with "hardware not ready: ..." until its
+authenticated Start is accepted (the CRS refuses Start with "not ready: ..." until its
 drivers report; it is sent again until it is not).
 
 ``stop()`` always stops the launcher: SIGINT (the launcher's own orderly stop), then SIGTERM and
@@ -178,7 +178,7 @@ class SystemRun:
             if ack is None:
                 unanswered.append(sent)  # not heard in time (the CRS busy or still binding)
                 continue
-            if ack.detail.startswith("hardware not ready"):
+            if ack.detail.startswith("not ready"):
                 last = ack
                 self.link.poll(1.0)
                 continue

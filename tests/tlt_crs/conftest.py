@@ -172,15 +172,31 @@ class ArsStandIn:
 
 
 class VisionStandIn:
-    def __init__(self, node: Node, group: ReentrantCallbackGroup) -> None:
-        from tlt_interfaces.srv import InspectBay, InspectPart
+    """Vision's inspection services, the ones the CRS calls."""
 
+    def __init__(self, node: Node, group: ReentrantCallbackGroup) -> None:
         self.part_verdicts: dict[str, list[bool]] = {}  # member id -> verdicts of successive parts
         self.bay_passes = True
         self.part_calls: list[str] = []
         self.bay_calls: list[int] = []
-        node.create_service(InspectPart, ros_names.VISION_INSPECT_PART, self._part, callback_group=group)
-        node.create_service(InspectBay, ros_names.VISION_INSPECT_BAY, self._bay, callback_group=group)
+        self._node, self._group = node, group
+        self._services: list[Any] = []
+        self.serve()
+
+    def serve(self) -> None:
+        from tlt_interfaces.srv import InspectBay, InspectPart
+
+        self._services = [
+            self._node.create_service(srv_type, name, handler, callback_group=self._group)
+            for srv_type, name, handler in ((InspectPart, ros_names.VISION_INSPECT_PART, self._part),
+                                            (InspectBay, ros_names.VISION_INSPECT_BAY, self._bay))
+        ]
+
+    def withdraw(self) -> None:
+        """As if the vision node were not up yet."""
+        for service in self._services:
+            self._node.destroy_service(service)
+        self._services = []
 
     def _part(self, request: Any, response: Any) -> Any:
         self.part_calls.append(request.member_id)

@@ -8,6 +8,7 @@ import time
 import pytest
 from py_trees.common import Status
 
+from tlt_common import ros_names
 from tlt_common.ccsds.reasons import AckStage
 from tlt_crs.context import RunState
 from tlt_crs.index_record import IndexRecord
@@ -34,7 +35,7 @@ class Acks:
 def crs_node(rig, crs, tmp_path):
     node = build_node(crs.fast_config(tmp_path))
     rig.add(node)
-    crs.wait_for(lambda: not node.ctx.hardware_not_ready(), what="driver states")
+    crs.wait_for(lambda: not node.ctx.not_ready(), what="driver states")
     yield node
     node.interrupt()
     node.destroy_node()
@@ -74,10 +75,10 @@ def test_start_is_refused_while_a_driver_is_silent_and_taken_once_it_reports(rig
     rig.lifter.publishing = False
     crs.wait_for(lambda: "lifter" in crs_node.ctx.hardware_not_ready(), what="lifter state gone stale")
     refused = _submit(crs_node, crs, "start")
-    assert refused.rejected and refused.stages[0][1].startswith("hardware not ready: lifter: state ")
+    assert refused.rejected and refused.stages[0][1].startswith("not ready: lifter: state ")
     assert not crs_node.ctx.started and rig.recorder.requests == []
     rig.lifter.publishing = True
-    crs.wait_for(lambda: not crs_node.ctx.hardware_not_ready(), what="lifter state back")
+    crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="lifter state back")
     assert _submit(crs_node, crs, "start").final[0] == AckStage.COMPLETED
 
 
@@ -234,3 +235,15 @@ def test_start_twice_is_refused(rig, crs, crs_node):
     _submit(crs_node, crs, "start")
     acks = _submit(crs_node, crs, "start")
     assert acks.rejected and "already started" in acks.stages[0][1]
+
+
+def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
+    rig.vision.withdraw()
+    crs.wait_for(lambda: "vision" in crs_node.ctx.not_ready(), what="vision gone from the graph")
+    refused = _submit(crs_node, crs, "start")
+    assert refused.rejected
+    assert refused.stages[0][1] == f"not ready: vision: {ros_names.VISION_INSPECT_PART}, " \
+                                   f"vision: {ros_names.VISION_INSPECT_BAY} not up"
+    rig.vision.serve()
+    crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="vision back")
+    assert _submit(crs_node, crs, "start").final[0] == AckStage.COMPLETED

@@ -331,12 +331,12 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
 
     try:
         # The CRS process takes a moment to bind (until then a Start goes unheard) and to hear
-        # from its drivers (until then Start is refused: hardware not ready).
+        # from its drivers (until then Start is refused: not ready).
         deadline = time.monotonic() + 60
         while True:
             sent = gsw.send_command("start")
             ack = gsw.wait_ack(sent, final=True, timeout=2.0)
-            if ack is not None and not ack.detail.startswith("hardware not ready"):
+            if ack is not None and not ack.detail.startswith("not ready"):
                 break
             if ack is not None:
                 time.sleep(0.5)

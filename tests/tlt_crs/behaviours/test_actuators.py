@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
+from tlt_common.mission.schema import load_mission
 from tlt_crs.behaviours.actuators import Actuators
 
 
@@ -24,10 +25,11 @@ def test_raise_payload_follows_fig_18_and_is_confirmed_by_sensors(rig, crs, tmp_
 
 
 def test_lower_lifter_follows_fig_19(rig, crs, tmp_path):
-    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    # The devices' states first: a context made before could still hear the stand-ins' old ones.
     rig.top.set_engaged(False)
     rig.active.set_engaged(True)
     rig.lifter.positions = [0.8] * 4
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
     subtree = Actuators(ctx).lower_lifter()
     assert crs.tick_until(subtree) == Status.SUCCESS
     assert rig.top.engaged == [True] * 4 and rig.active.engaged == [False] * 4
@@ -35,11 +37,12 @@ def test_lower_lifter_follows_fig_19(rig, crs, tmp_path):
 
 
 def test_steps_already_true_by_the_sensors_are_skipped(rig, crs, tmp_path):
-    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    config = crs.fast_config(tmp_path)
     rig.active.set_engaged(True)
     rig.top.set_engaged(False)
     rig.lifter.state = 2
-    rig.lifter.positions = [ctx.config.lifter.lowered_m + ctx.mission.bay_height] * 4
+    rig.lifter.positions = [config.lifter.lowered_m + load_mission(config.mission).bay_height] * 4
+    ctx = crs.make_context(rig, config)
     subtree = Actuators(ctx).raise_payload()  # subscribes to the sensor topics
     for topic in ("/lifter/state", "/active_grippers/state", "/top_grippers/state"):
         crs.wait_for(lambda topic=topic: ctx.cache.latest(topic) is not None, what=topic)
