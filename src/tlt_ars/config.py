@@ -55,6 +55,7 @@ SCHEMA = {
             "goal_tolerance": opt("float", 0.01, minimum=0.0),
             "goal_time_tolerance_s": opt("float", 1.0, minimum=0.0),
             "planning_time_s": opt("float", 2.0, minimum=0.01),
+            "motion_attempts": opt("int", 2, minimum=1, maximum=5),
         },
     ),
     "poses": Field(

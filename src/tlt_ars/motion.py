@@ -171,8 +171,10 @@ class PlanMotion(Action):
 
     Reads: the arm's JointState (start), the mission state (tower), the held part, the other arm.
     Writes: the slot's trajectory; ``RequestData.targets[goal.key]`` when a candidate is chosen.
-    RUNNING while planning (≤ ``timeouts.planning_s``). SUCCESS with a checked trajectory. FAILURE
-    without a fresh arm state, when the goal cannot be built, or with the planner's reason.
+    RUNNING while the arm still moves (an aborted motion decelerating: a plan from a moving start
+    would not match where the arm is when it is sent) and while planning, together at most
+    ``timeouts.planning_s``. SUCCESS with a checked trajectory. FAILURE without a fresh arm state,
+    when the goal cannot be built, or with the planner's reason.
     """
 
     def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
@@ -193,6 +195,12 @@ class PlanMotion(Action):
             start = self.ctx.arm_q()
             if start is None:
                 return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
+            if not self._arm_stopped():
+                limit = self.ctx.config.timeouts["planning_s"]
+                if self.ctx.clock() - self._started > limit:
+                    return self.fail(f"the arm did not stop within {limit:g} s")
+                self.feedback_message = "waiting for the arm to stop"
+                return Status.RUNNING
             try:
                 self._goal = self.goal()
             except Exception as exc:
@@ -234,6 +242,10 @@ class PlanMotion(Action):
                 self.ctx.data.approached_from[goal.key] = np.array(motion.trajectory.points[0].positions)
         self.feedback_message = f"planned {motion.duration:.2f} s"
         return Status.SUCCESS
+
+    def _arm_stopped(self) -> bool:
+        velocity = self.ctx.arm_velocity()
+        return velocity is None or float(np.max(np.abs(velocity))) <= self.ctx.config.arm["stopped_velocity"]
 
     def terminate(self, new_status: Status) -> None:
         if self._future is not None:
@@ -292,20 +304,53 @@ class ExecuteTrajectory(ActionGoal):
         self.result_timeout = duration + self.ctx.config.timeouts["trajectory_margin_s"]
 
 
+class RetryMotion(py_trees.decorators.Retry):
+    """A motion tried again, planned afresh from where the arm stands, until it has failed
+    ``attempts`` times; each failed attempt is logged with its reason, so a retry is never silent.
+
+    Carries ``replan_on_resume``: ArsTree.hold() stops the whole motion and Resume plans it afresh.
+    """
+
+    replan_on_resume = True
+
+    def __init__(self, name: str, ctx: ArsContext, attempt: py_trees.behaviour.Behaviour,
+                 attempts: int) -> None:  # fmt: skip
+        super().__init__(name, attempt, attempts)
+        self.ctx = ctx
+
+    def update(self) -> Status:
+        status = super().update()
+        if status == Status.RUNNING and self.decorated.status == Status.FAILURE:
+            leaf = self.decorated
+            while leaf.children:
+                leaf = next((c for c in leaf.children if c.status == Status.FAILURE), leaf.children[-1])
+            self.ctx.node.get_logger().warning(
+                f"{self.name}: attempt {self.failures} of {self.num_failures} failed "
+                f"({leaf.name}: {leaf.feedback_message}); planning again from where the arm stands"
+            )
+        return status
+
+
 def move(
     name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal]
-) -> py_trees.composites.Sequence:
-    """A named motion: ``Sequence[Plan, Execute]`` (memory: a finished plan is not redone)."""
+) -> py_trees.behaviour.Behaviour:
+    """A named motion: ``Sequence[Plan, Execute]`` (memory: a finished plan is not redone), tried
+    up to ``arm.motion_attempts`` times in all (:class:`RetryMotion`). A search that ran out of
+    time, or an execution the driver aborted because the arm trailed its path (a busy
+    controller), is worth a fresh plan; a goal that cannot be reached fails every attempt alike."""
     slot = TrajectorySlot()
-    seq = py_trees.composites.Sequence(name, memory=True)
-    seq.replan_on_resume = True  # ArsTree.hold() stops the whole motion: Resume plans it afresh
+    attempts = ctx.config.arm["motion_attempts"]
+    seq = py_trees.composites.Sequence(name if attempts <= 1 else "Attempt", memory=True)
     seq.add_children(
         [
             PlanMotion(f"Plan {name}", ctx, planner, goal, slot),
             ExecuteTrajectory(f"Execute {name}", ctx, slot),
         ]
     )
-    return seq
+    if attempts <= 1:
+        seq.replan_on_resume = True  # ArsTree.hold() stops the whole motion: Resume plans it afresh
+        return seq
+    return RetryMotion(name, ctx, seq, attempts)
 
 
 __all__ = [
@@ -314,6 +359,7 @@ __all__ = [
     "MotionPlanner",
     "PlanMotion",
     "PlannedMotion",
+    "RetryMotion",
     "TrajectorySlot",
     "duration_msg",
     "move",
