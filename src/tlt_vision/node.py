@@ -56,19 +56,16 @@ from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_vision import inspection
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
-from tlt_vision.cad.models import load_parts, models_for_mission
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
-from tlt_vision.pipeline import Detection, PartPipeline
-from tlt_vision.pose.corrector import CorrectorConfig
-from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, rotation_to_quaternion
+from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
+from tlt_vision.pipeline import Detection
+from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
-from tlt_vision.train.c3po_supervised import load_detector
-from tlt_vision.weights import WeightsError, read_manifest
+from tlt_vision.weights import WeightsError
 
 log = logging.getLogger("tlt.vision")
-STRUT_KINDS = ("vertical", "diagonal")
 BAY_DUPLICATE_M = 0.02  # corner joints seen by both ZEDs closer than this are one joint
 
 
@@ -140,29 +137,11 @@ class VisionNode(Node):
         self.config = config
         raw = config.raw
         self.mission = mission or load_mission(config.mission_path)
-        self.parts = load_parts()
-        self.tol = inspection.Tolerances.from_mission(self.mission)
+        self.inspector = PartInspector(config, self.mission)
+        self.parts, self.tol = self.inspector.parts, self.inspector.tol
+        self.estimators, self.pipelines = self.inspector.estimators, self.inspector.pipelines
         self.rig = CameraRig(config)
-        self.estimators = self._load_estimators()
         self._warm_up()
-        ms = raw["max_points"]
-        self.pipelines = {
-            kind: PartPipeline(
-                {
-                    "strut_tube": self.estimators[f"strut_tube/{kind}"],
-                    "end_fitting": self.estimators["end_fitting"],
-                },
-                max_points=ms,
-            )
-            for kind in STRUT_KINDS
-        }
-        self.pipelines["cross_frame"] = PartPipeline(
-            {"cross_frame": self.estimators["cross_frame"], "corner_joint": self.estimators["corner_joint"]},
-            max_points=ms,
-        )
-        self.pipelines["bay"] = PartPipeline({"corner_joint": self.estimators["corner_joint"]}, max_points=ms)
-        self.pipelines["rivet"] = PartPipeline({"rivet": self.estimators["rivet"]}, max_points=ms)
-        self._pipeline_locks = {k: threading.Lock() for k in self.pipelines}
         self.tags = TagLocator(TagConfig.load())
         self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
         self.tool = pose_of(raw["tool"])
@@ -200,23 +179,6 @@ class VisionNode(Node):
         import torch
 
         torch.optim.Adam([torch.zeros(1, requires_grad=True)])
-
-    def _load_estimators(self) -> dict[str, PoseEstimator]:
-        models = models_for_mission(self.mission)
-        thresholds = self.mission.inspection["chamfer_thresholds"]
-        corrector = CorrectorConfig(**self.config.raw["corrector"])
-        out = {}
-        for name in self.config.raw["detectors"]:
-            path = self.config.detector_path(name)
-            manifest = read_manifest(path)
-            width = manifest["settings"].get("width")
-            if not isinstance(width, int):
-                raise WeightsError(path, "manifest settings lack the detector width")
-            model = models[name]
-            out[name] = PoseEstimator(
-                model, load_detector(path, model, width), thresholds[model.object_class], corrector
-            )
-        return out
 
     def _subscribe_joint_states(self, group: Any) -> None:
         def on_joints(msg: JointState) -> None:
@@ -273,46 +235,9 @@ class VisionNode(Node):
     def _observe(
         self, pipeline: str, detections: list[Detection], frame: CameraFrame
     ) -> list[inspection.Observation]:
-        with self._pipeline_locks[pipeline]:  # one pipeline's random draws are not shared by threads
-            return self.pipelines[pipeline].observe(
-                detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
-            )
-
-    def select_part(
-        self,
-        detections: list[Detection],
-        frame: CameraFrame,
-        classes: Sequence[str],
-        anchor: str,
-        reach: float,
-    ) -> list[Detection]:
-        """The instances of one part: the biggest ``anchor`` instance in the working depth range (of
-        at least ``min_part_pixels``) and the instances of ``classes`` whose centre lies within
-        ``reach`` (m) of it. None when no such anchor: the part is not in view."""
-        depth = frame.get("depth")
-        near, far = self.config.raw["part_depth_range"]
-        k = frame.intrinsics
-        centres: list[tuple[Detection, np.ndarray]] = []
-        for d in detections:
-            if d.object_class not in classes or depth is None:
-                continue
-            with np.errstate(invalid="ignore"):
-                valid = d.mask & np.isfinite(depth) & (depth > 0)
-            if not valid.any():
-                continue
-            v, u = np.nonzero(valid)
-            z = depth[v, u].astype(float)
-            zc = float(np.median(z))
-            if not near <= zc <= far:
-                continue
-            c = np.array([(np.median(u) - k.cx) * zc / k.fx, (np.median(v) - k.cy) * zc / k.fy, zc])
-            centres.append((d, c))
-        least = self.config.raw["min_part_pixels"]
-        anchors = [(d, c) for d, c in centres if d.object_class == anchor and int(d.mask.sum()) >= least]
-        if not anchors:
-            return []
-        _, centre = max(anchors, key=lambda dc: int(dc[0].mask.sum()))
-        return [d for d, c in centres if np.linalg.norm(c - centre) <= reach]
+        return self.inspector.observe(
+            pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
+        )
 
     def _report_msg(
         self, report: inspection.InspectionReport, stamp: float, frame_id: str, object_ids: dict[int, str]
@@ -374,20 +299,9 @@ class VisionNode(Node):
             detections = self._segment(frame)
         except NoFrame as exc:
             return self._failed(member_id, kind, str(exc))
-        w = self.mission.bay_width
-        if kind == "cross_frame":
-            part = self.select_part(
-                detections, frame, ("cross_frame", "corner_joint"), "cross_frame", w * 1.2
-            )
-            obs = self._observe("cross_frame", part, frame)
-            report = inspection.inspect_cross_frame(member_id, w, obs, self.tol)
-        else:
-            length = self.mission.strut_lengths[kind]
-            part = self.select_part(
-                detections, frame, ("strut_tube", "end_fitting"), "strut_tube", length / 2 + 0.1
-            )
-            obs = self._observe(kind, part, frame)
-            report = inspection.inspect_strut(member_id, kind, length, obs, self.parts, self.tol)
+        report, obs = self.inspector.inspect(
+            member_id, kind, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
+        )
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return self._report_msg(report, frame.stamp, frame.frame_id, ids)
 
@@ -519,17 +433,8 @@ class VisionNode(Node):
             response.reason = str(exc)
             return response
         w = self.mission.bay_width
-        if member.kind == "cross_frame":
-            part = self.select_part(
-                detections, frame, ("cross_frame", "corner_joint"), "cross_frame", w * 1.2
-            )
-            obs = self._observe("cross_frame", part, frame)
-        else:
-            length = self.mission.strut_lengths[member.kind]
-            part = self.select_part(
-                detections, frame, ("strut_tube", "end_fitting"), "strut_tube", length / 2 + 0.1
-            )
-            obs = self._observe(member.kind, part, frame)
+        part = self.inspector.select(member.kind, detections, frame.get("depth"), frame.intrinsics)
+        obs = self._observe(member.kind, part, frame)
         main = "cross_frame" if member.kind == "cross_frame" else "strut_tube"
         mine = [o for o in obs if o.object_class == main]
         good = [o for o in mine if o.estimate is not None and o.estimate.certified]

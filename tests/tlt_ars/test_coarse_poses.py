@@ -1,6 +1,8 @@
 """The coarse dispenser poses of config/ars/*.yaml (§V.C.3): from each, the arm stands clear of
 everything the planner knows, and the end effector's camera sees that dispenser's AprilTag in the
-twin, so the fine approach (LocateTag) can begin where the coarse approach ends."""
+twin well enough for the fine approach (LocateTag) to begin where the coarse approach ends: found
+at the twin's frame size and at twice it, well inside the image (a tag at the border is found one
+time and missed the next), and located to millimetres against the twin's ground truth."""
 
 from __future__ import annotations
 
@@ -10,13 +12,24 @@ from tlt_sim.model import names
 from tlt_sim.model.scene import Scene
 
 from tlt_ars.config import default_config_path
+from tlt_ars.planning.coarse_pose_search import Setup
+from tlt_ars.planning.kinematics import pose_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.apriltag import TagConfig, TagLocator
+from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
 
 MISSION = "missions/one_bay.yaml"  # every mission shares the dispenser layout
 HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+SIZES = ((320, 240), (640, 480))  # the twin's D405 frames (config/twin/run.yaml), and twice that
+MARGIN = 0.15  # each detected corner at least this fraction of the image size from every border
+POSITION_TOLERANCE = 0.003  # m
+ANGLE_TOLERANCE_DEG = 1.5
+ARS_DISPENSERS = [
+    (ars, dispenser)
+    for ars in ("ars_x", "ars_y")
+    for dispenser in load_yaml(default_config_path(ars))["poses"]["dispensers"]
+]
 
 
 @pytest.fixture(scope="module")
@@ -25,22 +38,77 @@ def twin(tmp_path_factory):
         yield scene
 
 
-@pytest.mark.parametrize("ars", ["ars_x", "ars_y"])
-def test_from_each_coarse_pose_the_ee_camera_sees_the_dispensers_tag(twin, ars):
-    mission = load_mission(MISSION)
-    tag_ids = {name: i for i, name in enumerate(mission.dispensers)}
-    collision = build_scene(load_scene_config(), ars, mission, other_arm_q=HOME)
-    locator = TagLocator(TagConfig.load())
-    poses = load_yaml(default_config_path(ars))["poses"]["dispensers"]
-    assert poses
-    for dispenser, pose in poses.items():
-        q = np.array(pose["joints"])
-        assert not collision.in_collision(q), f"{ars} coarse pose for {dispenser} collides"
-        for joint, value in zip(names.arm_joints(ars), q, strict=True):
-            twin.set_joint_state(joint, value)
-        twin.step(1)
-        frame = twin.render(f"{ars}/d405_a", 320, 240)
+@pytest.fixture(scope="module")
+def mission():
+    return load_mission(MISSION)
+
+
+@pytest.fixture(scope="module")
+def locator():
+    return TagLocator(TagConfig.load())
+
+
+@pytest.fixture(scope="module")
+def collision(mission):
+    cfg = load_scene_config()
+    return {ars: build_scene(cfg, ars, mission, other_arm_q=HOME) for ars in ("ars_x", "ars_y")}
+
+
+def coarse_pose(ars: str, dispenser: str) -> np.ndarray:
+    return np.array(load_yaml(default_config_path(ars))["poses"]["dispensers"][dispenser]["joints"])
+
+
+def tag_truth(twin: Scene, dispenser: str) -> np.ndarray:
+    """The tag's frame in the world as the twin built it: at the tag's site on its face, turned
+    as its dispenser (the tag frame is the dispenser's, config/vision/node.yaml tag_mount.rpy)."""
+    _, rotation = twin.body_pose(f"dispenser/{dispenser}")
+    return pose_matrix(twin.site_position(f"dispenser/{dispenser}/tag"), rotation)
+
+
+def test_every_dispenser_each_ars_uses_has_a_coarse_pose(mission):
+    assert {d for _, d in ARS_DISPENSERS} == set(mission.dispensers)
+
+
+@pytest.mark.parametrize(("ars", "dispenser"), ARS_DISPENSERS)
+def test_coarse_pose_is_free_and_within_the_limits(collision, ars, dispenser):
+    q = coarse_pose(ars, dispenser)
+    lower, upper = load_scene_config().joint_limits(ars)
+    assert np.all(q >= lower) and np.all(q <= upper), f"{ars} {dispenser}: {q} outside the limits"
+    assert not collision[ars].in_collision(q), f"{ars} coarse pose for {dispenser} collides"
+
+
+@pytest.mark.parametrize(("ars", "dispenser"), ARS_DISPENSERS)
+def test_from_the_coarse_pose_the_ee_camera_locates_the_tag_well(twin, mission, locator, ars, dispenser):
+    for joint, value in zip(names.arm_joints(ars), coarse_pose(ars, dispenser), strict=True):
+        twin.set_joint_state(joint, value)
+    twin.step(1)
+    camera = f"{ars}/d405_a"
+    position, rotation = twin.camera_pose(camera)
+    cam = pose_matrix(position, rotation)
+    truth = tag_truth(twin, dispenser)
+    tag_id = dispenser_tag_ids(list(mission.dispensers))[dispenser]
+    for w, h in SIZES:
+        frame = twin.render(camera, w, h, depth=False, segmentation=False)
         i = frame.intrinsics
         k = np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
-        seen = [t.tag_id for t in locator.detect(frame.rgb, k)]
-        assert tag_ids[dispenser] in seen, f"{ars} at its {dispenser} pose sees tags {seen}"
+        result = locator.locate(frame.rgb, tag_id, k)
+        assert result.found, f"{ars} at its {dispenser} pose, {w}x{h}: {result.reason}"
+        c = result.pose.corners
+        margin = min(c[:, 0].min() / w, c[:, 1].min() / h, 1 - c[:, 0].max() / w, 1 - c[:, 1].max() / h)
+        assert margin >= MARGIN, f"{ars} {dispenser} {w}x{h}: tag {margin:.2f} of the image from a border"
+        seen = cam @ pose_matrix(result.pose.translation, result.pose.rotation)
+        error = np.linalg.norm(seen[:3, 3] - truth[:3, 3])
+        rel = seen[:3, :3].T @ truth[:3, :3]
+        angle = np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1.0, 1.0)))
+        assert error <= POSITION_TOLERANCE, f"{ars} {dispenser} {w}x{h}: tag {1000 * error:.1f} mm off"
+        assert angle <= ANGLE_TOLERANCE_DEG, f"{ars} {dispenser} {w}x{h}: tag {angle:.2f} deg off"
+
+
+@pytest.mark.parametrize("dispenser", ["cross_frame_dispenser", "rivet_dispenser_x", "vertical_dispenser_y"])
+def test_the_search_places_each_tag_where_the_twin_has_it(twin, dispenser):
+    """coarse_pose_search's tag rule (the vision's LocateTag tag_mount) against the twin's model."""
+    setup = Setup.load(MISSION)
+    truth = tag_truth(twin, dispenser)
+    mine = setup.tag_pose(dispenser)
+    assert np.allclose(mine[:3, 3], truth[:3, 3], atol=1e-6)
+    assert np.allclose(mine[:3, :3], truth[:3, :3], atol=1e-9)

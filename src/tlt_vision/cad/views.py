@@ -45,9 +45,12 @@ def visible_points(
         return p
     u = np.floor(p[:, 0] / p[:, 2] / angle_step).astype(np.int64)
     v = np.floor(p[:, 1] / p[:, 2] / angle_step).astype(np.int64)
-    key = (u - u.min()) * (v.max() - v.min() + 1) + (v - v.min())
+    # One bin per occupied (u, v) cell: a dense grid over the view's angular extent can be huge
+    # (a point just ahead of the camera spans thousands of cells and asked for a 76 GiB array).
+    _, key = np.unique(np.stack([u, v], axis=1), axis=0, return_inverse=True)
+    key = key.reshape(-1)
     depth = np.linalg.norm(p, axis=1)
-    nearest = np.full(key.max() + 1, np.inf)
+    nearest = np.full(int(key.max()) + 1, np.inf)
     np.minimum.at(nearest, key, depth)
     return p[depth <= nearest[key] + depth_tolerance]
 

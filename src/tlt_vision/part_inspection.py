@@ -1,0 +1,228 @@
+"""Inspection of one part presented to a camera: pick out its instances, pose them, decide.
+
+:class:`PartInspector` holds the C-3PO estimators of the vision node's detectors
+(``node.yaml`` ``detectors``) and one :class:`~tlt_vision.pipeline.PartPipeline` per part kind.
+From one frame's detections (instance masks and classes, from the twin's labels or Mask R-CNN),
+its depth image and intrinsics it answers the InspectPart decision for a strut or a cross frame
+(:meth:`PartInspector.inspect`), and the instances and observations CheckAlignment needs. It needs
+no ROS: the vision node (:mod:`tlt_vision.node`) wraps it in its services, and tests run it on the
+twin's renders directly.
+
+Which instances are the part (:func:`select_part`): the biggest instance of the part's main class
+(a strut's tube, a cross frame's side) in the working depth range is the anchor; the part is the
+anchor and the instances joined to it in 3-D, each within ``gap`` of the part grown so far (a
+cross frame's sides meet at its corner joints; a strut's fittings sit on its tube), and within
+``reach`` of the anchor's centre. Other parts in view, however close in the image (the lifter's
+top cross frame below a held one, the rest of a dispenser's stack behind it), stay out of it. With
+no ``gap`` every instance within ``reach`` is taken, as for a strut.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tlt_common.mission.schema import Mission
+from tlt_vision import inspection
+from tlt_vision.cad.models import load_parts, models_for_mission
+from tlt_vision.node_config import VisionConfig
+from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.pointcloud import PinholeIntrinsics
+from tlt_vision.pose.corrector import CorrectorConfig
+from tlt_vision.pose.estimator import PoseEstimator
+from tlt_vision.train.c3po_supervised import load_detector
+from tlt_vision.weights import WeightsError, read_manifest
+
+STRUT_KINDS = ("vertical", "diagonal")
+# Points per instance used to measure how far apart two instances are (a subsample: the gaps
+# looked for are centimetres, the masks thousands of pixels).
+_GAP_POINTS = 400
+
+
+def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEstimator]:
+    """One estimator per ``detectors`` entry; WeightsError names a file that is missing or wrong."""
+    models = models_for_mission(mission)
+    thresholds = mission.inspection["chamfer_thresholds"]
+    corrector = CorrectorConfig(**config.raw["corrector"])
+    out = {}
+    for name in config.raw["detectors"]:
+        path = config.detector_path(name)
+        manifest = read_manifest(path)
+        width = manifest["settings"].get("width")
+        if not isinstance(width, int):
+            raise WeightsError(path, "manifest settings lack the detector width")
+        model = models[name]
+        out[name] = PoseEstimator(
+            model, load_detector(path, model, width), thresholds[model.object_class], corrector
+        )
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Instance:
+    detection: Detection
+    centre: np.ndarray  # (3,) camera frame, m
+    points: np.ndarray  # (n, 3) subsample, camera frame, m
+
+
+def _instance(d: Detection, depth: np.ndarray, k: PinholeIntrinsics) -> _Instance | None:
+    with np.errstate(invalid="ignore"):
+        valid = d.mask & np.isfinite(depth) & (depth > 0)
+    if not valid.any():
+        return None
+    v, u = np.nonzero(valid)
+    z = depth[v, u].astype(float)
+    zc = float(np.median(z))
+    centre = np.array([(np.median(u) - k.cx) * zc / k.fx, (np.median(v) - k.cy) * zc / k.fy, zc])
+    step = max(1, len(z) // _GAP_POINTS)
+    u, v, z = u[::step], v[::step], z[::step]
+    points = np.stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z], axis=1)
+    return _Instance(d, centre, points)
+
+
+def _gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest distance between two point sets (m)."""
+    return float(np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1).min()))
+
+
+def select_part(
+    detections: Sequence[Detection],
+    depth: np.ndarray | None,
+    intrinsics: PinholeIntrinsics,
+    classes: Sequence[str],
+    anchor: str,
+    reach: float,
+    depth_range: Sequence[float],
+    min_pixels: int,
+    gap: float | None = None,
+) -> list[Detection]:
+    """The instances of one part (see the module docstring); empty when no anchor instance of at
+    least ``min_pixels`` pixels lies in ``depth_range``: the part is not in view."""
+    if depth is None:
+        return []
+    near, far = depth_range
+    found = []
+    for d in detections:
+        if d.object_class not in classes:
+            continue
+        inst = _instance(d, depth, intrinsics)
+        if inst is not None and near <= inst.centre[2] <= far:
+            found.append(inst)
+    anchors = [
+        i for i in found if i.detection.object_class == anchor and int(i.detection.mask.sum()) >= min_pixels
+    ]
+    if not anchors:
+        return []
+    first = max(anchors, key=lambda i: int(i.detection.mask.sum()))
+    near_enough = [i for i in found if np.linalg.norm(i.centre - first.centre) <= reach]
+    if gap is None:
+        return [i.detection for i in near_enough]
+    part = [first]
+    rest = [i for i in near_enough if i is not first]
+    grown = True
+    while grown:
+        grown = False
+        for i in list(rest):
+            if any(_gap(i.points, p.points) <= gap for p in part):
+                part.append(i)
+                rest.remove(i)
+                grown = True
+    return [i.detection for i in part]
+
+
+class PartInspector:
+    """The estimators and pipelines of part inspection and the choices of which instances are the
+    part; thread-safe (one pipeline's random draws are not shared by threads)."""
+
+    def __init__(
+        self,
+        config: VisionConfig,
+        mission: Mission,
+        estimators: dict[str, PoseEstimator] | None = None,
+    ) -> None:
+        self.config = config
+        self.mission = mission
+        self.parts = load_parts()
+        self.tol = inspection.Tolerances.from_mission(mission)
+        self.estimators = estimators if estimators is not None else load_estimators(config, mission)
+        e, ms = self.estimators, config.raw["max_points"]
+        self.pipelines = {
+            kind: PartPipeline(
+                {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]}, max_points=ms
+            )
+            for kind in STRUT_KINDS
+        }
+        self.pipelines["cross_frame"] = PartPipeline(
+            {"cross_frame": e["cross_frame"], "corner_joint": e["corner_joint"]}, max_points=ms
+        )
+        self.pipelines["bay"] = PartPipeline({"corner_joint": e["corner_joint"]}, max_points=ms)
+        self.pipelines["rivet"] = PartPipeline({"rivet": e["rivet"]}, max_points=ms)
+        self._locks = {k: threading.Lock() for k in self.pipelines}
+
+    def observe(
+        self,
+        pipeline: str,
+        detections: Sequence[Detection],
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None = None,
+    ) -> list[inspection.Observation]:
+        with self._locks[pipeline]:
+            return self.pipelines[pipeline].observe(detections, depth, intrinsics, rgb)
+
+    def select(
+        self,
+        kind: str,
+        detections: Sequence[Detection],
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+    ) -> list[Detection]:
+        """The instances of the ``kind`` part (vertical, diagonal, cross_frame) presented."""
+        raw = self.config.raw
+        common = {"depth_range": raw["part_depth_range"], "min_pixels": raw["min_part_pixels"]}
+        if kind == "cross_frame":
+            return select_part(
+                detections,
+                depth,
+                intrinsics,
+                ("cross_frame", "corner_joint"),
+                "cross_frame",
+                self.mission.bay_width * 1.2,
+                gap=raw["part_gap"],
+                **common,
+            )
+        length = self.mission.strut_lengths[kind]
+        return select_part(
+            detections,
+            depth,
+            intrinsics,
+            ("strut_tube", "end_fitting"),
+            "strut_tube",
+            length / 2 + 0.1,
+            **common,
+        )
+
+    def inspect(
+        self,
+        member_id: str,
+        kind: str,
+        detections: Sequence[Detection],
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None = None,
+    ) -> tuple[inspection.InspectionReport, list[inspection.Observation]]:
+        """InspectPart's decision for a strut (vertical, diagonal) or a cross frame in one frame."""
+        part = self.select(kind, detections, depth, intrinsics)
+        obs = self.observe(kind, part, depth, intrinsics, rgb)
+        if kind == "cross_frame":
+            report = inspection.inspect_cross_frame(member_id, self.mission.bay_width, obs, self.tol)
+        else:
+            length = self.mission.strut_lengths[kind]
+            report = inspection.inspect_strut(member_id, kind, length, obs, self.parts, self.tol)
+        return report, obs
+
+
+__all__ = ["STRUT_KINDS", "PartInspector", "load_estimators", "select_part"]
