@@ -31,6 +31,12 @@ from tlt_sim.model.geometry import fmt, look_at_xyaxes, mat_to_quat, rot_x, rot_
 from tlt_sim.model.scenario import NOMINAL, Defect, Scenario
 
 ARM_BIT, PART_BIT = 2, 4
+# Rivet gun body of the end effector (half extents, m) and how far it sits outboard of the grasp
+# line, across the bar: a gun hangs over each end of whatever side of a part is grasped.
+GUN_HALF, GUN_OUTBOARD = (0.025, 0.025, 0.04), 0.06
+# Rack uprights: half width of their square section, and the gap kept between a cross-frame
+# upright and a rivet gun over the corner it stands by (the fine approach's error budget).
+UPRIGHT_HALF, UPRIGHT_GUN_GAP = 0.015, 0.03
 HIDDEN_GROUP, RIVET_GROUP = 5, 2
 CLASS_COLOURS = {
     "strut_tube": "0.78 0.80 0.83 1",
@@ -613,28 +619,25 @@ class _Builder:
 
     def _rack(self, body: ET.Element, name: str, extent: float, top: float) -> None:
         height = top + 0.05
-        width = self.w if name.startswith("cross") else 0.1
-        # Uprights stand clear of the strut ends so the rivet guns beside the grippers fit.
-        clearance = 0.03 if name.startswith("cross") else self.edu["end_effector"]["rivet_gun_offset"] * 0.9
-        for sx in (-1, 1):
-            for sy in (-1, 1):
-                x, y = sx * (extent / 2 + clearance), sy * (width / 2 + 0.02)
-                _sub(
-                    body,
-                    "geom",
-                    name=f"dispenser/{name}/upright_{sx}_{sy}".replace("-", "m"),
-                    class_="env",
-                    type="box",
-                    size=(0.015, 0.015, height / 2),
-                    pos=(x, y, height / 2),
-                )
+        uprights = rack_uprights(name.startswith("cross"), extent, self.w, self.edu)
+        for sx, sy, x, y in uprights:
+            _sub(
+                body,
+                "geom",
+                name=f"dispenser/{name}/upright_{sx}_{sy}".replace("-", "m"),
+                class_="env",
+                type="box",
+                size=(UPRIGHT_HALF, UPRIGHT_HALF, height / 2),
+                pos=(x, y, height / 2),
+            )
+        x, y = abs(uprights[0][2]), abs(uprights[0][3])
         _sub(
             body,
             "geom",
             name=f"dispenser/{name}/base",
             class_="env",
             type="box",
-            size=(extent / 2 + clearance + 0.02, width / 2 + 0.04, 0.01),
+            size=(x + 0.02, y + 0.02, 0.01),
             pos=(0, 0, 0.01),
         )
 
@@ -868,8 +871,8 @@ class _Builder:
             name=f"{arm}/rivet_gun_{side}/body",
             class_="arm",
             type="box",
-            size=(0.025, 0.025, 0.04),
-            pos=(gx, -0.06, depth - 0.05),
+            size=GUN_HALF,
+            pos=(gx, -GUN_OUTBOARD, depth - 0.05),
             mass=0.8,
             rgba=(0.9, 0.75, 0.1, 1),
         )
@@ -879,7 +882,7 @@ class _Builder:
             class_="arm",
             type="box",
             size=(abs(gx) / 2 + 0.02, 0.01, 0.01),
-            pos=(gx / 2, -0.06, depth - 0.1),
+            pos=(gx / 2, -GUN_OUTBOARD, depth - 0.1),
             mass=0.1,
         )
         _sub(body, "site", name=names.rivet_gun_site(arm, side), pos=(gx, 0, depth), size=(0.008,))
@@ -959,6 +962,26 @@ class _Builder:
                     active="false",
                     solref=phys["grasp_solref"],
                 )
+
+
+def rack_uprights(
+    cross_frame: bool, extent: float, bay_width: float, edu: dict[str, Any]
+) -> list[tuple[int, int, float, float]]:
+    """The four uprights of a part rack, ``(sx, sy, x, y)`` in the dispenser's frame.
+
+    ``extent`` is the parts' length along the rack's x. A grasp puts the EE's rivet guns over both
+    ends of the grasped bar, outboard of it: strut racks keep their uprights beyond the strut ends,
+    and cross-frame racks (whose frames may be taken by any side) stand theirs diagonally out from
+    each corner, a gun's half length plus a gap beyond it both ways, so that no side's guns meet
+    them (an upright by a corner stopped the EE short of every frame below the top one).
+    """
+    if cross_frame:
+        out = GUN_HALF[0] + UPRIGHT_HALF + UPRIGHT_GUN_GAP
+        half_x, half_y = extent / 2 + out, bay_width / 2 + out
+    else:
+        half_x = extent / 2 + edu["end_effector"]["rivet_gun_offset"] * 0.9
+        half_y = 0.05 + 0.02
+    return [(sx, sy, sx * half_x, sy * half_y) for sx in (-1, 1) for sy in (-1, 1)]
 
 
 def build_model(

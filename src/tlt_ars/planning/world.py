@@ -65,7 +65,15 @@ _ARM = {
 }
 _POSE = {"position": _vec(3), "rpy": _vec(3)}
 _BOX = {"name": Field("str"), "position": _vec(3), "size": _positive_vec(3)}
-_RACK = {"size": _positive_vec(2), "top": Field("float")}
+# Uprights of a part rack: each stands `beyond_part` (x, y) out from the stowed parts' ends/sides
+# (a strut has no y extent), a square post of side `section`, rising `above_top_slot` above the
+# top part of a full dispenser.
+_UPRIGHTS = {
+    "beyond_part": _positive_vec(2),
+    "section": Field("float", minimum=0.001),
+    "above_top_slot": Field("float", minimum=0.0),
+}
+_RACK = {"size": _positive_vec(2), "top": Field("float"), "uprights": opt("dict", None, schema=_UPRIGHTS)}
 
 SCHEMA = {
     "format": Field("int", choices=(1,)),
@@ -280,6 +288,42 @@ def dispenser_shapes(cfg: SceneConfig, mission: Any) -> list[Shape]:
         pose = frame.copy()
         pose[2, 3] = floor_z + height / 2
         out.append(Box(f"dispenser/{name}", pose, (rack["size"][0], rack["size"][1], height)))
+        out += _upright_shapes(cfg, mission, name, disp, frame)
+    return out
+
+
+def rack_upright_positions(cfg: SceneConfig, mission: Any, dispenser: Any) -> list[np.ndarray]:
+    """Centre (x, y) of each upright of ``dispenser``'s rack in its own frame (none configured: [])."""
+    spec = cfg.raw["dispensers"][dispenser.part_kind].get("uprights")
+    if spec is None:
+        return []
+    if dispenser.part_kind == "cross_frame":
+        extent = (mission.bay_width, mission.bay_width)
+    else:
+        extent = (mission.strut_lengths[dispenser.part_kind], 0.0)
+    hx, hy = (extent[k] / 2 + spec["beyond_part"][k] for k in range(2))
+    return [np.array([sx * hx, sy * hy]) for sx in (-1, 1) for sy in (-1, 1)]
+
+
+def rack_upright_height(cfg: SceneConfig, dispenser: Any) -> float:
+    """Height of ``dispenser``'s rack uprights above its origin (full dispenser)."""
+    racks = cfg.raw["dispensers"]
+    top = racks["first_slot_height"] + max(dispenser.count - 1, 0) * racks["slot_pitch"]
+    return top + racks[dispenser.part_kind]["uprights"]["above_top_slot"]
+
+
+def _upright_shapes(cfg: SceneConfig, mission: Any, name: str, disp: Any, frame: np.ndarray) -> list[Shape]:
+    # The uprights rise above the stowed parts, where the end effector works: a path that clears
+    # the rack's box may still run a rivet gun into one.
+    centres = rack_upright_positions(cfg, mission, disp)
+    if not centres:
+        return []
+    side = cfg.raw["dispensers"][disp.part_kind]["uprights"]["section"]
+    height = rack_upright_height(cfg, disp)
+    out: list[Shape] = []
+    for k, (x, y) in enumerate(centres):
+        pose = frame @ pose_matrix((x, y, height / 2))
+        out.append(Box(f"dispenser/{name}/upright_{k}", pose, (side, side, height)))
     return out
 
 

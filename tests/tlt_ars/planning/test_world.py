@@ -55,6 +55,11 @@ def test_unknown_key_is_named():
         (("arms", "ars_x", "home"), [0.0, -1.57, 9.0, 0.0, 0.0, 0.0], "arms.ars_x.home[2]"),
         (("limits", "position_lower"), [7.0, -6.0, -3.0, -6.0, -6.0, -6.0], "limits.position_lower[0]"),
         (("planning", "check_resolution"), 0.0, "planning.check_resolution"),
+        (
+            ("dispensers", "cross_frame", "uprights", "section"),
+            0.0,
+            "dispensers.cross_frame.uprights.section",
+        ),
     ],
 )
 def test_bad_values_are_refused_naming_the_key(path, value, key):
@@ -72,8 +77,16 @@ def test_static_world(cfg, mission):
     groups = static_shapes(cfg, mission)
     posts = [s for s in groups["lifter"] if s.name.startswith("lifter/post")]
     assert len(posts) == 4 and all(isinstance(p, Capsule) for p in posts)
-    assert {s.name for s in groups["dispensers"]} == {f"dispenser/{n}" for n in mission.dispensers}
+    bodies = {s.name for s in groups["dispensers"] if "/upright_" not in s.name}
+    assert bodies == {f"dispenser/{n}" for n in mission.dispensers}
     assert all(isinstance(s, Box) for s in groups["dispensers"])
+    # Part racks (not rivet feeders) have four uprights, rising above the top part of the stack.
+    for name, disp in mission.dispensers.items():
+        uprights = [s for s in groups["dispensers"] if s.name.startswith(f"dispenser/{name}/upright_")]
+        assert len(uprights) == (0 if disp.part_kind == "rivet" else 4), name
+        racks = cfg.raw["dispensers"]
+        top = racks["first_slot_height"] + (disp.count - 1) * racks["slot_pitch"]
+        assert all(u.pose[2, 3] + u.size[2] / 2 > disp.position[2] + top for u in uprights), name
     assert {"floor", "ars_x/pedestal", "ars_y/pedestal"} <= {s.name for s in groups["environment"]}
 
 

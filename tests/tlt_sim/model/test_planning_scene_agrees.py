@@ -1,6 +1,7 @@
-"""The twin and the motion planner describe one machine: the lifter posts and the arm bases the
-arms plan around (config/planning/scene.yaml) are where the twin builds them (config/twin/edu.yaml).
-A difference puts every grasp and placement off by it."""
+"""The twin and the motion planner describe one machine: the lifter posts, the arm bases and the
+dispenser racks' uprights the arms plan around (config/planning/scene.yaml) are where the twin
+builds them (config/twin/edu.yaml, generate.py). A difference puts every grasp and placement off by
+it, or lets a planned path run the end effector into something."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from tlt_sim.model import names
 
-from tlt_ars.planning.world import load_scene_config
+from tlt_ars.planning.world import load_scene_config, rack_upright_height, rack_upright_positions
 
 
 def test_posts_and_arm_bases_agree(scene):
@@ -20,3 +21,27 @@ def test_posts_and_arm_bases_agree(scene):
         assert twin_arm["base"] == pytest.approx(plan_arm["base"])
         assert twin_arm["yaw_deg"] == pytest.approx(plan_arm["yaw_deg"])
         assert twin_arm["pedestal_height"] == pytest.approx(plan_arm["pedestal_height"])
+
+
+def test_dispenser_rack_uprights_agree(scene):
+    """The planner keeps the end effector off the rack uprights the twin builds (same place, same
+    height): uprights it did not know of stopped the arm short of the parts below the top one."""
+    planning = load_scene_config()
+    m, d = scene.model, scene.data
+    checked = 0
+    for name, disp in scene.mission.dispensers.items():
+        if disp.part_kind == "rivet":
+            continue
+        body = m.body(f"dispenser/{name}")
+        origin, rot = d.xpos[body.id], d.xmat[body.id].reshape(3, 3)
+        twin = []
+        for g in range(m.ngeom):
+            if m.geom_bodyid[g] == body.id and "/upright_" in m.geom(g).name:
+                x, y, _ = rot.T @ (d.geom_xpos[g] - origin)
+                twin.append((round(float(x), 4), round(float(y), 4), 2 * float(m.geom_size[g][2])))
+        centres = rack_upright_positions(planning, scene.mission, disp)
+        planned = [(round(float(x), 4), round(float(y), 4)) for x, y in centres]
+        assert sorted(t[:2] for t in twin) == sorted(planned), name
+        assert all(t[2] == pytest.approx(rack_upright_height(planning, disp)) for t in twin), name
+        checked += 1
+    assert checked >= 3
