@@ -50,7 +50,7 @@ from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
 from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
 
-from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_matrix
+from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import Mission, load_mission
@@ -63,6 +63,7 @@ from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
 from tlt_vision.pipeline import Detection
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
+from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
 log = logging.getLogger("tlt.vision")
@@ -469,21 +470,7 @@ class VisionNode(Node):
     # ----- LocateTag -----
     def tag_mount(self, dispenser: str) -> np.ndarray:
         """The tag's frame in its dispenser's frame, where the twin mounts it (node.yaml ``tag_mount``)."""
-        m = self.config.raw["tag_mount"]
-        disp = self.mission.dispensers[dispenser]
-        size = self.tags.config.tag_side * 10 / 8  # printed size, quiet zone included
-        if disp.part_kind == "rivet":
-            extent, top = m["rivet_extent"], m["rivet_top"]
-        else:
-            extent = (
-                self.mission.bay_width
-                if disp.part_kind == "cross_frame"
-                else self.mission.strut_lengths[disp.part_kind]
-            )
-            top = m["first_slot_height"] + max(disp.count - 1, 0) * m["slot_pitch"]
-        return pose_matrix(
-            (-(extent / 2 + m["end_gap"] + size / 2), 0.0, top + m["above_top"]), rpy_matrix(m["rpy"])
-        )
+        return tag_mount(self.config.raw["tag_mount"], self.mission, dispenser, self.tags.config.tag_side)
 
     def _locate_tag(self, request: Any, response: Any) -> Any:
         try:

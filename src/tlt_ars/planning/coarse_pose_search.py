@@ -38,11 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import VELOCITY_LIMIT, IkFailed, invert, pose_matrix, rpy_matrix
+from tlt_ars.planning.kinematics import VELOCITY_LIMIT, IkFailed, invert, pose_matrix
 from tlt_ars.planning.world import SceneConfig, build_scene, dispenser_frame, load_scene_config
 from tlt_common.mission.schema import load_mission
 from tlt_vision.apriltag import TagConfig
 from tlt_vision.node_config import VisionConfig, load_config, pose_of
+from tlt_vision.tag_mounts import tag_mount
 
 DEFAULT_MISSION = "missions/one_bay.yaml"  # every mission shares the dispenser layout
 ARMS = ("ars_x", "ars_y")
@@ -126,22 +127,9 @@ class Setup:
 
     def tag_pose(self, dispenser: str) -> np.ndarray:
         """World pose of ``dispenser``'s tag (x right, y up as printed, z out of the face), where the
-        twin mounts it: the rule of the vision node's LocateTag (node.yaml ``tag_mount``)."""
-        m = self.vision.raw["tag_mount"]
+        twin mounts it: vision's rule (:func:`tlt_vision.tag_mounts.tag_mount`)."""
         disp = self.mission.dispensers[dispenser]
-        if disp.part_kind == "rivet":
-            extent, top = m["rivet_extent"], m["rivet_top"]
-        else:
-            extent = (
-                self.mission.bay_width
-                if disp.part_kind == "cross_frame"
-                else self.mission.strut_lengths[disp.part_kind]
-            )
-            top = m["first_slot_height"] + max(disp.count - 1, 0) * m["slot_pitch"]
-        mount = pose_matrix(
-            (-(extent / 2 + m["end_gap"] + self.printed_size / 2), 0.0, top + m["above_top"]),
-            rpy_matrix(m["rpy"]),
-        )
+        mount = tag_mount(self.vision.raw["tag_mount"], self.mission, dispenser, self.tag.tag_side)
         return dispenser_frame(self.scene, disp) @ mount
 
 
