@@ -75,6 +75,8 @@ class ExecutingGoal:
     desired: dict[str, float] = field(default_factory=dict)
     desired_velocity: dict[str, float] = field(default_factory=dict)
     actual: dict[str, float] = field(default_factory=dict)
+    elapsed: float = 0.0  # trajectory time reached, s (behind the clock after stalled cycles)
+    last_update: float | None = None
 
     @property
     def done(self) -> bool:
@@ -97,8 +99,10 @@ class JointTrajectoryController:
         goal_tolerance: float = 0.02,
         goal_time_tolerance: float = 0.5,
         motion_gate: Callable[[], str | None] | None = None,
+        max_time_step: float | None = None,
     ) -> None:
         self.joints = list(joints)
+        self.max_time_step = max_time_step
         self.limits = dict(limits)
         self.default_path_tolerance = path_tolerance
         self.default_goal_tolerance = goal_tolerance
@@ -214,7 +218,7 @@ class JointTrajectoryController:
         goal = self.active
         if goal is None or goal.done:
             return commands
-        t = now - goal.start_time
+        t = self._advance(goal, now)
         desired, desired_vel = sample(goal.goal, goal.start_positions, t)
         goal.desired, goal.desired_velocity = desired, desired_vel
         goal.actual = {n: actual[n] for n in goal.goal.joint_names}
@@ -252,6 +256,18 @@ class JointTrajectoryController:
             self._hold_actual(actual)
             return dict(self.hold)
         return commands
+
+    def _advance(self, goal: ExecutingGoal, now: float) -> float:
+        """The goal's trajectory time at ``now``: the clock's, except that one cycle never moves it
+        on by more than ``max_time_step``. A control loop that missed cycles (a starved process)
+        then resumes the trajectory where it left it, slower, instead of finding the desired
+        position far ahead of an arm that got no commands meanwhile."""
+        step = now - (goal.start_time if goal.last_update is None else goal.last_update)
+        if self.max_time_step is not None:
+            step = min(step, self.max_time_step)
+        goal.elapsed += max(step, 0.0)
+        goal.last_update = now
+        return goal.elapsed
 
 
 def sample(

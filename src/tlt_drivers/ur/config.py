@@ -65,6 +65,9 @@ UR_SCHEMA = {
     "default_path_tolerance": opt("float", 0.1, minimum=0.0),
     "default_goal_tolerance": opt("float", 0.01, minimum=0.0),
     "default_goal_time_tolerance_s": opt("float", 1.0, minimum=0.0),
+    "max_trajectory_step_s": opt(
+        "float", 0.05, minimum=0.001, doc="most trajectory time one control cycle may move on, s"
+    ),
     "joints": Field("list", item=Field("dict", schema=JOINT_SCHEMA), check=_check_joints),
 }
 
@@ -99,6 +102,7 @@ class URConfig:
     default_path_tolerance: float = 0.1
     default_goal_tolerance: float = 0.01
     default_goal_time_tolerance_s: float = 1.0
+    max_trajectory_step_s: float = 0.05
 
     @property
     def joint_names(self) -> tuple[str, ...]:

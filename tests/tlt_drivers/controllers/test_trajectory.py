@@ -146,3 +146,19 @@ def test_fault_and_cancel_stop_where_the_joints_are():
     run2 = c.start(goal((1.0, (1.0, 0.0))), 1.0, {"a": 0.3, "b": 0.0})
     c.cancel({"a": 0.4, "b": 0.0})
     assert run2.status == GoalStatus.CANCELED and c.update(1.5, {"a": 0.4, "b": 0.0})["a"] == 0.4
+
+
+def test_a_stalled_cycle_moves_the_trajectory_on_by_at_most_max_time_step():
+    # A control loop that got no CPU for 0.3 s: without a bound the desired position would jump
+    # 0.3 rad ahead of an arm that got no commands meanwhile and abort the goal on the path limit.
+    c = make(max_time_step=0.05)
+    run = c.start(goal((1.0, (1.0, 0.0))), 10.0, {"a": 0.0, "b": 0.0})
+    actual = c.update(10.02, {"a": 0.0, "b": 0.0})
+    cmd = c.update(10.32, actual)
+    assert cmd["a"] == pytest.approx(0.07)  # 0.02 s, then the bounded 0.05 s
+    assert run.status == GoalStatus.RUNNING
+    unbounded = make()
+    run = unbounded.start(goal((1.0, (1.0, 0.0))), 10.0, {"a": 0.0, "b": 0.0})
+    actual = unbounded.update(10.02, {"a": 0.0, "b": 0.0})
+    unbounded.update(10.32, actual)
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.PATH_TOLERANCE_VIOLATED
