@@ -10,7 +10,9 @@ running goal:
 * between points the desired state is interpolated: linear when the points carry positions only,
   cubic (Hermite) when every point carries velocities;
 * while the trajectory runs, a joint further than its path tolerance from the desired position
-  aborts the goal (PATH_TOLERANCE_VIOLATED);
+  aborts the goal (PATH_TOLERANCE_VIOLATED), unless the arm is within tolerance of where the path
+  was up to ``path_lag_window`` seconds earlier: late along its path, not off it (a controller
+  whose cycles were delayed); ``max_time_step`` bounds how far one cycle moves the trajectory on;
 * after the last point's time, the goal SUCCEEDS once every joint is within its goal tolerance, and
   ABORTS (GOAL_TOLERANCE_VIOLATED) when that has not happened within the goal time tolerance.
 
@@ -33,6 +35,8 @@ INVALID_JOINTS = -2
 PATH_TOLERANCE_VIOLATED = -4
 GOAL_TOLERANCE_VIOLATED = -5
 HARDWARE_FAULT = -6
+# Points of the path looked back at when judging an arm that is late along it.
+LAG_SAMPLES = 10
 
 
 class GoalStatus(enum.Enum):
@@ -100,9 +104,11 @@ class JointTrajectoryController:
         goal_time_tolerance: float = 0.5,
         motion_gate: Callable[[], str | None] | None = None,
         max_time_step: float | None = None,
+        path_lag_window: float = 0.0,
     ) -> None:
         self.joints = list(joints)
         self.max_time_step = max_time_step
+        self.path_lag_window = path_lag_window
         self.limits = dict(limits)
         self.default_path_tolerance = path_tolerance
         self.default_goal_tolerance = goal_tolerance
@@ -225,17 +231,18 @@ class JointTrajectoryController:
         commands.update(desired)
         end = goal.goal.points[-1].time_from_start
         if t <= end:
-            for name, want in desired.items():
-                tol = goal.path_tolerance[name]
-                if tol > 0 and abs(actual[name] - want) > tol:
-                    goal.finish(
-                        GoalStatus.ABORTED,
-                        PATH_TOLERANCE_VIOLATED,
-                        f"joint {name!r} is {abs(actual[name] - want):.4f} from the path "
-                        f"(tolerance {tol}) at t={t:.3f} s",
-                    )
-                    self._hold_actual(actual)
-                    return dict(self.hold)
+            violations = self._path_violations(goal, t, desired, actual)
+            if violations:
+                name, want = next(iter(violations.items()))
+                late = f", nor up to {self.path_lag_window:g} s earlier" if self.path_lag_window > 0 else ""
+                goal.finish(
+                    GoalStatus.ABORTED,
+                    PATH_TOLERANCE_VIOLATED,
+                    f"joint {name!r} is {abs(actual[name] - want):.4f} from the path "
+                    f"(tolerance {goal.path_tolerance[name]}) at t={t:.3f} s{late}",
+                )
+                self._hold_actual(actual)
+                return dict(self.hold)
             return commands
         final = dict(zip(goal.goal.joint_names, goal.goal.points[-1].positions, strict=True))
         off = {n: abs(actual[n] - final[n]) for n in final if goal.goal_tolerance[n] > 0}
@@ -256,6 +263,23 @@ class JointTrajectoryController:
             self._hold_actual(actual)
             return dict(self.hold)
         return commands
+
+    def _path_violations(self, goal: ExecutingGoal, t: float, desired: Mapping[str, float],
+                         actual: Mapping[str, float]) -> dict[str, float]:  # fmt: skip
+        """The joints off the path at ``t`` (name -> desired position); none when the arm is on the
+        path as it was up to ``path_lag_window`` earlier, i.e. merely late along it."""
+        def off(want: Mapping[str, float]) -> dict[str, float]:
+            tol = goal.path_tolerance
+            return {n: w for n, w in want.items() if tol[n] > 0 and abs(actual[n] - w) > tol[n]}
+
+        violations = off(desired)
+        if not violations or self.path_lag_window <= 0:
+            return violations
+        for k in range(1, LAG_SAMPLES + 1):
+            earlier = max(t - self.path_lag_window * k / LAG_SAMPLES, 0.0)
+            if not off(sample(goal.goal, goal.start_positions, earlier)[0]):
+                return {}
+        return violations
 
     def _advance(self, goal: ExecutingGoal, now: float) -> float:
         """The goal's trajectory time at ``now``: the clock's, except that one cycle never moves it

@@ -68,6 +68,9 @@ UR_SCHEMA = {
     "max_trajectory_step_s": opt(
         "float", 0.05, minimum=0.001, doc="most trajectory time one control cycle may move on, s"
     ),
+    "path_lag_window_s": opt(
+        "float", 0.5, minimum=0.0, doc="an arm this late along its path is not off it, s"
+    ),
     "joints": Field("list", item=Field("dict", schema=JOINT_SCHEMA), check=_check_joints),
 }
 
@@ -103,6 +106,7 @@ class URConfig:
     default_goal_tolerance: float = 0.01
     default_goal_time_tolerance_s: float = 1.0
     max_trajectory_step_s: float = 0.05
+    path_lag_window_s: float = 0.5
 
     @property
     def joint_names(self) -> tuple[str, ...]:

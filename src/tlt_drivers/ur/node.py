@@ -66,6 +66,7 @@ class URNode(Node):
             goal_time_tolerance=config.default_goal_time_tolerance_s,
             motion_gate=self._motion_gate,
             max_time_step=config.max_trajectory_step_s,
+            path_lag_window=config.path_lag_window_s,
         )
         self._joint_pub = self.create_publisher(JointState, ros_names.joint_states_topic(c), 10)
         self._status_pub = self.create_publisher(HardwareStatus, ros_names.hardware_status_topic(c), 10)

@@ -162,3 +162,17 @@ def test_a_stalled_cycle_moves_the_trajectory_on_by_at_most_max_time_step():
     actual = unbounded.update(10.02, {"a": 0.0, "b": 0.0})
     unbounded.update(10.32, actual)
     assert run.status == GoalStatus.ABORTED and run.error_code == jtc.PATH_TOLERANCE_VIOLATED
+
+
+def test_an_arm_late_along_its_path_is_not_off_it_within_the_lag_window():
+    # The arm keeps to the path 0.3 s behind it: on the path, late; then it stops moving: off it.
+    c = make(path_lag_window=0.5)
+    run = c.start(goal((2.0, (1.0, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    for k in range(1, 11):
+        t = 0.1 * k
+        c.update(t, {"a": max(t - 0.3, 0.0) / 2.0, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING
+    for k in range(11, 18):
+        c.update(0.1 * k, {"a": 0.35, "b": 0.0})
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.PATH_TOLERANCE_VIOLATED
+    assert "nor up to 0.5 s earlier" in run.error_string
