@@ -8,13 +8,14 @@ its depth image and intrinsics it answers the InspectPart decision for a strut o
 no ROS: the vision node (:mod:`tlt_vision.node`) wraps it in its services, and tests run it on the
 twin's renders directly.
 
-Which instances are the part (:func:`select_part`): the biggest instance of the part's main class
-(a strut's tube, a cross frame's side) in the working depth range is the anchor; the part is the
-anchor and the instances joined to it in 3-D, each within ``gap`` of the part grown so far (a
-cross frame's sides meet at its corner joints; a strut's fittings sit on its tube), and within
-``reach`` of the anchor's centre. Other parts in view, however close in the image (the lifter's
-top cross frame below a held one, the rest of a dispenser's stack behind it), stay out of it. With
-no ``gap`` every instance within ``reach`` is taken, as for a strut.
+Which instances are the part (:func:`select_part`), among those in the working depth range: with a
+``gap``, the instances are joined into parts, two instances being of one part when a chain of
+instances links them with 3-D gaps of at most ``gap`` (a cross frame's sides meet at its corner
+joints); the part presented is the one with the most pixels of its main class (a cross frame's
+sides), kept to ``reach`` of its biggest main instance. Other parts in view, however close in the
+image (the lifter's top cross frame below a held one, the rest of a dispenser's stack behind it),
+stay out of it as long as they do not touch it. Without a ``gap`` (struts) the biggest main
+instance (a tube) is the anchor and every instance within ``reach`` of its centre is taken.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from tlt_vision import inspection
 from tlt_vision.cad.models import load_parts, models_for_mission
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.pipeline import Detection, PartPipeline
-from tlt_vision.pointcloud import PinholeIntrinsics
+from tlt_vision.pointcloud import PinholeIntrinsics, masked_point_cloud
 from tlt_vision.pose.corrector import CorrectorConfig
 from tlt_vision.pose.estimator import PoseEstimator
 from tlt_vision.train.c3po_supervised import load_detector
@@ -77,10 +78,15 @@ def _instance(d: Detection, depth: np.ndarray, k: PinholeIntrinsics) -> _Instanc
     z = depth[v, u].astype(float)
     zc = float(np.median(z))
     centre = np.array([(np.median(u) - k.cx) * zc / k.fx, (np.median(v) - k.cy) * zc / k.fy, zc])
-    step = max(1, len(z) // _GAP_POINTS)
-    u, v, z = u[::step], v[::step], z[::step]
-    points = np.stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z], axis=1)
-    return _Instance(d, centre, points)
+    # Off the mask's border: a border pixel where one part occludes another may carry the
+    # front part's depth and would join the two (a tiny instance keeps its border pixels).
+    rng = np.random.default_rng(0)
+    cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS, rng=rng)
+    if not cloud.ok:
+        cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS, rng=rng, erode=0)
+    if not cloud.ok:
+        return None
+    return _Instance(d, centre, cloud.points.astype(float))
 
 
 def _gap(a: np.ndarray, b: np.ndarray) -> float:
@@ -111,26 +117,45 @@ def select_part(
         inst = _instance(d, depth, intrinsics)
         if inst is not None and near <= inst.centre[2] <= far:
             found.append(inst)
-    anchors = [
-        i for i in found if i.detection.object_class == anchor and int(i.detection.mask.sum()) >= min_pixels
-    ]
+    anchors = [i for i in found if i.detection.object_class == anchor and _pixels(i) >= min_pixels]
     if not anchors:
         return []
-    first = max(anchors, key=lambda i: int(i.detection.mask.sum()))
-    near_enough = [i for i in found if np.linalg.norm(i.centre - first.centre) <= reach]
     if gap is None:
-        return [i.detection for i in near_enough]
-    part = [first]
-    rest = [i for i in near_enough if i is not first]
-    grown = True
-    while grown:
-        grown = False
-        for i in list(rest):
-            if any(_gap(i.points, p.points) <= gap for p in part):
-                part.append(i)
-                rest.remove(i)
-                grown = True
-    return [i.detection for i in part]
+        first = max(anchors, key=_pixels)
+        return [i.detection for i in found if np.linalg.norm(i.centre - first.centre) <= reach]
+    # Parts as groups of instances joined within ``gap``; the part presented is the group with
+    # the most pixels of the anchor class (a held frame, not the bigger side of one behind it).
+    groups = _joined(found, gap)
+    best = max(
+        (g for g in groups if any(i in anchors for i in g)),
+        key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor),
+    )
+    first = max((i for i in best if i in anchors), key=_pixels)
+    return [i.detection for i in best if np.linalg.norm(i.centre - first.centre) <= reach]
+
+
+def _pixels(i: _Instance) -> int:
+    return int(i.detection.mask.sum())
+
+
+def _joined(instances: list[_Instance], gap: float) -> list[list[_Instance]]:
+    """Groups of instances linked by chains of gaps of at most ``gap`` (m)."""
+    parent = list(range(len(instances)))
+
+    def root(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a in range(len(instances)):
+        for b in range(a + 1, len(instances)):
+            if root(a) != root(b) and _gap(instances[a].points, instances[b].points) <= gap:
+                parent[root(a)] = root(b)
+    groups: dict[int, list[_Instance]] = {}
+    for k, inst in enumerate(instances):
+        groups.setdefault(root(k), []).append(inst)
+    return list(groups.values())
 
 
 class PartInspector:

@@ -1,0 +1,61 @@
+"""select_part: the part presented is the group of instances joined in 3-D with the most pixels of
+its main class, not the biggest single instance (a bigger side of another frame behind it)."""
+
+import numpy as np
+
+from tlt_vision.part_inspection import select_part
+from tlt_vision.pipeline import Detection
+from tlt_vision.pointcloud import Intrinsics
+
+K = Intrinsics(100.0, 100.0, 49.5, 49.5)
+
+
+def _mask(rows: slice, cols: slice) -> np.ndarray:
+    m = np.zeros((100, 100), dtype=bool)
+    m[rows, cols] = True
+    return m
+
+
+def _scene():
+    depth = np.zeros((100, 100), dtype=np.float32)
+    # The held frame, 0.6 m away: two sides meeting at a corner joint.
+    a1, a2, joint = (
+        _mask(slice(10, 20), slice(10, 40)),
+        _mask(slice(20, 50), slice(10, 20)),
+        _mask(slice(10, 20), slice(40, 45)),
+    )
+    # Another frame 1.5 m away: one side bigger than either held side, fewer pixels in all.
+    b = _mask(slice(60, 75), slice(10, 40))
+    for m, z in ((a1, 0.6), (a2, 0.6), (joint, 0.6), (b, 1.5)):
+        depth[m] = z
+    dets = [
+        Detection("cross_frame", a1, object_id="a/side_0"),
+        Detection("cross_frame", a2, object_id="a/side_1"),
+        Detection("corner_joint", joint, object_id="a/corner_1"),
+        Detection("cross_frame", b, object_id="b/side_0"),
+    ]
+    return dets, depth
+
+
+def _ids(picked):
+    return sorted(d.object_id for d in picked)
+
+
+def test_the_joined_part_with_most_main_pixels_is_picked_without_the_frame_behind():
+    dets, depth = _scene()
+    picked = select_part(
+        dets, depth, K, ("cross_frame", "corner_joint"), "cross_frame", 2.0, (0.15, 2.0), 50, gap=0.03
+    )
+    assert _ids(picked) == ["a/corner_1", "a/side_0", "a/side_1"]
+
+
+def test_without_a_gap_the_biggest_instance_anchors_and_reach_decides():
+    dets, depth = _scene()
+    picked = select_part(dets, depth, K, ("cross_frame", "corner_joint"), "cross_frame", 0.3, (0.15, 2.0), 50)
+    assert _ids(picked) == ["b/side_0"]
+
+
+def test_no_anchor_in_the_depth_range_means_the_part_is_not_in_view():
+    dets, depth = _scene()
+    assert select_part(dets, depth, K, ("cross_frame",), "cross_frame", 2.0, (0.15, 0.5), 50, gap=0.03) == []
+    assert select_part(dets, None, K, ("cross_frame",), "cross_frame", 2.0, (0.15, 2.0), 50, gap=0.03) == []
