@@ -131,7 +131,8 @@ class ArsStandIn:
             for _ in range(self.max_parts):
                 if not handle.is_active or handle.is_cancel_requested or CLOSING.is_set():
                     break
-                call = InspectPart.Request(member_id=member, part_kind="part", camera="zed_left")
+                camera = INSPECTION_CAMERA[self.ars]
+                call = InspectPart.Request(member_id=member, part_kind="part", camera=camera)
                 if not self.inspect.wait_for_service(timeout_sec=2.0):
                     break
                 report = self.inspect.call(call, timeout_sec=5.0)
@@ -171,6 +172,10 @@ class ArsStandIn:
         self.node.destroy_service(self.service)
 
 
+# The lifter ZED each ARS presents its parts to (config/ars/ars_*.yaml cameras.inspection).
+INSPECTION_CAMERA = {"ars_x": "zed_right", "ars_y": "zed_left"}
+
+
 class VisionStandIn:
     """Vision's inspection services, the ones the CRS calls."""
 
@@ -178,6 +183,7 @@ class VisionStandIn:
         self.part_verdicts: dict[str, list[bool]] = {}  # member id -> verdicts of successive parts
         self.bay_passes = True
         self.part_calls: list[str] = []
+        self.part_cameras: list[str] = []
         self.bay_calls: list[int] = []
         self._node, self._group = node, group
         self._services: list[Any] = []
@@ -200,6 +206,7 @@ class VisionStandIn:
 
     def _part(self, request: Any, response: Any) -> Any:
         self.part_calls.append(request.member_id)
+        self.part_cameras.append(request.camera)
         verdicts = self.part_verdicts.get(request.member_id, [])
         passed = verdicts.pop(0) if verdicts else True
         response.report.target_id = request.member_id

@@ -32,6 +32,7 @@ def test_far_vertical_is_added_by_ars_x_and_affixed_by_ars_y(rig, crs, tmp_path)
     ]
     assert ctx.model.states[member.id] == RIVETED
     assert rig.vision.part_calls == [member.id]  # Inspection Check asked vision once
+    assert rig.vision.part_cameras == ["zed_right"]  # through the camera ARS X presents it to
     # One vertical and its two rivets (one from each ARS's rivet dispenser) left the dispensers.
     assert ctx.model.remaining["vertical_dispenser_x"] == 4
     assert ctx.model.remaining["rivet_dispenser_x"] == 15 and ctx.model.remaining["rivet_dispenser_y"] == 15

@@ -265,7 +265,9 @@ def inspection_check(ctx: CrsContext, request: ArsRequest) -> py_trees.behaviour
         msg = InspectPart.Request()
         msg.member_id = member.id
         msg.part_kind = wait.pending.part_kind if wait.pending and wait.pending.part_kind else member.kind
-        msg.camera = ctx.config.camera_mounts.part_camera
+        # The ZED the ARS presents the part to (each faces one arm's side of the lifter).
+        asked = wait.pending.camera if wait.pending else ""
+        msg.camera = asked or ctx.config.camera_mounts.part_camera
         return msg
 
     inspect = ServiceCall(
