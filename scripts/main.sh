@@ -29,8 +29,11 @@ if [ ! -f "$ROOT/missions/$MISSION.yaml" ]; then
 fi
 bash "$ROOT/scripts/setup.sh"
 VENV="${TLT_VENV:-$ROOT/.venv}"
-# A private device folder and ROS domain, so the job does not meet another run on this machine.
+# A private device folder, ROS domain and UR controller addresses (all of 127/8 is loopback), so
+# the job does not meet another run, or pytest's emulated arms on 127.0.0.2/.3, on this machine.
 export TLT_RUN_DIR="${TLT_RUN_DIR:-$(mktemp -d /tmp/tlt-run.XXXXXX)}"
+UR_NET="127.0.$((100 + RANDOM % 150))"
+export TLT_UR_X_HOST="${TLT_UR_X_HOST:-$UR_NET.2}" TLT_UR_Y_HOST="${TLT_UR_Y_HOST:-$UR_NET.3}"
 export TLT_MISSION="$MISSION"
 echo "main.sh: mission $MISSION, run files in $TLT_RUN_DIR"
 status=0
