@@ -980,7 +980,9 @@ def rack_uprights(
         half_x, half_y = extent / 2 + out, bay_width / 2 + out
     else:
         half_x = extent / 2 + edu["end_effector"]["rivet_gun_offset"] * 0.9
-        half_y = 0.05 + 0.02
+        # Close to the strut's axis: beyond the strut ends they need no width, and wider they
+        # stood where a rivet gun picks a rivet from the feeder beside the rack.
+        half_y = 0.02
     return [(sx, sy, sx * half_x, sy * half_y) for sx in (-1, 1) for sy in (-1, 1)]
 
 
