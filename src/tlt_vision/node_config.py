@@ -54,6 +54,7 @@ SCHEMA = {
     ),
     "detectors": Field("dict", schema={name: Field("str", doc="weights file (.pt)") for name in MODEL_NAMES}),
     "max_points": opt("int", 1024, minimum=32),
+    "keep_border_below": opt("int", 0, minimum=0),
     "corrector": Field(
         "dict",
         schema={
@@ -61,6 +62,7 @@ SCHEMA = {
             "step": Field("float", **_POSITIVE),
             "decay": Field("float", minimum=0.5, maximum=1.0),
             "patience": Field("int", minimum=1),
+            "refine_iterations": opt("int", 0, minimum=0, maximum=500),
         },
     ),
     "timeouts": Field(

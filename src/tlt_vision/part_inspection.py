@@ -173,18 +173,19 @@ class PartInspector:
         self.parts = load_parts()
         self.tol = inspection.Tolerances.from_mission(mission)
         self.estimators = estimators if estimators is not None else load_estimators(config, mission)
-        e, ms = self.estimators, config.raw["max_points"]
+        e = self.estimators
+        opts = {"max_points": config.raw["max_points"], "keep_border_below": config.raw["keep_border_below"]}
         self.pipelines = {
             kind: PartPipeline(
-                {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]}, max_points=ms
+                {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]}, **opts
             )
             for kind in STRUT_KINDS
         }
         self.pipelines["cross_frame"] = PartPipeline(
-            {"cross_frame": e["cross_frame"], "corner_joint": e["corner_joint"]}, max_points=ms
+            {"cross_frame": e["cross_frame"], "corner_joint": e["corner_joint"]}, **opts
         )
-        self.pipelines["bay"] = PartPipeline({"corner_joint": e["corner_joint"]}, max_points=ms)
-        self.pipelines["rivet"] = PartPipeline({"rivet": e["rivet"]}, max_points=ms)
+        self.pipelines["bay"] = PartPipeline({"corner_joint": e["corner_joint"]}, **opts)
+        self.pipelines["rivet"] = PartPipeline({"rivet": e["rivet"]}, **opts)
         self._locks = {k: threading.Lock() for k in self.pipelines}
 
     def observe(

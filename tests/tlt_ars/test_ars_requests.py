@@ -97,7 +97,7 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     )
     try:
         handle = add_member(stack, "bay1/diagonal/face_x0", DIAGONAL)
-        result = stack.result(handle)
+        result = stack.result(handle, timeout=180)  # two parts fetched and inspected, one discarded
     finally:
         stack.client.destroy_subscription(seen)
     assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason

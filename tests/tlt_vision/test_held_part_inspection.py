@@ -9,8 +9,16 @@ frame is rendered at the twin's run size and segmented by the twin's labels
 the vision node (:class:`tlt_vision.part_inspection.PartInspector`, the shipped weights) runs on it.
 
 What the build relies on and this checks: the whole frame is in view and large, the part picked
-out is the held frame only (not the lifter's top frame or the dispenser's stack in view), and its
-C-3PO pose is certified and matches the twin's truth. The pose is collision-free in the ARS
+out is the held frame only (not the lifter's top frame or the dispenser's stack in view), its
+C-3PO pose is certified and matches the twin's truth, and the whole InspectPart decision passes
+the good frame (every corner joint found within the position tolerance) while its observations
+without one corner joint's fail on that joint.
+
+The same for struts: each ARS holds a vertical and a diagonal strut at its ``poses.inspection``
+before the ZED facing it (ARS X zed_2, ARS Y zed_1); the strut is whole and large in view, the
+pose is collision-free with it held, the good strut passes and its observations without one end
+fitting's fail. (The twin's cross frames are never defective; its defective struts are caught in
+tests/tlt_vision/test_inspection.py.) The pose is collision-free in the ARS
 planning scene with the frame held.
 """
 
@@ -22,10 +30,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from tlt_ars.planning.kinematics import rpy_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frames import CameraFrame
+from tlt_vision.inspection import inspect_cross_frame, inspect_strut
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import TwinLabels
@@ -79,20 +89,36 @@ def test_the_whole_held_frame_is_in_view_and_large(presented):
     assert all(seen.get(f"corner_{i}", 0) >= 80 for i in range(4)), seen
 
 
-def test_the_held_frame_alone_is_inspected_and_its_pose_is_certified(presented):
-    scene, part, frame = presented
-    config = load_config()
-    inspector = PartInspector(config, scene.mission)
+@pytest.fixture(scope="module")
+def inspector(presented):
+    return PartInspector(load_config(), presented[0].mission)
+
+
+def _detections(frame, camera=CAMERA):
     labels = TwinLabels(lambda: (frame.labels.instance_names, frame.labels.classes))
     camera_frame = CameraFrame(
-        CAMERA,
+        camera,
         0.0,
-        f"{CAMERA}_optical",
+        f"{camera}_optical",
         frame.intrinsics,
         frame.intrinsics.matrix,
         {"depth": frame.depth, "segmentation": frame.segmentation, "rgb": frame.rgb},
     )
-    detections = labels.detect(camera_frame)
+    return labels.detect(camera_frame)
+
+
+@pytest.fixture(scope="module")
+def frame_inspected(presented, inspector):
+    """InspectPart's decision and observations for the presented frame."""
+    _, _, frame = presented
+    return inspector.inspect(
+        "bay1/cross_frame", "cross_frame", _detections(frame), frame.depth, frame.intrinsics, frame.rgb
+    )
+
+
+def test_the_held_frame_alone_is_inspected_and_its_pose_is_certified(presented, inspector, frame_inspected):
+    scene, part, frame = presented
+    detections = _detections(frame)
     picked = inspector.select("cross_frame", detections, frame.depth, frame.intrinsics)
     assert picked and all(d.object_id.startswith(part.body + "/") for d in picked), [
         d.object_id for d in picked
@@ -102,9 +128,7 @@ def test_the_held_frame_alone_is_inspected_and_its_pose_is_certified(presented):
     }
     assert others, "other cross frames are in view (the lifter's top frame, the dispenser stack)"
 
-    report, obs = inspector.inspect(
-        "bay1/cross_frame", "cross_frame", detections, frame.depth, frame.intrinsics, frame.rgb
-    )
+    report, obs = frame_inspected
     frames = [o.estimate for o in obs if o.object_class == "cross_frame" and o.estimate is not None]
     assert len(frames) == 1
     est = frames[0]
@@ -115,3 +139,113 @@ def test_the_held_frame_alone_is_inspected_and_its_pose_is_certified(presented):
     hw = part.length / 2
     truth = frame.rotation.T @ (pos + rot @ np.array([hw, hw, 0.0]) - frame.position)
     assert np.linalg.norm(est.translation - truth) < 0.01, (est.translation, truth)
+    # The good frame passes whole: its four corner joints are found where the frame puts them.
+    assert report.passed, report.reasons
+    assert (
+        sum(o.object_class == "corner_joint" and o.estimate is not None and o.estimate.certified for o in obs)
+        == 4
+    )
+
+
+def test_a_frame_missing_a_corner_joint_fails(presented, inspector, frame_inspected):
+    """The decision on the same view's observations without one corner joint's (as if the joint
+    were not on the frame): it fails on that corner alone."""
+    scene, part, _ = presented
+    _, obs = frame_inspected
+    without = [o for o in obs if o.object_id != f"{part.body}/corner_0"]
+    assert len(without) == len(obs) - 1
+    report = inspect_cross_frame("bay1/cross_frame", scene.mission.bay_width, without, inspector.tol)
+    assert not report.passed
+    assert sum(r.startswith("missing corner joint") for r in report.reasons) == 1, report.reasons
+
+
+# -- struts: each ARS presents a held strut at its ``poses.inspection`` to the ZED facing it ------
+STRUT_VIEWS = [
+    (arm, camera, kind)
+    for arm, camera in (("ars_x", "zed_2"), ("ars_y", "zed_1"))
+    for kind in ("vertical", "diagonal")
+]
+
+
+def _strut_joints(arm: str) -> np.ndarray:
+    return np.array(
+        load_yaml(ROOT / "config" / "ars" / f"{arm}.yaml")["poses"]["inspection"]["joints"], dtype=float
+    )
+
+
+@pytest.fixture(scope="module", params=STRUT_VIEWS, ids=lambda v: "-".join(v))
+def held_strut(request, tmp_path_factory):
+    """The rendered frame and the held strut, the arm at its inspection pose, the strut seated in
+    the grasp the way the twin seats a grasped part (its middle on the grasp line)."""
+    arm, camera, kind = request.param
+    scene = scene_mod.Scene(out_dir=tmp_path_factory.mktemp("twin"))
+    with scene:
+        for j, v in zip(names.arm_joints(arm), _strut_joints(arm), strict=True):
+            scene.set_joint_state(j, float(v))
+        for i in range(2):
+            scene.set_joint_state(names.camera_mount(i), 0.0)
+        mujoco.mj_forward(scene.model, scene.data)
+        part = scene.part(scene.next_part(f"{kind}_dispenser_{arm[-1]}"))
+        centre, axis = scene.assembly.grasp_line(arm)
+        middle = (part.ends["a"] + part.ends["b"]) / 2
+        along = (part.ends["b"] - part.ends["a"]) / np.linalg.norm(part.ends["b"] - part.ends["a"])
+        # The body rotation taking the strut's axis onto the grasp line (a strut is round: the roll
+        # about its axis does not matter).
+        target = np.column_stack([axis, *_perpendiculars(axis)])
+        body_axes = np.column_stack([along, *_perpendiculars(along)])
+        seated = target @ body_axes.T
+        scene.place_part(part.name, centre - seated @ middle, seated)
+        size = RUN["cameras"]["zed"]
+        yield arm, camera, kind, scene, part, scene.render(camera, size["width"], size["height"])
+
+
+def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    return a, np.cross(u, a)
+
+
+@pytest.mark.parametrize("kind", ["vertical", "diagonal"])
+@pytest.mark.parametrize("arm", ["ars_x", "ars_y"])
+def test_the_strut_inspection_pose_is_collision_free_with_the_strut_held(arm, kind):
+    cfg = load_scene_config()
+    mission = load_mission(ROOT / "missions" / "one_bay.yaml")
+    other = "ars_y" if arm == "ars_x" else "ars_x"
+    world = build_scene(cfg, arm, mission, other_arm_q=cfg.home(other), carrying=kind)
+    assert not world.in_collision(_strut_joints(arm))
+
+
+def test_the_scene_file_inspection_tool_pose_is_the_arm_configs():
+    cfg = load_scene_config()
+    for arm in ("ars_x", "ars_y"):
+        spec = cfg.arm(arm)["inspection"]
+        tool = cfg.kinematics(arm).forward(_strut_joints(arm))
+        assert np.linalg.norm(tool[:3, 3] - np.asarray(spec["position"])) < 1e-3, arm
+        assert np.allclose(tool[:3, :3], rpy_matrix(spec["rpy"]), atol=1e-3), arm
+
+
+def test_a_good_held_strut_passes_and_one_missing_a_fitting_fails(held_strut, inspector):
+    _, camera, kind, scene, part, frame = held_strut
+    seen = {k.rsplit("/", 1)[1]: n for k, n in frame.instances().items() if k.startswith(part.body + "/")}
+    # Whole and large: the tube and both end fittings well in view.
+    assert seen.get("tube", 0) >= 500 and min(seen.get("fitting_a", 0), seen.get("fitting_b", 0)) >= 60, seen
+    detections = _detections(frame, camera)
+    report, obs = inspector.inspect(
+        f"bay1/{kind}", kind, detections, frame.depth, frame.intrinsics, frame.rgb
+    )
+    assert report.passed, report.reasons
+    assert {o.object_id.rsplit("/", 1)[1] for o in obs} == {"tube", "fitting_a", "fitting_b"}
+    # The tube's certified pose lies on the held strut's axis (within the position tolerance).
+    tube = next(o.estimate for o in obs if o.object_class == "strut_tube")
+    pos, rot = scene.body_pose(part.body)
+    a, b = (frame.rotation.T @ (pos + rot @ part.ends[e] - frame.position) for e in ("a", "b"))
+    u = (b - a) / np.linalg.norm(b - a)
+    off = tube.translation - a
+    assert np.linalg.norm(off - (off @ u) * u) < 0.005, (tube.translation, a, b)
+
+    # The same observations without one end fitting's (a strut missing it) fail.
+    without = [o for o in obs if o.object_id != f"{part.body}/fitting_a"]
+    length = scene.mission.strut_lengths[kind]
+    report = inspect_strut(f"bay1/{kind}", kind, length, without, inspector.parts, inspector.tol)
+    assert not report.passed
+    assert any(r.startswith("missing end fitting") for r in report.reasons), report.reasons

@@ -16,7 +16,7 @@ import torch
 from tlt_vision.cad.models import CadModel
 from tlt_vision.ops.registration import transform
 from tlt_vision.pose.certificate import Certificate, certify, not_certified
-from tlt_vision.pose.corrector import CorrectorConfig, chamfer_objective, correct, model_frame
+from tlt_vision.pose.corrector import CorrectorConfig, chamfer_objective, correct, model_frame, refine_pose
 from tlt_vision.pose.detector import KeypointDetector
 
 MIN_POINTS = 16
@@ -104,6 +104,9 @@ class PoseEstimator:
         self.surface = model.surface
         self.model_keypoints = torch.as_tensor(model.keypoints, dtype=torch.float32)
         self.scale = model.diameter / 2
+        # Refinement starts: as corrected, and one tube diameter further (a tube fitted from behind).
+        radii = self.surface.seg_r
+        self.depth_offsets = (0.0, 2.0 * float(radii.min())) if radii.numel() else (0.0,)
 
     def _failed(self, reason: str, n: int) -> PoseEstimate:
         return PoseEstimate(
@@ -147,6 +150,10 @@ class PoseEstimator:
             else:
                 with torch.no_grad():
                     obj, rot, t = chamfer_objective(obs, mask, kp, self.surface, self.model_keypoints)
+            if self.corrector.refine_iterations > 0:
+                rot, t, obj = refine_pose(
+                    obs, mask, rot, t, self.surface, self.corrector.refine_iterations, self.depth_offsets
+                )
             for j, (i, c) in enumerate(good):
                 seen = obs[j, : len(c)]
                 with torch.no_grad():
