@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 import rclpy
-from rclpy.action import ActionClient
 from rclpy.action.client import GoalStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from tlt_common.bt.ros import SerialisedActionClient
 from tlt_common.interfaces import iter_interfaces, message_parts, sample_message
 
 INTERFACES = list(iter_interfaces())
@@ -125,7 +125,9 @@ def test_service_round_trip(node, name):
 @pytest.mark.parametrize("name", _ids("action"))
 def test_action_round_trip(node, name):
     cls = next(c for k, n, c in INTERFACES if k == "action" and n == name)
-    client = ActionClient(node, cls, f"rt/action/{name}")
+    # The test thread sends while the executor thread takes responses: rclpy's own client can drop
+    # a response taken before its future is registered, which the serialised client cannot.
+    client = SerialisedActionClient(node, cls, f"rt/action/{name}")
     feedback = []
     try:
         assert client.wait_for_server(timeout_sec=TIMEOUT_S), f"action rt/action/{name} not found"
