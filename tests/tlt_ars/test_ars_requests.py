@@ -16,6 +16,7 @@ from tlt_interfaces.srv import GroundCommand
 from tlt_ars.mission_state import Request
 from tlt_ars.motion import ExecuteTrajectory, MotionGoal, TrajectorySlot
 from tlt_ars.planning.kinematics import pose_error
+from tlt_ars.planning.planner import PlanningFailed
 from tlt_ars.planning.targets import placement_targets
 from tlt_ars.tree import failure_reason
 
@@ -221,11 +222,21 @@ def test_foundation_rivet_subtree_ticks_on_its_own(stack):
 def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
     ctx = stack.ars.ctx
     q = ctx.arm_q()
-    stale = stack.ars.planner.plan(
-        q + np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]),
-        MotionGoal(joints=q + np.array([0.4, 0.0, 0.0, 0.0, 0.0, 0.0])),
-        placed=ctx.state.placed(), bay=1, carrying=None, other_q=None,
-    )  # fmt: skip
+    stale = None
+    # A short move that starts away from the arm; which way is free depends on where the tests
+    # before left the arm.
+    for joint, sign in ((0, 1.0), (0, -1.0), (5, 1.0), (5, -1.0)):
+        step = np.zeros(6)
+        step[joint] = sign
+        try:
+            stale = stack.ars.planner.plan(
+                q + 0.3 * step, MotionGoal(joints=q + 0.4 * step),
+                placed=ctx.state.placed(), bay=1, carrying=None, other_q=None,
+            )  # fmt: skip
+            break
+        except PlanningFailed:
+            continue
+    assert stale is not None, "no free short move near the arm to plan"
     slot = TrajectorySlot()
     slot.motion = stale
     execute = ExecuteTrajectory("Execute Stale", ctx, slot)

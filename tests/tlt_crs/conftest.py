@@ -444,8 +444,10 @@ def fast_config(tmp_path: Path, mission: Path = ONE_BAY, **timeouts: float):
     from tlt_crs.config import CrsConfig, Timeouts
 
     values = dict(
-        ars_server_s=1.5,
-        service_s=1.5,
+        # Each test's context is a new node: finding the stand-ins' servers is a fresh discovery,
+        # which takes seconds on a loaded machine. Tests of these timeouts set their own.
+        ars_server_s=5.0,
+        service_s=5.0,
         vision_s=3.0,
         actuator_s=5.0,
         part_presented_s=5.0,

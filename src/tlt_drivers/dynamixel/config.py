@@ -59,6 +59,12 @@ TRAJECTORY_SCHEMA = {
     "path_tolerance": opt("float", 0.2, doc="default path tolerance, joint units (<=0: none)"),
     "goal_tolerance": opt("float", 0.02, doc="default goal tolerance, joint units (<=0: none)"),
     "goal_time_tolerance_s": opt("float", 0.5, minimum=0.0),
+    "max_time_step_s": opt(
+        "float", 0.05, minimum=0.001, doc="most trajectory time one control cycle may move on, s"
+    ),
+    "path_lag_window_s": opt(
+        "float", 0.5, minimum=0.0, doc="a joint this late along its path is not off it, s"
+    ),
 }
 
 CALIBRATION_SCHEMA = {

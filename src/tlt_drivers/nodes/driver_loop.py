@@ -70,6 +70,9 @@ class DriverLoop:
                 goal_tolerance=tol.get("goal_tolerance", 0.02),
                 goal_time_tolerance=tol.get("goal_time_tolerance_s", 0.5),
                 motion_gate=self.motion_refusal,
+                # A starved loop resumes the path where it left it (see the controller).
+                max_time_step=tol.get("max_time_step_s", 0.05),
+                path_lag_window=tol.get("path_lag_window_s", 0.5),
             )
             self.action = TrajectoryActionServer(
                 node,
