@@ -299,7 +299,9 @@ def main(argv: list[str] | None = None) -> int:
             node.interrupt()
             if link is not None:
                 link.close()
-            executor.shutdown(timeout_sec=1.0)
+            # Callbacks still running when the node is destroyed use freed handles (a segfault
+            # was seen on SIGINT): give them time to return first.
+            executor.shutdown(timeout_sec=5.0)
             node.destroy_node()
         return 0
     finally:

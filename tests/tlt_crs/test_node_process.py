@@ -141,7 +141,8 @@ def test_process_builds_one_bay_and_shuts_down_cleanly(rig_process, crs, tmp_pat
             crs,
             proc,
             lambda: _states(state) and all(v != "NOT_PLACED" for v in _states(state).values()),
-            timeout=30.0,
+            # Autostart first waits until every ARS and vision server is discovered.
+            timeout=60.0,
             what="tower built by the CRS process",
         )
         assert set(_states(state).values()) <= {"INSPECTED", "RIVETED"}
