@@ -15,6 +15,11 @@ import numpy as np
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 
 
+def printed_size(tag_side: float) -> float:
+    """Side of the printed tag plate, m: the black square ``tag_side`` is 8 of its 10 cells."""
+    return tag_side * 10 / 8
+
+
 def tag_mount(mount: Mapping[str, Any], mission: Any, dispenser: str, tag_side: float) -> np.ndarray:
     """The tag's frame (x right, y up as printed, z out of the face) in ``dispenser``'s frame.
 
@@ -23,7 +28,7 @@ def tag_mount(mount: Mapping[str, Any], mission: Any, dispenser: str, tag_side: 
     height; a part rack just above its top slot, which depends on how many parts it was filled with.
     """
     disp = mission.dispensers[dispenser]
-    printed = tag_side * 10 / 8
+    printed = printed_size(tag_side)
     if disp.part_kind == "rivet":
         extent, top = mount["rivet_extent"], mount["rivet_top"]
     else:

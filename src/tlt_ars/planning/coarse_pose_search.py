@@ -43,7 +43,7 @@ from tlt_ars.planning.world import SceneConfig, build_scene, dispenser_frame, lo
 from tlt_common.mission.schema import load_mission
 from tlt_vision.apriltag import TagConfig
 from tlt_vision.node_config import VisionConfig, load_config, pose_of
-from tlt_vision.tag_mounts import tag_mount
+from tlt_vision.tag_mounts import printed_size, tag_mount
 
 DEFAULT_MISSION = "missions/one_bay.yaml"  # every mission shares the dispenser layout
 ARMS = ("ars_x", "ars_y")
@@ -116,7 +116,7 @@ class Setup:
     @property
     def printed_size(self) -> float:
         """Side of the printed tag, quiet zone included (the black square is 8 of its 10 cells)."""
-        return self.tag.tag_side * 10 / 8
+        return printed_size(self.tag.tag_side)
 
     def camera_name(self, arm: str) -> str:
         return f"{arm}/{self.camera}"
