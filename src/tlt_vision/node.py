@@ -142,7 +142,7 @@ class VisionNode(Node):
         self.parts, self.tol = self.inspector.parts, self.inspector.tol
         self.estimators, self.pipelines = self.inspector.estimators, self.inspector.pipelines
         self.rig = CameraRig(config)
-        self._warm_up()
+        self._set_up_torch(raw["torch_threads"])
         self.tags = TagLocator(TagConfig.load())
         self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
         self.tool = pose_of(raw["tool"])
@@ -174,11 +174,13 @@ class VisionNode(Node):
 
     # ----- set-up -----
     @staticmethod
-    def _warm_up() -> None:
-        """torch imports its compiler stack on the first optimiser made (seconds of CPU): do it at
-        start-up rather than inside the first request's time."""
+    def _set_up_torch(threads: int) -> None:
+        """Fix torch's thread count (config ``torch_threads``) and import its compiler stack, which
+        the first optimiser made pulls in (seconds of CPU), at start-up rather than inside the first
+        request's time."""
         import torch
 
+        torch.set_num_threads(threads)
         torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
     def _subscribe_joint_states(self, group: Any) -> None:
@@ -279,12 +281,22 @@ class VisionNode(Node):
 
     # ----- InspectPart -----
     def _inspect_part(self, request: Any, response: Any) -> Any:
+        started = time.monotonic()
         try:
             response.report = self.inspect_part(request.member_id, request.part_kind, request.camera)
         except Exception as exc:  # a service must answer: an unexpected error is a failed report
             log.exception("inspect_part failed")
             response.report = self._failed(request.member_id, request.part_kind, f"vision error: {exc}")
+        self._log_report(f"inspect_part {request.part_kind} via {request.camera}", response.report, started)
         return response
+
+    def _log_report(self, what: str, report: InspectionReport, started: float) -> None:
+        """One line per answered inspection: what was asked, the verdict with its reasons, and the
+        wall time it took (the CRS waits for it within a mission-time bound)."""
+        verdict = "passed" if report.passed else "failed: " + "; ".join(report.reasons)
+        self.get_logger().info(
+            f"{what} {report.target_id}: {verdict} ({time.monotonic() - started:.1f} s wall)"
+        )
 
     def inspect_part(self, member_id: str, kind: str, camera_name: str) -> InspectionReport:
         deadline = self._deadline()
@@ -339,11 +351,13 @@ class VisionNode(Node):
 
     # ----- InspectBay -----
     def _inspect_bay(self, request: Any, response: Any) -> Any:
+        started = time.monotonic()
         try:
             response.report = self.inspect_bay(int(request.bay))
         except Exception as exc:
             log.exception("inspect_bay failed")
             response.report = self._failed(f"bay{request.bay}", "bay", f"vision error: {exc}")
+        self._log_report("inspect_bay", response.report, started)
         return response
 
     def inspect_bay(self, bay: int) -> InspectionReport:

@@ -55,6 +55,7 @@ SCHEMA = {
     "detectors": Field("dict", schema={name: Field("str", doc="weights file (.pt)") for name in MODEL_NAMES}),
     "max_points": opt("int", 1024, minimum=32),
     "keep_border_below": opt("int", 0, minimum=0),
+    "torch_threads": opt("int", 1, minimum=1),
     "corrector": Field(
         "dict",
         schema={
