@@ -39,7 +39,6 @@ class RequestData:
     parts_discarded: int = 0
     targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
-    approached_from: dict[str, np.ndarray] = field(default_factory=dict)  # key -> joints before the fine move
     alignment: Any = None  # the latest CheckAlignment response
 
 

@@ -50,13 +50,17 @@ class MotionGoal:
     """Where a motion goes: a joint configuration, or the first usable of candidate targets
     (``use`` picks the target's ``pose`` or its ``pre_pose``). ``contact`` lets the end effector and
     the held part touch the tower (the last move onto a joint). ``key`` names the approach, so the
-    fine move after a coarse one takes the same candidate (``RequestData.targets[key]``)."""
+    fine move after a coarse one takes the same candidate (``RequestData.targets[key]``).
+    ``straight`` moves the tool on the straight line to the (single) target's pose or pre-pose: the
+    fine move onto a part or joint and the retreat from it, along the line its approach was checked
+    on."""
 
     joints: np.ndarray | None = None
     targets: list[Target] = field(default_factory=list)
     use: str = "pose"
     contact: bool = False
     key: str | None = None
+    straight: bool = False
 
 
 @dataclass
@@ -107,6 +111,13 @@ class MotionPlanner:
         chosen = None
         if goal.joints is not None:
             plan = planner.plan_to_joints(start, goal.joints, self.time_limit)
+        elif goal.straight:
+            # Not the joint-space line between the ends: on a 0.7 m approach that line swings a
+            # carried cross frame into the lifter's posts, where the tool's straight line is free.
+            if len(goal.targets) != 1:
+                raise PlanningFailed("ik", f"a straight move needs one target, not {len(goal.targets)}")
+            chosen = goal.targets[0]
+            plan = planner.plan_cartesian(start, chosen.pose if goal.use == "pose" else chosen.pre_pose)
         else:
             if not goal.targets:
                 raise PlanningFailed("ik", "no candidate pose to move to")
@@ -233,13 +244,8 @@ class PlanMotion(Action):
             return self.fail(f"planning failed: {exc!r}")
         self.slot.motion = motion
         goal = self._goal
-        if goal is not None and goal.key:
-            if motion.target is not None:
-                self.ctx.data.targets[goal.key] = motion.target
-            if goal.use == "pose" and motion.trajectory.points:
-                # Where the final move onto the part or joint starts: the retreat goes back there
-                # along the same checked straight line instead of searching a narrow gap again.
-                self.ctx.data.approached_from[goal.key] = np.array(motion.trajectory.points[0].positions)
+        if goal is not None and goal.key and motion.target is not None:
+            self.ctx.data.targets[goal.key] = motion.target
         self.feedback_message = f"planned {motion.duration:.2f} s"
         return Status.SUCCESS
 

@@ -90,20 +90,18 @@ def pose_goal(spec: PoseSpec) -> MotionGoal:
 
 
 def back_out(ctx: ArsContext, key: str) -> MotionGoal:
-    """Back to where the fine move ``key`` started (its pre-pose configuration), allowed to start
-    in contact with the tower."""
-    q = ctx.data.approached_from.get(key)
-    if q is None:
-        return chosen(ctx, key, use="pre_pose", contact=True)
-    return MotionGoal(joints=q, contact=True)
+    """Straight back to the pre-pose of the fine move ``key``, allowed to start in contact with the
+    tower."""
+    return chosen(ctx, key, use="pre_pose", contact=True)
 
 
 def chosen(ctx: ArsContext, key: str, use: str = "pose", contact: bool = False) -> MotionGoal:
-    """The candidate an earlier approach chose (``key``), for the fine move or the retreat."""
+    """The fine move onto the candidate an earlier approach chose (``key``), or with ``use``
+    ``pre_pose`` the retreat from it: the tool on the straight line between the two."""
     target = ctx.data.targets.get(key)
     if target is None:
         raise RuntimeError(f"no '{key}' target was chosen by an earlier approach")
-    return MotionGoal(targets=[target], use=use, contact=contact, key=key)
+    return MotionGoal(targets=[target], use=use, contact=contact, key=key, straight=True)
 
 
 class RecordMember(Action):

@@ -225,7 +225,8 @@ def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
     stale = None
     # A short move that starts away from the arm; which way is free depends on where the tests
     # before left the arm.
-    for joint, sign in ((0, 1.0), (0, -1.0), (5, 1.0), (5, -1.0)):
+    moves = [(j, sign * size) for size in (1.0, 0.3) for j in (0, 5, 4, 3, 1, 2) for sign in (1.0, -1.0)]
+    for joint, sign in moves:
         step = np.zeros(6)
         step[joint] = sign
         try:
