@@ -12,7 +12,7 @@ never counted as a found part.
   that does not fit a straight tube (not observably correct although well seen) is a bent tube.
 * Cross frame: the frame itself (its four sides) and a corner joint at each of its four corners.
 * Placement alignment: a placed part's centre and axis, moved into the tower frame, against the
-  mission's joint positions of its member.
+  mission's joint positions of its member; a cross frame from the corner joints the EE cameras see.
 * Bay: the corner joints found match the mission's joint positions up to one rigid motion (the
   camera's pose drops out) within the position tolerance.
 """
@@ -234,14 +234,102 @@ def inspect_cross_frame(
     return InspectionReport(target_id, "cross_frame", not reasons, tuple(reasons), used)
 
 
+def _rigid_fit(expected: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``R``, ``t`` with ``R e_i + t ~ o_i`` (least squares). For two points the smallest rotation
+    that turns one's direction into the other's: the roll about their line is not observed."""
+    ce, co = expected.mean(0), observed.mean(0)
+    if len(expected) == 2:
+        r = _rotation_between(expected[1] - expected[0], observed[1] - observed[0])
+    else:
+        h = (expected - ce).T @ (observed - co)
+        u, _, vt = np.linalg.svd(h)
+        d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+        r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return r, co - r @ ce
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking direction ``a`` onto direction ``b``."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any axis normal to a
+        n = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        n /= np.linalg.norm(n)
+        return 2.0 * np.outer(n, n) - np.eye(3)
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + k + k @ k / (1.0 + c)
+
+
 def _rigid_residuals(expected: np.ndarray, observed: np.ndarray) -> np.ndarray:
     """Residual distances after the best rigid fit of ``expected`` (n, 3) onto ``observed``."""
-    ce, co = expected.mean(0), observed.mean(0)
-    h = (expected - ce).T @ (observed - co)
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return np.linalg.norm((expected - ce) @ r.T + co - observed, axis=1)
+    r, t = _rigid_fit(expected, observed)
+    return np.linalg.norm(expected @ r.T + t - observed, axis=1)
+
+
+@dataclass(frozen=True)
+class CrossFrameAlignment:
+    """Where a cross frame is against its place, from the corner joints seen (see
+    :func:`cross_frame_alignment`). ``held`` is the tool pose (world, 4x4) that holds the frame
+    where it is seen, in the ARS convention; None when too few corners were matched."""
+
+    aligned: bool
+    position_error: float  # m, the frame's centre
+    angle_error: float  # rad
+    matched: int
+    held: np.ndarray | None
+    reason: str = ""
+
+
+def cross_frame_alignment(
+    corners: Sequence[Sequence[float]],
+    seen: Sequence[Sequence[float]],
+    tool: np.ndarray,
+    tol: Tolerances,
+    gate: float,
+) -> CrossFrameAlignment:
+    """A cross frame's alignment from the certified corner joints an EE camera sees.
+
+    Held at the middle of a side, a frame fills the D405s' view too closely for its own pose (one
+    side, centimetres away), but each D405 sees the corner joint at its end of that side. Each
+    joint ``seen`` (world) is matched to the nearest of the frame's ``corners`` at its place (world,
+    adjacent in order) within ``gate``; the rigid motion of those matched onto those seen (two or
+    more) moves the whole frame from its place to where it is. Errors are its centre's distance and
+    the motion's rotation angle. ``held``: the tool on the middle of the side nearest ``tool``, tool
+    x along that side (the sign of ``tool``'s), y into the frame, z = x cross y.
+    """
+    expected = np.asarray(corners, dtype=float)
+    pairs: dict[int, np.ndarray] = {}
+    for p in np.asarray(seen, dtype=float).reshape(-1, 3):
+        d = np.linalg.norm(expected - p, axis=1)
+        k = int(np.argmin(d))
+        if d[k] <= gate and (k not in pairs or d[k] < np.linalg.norm(pairs[k] - expected[k])):
+            pairs[k] = p
+    if len(pairs) < 2:
+        return CrossFrameAlignment(
+            False, math.inf, math.inf, len(pairs), None,
+            f"{len(pairs)} corner joint(s) of the frame seen within {gate * 1000:.0f} mm of their place;"
+            " 2 needed",
+        )  # fmt: skip
+    idx = sorted(pairs)
+    r, t = _rigid_fit(expected[idx], np.array([pairs[k] for k in idx]))
+    moved = expected @ r.T + t
+    centre = moved.mean(0)
+    pos_err = float(np.linalg.norm(centre - expected.mean(0)))
+    ang_err = float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+    tool = np.asarray(tool, dtype=float)
+    mids = [(moved[i] + moved[(i + 1) % len(moved)]) / 2 for i in range(len(moved))]
+    i = int(np.argmin([np.linalg.norm(m - tool[:3, 3]) for m in mids]))
+    x = moved[(i + 1) % len(moved)] - moved[i]
+    x /= np.linalg.norm(x)
+    if np.dot(x, tool[:3, 0]) < 0:
+        x = -x
+    y = centre - mids[i]
+    y /= np.linalg.norm(y)
+    held = np.eye(4)
+    held[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
+    held[:3, 3] = mids[i]
+    reasons = _misalignment(pos_err, ang_err, tol)
+    return CrossFrameAlignment(not reasons, pos_err, ang_err, len(pairs), held, "; ".join(reasons))
 
 
 def inspect_bay(
@@ -329,6 +417,11 @@ def check_alignment(
         )
     pos_err = float(np.linalg.norm(centre - want_centre))
     ang_err = _angle_between_axes(axis, want_axis)
+    reasons = _misalignment(pos_err, ang_err, tol)
+    return Alignment(not reasons, pos_err, ang_err, estimate, "; ".join(reasons))
+
+
+def _misalignment(pos_err: float, ang_err: float, tol: Tolerances) -> list[str]:
     reasons = []
     if pos_err > tol.position:
         reasons.append(f"{pos_err * 1000:.1f} mm from its place (tolerance {tol.position * 1000:.1f} mm)")
@@ -336,7 +429,7 @@ def check_alignment(
         reasons.append(
             f"turned {math.degrees(ang_err):.1f} deg (tolerance {math.degrees(tol.angle):.1f} deg)"
         )
-    return Alignment(not reasons, pos_err, ang_err, estimate, "; ".join(reasons))
+    return reasons
 
 
 def bay_joints(mission: Any, bay: int) -> dict[str, tuple[float, float, float]]:
@@ -350,11 +443,13 @@ def bay_joints(mission: Any, bay: int) -> dict[str, tuple[float, float, float]]:
 
 __all__ = [
     "Alignment",
+    "CrossFrameAlignment",
     "InspectionReport",
     "Observation",
     "Tolerances",
     "bay_joints",
     "check_alignment",
+    "cross_frame_alignment",
     "inspect_bay",
     "inspect_cross_frame",
     "inspect_strut",

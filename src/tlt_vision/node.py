@@ -436,10 +436,17 @@ class VisionNode(Node):
             request.position_tolerance if request.position_tolerance > 0 else self.tol.position,
             request.angle_tolerance if request.angle_tolerance > 0 else self.tol.angle,
         )
+        site = self.config.raw["site"]
+        origin = np.asarray(site["base_origin"]) + np.array(
+            [0.0, 0.0, site["build_level"] + member.bay * self.mission.bay_height]
+        )
+        joints = [origin + np.asarray(p, dtype=float) for _, p in member.joints]
         try:
             camera = self._camera(request.camera)
             if camera not in self.rig.ee:
                 raise NoFrame(f"camera {request.camera!r} is not an end-effector camera")
+            if member.kind == "cross_frame":
+                return self._check_cross_frame(member.id, camera, joints, tol, deadline, response)
             frame = self._grab(camera, self._frame_streams(), deadline)
             cam_pose = self.rig.camera_pose(camera, frame.stamp)
             tool = self.rig.tool_pose(camera, frame.stamp, self.tool)
@@ -458,11 +465,6 @@ class VisionNode(Node):
         why = "" if mine else "part not in view"
         if mine and estimate is None:
             why = mine[0].reason
-        site = self.config.raw["site"]
-        origin = np.asarray(site["base_origin"]) + np.array(
-            [0.0, 0.0, site["build_level"] + member.bay * self.mission.bay_height]
-        )
-        joints = [origin + np.asarray(p, dtype=float) for _, p in member.joints]
         result = inspection.check_alignment(member.kind, joints, estimate, cam_pose, tol, why)
         response.aligned = bool(result.aligned)
         response.position_error, response.angle_error = (
@@ -479,6 +481,62 @@ class VisionNode(Node):
         else:
             response.pose.header.frame_id = world
             response.pose.reason = why or "no pose estimate"
+        return response
+
+    def _check_cross_frame(
+        self,
+        member_id: str,
+        camera: str,
+        corners: list[np.ndarray],
+        tol: inspection.Tolerances,
+        deadline: float,
+        response: Any,
+    ) -> Any:
+        """CheckAlignment of a cross frame: from the certified corner joints the EE cameras of
+        ``camera``'s arm see (:func:`inspection.cross_frame_alignment`); a joint both see is one."""
+        arm = self.rig.ee[camera].arm
+        seen: list[PoseEstimate] = []
+        problems: list[str] = []
+        stamp = self._now()
+        for cam in sorted(c.name for c in self.rig.ee.values() if c.arm == arm):
+            try:
+                frame = self._grab(cam, self._frame_streams(), deadline)
+                cam_pose = self.rig.camera_pose(cam, frame.stamp)
+                detections = [d for d in self._segment(frame) if d.object_class == "corner_joint"]
+            except (NoFrame, FrameUnavailable) as exc:
+                problems.append(f"{cam}: {exc}")
+                continue
+            stamp = frame.stamp
+            for o in self._observe("bay", detections, frame):
+                e = o.estimate
+                if e is None or not e.certified:
+                    continue
+                e = _in_world(e, cam_pose)
+                if all(np.linalg.norm(m.translation - e.translation) >= BAY_DUPLICATE_M for m in seen):
+                    seen.append(e)
+        try:
+            tool = self.rig.tool_pose(camera, stamp, self.tool)
+        except FrameUnavailable as exc:
+            response.reason = str(exc)
+            return response
+        gate = self.config.raw["cross_frame_corner_gate"]
+        result = inspection.cross_frame_alignment(corners, [e.translation for e in seen], tool, tol, gate)
+        response.aligned = bool(result.aligned)
+        response.position_error, response.angle_error = result.position_error, result.angle_error
+        response.reason = "; ".join([r for r in (result.reason, *problems) if r])
+        p = response.pose
+        _stamp(p.header, stamp)
+        p.header.frame_id = self.config.raw["world_frame"]
+        p.object_class, p.object_id = "cross_frame", member_id
+        p.keypoint_groups_visible, p.keypoint_groups_required = result.matched, 2
+        p.certified = result.held is not None
+        if seen:
+            p.chamfer_p90 = max(e.certificate.chamfer_p90 for e in seen)
+            p.chamfer_threshold = min(e.certificate.chamfer_threshold for e in seen)
+        if result.held is None:
+            p.reason = result.reason
+        else:
+            p.pose = pose_msg(result.held)
         return response
 
     # ----- LocateTag -----

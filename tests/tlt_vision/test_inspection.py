@@ -17,6 +17,7 @@ from tlt_vision.inspection import (
     Tolerances,
     bay_joints,
     check_alignment,
+    cross_frame_alignment,
     inspect_bay,
     inspect_cross_frame,
     inspect_strut,
@@ -209,6 +210,48 @@ def test_bay_inspection():
     assert inspect_bay(1, expected, [], TOL).reasons[0] == "part not in view: no corner joint detected"
     with pytest.raises(KeyError):
         bay_joints(MISSION, 7)
+
+
+def _rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_cross_frame_alignment_from_the_corner_joints_at_the_held_side():
+    corners = np.array([p for _, p in MISSION.member("bay1/cross_frame").joints], dtype=float)
+    # The ARS holds side 0 (corners 0 -> 1) at its middle: tool z down, y into the frame, x = y x z.
+    mid = (corners[0] + corners[1]) / 2
+    at_place = np.eye(4)
+    at_place[:3, :3] = np.column_stack([[-1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]])
+    at_place[:3, 3] = mid
+
+    placed = cross_frame_alignment(corners, corners[:2], at_place, TOL, gate=0.1)
+    assert placed.aligned and placed.matched == 2 and placed.position_error < 1e-9
+    assert np.allclose(placed.held, at_place)
+
+    # The frame 20 mm off along its side and turned 1 deg about the vertical, as held.
+    motion = np.eye(4)
+    motion[:3, :3] = _rz(math.radians(1.0))
+    motion[:3, 3] = [0.02, 0.0, 0.0]
+    seen = corners @ motion[:3, :3].T + motion[:3, 3]
+    off = cross_frame_alignment(corners, seen[:2], motion @ at_place, TOL, gate=0.1)
+    centre = corners.mean(0)
+    want = np.linalg.norm(motion[:3, :3] @ centre + motion[:3, 3] - centre)
+    assert not off.aligned and off.position_error == pytest.approx(want, abs=1e-9)
+    assert off.angle_error == pytest.approx(math.radians(1.0), abs=1e-9)
+    # The tool pose that holds it there is the motion applied to the one at its place: the ARS moves
+    # the tool by the inverse to place it (tlt_ars.behaviours.vision.corrected_target).
+    assert np.allclose(off.held, motion @ at_place, atol=1e-9)
+    # Seen by both EE cameras, or with all four corners, the answer is the same.
+    assert np.allclose(cross_frame_alignment(corners, seen, at_place, TOL, 0.1).held, motion @ at_place)
+
+    # One corner, or only the joints of a frame a bay higher up (the lifter's top frame): no answer.
+    one = cross_frame_alignment(corners, seen[:1], at_place, TOL, gate=0.1)
+    above = cross_frame_alignment(corners, corners[:2] + [0, 0, 0.75], at_place, TOL, gate=0.1)
+    for r in (one, above):
+        assert not r.aligned and r.held is None and math.isinf(r.position_error)
+    assert one.reason.startswith("1 corner joint(s) of the frame seen within 100 mm")
+    assert above.matched == 0
 
 
 def test_placement_alignment():

@@ -1,0 +1,116 @@
+"""A cross frame held by ARS X at its place, measured by the arm's own D405s (CheckAlignment).
+
+Held at the middle of a side, the frame is centimetres from the EE cameras: neither sees enough of
+it for the frame's own pose, but each sees the corner joint at its end of the held side. The twin
+(``tlt_sim.model.Scene``) puts ARS X at the placement configuration the planner picks for
+``bay1/cross_frame`` (the first usable candidate, as the ARS's coarse and fine approach take it),
+seats the frame in the grasp as the twin's grasp does (or 10 mm along its side, a grasp that
+caught it off-centre), renders both D405s and runs what CheckAlignment runs on them: the vision
+pipeline's corner joint poses (C-3PO, the shipped weights; the twin's segmentation, as the launch
+set runs vision) and :func:`tlt_vision.inspection.cross_frame_alignment`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from tlt_ars.planning.reachability import reach_target
+from tlt_ars.planning.targets import placement_targets
+from tlt_ars.planning.world import build_scene, load_scene_config
+from tlt_common.config_schema import load_yaml
+from tlt_common.mission.schema import load_mission
+from tlt_vision.camera_frames import CameraFrame
+from tlt_vision.inspection import cross_frame_alignment
+from tlt_vision.node_config import load_config
+from tlt_vision.part_inspection import PartInspector
+from tlt_vision.segmentation_source import TwinLabels
+
+scene_mod = pytest.importorskip("tlt_sim.model.scene")
+names = pytest.importorskip("tlt_sim.model.names")
+
+ROOT = Path(__file__).resolve().parents[2]
+RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
+MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
+MEMBER = MISSION.member("bay1/cross_frame")
+CAMERAS = ("ars_x/d405_a", "ars_x/d405_b")
+
+
+@pytest.fixture(scope="module")
+def placement():
+    """ARS X's joints and tool pose at the frame's place, and the frame's corners there (world)."""
+    cfg = load_scene_config()
+    kw = dict(placed=set(), bay=1, carrying="cross_frame")
+    free = build_scene(cfg, "ars_x", MISSION, contact=False, **kw)
+    contact = build_scene(cfg, "ars_x", MISSION, contact=True, **kw)
+    target = placement_targets(cfg, MISSION, MEMBER, "ars_x")[0]
+    _, q = reach_target(free, contact, target, cfg.home("ars_x"), cfg.planning["dense_check_resolution"])
+    vision = load_config().raw["site"]
+    origin = np.asarray(vision["base_origin"]) + [0.0, 0.0, vision["build_level"] + MISSION.bay_height]
+    corners = np.array([origin + np.asarray(p) for _, p in MEMBER.joints])
+    return q, cfg.kinematics("ars_x").forward(q), corners
+
+
+@pytest.fixture(scope="module")
+def inspector():
+    cfg = load_config()
+    return PartInspector(cfg, load_mission(cfg.mission_path))
+
+
+def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarray]:
+    """Certified corner joints (world) in both D405 frames, the frame ``shift`` m along its side."""
+    q, _, _ = placement
+    scene = scene_mod.Scene(out_dir=tmp_path)
+    seen = []
+    with scene:
+        for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
+            scene.set_joint_state(j, float(v))
+        mujoco.mj_forward(scene.model, scene.data)
+        part = scene.part(scene.next_part("cross_frame_dispenser"))
+        centre, axis = scene.assembly.grasp_line("ars_x")
+        tool = load_scene_config().kinematics("ars_x").forward(q)
+        y = tool[:3, 1] - (tool[:3, 1] @ axis) * axis
+        y /= np.linalg.norm(y)
+        start = centre - axis * (part.length / 2 - shift)
+        scene.place_part(part.name, start, np.column_stack([axis, y, np.cross(axis, y)]))
+        size = RUN["cameras"]["d405"]
+        for camera in CAMERAS:
+            f = scene.render(camera, size["width"], size["height"])
+            labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
+            frame = CameraFrame(
+                camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
+                {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
+            )  # fmt: skip
+            joints = [d for d in labels.detect(frame) if d.object_class == "corner_joint"]
+            for o in inspector.observe("bay", joints, f.depth, f.intrinsics, f.rgb):
+                if o.estimate is not None and o.estimate.certified:
+                    seen.append(f.rotation @ o.estimate.translation + f.position)
+    return seen
+
+
+def test_each_d405_sees_the_corner_joint_at_its_end_and_the_frame_is_aligned(placement, inspector, tmp_path):
+    _, tool, corners = placement
+    seen = _corners_seen(placement, inspector, tmp_path, 0.0)
+    assert len(seen) == 2, seen
+    result = cross_frame_alignment(corners, seen, tool, inspector.tol, gate=0.1)
+    assert result.aligned, result.reason
+    assert result.matched == 2 and result.position_error < 0.002
+    assert np.linalg.norm(result.held[:3, 3] - tool[:3, 3]) < 0.002
+
+
+def test_a_frame_caught_off_centre_is_measured_and_the_correction_puts_it_in_place(
+    placement, inspector, tmp_path
+):
+    _, tool, corners = placement
+    seen = _corners_seen(placement, inspector, tmp_path, 0.01)
+    result = cross_frame_alignment(corners, seen, tool, inspector.tol, gate=0.1)
+    assert not result.aligned and result.position_error == pytest.approx(0.01, abs=0.002), result
+    assert "from its place" in result.reason
+    # The ARS's correction (tlt_ars.behaviours.vision.corrected_target, target = the tool now) moves
+    # the tool by the measured error the other way: the frame's corners land on their place.
+    corrected = tool @ np.linalg.inv(result.held) @ tool
+    moved = [corrected @ np.linalg.inv(tool) @ np.append(p, 1.0) for p in seen]
+    assert max(np.min(np.linalg.norm(corners - m[:3], axis=1)) for m in moved) < 0.002
