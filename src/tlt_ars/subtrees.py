@@ -17,8 +17,8 @@ Member                                 Open Grasp, Approach Dispenser, Locate Di
                                        Approach, Grasp (Close Grasp, Verify Grasp), Take Part, Lift Part
 Inspect Cross Frame /       30 / 35    Move To Inspection, Inspection (Inspection Passed, or Discard
 Inspect Member                         Part: Move To Discard, Release, Count Discard)
-Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Retreat,
-                                       Verify Placement, Placed?, Record Placed
+Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Verify
+                                       Placement, Placed?, Retreat, Record Placed
 Add Member                  32         Load Rivet, Get Inspected Member, Place Member, Rivet Member
 Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Locate Dispenser Tag,
                                        Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
@@ -245,9 +245,11 @@ class SubtreeBuilder:
                 *transit,
                 *self._approach_placement(member),
                 release(ctx),
-                self._move("Retreat", lambda: back_out(ctx, "place")),
+                # Measured before the retreat: the D405s see the frame's corner joints from the
+                # grasp; from the pre-pose 0.7 m back they look at the floor in front of it.
                 MeasureAlignment("Verify Placement", ctx),
                 PartAligned("Placed?", ctx),
+                self._move("Retreat", lambda: back_out(ctx, "place")),
                 RecordMember("Record Placed", ctx, "placed"),
             ],
         )

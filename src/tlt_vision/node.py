@@ -291,8 +291,8 @@ class VisionNode(Node):
         return response
 
     def _log_report(self, what: str, report: InspectionReport, started: float) -> None:
-        """One line per answered inspection: what was asked, the verdict with its reasons, and the
-        wall time it took (the CRS waits for it within a mission-time bound)."""
+        """One line per answered inspection (and alignment check, in ``_check_alignment``): what was
+        asked, the verdict with its reasons, and the wall time it took."""
         verdict = "passed" if report.passed else "failed: " + "; ".join(report.reasons)
         self.get_logger().info(
             f"{what} {report.target_id}: {verdict} ({time.monotonic() - started:.1f} s wall)"
@@ -413,11 +413,21 @@ class VisionNode(Node):
 
     # ----- CheckAlignment -----
     def _check_alignment(self, request: Any, response: Any) -> Any:
+        started = time.monotonic()
         try:
             self.check_alignment(request, response)
         except Exception as exc:
             log.exception("check_alignment failed")
             response.aligned, response.reason = False, f"vision error: {exc}"
+        verdict = (
+            f"aligned ({response.position_error * 1000:.1f} mm, {math.degrees(response.angle_error):.2f} deg)"
+            if response.aligned
+            else f"not aligned: {response.reason}"
+        )
+        self.get_logger().info(
+            f"check_alignment {request.member_id} via {request.camera}: {verdict}"
+            f" ({time.monotonic() - started:.1f} s wall)"
+        )
         return response
 
     def check_alignment(self, request: Any, response: Any) -> Any:
@@ -514,27 +524,27 @@ class VisionNode(Node):
                 e = _in_world(e, cam_pose)
                 if all(np.linalg.norm(m.translation - e.translation) >= BAY_DUPLICATE_M for m in seen):
                     seen.append(e)
+        p = response.pose
+        _stamp(p.header, stamp)
+        p.header.frame_id = self.config.raw["world_frame"]
+        p.object_class, p.object_id = "cross_frame", member_id
         try:
             tool = self.rig.tool_pose(camera, stamp, self.tool)
         except FrameUnavailable as exc:
-            response.reason = str(exc)
+            response.reason = p.reason = "; ".join([f"tool pose: {exc}", *problems])
             return response
         gate = self.config.raw["cross_frame_corner_gate"]
         result = inspection.cross_frame_alignment(corners, [e.translation for e in seen], tool, tol, gate)
         response.aligned = bool(result.aligned)
         response.position_error, response.angle_error = result.position_error, result.angle_error
         response.reason = "; ".join([r for r in (result.reason, *problems) if r])
-        p = response.pose
-        _stamp(p.header, stamp)
-        p.header.frame_id = self.config.raw["world_frame"]
-        p.object_class, p.object_id = "cross_frame", member_id
         p.keypoint_groups_visible, p.keypoint_groups_required = result.matched, 2
         p.certified = result.held is not None
         if seen:
             p.chamfer_p90 = max(e.certificate.chamfer_p90 for e in seen)
             p.chamfer_threshold = min(e.certificate.chamfer_threshold for e in seen)
         if result.held is None:
-            p.reason = result.reason
+            p.reason = response.reason
         else:
             p.pose = pose_msg(result.held)
         return response
