@@ -508,10 +508,14 @@ class VisionNode(Node):
         seen: list[PoseEstimate] = []
         problems: list[str] = []
         stamp = self._now()
+        tool: np.ndarray | None = None
         for cam in sorted(c.name for c in self.rig.ee.values() if c.arm == arm):
             try:
                 frame = self._grab(cam, self._frame_streams(), deadline)
                 cam_pose = self.rig.camera_pose(cam, frame.stamp)
+                # At the frame's time, before the poses take their seconds: the joint states
+                # kept are the latest, and only those near the frame's stamp are trusted.
+                tool = self.rig.tool_pose(cam, frame.stamp, self.tool) if tool is None else tool
                 detections = [d for d in self._segment(frame) if d.object_class == "corner_joint"]
             except (NoFrame, FrameUnavailable) as exc:
                 problems.append(f"{cam}: {exc}")
@@ -528,10 +532,8 @@ class VisionNode(Node):
         _stamp(p.header, stamp)
         p.header.frame_id = self.config.raw["world_frame"]
         p.object_class, p.object_id = "cross_frame", member_id
-        try:
-            tool = self.rig.tool_pose(camera, stamp, self.tool)
-        except FrameUnavailable as exc:
-            response.reason = p.reason = "; ".join([f"tool pose: {exc}", *problems])
+        if tool is None:
+            response.reason = p.reason = "; ".join(problems)
             return response
         gate = self.config.raw["cross_frame_corner_gate"]
         result = inspection.cross_frame_alignment(corners, [e.translation for e in seen], tool, tol, gate)

@@ -15,6 +15,7 @@ import threading
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 import rclpy
@@ -24,13 +25,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import EndEffectorState
-from tlt_interfaces.srv import InspectPart, LocateTag
+from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 from tlt_sim.model import names
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
 from tlt_sim.twin.settings import load_settings
 
 from tlt_ars.planning.kinematics import pose_error, pose_matrix
+from tlt_ars.planning.reachability import reach_target
+from tlt_ars.planning.targets import placement_targets
+from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
 from tlt_vision.frames import arm_joint_names, width_joint_name
@@ -285,6 +289,46 @@ def test_dispenser_tag_is_located_within_millimetres_of_the_twin(rig):
         LocateTag.Request(dispenser="diagonal_dispenser_y", camera="ars_x/d405"),
     )
     assert not res.found and "not in view" in res.reason
+
+
+def test_a_cross_frame_held_at_its_place_is_aligned_from_the_d405s(rig):
+    """CheckAlignment of a cross frame ARS X holds at its place (the planner's placement
+    configuration, the frame seated in the grasp as the twin's grasp seats it)."""
+    member = rig.twin.scene.mission.member("bay1/cross_frame")
+    cfg = load_scene_config()
+    kw = dict(placed=set(), bay=1, carrying="cross_frame")
+    free = build_scene(cfg, "ars_x", rig.twin.scene.mission, contact=False, **kw)
+    contact = build_scene(cfg, "ars_x", rig.twin.scene.mission, contact=True, **kw)
+    target = placement_targets(cfg, rig.twin.scene.mission, member, "ars_x")[0]
+    _, q = reach_target(free, contact, target, cfg.home("ars_x"), cfg.planning["dense_check_resolution"])
+
+    def hold(scene: Scene) -> None:
+        for joint, value in zip(names.arm_joints("ars_x"), q, strict=True):
+            scene.set_joint_state(joint, float(value))
+        scene.set_joint_state(names.width_joint("ars_x"), 0.0)
+        mujoco.mj_forward(scene.model, scene.data)
+        part = scene.part(scene.next_part("cross_frame_dispenser"))
+        centre, axis = scene.assembly.grasp_line("ars_x")
+        tool = cfg.kinematics("ars_x").forward(q)
+        y = tool[:3, 1] - (tool[:3, 1] @ axis) * axis
+        y /= np.linalg.norm(y)
+        scene.place_part(
+            part.name, centre - axis * part.length / 2, np.column_stack([axis, y, np.cross(axis, y)])
+        )
+
+    rig.twin.do(hold)
+    time.sleep(0.5)  # joint states of the new pose reach the vision node
+    res = rig.call(
+        CheckAlignment,
+        ros_names.VISION_CHECK_ALIGNMENT,
+        CheckAlignment.Request(member_id=member.id, camera="ars_x/d405"),
+    )
+    assert res.aligned, res.reason
+    assert res.position_error < 0.003 and res.angle_error < np.radians(0.5)
+    assert res.pose.certified and res.pose.header.frame_id == "world"
+    assert res.pose.keypoint_groups_visible == 2  # a corner joint in each D405
+    p = res.pose.pose.position
+    assert np.linalg.norm([p.x, p.y, p.z] - target.pose[:3, 3]) < 0.003  # held where the ARS aims
 
 
 def test_no_frame_in_time_answers_with_the_reason(rig):
