@@ -100,6 +100,8 @@ class CommandQueue:
         return command
 
     def pop(self) -> Command | None:
+        if not self._items:  # the tick's common case; a command appended meanwhile waits a tick
+            return None
         with self._lock:
             return self._items.popleft() if self._items else None
 

@@ -115,7 +115,18 @@ class HoldWhilePaused(py_trees.decorators.Decorator):
             yield self
             return
         self.feedback_message = ""
-        yield from super().tick()
+        # py_trees' Decorator.tick (2.6) written out rather than ``yield from super().tick()``:
+        # this decorator sits above Build Tower, and a second generator frame here was passed
+        # through by every node ticked below it.
+        self.logger.debug(f"{self.__class__.__name__}.tick()")
+        if self.status != Status.RUNNING:
+            self.initialise()
+        yield from self.decorated.tick()
+        new_status = self.update()
+        if new_status != Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        yield self
 
     def update(self) -> Status:
         return self.decorated.status

@@ -35,6 +35,7 @@ import py_trees
 from py_trees.common import Status
 
 _log = logging.getLogger("tlt_common.bt")
+_STATUSES = tuple(Status)
 
 
 class ContractViolation(RuntimeError):
@@ -57,11 +58,24 @@ class Action(py_trees.behaviour.Behaviour):
         self.strict = self.strict_default if strict is None else strict
 
     def tick(self):  # type: ignore[override]
-        # Only wraps the status check; the py_trees life cycle (initialise/update/stop) is unchanged.
-        for node in super().tick():
-            if node.status is Status.INVALID:
-                self._violation("answered INVALID; an action answers RUNNING, SUCCESS or FAILURE")
-            yield node
+        # py_trees' Behaviour.tick (2.6) step for step, with the status check added. Written out
+        # rather than wrapping super().tick(): a wrapping generator cost every action a second
+        # generator frame per tick, a tenth of a bare leaf's tick.
+        self.logger.debug(f"{self.__class__.__name__}.tick()")
+        if self.status != Status.RUNNING:
+            self.initialise()
+        new_status = self.update()
+        if new_status not in _STATUSES:
+            self.logger.error(
+                f"A behaviour returned an invalid status, setting to INVALID [{new_status}][{self.name}]"
+            )
+            new_status = Status.INVALID
+        if new_status != Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        if new_status is Status.INVALID:
+            self._violation("answered INVALID; an action answers RUNNING, SUCCESS or FAILURE")
+        yield self
 
     def _violation(self, what: str) -> None:
         text = f"action '{self.name}' ({type(self).__name__}) {what}"

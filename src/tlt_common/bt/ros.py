@@ -7,11 +7,17 @@ ticks): a behaviour never spins, sleeps or waits.
 
 Timeouts are measured on ``clock`` (seconds, a callable); by default the node's clock, which is
 ROS time, so a twin publishing ``/clock`` faster than real time shortens them accordingly.
+
+Whether a server is there is read through :mod:`tlt_common.bt.server_readiness`: a behaviour waits
+on an answer up to a quarter second old and sends a goal, or fails for want of a server, only on a
+fresh one.
 """
 
 from __future__ import annotations
 
 import threading
+import time
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -19,18 +25,71 @@ import py_trees
 from action_msgs.msg import GoalStatus
 from py_trees.common import Status
 from rclpy.action import ActionClient
+from rclpy.clock import ClockChange, JumpThreshold, ROSClock, TimeJump
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from tlt_common.bt.nodes import Action, Condition
+from tlt_common.bt.server_readiness import readiness_of
 from tlt_common.bt.status_codec import DEFAULT_MAX_STATUS_BYTES, TreeShape, encode
 
 Clock = Callable[[], float]
 
 
+class RosSeconds:
+    """Seconds on an rclpy ROS clock, read cheaply while no simulated time is active.
+
+    rclpy's ``Clock.now()`` builds a ``Time`` on every call (several microseconds, as much as a
+    whole bare behaviour tick). While ROS time is not overridden by ``/clock``, rcl answers it from
+    the system clock (CLOCK_REALTIME), which ``time.time_ns()`` reads directly. A jump callback on
+    clock change (the public rclpy way to hear of it) says when simulated time is switched on or
+    off; from then on ``Clock.now()`` is used again.
+    """
+
+    def __init__(self, clock: ROSClock) -> None:
+        self._clock_now = clock.now
+        # The callback holds only this cell, not self: the clock keeps its jump callbacks alive.
+        self._simulated = simulated = [False]
+
+        def on_jump(jump: TimeJump) -> None:
+            if jump.clock_change == ClockChange.ROS_TIME_ACTIVATED:
+                simulated[0] = True
+            elif jump.clock_change == ClockChange.ROS_TIME_DEACTIVATED:
+                simulated[0] = False
+
+        handle = clock.create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=None, on_clock_change=True), post_callback=on_jump
+        )
+        # The clock holds the handle and the handle the clock: unregister once nobody reads these
+        # seconds any more, so neither is kept for the life of the process.
+        finalizer = weakref.finalize(self, _unregister, handle)
+        finalizer.atexit = False
+        # Read after registering, so a switch in between is not missed.
+        simulated[0] = clock.ros_time_is_active
+
+    @property
+    def simulated(self) -> bool:
+        """Whether ROS time is currently overridden (``use_sim_time`` and ``/clock``)."""
+        return self._simulated[0]
+
+    def __call__(self) -> float:
+        if self._simulated[0]:
+            return self._clock_now().nanoseconds * 1e-9
+        return time.time_ns() * 1e-9
+
+
+def _unregister(handle: Any) -> None:
+    try:
+        handle.unregister()
+    except Exception:  # the clock's handle is already gone: nothing left to unregister
+        pass
+
+
 def node_clock(node: Node) -> Clock:
     """Seconds on ``node``'s clock (ROS time; simulated time when use_sim_time is set)."""
     clock = node.get_clock()
+    if isinstance(clock, ROSClock):
+        return RosSeconds(clock)
     return lambda: clock.now().nanoseconds * 1e-9
 
 
@@ -155,6 +214,7 @@ class ActionGoal(Action):
         self.node = node
         self.action_name = action_name
         self.client = client or shared_action_client(node, action_type, action_name)
+        self._readiness = readiness_of(self.client)
         self._goal = goal
         self.server_timeout = server_timeout
         self.result_timeout = result_timeout
@@ -191,7 +251,11 @@ class ActionGoal(Action):
     def update(self) -> Status:
         now = self.clock()
         if self._send_future is None:
-            if not self.client.server_is_ready():
+            # Wait on the cached answer; send, or fail, only on a fresh one (server_readiness).
+            up = self._readiness.ready()
+            if up or now - self._started > self.server_timeout:
+                up = self._readiness.ready_now()
+            if not up:
                 if now - self._started > self.server_timeout:
                     return self.fail(
                         f"action server '{self.action_name}' not available after {self.server_timeout:g} s"
@@ -306,6 +370,7 @@ class ServiceCall(Action):
         super().__init__(name)
         self.srv_name = srv_name
         self.client = shared_service_client(node, srv_type, srv_name)
+        self._readiness = readiness_of(self.client)
         self._request = request
         self.service_timeout = service_timeout
         self.timeout = timeout
@@ -329,7 +394,10 @@ class ServiceCall(Action):
     def update(self) -> Status:
         now = self.clock()
         if self._future is None:
-            if not self.client.service_is_ready():
+            up = self._readiness.ready()
+            if up or now - self._started > self.service_timeout:
+                up = self._readiness.ready_now()
+            if not up:
                 if now - self._started > self.service_timeout:
                     return self.fail(
                         f"service '{self.srv_name}' not available after {self.service_timeout:g} s"
@@ -556,6 +624,7 @@ class TreeStatusPublisher:
 
 __all__ = [
     "ActionGoal",
+    "RosSeconds",
     "SerialisedActionClient",
     "ServiceCall",
     "TopicCache",

@@ -10,7 +10,9 @@ behaviours share it: :class:`SendArsRequest` (the acknowledgement), the Inspecti
 Failures name the ARS and the action: server not found within ``timeouts.ars_server_s``, goal
 rejected, server gone while the goal runs (not discoverable for ``ars_server_s``), no result
 within blackboard ``ars_result_timeout``, aborted, or a result of failure with the ARS's reason.
-Every wait is measured on the mission clock, which stands still while the CRS is paused.
+Every wait is measured on the mission clock, which stands still while the CRS is paused. Whether
+a server is there is read through :mod:`tlt_common.bt.server_readiness`: waiting uses an answer up
+to a quarter second old, and the "missing" and "gone" failures are decided on a fresh one.
 """
 
 from __future__ import annotations
@@ -25,11 +27,24 @@ from py_trees.common import Status
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import default_feedback_text, shared_action_client
+from tlt_common.bt.server_readiness import Readiness, readiness_of
 from tlt_common.mission.schema import Member
 from tlt_crs.context import CrsContext
 
 GoalBuilder = Callable[[str], Any]  # ARS name -> goal message
 ResultRecorder = Callable[[CrsContext, Member, Any, bool], None]
+
+
+class _Server:
+    """One ARS's action server for one request: its name, shared client and readiness."""
+
+    __slots__ = ("action", "client", "readiness", "waiting_text")
+
+    def __init__(self, action: str, client: Any, readiness: Readiness) -> None:
+        self.action = action
+        self.client = client
+        self.readiness = readiness
+        self.waiting_text = f"waiting for '{action}'"
 
 
 class ArsRequest:
@@ -56,13 +71,25 @@ class ArsRequest:
         self.record = record
         self.inspected = inspected  # the ARS presents the part to /crs/inspect_part meanwhile
         self.title = request.replace("_", " ").title().replace(" ", "")
+        self._servers: dict[str, _Server] = {}
         self.reset()
 
     def ars(self) -> str:
         return self._ars() if callable(self._ars) else self._ars
 
     def client(self, ars: str) -> Any:
-        return shared_action_client(self.ctx.node, self.action_type, ros_names.ars_action(ars, self.request))
+        return self.server(ars).client
+
+    def server(self, ars: str) -> _Server:
+        """The client, readiness and texts for ``ars``'s action server of this request, made once:
+        a waiting behaviour looks them up on every tick."""
+        server = self._servers.get(ars)
+        if server is None:
+            action = ros_names.ars_action(ars, self.request)
+            client = shared_action_client(self.ctx.node, self.action_type, action)
+            server = _Server(action, client, readiness_of(client))
+            self._servers[ars] = server
+        return server
 
     def reset(self) -> None:
         self.ars_name = ""
@@ -145,17 +172,22 @@ class SendArsRequest(Action):
         if req.send_future is None:
             try:
                 ars = req.ars()
-                client = req.client(ars)
+                server = req.server(ars)
             except ValueError as exc:
                 return self.fail(f"cannot address the ARS: {exc}")
-            if not client.server_is_ready():
+            # Wait on the cached answer; send, or fail, only on a fresh one (server_readiness).
+            up = server.readiness.ready()
+            if up or now - self._started > limit:
+                up = server.readiness.ready_now()
+            if not up:
                 if now - self._started > limit:
                     return self.fail(
-                        f"ARS '{ars}' missing: action server '{ros_names.ars_action(ars, req.request)}'"
+                        f"ARS '{ars}' missing: action server '{server.action}'"
                         f" not available after {limit:g} s"
                     )
-                self.feedback_message = f"waiting for '{ros_names.ars_action(ars, req.request)}'"
+                self.feedback_message = server.waiting_text
                 return Status.RUNNING
+            client = server.client
             try:
                 goal = req.make_goal(ars)
             except Exception as exc:
@@ -198,30 +230,38 @@ class AwaitArsResult(Action):
         self.req = request
         self.ctx = request.ctx
         self._lost_since: float | None = None
+        self._shown: Any = None
 
     def initialise(self) -> None:
         self._lost_since = None
+        self._shown = None
 
     def update(self) -> Status:
         req, now = self.req, self.ctx.clock()
         if req.result_future is None:
             return self.fail(f"no {req.title} goal in flight for '{req.member.id}'")
         if not req.result_future.done():
-            if req.feedback is not None:
-                self.feedback_message = f"{req.ars_name}: {default_feedback_text(req.feedback)}"
+            feedback = req.feedback
+            if feedback is not None and feedback is not self._shown:  # formatted once per message
+                self._shown = feedback
+                self.feedback_message = f"{req.ars_name}: {default_feedback_text(feedback)}"
             timeout = float(self.ctx.board.get("ars_result_timeout", 600.0))
             if now - req.accepted_at > timeout:
                 name = req.describe()
                 req.cancel()
                 return self.fail(f"no result for {name} within {timeout:g} s")
-            if not req.client(req.ars_name).server_is_ready():
-                self._lost_since = now if self._lost_since is None else self._lost_since
-                if now - self._lost_since > self.ctx.config.timeouts.ars_server_s:
-                    name = req.describe()
-                    req.cancel()
-                    return self.fail(f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}")
-            else:
+            readiness = req.server(req.ars_name).readiness
+            if readiness.ready():
                 self._lost_since = None
+                return Status.RUNNING
+            self._lost_since = now if self._lost_since is None else self._lost_since
+            if now - self._lost_since > self.ctx.config.timeouts.ars_server_s:
+                if readiness.ready_now():  # back (or the cached answer was old): not gone
+                    self._lost_since = None
+                    return Status.RUNNING
+                name = req.describe()
+                req.cancel()
+                return self.fail(f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}")
             return Status.RUNNING
         ok, reason = req.conclude()
         if not ok:

@@ -207,3 +207,43 @@ def test_node_kind_names_table3_types():
         "condition",
         "action",
     ]
+
+
+def _scripted(base: type):
+    """A leaf of ``base`` answering a script of statuses and logging its life cycle calls."""
+
+    class Scripted(base):
+        def __init__(self, script: list[Status]) -> None:
+            super().__init__("scripted")
+            self.script, self.calls = list(script), []
+
+        def initialise(self) -> None:
+            self.calls.append("initialise")
+
+        def update(self) -> Status:
+            self.calls.append("update")
+            return self.script.pop(0)
+
+        def terminate(self, new_status: Status) -> None:
+            self.calls.append(f"terminate {new_status.name}")
+
+    return Scripted
+
+
+def test_action_tick_keeps_the_py_trees_life_cycle():
+    """Action.tick is py_trees' Behaviour.tick written out: the same calls, statuses and yields,
+    also when a parent pre-empts it (a Selector whose first child turns true)."""
+    script = [Status.RUNNING, Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.RUNNING, Status.RUNNING]
+    traces = []
+    for base in (py_trees.behaviour.Behaviour, Action):
+        leaf = _scripted(base)(script)
+        guard = Flag("guard", False)
+        root = py_trees.composites.Selector("root", memory=False, children=[guard, leaf])
+        trace = []
+        for tick in range(len(script) + 1):
+            guard.answer = tick == 5  # pre-empts the leaf while it runs
+            yielded = [node.name for node in root.tick()]
+            trace.append((yielded, leaf.status, root.status))
+        traces.append((trace, leaf.calls))
+    assert traces[0] == traces[1]
+    assert "terminate INVALID" in traces[1][1]
