@@ -195,8 +195,14 @@ def check_against_mission(edu: dict[str, Any], mission: Mission, source: str) ->
         raise ConfigError(
             source, "lifter.post_height", f"posts must reach above the top grippers at {top:.3f} m"
         )
-    if edu["site"]["foundation_top"] > edu["site"]["build_level"]:
-        raise ConfigError(source, "site.foundation_top", "the foundation must not rise above build_level")
+    seat = edu["site"]["build_level"] - edu["parts"]["corner_size"] / 2
+    if edu["site"]["foundation_top"] > seat + 1e-9:
+        raise ConfigError(
+            source,
+            "site.foundation_top",
+            f"the pads would hold a cross frame above build_level (top at most {seat:.4f} m:"
+            " build_level - parts.corner_size / 2)",
+        )
     ag = edu["active_grippers"]
     if not ag["range"][0] < ag["engaged_above"] <= ag["range"][1]:
         raise ConfigError(source, "active_grippers.engaged_above", "must lie inside active_grippers.range")

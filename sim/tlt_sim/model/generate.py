@@ -9,7 +9,8 @@ frame (corner x0_y0 of the payload's cross frame, mission ``bay0``) starts at
 ``(0, 0, build_level + bay_height)``; bay n's bottom cross frame is at ``-n * bay_height`` in it.
 
 Collision filtering (contype/conaffinity): the arms (bit 2) touch the floor, posts, pedestals and
-dispensers; a part that falls (bit 4, set when it drops) touches only the floor; nothing else
+dispensers; a part that falls (bit 4, set when it drops) touches only the floor and the foundation
+pads (a cross frame released at the build level rests on them, the arms pass them); nothing else
 collides.
 Assembly is by equality constraints (see :mod:`tlt_sim.model.assembly`).
 """
@@ -218,6 +219,11 @@ class _Builder:
                 "geom",
                 name=f"foundation/pad_{i}",
                 class_="env",
+                # Falling parts land on the pads as on the floor: a cross frame the ARS lets go of
+                # at the build level rests on them until the Active Grippers latch it (as on the EDU).
+                # The arms do not touch them: a rivet gun at a corner joint reaches just above a
+                # pad, and the ARS planning scene does not model the pads either.
+                conaffinity=PART_BIT,
                 type="box",
                 size=(0.035, 0.035, top / 2),
                 pos=(c[0], c[1], top / 2),
