@@ -12,7 +12,8 @@ never counted as a found part.
   that does not fit a straight tube (not observably correct although well seen) is a bent tube.
 * Cross frame: the frame itself (its four sides) and a corner joint at each of its four corners.
 * Placement alignment: a placed part's centre and axis, moved into the tower frame, against the
-  mission's joint positions of its member; a cross frame from the corner joints the EE cameras see.
+  mission's joint positions of its member; a held part from the end pieces (corner joints, end
+  fittings) its arm's EE cameras see.
 * Bay: the corner joints found match the mission's joint positions up to one rigid motion (the
   camera's pose drops out) within the position tolerance.
 """
@@ -267,37 +268,57 @@ def _rigid_residuals(expected: np.ndarray, observed: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CrossFrameAlignment:
-    """Where a cross frame is against its place, from the corner joints seen (see
-    :func:`cross_frame_alignment`). ``held`` is the tool pose (world, 4x4) that holds the frame
-    where it is seen, in the ARS convention; None when too few corners were matched."""
+class HeldAlignment:
+    """Where a held part is against its place, from its end pieces seen (see
+    :func:`held_part_alignment`). ``held`` is the tool pose (world, 4x4) that holds the part where
+    it is seen, in the ARS convention; None when fewer than two pieces were matched."""
 
     aligned: bool
-    position_error: float  # m, the frame's centre
+    position_error: float  # m, the part's centre
     angle_error: float  # rad
     matched: int
     held: np.ndarray | None
     reason: str = ""
 
 
-def cross_frame_alignment(
-    corners: Sequence[Sequence[float]],
+PIECE_NAMES = {"cross_frame": "corner joint", "vertical": "end fitting", "diagonal": "end fitting"}
+
+
+def expected_pieces(kind: str, joints: Sequence[Sequence[float]], parts: Mapping[str, Any]) -> np.ndarray:
+    """Where the end pieces of a ``kind`` member at ``joints`` (its place) are: a cross frame's
+    corner joints (the joints, in order), a strut's two end fittings (their centres, on the line
+    between its joints, :func:`~tlt_vision.cad.models.strut_layout`)."""
+    pts = np.asarray(joints, dtype=float)
+    if kind == "cross_frame":
+        return pts
+    u = pts[1] - pts[0]
+    length = float(np.linalg.norm(u))
+    lay = strut_layout(length, parts)
+    u /= length
+    return np.array([pts[0] + lay["fitting_a"] * u, pts[0] + lay["fitting_b"] * u])
+
+
+def held_part_alignment(
+    kind: str,
+    pieces: Sequence[Sequence[float]],
     seen: Sequence[Sequence[float]],
     tool: np.ndarray,
     tol: Tolerances,
     gate: float,
-) -> CrossFrameAlignment:
-    """A cross frame's alignment from the certified corner joints an EE camera sees.
+) -> HeldAlignment:
+    """A held part's alignment from the certified end pieces its arm's EE cameras see.
 
-    Held at the middle of a side, a frame fills the D405s' view too closely for its own pose (one
-    side, centimetres away), but each D405 sees the corner joint at its end of that side. Each
-    joint ``seen`` (world) is matched to the nearest of the frame's ``corners`` at its place (world,
-    adjacent in order) within ``gate``; the rigid motion of those matched onto those seen (two or
-    more) moves the whole frame from its place to where it is. Errors are its centre's distance and
-    the motion's rotation angle. ``held``: the tool on the middle of the side nearest ``tool``, tool
-    x along that side (the sign of ``tool``'s), y into the frame, z = x cross y.
+    Held at its middle (a strut) or the middle of a side (a cross frame), a part fills the D405s'
+    view too closely for its own pose (a tube or side centimetres away), but each D405 sees the end
+    piece at its end: an end fitting, a corner joint. Each piece ``seen`` (world) is matched to the
+    nearest of the part's ``pieces`` at its place (:func:`expected_pieces`) within ``gate``; the rigid
+    motion of those matched onto those seen (two or more) moves the part from its place to where it
+    is. Errors are its centre's distance and the motion's rotation angle. ``held``, in the ARS
+    convention: a strut's tool at its middle, tool x along it (the sign of ``tool``'s), the tool's
+    own roll kept (a tube's is not observed); a cross frame's at the middle of the side nearest
+    ``tool``, x along that side (the sign of ``tool``'s), y into the frame, z = x cross y.
     """
-    expected = np.asarray(corners, dtype=float)
+    expected = np.asarray(pieces, dtype=float)
     pairs: dict[int, np.ndarray] = {}
     for p in np.asarray(seen, dtype=float).reshape(-1, 3):
         d = np.linalg.norm(expected - p, axis=1)
@@ -305,10 +326,10 @@ def cross_frame_alignment(
         if d[k] <= gate and (k not in pairs or d[k] < np.linalg.norm(pairs[k] - expected[k])):
             pairs[k] = p
     if len(pairs) < 2:
-        return CrossFrameAlignment(
+        return HeldAlignment(
             False, math.inf, math.inf, len(pairs), None,
-            f"{len(pairs)} corner joint(s) of the frame seen within {gate * 1000:.0f} mm of their place;"
-            " 2 needed",
+            f"{len(pairs)} {PIECE_NAMES[kind]}(s) of the part seen within {gate * 1000:.0f} mm of their"
+            " place; 2 needed",
         )  # fmt: skip
     idx = sorted(pairs)
     r, t = _rigid_fit(expected[idx], np.array([pairs[k] for k in idx]))
@@ -317,19 +338,23 @@ def cross_frame_alignment(
     pos_err = float(np.linalg.norm(centre - expected.mean(0)))
     ang_err = float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
     tool = np.asarray(tool, dtype=float)
-    mids = [(moved[i] + moved[(i + 1) % len(moved)]) / 2 for i in range(len(moved))]
-    i = int(np.argmin([np.linalg.norm(m - tool[:3, 3]) for m in mids]))
-    x = moved[(i + 1) % len(moved)] - moved[i]
-    x /= np.linalg.norm(x)
-    if np.dot(x, tool[:3, 0]) < 0:
-        x = -x
-    y = centre - mids[i]
-    y /= np.linalg.norm(y)
     held = np.eye(4)
-    held[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
-    held[:3, 3] = mids[i]
+    if kind == "cross_frame":
+        mids = [(moved[i] + moved[(i + 1) % len(moved)]) / 2 for i in range(len(moved))]
+        i = int(np.argmin([np.linalg.norm(m - tool[:3, 3]) for m in mids]))
+        x = _signed_like(moved[(i + 1) % len(moved)] - moved[i], tool[:3, 0])
+        y = (centre - mids[i]) / np.linalg.norm(centre - mids[i])
+        held[:3, :3], held[:3, 3] = np.column_stack([x, y, np.cross(x, y)]), mids[i]
+    else:
+        x = _signed_like(moved[1] - moved[0], tool[:3, 0])
+        held[:3, :3], held[:3, 3] = _rotation_between(tool[:3, 0], x) @ tool[:3, :3], centre
     reasons = _misalignment(pos_err, ang_err, tol)
-    return CrossFrameAlignment(not reasons, pos_err, ang_err, len(pairs), held, "; ".join(reasons))
+    return HeldAlignment(not reasons, pos_err, ang_err, len(pairs), held, "; ".join(reasons))
+
+
+def _signed_like(v: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    v = v / np.linalg.norm(v)
+    return -v if np.dot(v, ref) < 0 else v
 
 
 def inspect_bay(
@@ -369,58 +394,6 @@ def inspect_bay(
     return InspectionReport(target, "bay", not reasons, tuple(reasons), used)
 
 
-@dataclass(frozen=True)
-class Alignment:
-    """Answer of a placement alignment check (tlt_interfaces/srv/CheckAlignment's response)."""
-
-    aligned: bool
-    position_error: float  # m
-    angle_error: float  # rad
-    estimate: PoseEstimate | None
-    reason: str = ""
-
-
-def check_alignment(
-    member_kind: str,
-    joints: Sequence[Sequence[float]],
-    estimate: PoseEstimate | None,
-    camera_to_tower: np.ndarray,
-    tol: Tolerances,
-    reason: str = "",
-) -> Alignment:
-    """Whether a placed part sits where the mission puts it, from its pose seen by an EE camera.
-
-    ``joints`` are the member's joint positions in the tower frame (the mission's); a strut
-    (``vertical``, ``diagonal``; its tube's pose) must have its centre at their midpoint and its axis
-    along them; a cross frame (its frame's pose) its centre at their mean and its plane normal
-    vertical. ``camera_to_tower`` (4x4) is the camera's pose in the tower frame, from the
-    transform tree. Errors are the centre's distance and the axis' angle (undirected).
-    """
-    if estimate is None or not estimate.certified:
-        why = reason or (estimate.certificate.reason if estimate is not None else "no pose estimate")
-        return Alignment(False, float("inf"), float("inf"), estimate, f"no certified pose: {why}")
-    tf = np.asarray(camera_to_tower, dtype=float)
-    centre = tf[:3, :3] @ np.asarray(estimate.translation) + tf[:3, 3]
-    axis = tf[:3, :3] @ _axis(estimate)
-    pts = np.asarray(joints, dtype=float)
-    if member_kind == "cross_frame":
-        want_centre, want_axis = pts.mean(0), np.array([0.0, 0.0, 1.0])
-    elif member_kind in ("vertical", "diagonal") and len(pts) == 2:
-        want_centre, want_axis = pts.mean(0), (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0])
-    else:
-        return Alignment(
-            False,
-            float("inf"),
-            float("inf"),
-            estimate,
-            f"cannot check a {member_kind} with {len(pts)} joints",
-        )
-    pos_err = float(np.linalg.norm(centre - want_centre))
-    ang_err = _angle_between_axes(axis, want_axis)
-    reasons = _misalignment(pos_err, ang_err, tol)
-    return Alignment(not reasons, pos_err, ang_err, estimate, "; ".join(reasons))
-
-
 def _misalignment(pos_err: float, ang_err: float, tol: Tolerances) -> list[str]:
     reasons = []
     if pos_err > tol.position:
@@ -442,14 +415,13 @@ def bay_joints(mission: Any, bay: int) -> dict[str, tuple[float, float, float]]:
 
 
 __all__ = [
-    "Alignment",
-    "CrossFrameAlignment",
+    "HeldAlignment",
     "InspectionReport",
     "Observation",
     "Tolerances",
     "bay_joints",
-    "check_alignment",
-    "cross_frame_alignment",
+    "expected_pieces",
+    "held_part_alignment",
     "inspect_bay",
     "inspect_cross_frame",
     "inspect_strut",

@@ -7,9 +7,9 @@ Services (names from :mod:`tlt_common.ros_names`; paper §V.E):
   rivet in that EE gun (seen by the D405 beside it). The report passes or fails with every reason.
 * ``VISION_INSPECT_BAY`` (``InspectBay``): the four corner joints of bay N seen by the inward ZEDs,
   placed in the world through the transform tree and matched to the mission's joints.
-* ``VISION_CHECK_ALIGNMENT`` (``CheckAlignment``): the member's part seen by an EE camera, in the
-  world, against the mission's joint positions; the answered pose is the part's pose in the world
-  frame as the tool that holds it (the ARS's convention, see node.yaml ``tool``).
+* ``VISION_CHECK_ALIGNMENT`` (``CheckAlignment``): the member's held part, from the end pieces the
+  EE cameras of the named camera's arm see, in the world, against the mission's joint positions;
+  the answered pose is the tool pose that holds the part where it is seen (the ARS's convention).
 * ``VISION_LOCATE_TAG`` (``LocateTag``): the dispenser's AprilTag (cv2.aruco, IPPE square) in the
   named camera's RGB; the answered pose is the dispenser's frame in the world (the tag marks it).
 
@@ -67,7 +67,7 @@ from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
 log = logging.getLogger("tlt.vision")
-BAY_DUPLICATE_M = 0.02  # corner joints seen by both ZEDs closer than this are one joint
+BAY_DUPLICATE_M = 0.02  # pieces seen by two cameras closer than this are one piece
 
 
 def pose_msg(t: np.ndarray) -> Pose:
@@ -96,36 +96,6 @@ def _in_world(e: PoseEstimate, camera_pose: np.ndarray) -> PoseEstimate:
         translation=r @ e.translation + t,
         keypoints=e.keypoints @ r.T + t,
     )
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation taking unit vector ``a`` onto unit vector ``b`` (not opposite)."""
-    v, c = np.cross(a, b), float(np.dot(a, b))
-    if c < -1 + 1e-9:
-        raise ValueError("opposite vectors")
-    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx / (1 + c)
-
-
-def held_pose(kind: str, part: PoseEstimate, tool: np.ndarray, bay_width: float) -> np.ndarray:
-    """The tool pose (world) that holds ``part`` (world) where it is seen, in the ARS convention.
-
-    The part's axis (a strut's) or plane normal (a cross frame's) is observed; its roll about that
-    axis is not (rotation about a tube's axis is arbitrary in the estimate), so the tool's own
-    roll is kept: the tool frame is turned by the smallest rotation that brings tool x onto the
-    strut's axis (tool z onto the frame's normal). A strut is held at its middle; a cross frame at
-    the middle of the side the tool's -y points to.
-    """
-    r_tool = tool[:3, :3]
-    axis = np.asarray(part.rotation)[:, 2]
-    ref = r_tool[:, 0] if kind in STRUT_KINDS else r_tool[:, 2]
-    if np.dot(axis, ref) < 0:
-        axis = -axis
-    rot = _rotation_between(ref, axis) @ r_tool
-    centre = np.asarray(part.translation, dtype=float)
-    if kind == "cross_frame":
-        centre = centre - rot[:, 1] * bay_width / 2
-    return pose_matrix(centre, rot)
 
 
 class VisionNode(Node):
@@ -455,73 +425,49 @@ class VisionNode(Node):
             camera = self._camera(request.camera)
             if camera not in self.rig.ee:
                 raise NoFrame(f"camera {request.camera!r} is not an end-effector camera")
-            if member.kind == "cross_frame":
-                return self._check_cross_frame(member.id, camera, joints, tol, deadline, response)
-            frame = self._grab(camera, self._frame_streams(), deadline)
-            cam_pose = self.rig.camera_pose(camera, frame.stamp)
-            tool = self.rig.tool_pose(camera, frame.stamp, self.tool)
-            detections = self._segment(frame)
-        except (NoFrame, FrameUnavailable) as exc:
+        except NoFrame as exc:
             response.reason = str(exc)
             return response
-        w = self.mission.bay_width
-        part = self.inspector.select(member.kind, detections, frame.get("depth"), frame.intrinsics)
-        obs = self._observe(member.kind, part, frame)
-        main = "cross_frame" if member.kind == "cross_frame" else "strut_tube"
-        mine = [o for o in obs if o.object_class == main]
-        good = [o for o in mine if o.estimate is not None and o.estimate.certified]
-        pick = good or [o for o in mine if o.estimate is not None]
-        estimate = pick[0].estimate if pick else None
-        why = "" if mine else "part not in view"
-        if mine and estimate is None:
-            why = mine[0].reason
-        result = inspection.check_alignment(member.kind, joints, estimate, cam_pose, tol, why)
-        response.aligned = bool(result.aligned)
-        response.position_error, response.angle_error = (
-            float(result.position_error),
-            float(result.angle_error),
-        )
-        response.reason = result.reason
-        world = self.config.raw["world_frame"]
-        if estimate is not None:
-            seen = _in_world(estimate, cam_pose)
-            response.pose = self._certified_pose(seen, frame.stamp, world, member.id)
-            if estimate.certified:
-                response.pose.pose = pose_msg(held_pose(member.kind, seen, tool, w))
-        else:
-            response.pose.header.frame_id = world
-            response.pose.reason = why or "no pose estimate"
-        return response
+        return self._check_held_part(member, camera, joints, tol, deadline, response)
 
-    def _check_cross_frame(
+    def _check_held_part(
         self,
-        member_id: str,
+        member: Any,
         camera: str,
-        corners: list[np.ndarray],
+        joints: list[np.ndarray],
         tol: inspection.Tolerances,
         deadline: float,
         response: Any,
     ) -> Any:
-        """CheckAlignment of a cross frame: from the certified corner joints the EE cameras of
-        ``camera``'s arm see (:func:`inspection.cross_frame_alignment`); a joint both see is one."""
+        """CheckAlignment from the certified end pieces (a strut's end fittings, a cross frame's
+        corner joints) that the EE cameras of ``camera``'s arm see
+        (:func:`inspection.held_part_alignment`); a piece both see is one."""
+        piece = "corner_joint" if member.kind == "cross_frame" else "end_fitting"
+        pipeline = "bay" if member.kind == "cross_frame" else member.kind
         arm = self.rig.ee[camera].arm
         seen: list[PoseEstimate] = []
         problems: list[str] = []
         stamp = self._now()
         tool: np.ndarray | None = None
+        # Every camera's frame and pose first, then the poses (seconds each on a busy CPU): the
+        # frames are of one moment, and the request's time is not spent before the last is taken.
+        frames: list[tuple[CameraFrame, np.ndarray]] = []
         for cam in sorted(c.name for c in self.rig.ee.values() if c.arm == arm):
             try:
                 frame = self._grab(cam, self._frame_streams(), deadline)
-                cam_pose = self.rig.camera_pose(cam, frame.stamp)
-                # At the frame's time, before the poses take their seconds: the joint states
-                # kept are the latest, and only those near the frame's stamp are trusted.
+                frames.append((frame, self.rig.camera_pose(cam, frame.stamp)))
+                # The joint states kept are the latest, trusted only near the frame's stamp.
                 tool = self.rig.tool_pose(cam, frame.stamp, self.tool) if tool is None else tool
-                detections = [d for d in self._segment(frame) if d.object_class == "corner_joint"]
             except (NoFrame, FrameUnavailable) as exc:
                 problems.append(f"{cam}: {exc}")
-                continue
+        for frame, cam_pose in frames:
             stamp = frame.stamp
-            for o in self._observe("bay", detections, frame):
+            try:
+                detections = [d for d in self._segment(frame) if d.object_class == piece]
+            except NoFrame as exc:
+                problems.append(f"{frame.camera}: {exc}")
+                continue
+            for o in self._observe(pipeline, detections, frame):
                 e = o.estimate
                 if e is None or not e.certified:
                     continue
@@ -531,12 +477,19 @@ class VisionNode(Node):
         p = response.pose
         _stamp(p.header, stamp)
         p.header.frame_id = self.config.raw["world_frame"]
-        p.object_class, p.object_id = "cross_frame", member_id
+        p.object_class = "cross_frame" if member.kind == "cross_frame" else "strut_tube"
+        p.object_id = member.id
         if tool is None:
             response.reason = p.reason = "; ".join(problems)
             return response
-        gate = self.config.raw["cross_frame_corner_gate"]
-        result = inspection.cross_frame_alignment(corners, [e.translation for e in seen], tool, tol, gate)
+        result = inspection.held_part_alignment(
+            member.kind,
+            inspection.expected_pieces(member.kind, joints, self.parts),
+            [e.translation for e in seen],
+            tool,
+            tol,
+            self.config.raw["held_piece_gate"],
+        )
         response.aligned = bool(result.aligned)
         response.position_error, response.angle_error = result.position_error, result.angle_error
         response.reason = "; ".join([r for r in (result.reason, *problems) if r])

@@ -90,7 +90,7 @@ SCHEMA = {
     "part_depth_range": _vec(2),
     "min_part_pixels": Field("int", minimum=1),
     "part_gap": opt("float", 0.03, minimum=0.001),
-    "cross_frame_corner_gate": opt("float", 0.1, minimum=0.001),
+    "held_piece_gate": opt("float", 0.1, minimum=0.001),
     "lifter_cameras": Field(
         "map", item=Field("dict", schema={"joint": Field("str"), "hinge": _POSE, "optical": _POSE})
     ),

@@ -16,8 +16,8 @@ from tlt_vision.inspection import (
     Observation,
     Tolerances,
     bay_joints,
-    check_alignment,
-    cross_frame_alignment,
+    expected_pieces,
+    held_part_alignment,
     inspect_bay,
     inspect_cross_frame,
     inspect_strut,
@@ -217,7 +217,7 @@ def _rz(a):
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def test_cross_frame_alignment_from_the_corner_joints_at_the_held_side():
+def test_a_held_cross_frame_is_aligned_from_the_corner_joints_at_the_held_side():
     corners = np.array([p for _, p in MISSION.member("bay1/cross_frame").joints], dtype=float)
     # The ARS holds side 0 (corners 0 -> 1) at its middle: tool z down, y into the frame, x = y x z.
     mid = (corners[0] + corners[1]) / 2
@@ -225,7 +225,7 @@ def test_cross_frame_alignment_from_the_corner_joints_at_the_held_side():
     at_place[:3, :3] = np.column_stack([[-1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]])
     at_place[:3, 3] = mid
 
-    placed = cross_frame_alignment(corners, corners[:2], at_place, TOL, gate=0.1)
+    placed = held_part_alignment("cross_frame", corners, corners[:2], at_place, TOL, gate=0.1)
     assert placed.aligned and placed.matched == 2 and placed.position_error < 1e-9
     assert np.allclose(placed.held, at_place)
 
@@ -234,7 +234,7 @@ def test_cross_frame_alignment_from_the_corner_joints_at_the_held_side():
     motion[:3, :3] = _rz(math.radians(1.0))
     motion[:3, 3] = [0.02, 0.0, 0.0]
     seen = corners @ motion[:3, :3].T + motion[:3, 3]
-    off = cross_frame_alignment(corners, seen[:2], motion @ at_place, TOL, gate=0.1)
+    off = held_part_alignment("cross_frame", corners, seen[:2], motion @ at_place, TOL, gate=0.1)
     centre = corners.mean(0)
     want = np.linalg.norm(motion[:3, :3] @ centre + motion[:3, 3] - centre)
     assert not off.aligned and off.position_error == pytest.approx(want, abs=1e-9)
@@ -243,46 +243,48 @@ def test_cross_frame_alignment_from_the_corner_joints_at_the_held_side():
     # the tool by the inverse to place it (tlt_ars.behaviours.vision.corrected_target).
     assert np.allclose(off.held, motion @ at_place, atol=1e-9)
     # Seen by both EE cameras, or with all four corners, the answer is the same.
-    assert np.allclose(cross_frame_alignment(corners, seen, at_place, TOL, 0.1).held, motion @ at_place)
+    both = held_part_alignment("cross_frame", corners, seen, at_place, TOL, 0.1)
+    assert np.allclose(both.held, motion @ at_place)
 
     # One corner, or only the joints of a frame a bay higher up (the lifter's top frame): no answer.
-    one = cross_frame_alignment(corners, seen[:1], at_place, TOL, gate=0.1)
-    above = cross_frame_alignment(corners, corners[:2] + [0, 0, 0.75], at_place, TOL, gate=0.1)
+    one = held_part_alignment("cross_frame", corners, seen[:1], at_place, TOL, gate=0.1)
+    higher = corners[:2] + np.array([0, 0, 0.75])
+    above = held_part_alignment("cross_frame", corners, higher, at_place, TOL, gate=0.1)
     for r in (one, above):
         assert not r.aligned and r.held is None and math.isinf(r.position_error)
-    assert one.reason.startswith("1 corner joint(s) of the frame seen within 100 mm")
+    assert one.reason.startswith("1 corner joint(s) of the part seen within 100 mm")
     assert above.matched == 0
 
 
-def test_placement_alignment():
+def test_a_held_strut_is_aligned_from_its_end_fittings():
     member = MISSION.member("bay1/vertical/x0_y0")
-    joints = [p for _, p in member.joints]
-    lay_centre = (np.array(joints[0]) + np.array(joints[1])) / 2
-    # The EE camera 0.5 m from the strut, looking at it along tower +y; camera -> tower transform.
-    cam_r = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
-    cam_t = lay_centre - cam_r @ [0.0, 0.0, 0.5]
-    tf = np.eye(4)
-    tf[:3, :3], tf[:3, 3] = cam_r, cam_t
-    tube = MODELS["strut_tube/vertical"]
-    rng = np.random.default_rng(7)
+    joints = np.array([p for _, p in member.joints], dtype=float)
+    fittings = expected_pieces("vertical", joints, PARTS)
+    lay = strut_layout(float(np.linalg.norm(joints[1] - joints[0])), PARTS)
+    assert np.linalg.norm(fittings[0] - joints[0]) == pytest.approx(lay["fitting_a"])
+    # The ARS holds a strut at its middle along tool x; the tool's roll about it is its own.
+    at_place = np.eye(4)
+    at_place[:3, :3] = np.column_stack([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])
+    at_place[:3, 3] = joints.mean(0)
 
-    def seen(offset_tower, tilt):
-        rot_tower = _ry(tilt)  # strut along tower z, tilted about y
-        rot_c = cam_r.T @ rot_tower
-        t_c = cam_r.T @ (lay_centre + offset_tower - cam_t)
-        cloud = synthetic_view(tube, rot_c, t_c, 600, rng, noise=0.0005)
-        return _estimate(tube, cloud, rot_c, t_c)
+    placed = held_part_alignment("vertical", fittings, fittings[::-1], at_place, TOL, gate=0.1)
+    assert placed.aligned and placed.position_error < 1e-9 and np.allclose(placed.held, at_place)
 
-    good = check_alignment("vertical", joints, seen(np.zeros(3), 0.0), tf, TOL)
-    assert good.aligned and good.position_error < 1e-6 and good.angle_error < 1e-6 and good.reason == ""
-    off = check_alignment("vertical", joints, seen(np.array([0.01, 0.0, 0.0]), 0.0), tf, TOL)
-    assert not off.aligned and off.position_error == pytest.approx(0.01, abs=1e-6)
-    assert off.reason.startswith("10.0 mm from its place")
-    tilted = check_alignment("vertical", joints, seen(np.zeros(3), 0.06), tf, TOL)
-    assert (
-        not tilted.aligned
-        and tilted.angle_error == pytest.approx(0.06, abs=1e-6)
-        and "turned 3.4 deg" in tilted.reason
-    )
-    none = check_alignment("vertical", joints, None, tf, TOL, reason="empty mask: part not in view")
-    assert not none.aligned and none.reason == "no certified pose: empty mask: part not in view"
+    # 10 mm off along tower x and tilted 3.4 deg about y, the fittings with it.
+    motion = np.eye(4)
+    motion[:3, :3] = _ry(0.06)
+    motion[:3, 3] = [0.01, 0.0, 0.0]
+    seen = (fittings - joints.mean(0)) @ motion[:3, :3].T + joints.mean(0) + motion[:3, 3]
+    off = held_part_alignment("vertical", fittings, seen, at_place, TOL, gate=0.1)
+    assert not off.aligned
+    assert off.position_error == pytest.approx(0.01, abs=1e-9)
+    assert off.angle_error == pytest.approx(0.06, abs=1e-9)
+    assert off.reason == "10.0 mm from its place (tolerance 5.0 mm); turned 3.4 deg (tolerance 2.0 deg)"
+    moved = np.eye(4)
+    moved[:3, :3] = motion[:3, :3]
+    moved[:3, 3] = joints.mean(0) + motion[:3, 3] - motion[:3, :3] @ joints.mean(0)
+    assert np.allclose(off.held, moved @ at_place, atol=1e-9)
+
+    one = held_part_alignment("vertical", fittings, seen[:1], at_place, TOL, gate=0.1)
+    assert not one.aligned and one.held is None
+    assert one.reason == "1 end fitting(s) of the part seen within 100 mm of their place; 2 needed"

@@ -1,13 +1,15 @@
-"""A cross frame held by ARS X at its place, measured by the arm's own D405s (CheckAlignment).
+"""Parts held by ARS X at their place, measured by the arm's own D405s (CheckAlignment).
 
-Held at the middle of a side, the frame is centimetres from the EE cameras: neither sees enough of
-it for the frame's own pose, but each sees the corner joint at its end of the held side. The twin
+Held at the middle of a side, a cross frame is centimetres from the EE cameras: neither sees enough
+of it for the frame's own pose, but each sees the corner joint at its end of the held side; a
+strut held at its middle likewise shows each D405 the end fitting at its end. The twin
 (``tlt_sim.model.Scene``) puts ARS X at the placement configuration the planner picks for
 ``bay1/cross_frame`` (the first usable candidate, as the ARS's coarse and fine approach take it),
 seats the frame in the grasp as the twin's grasp does (or 10 mm along its side, a grasp that
 caught it off-centre), renders both D405s and runs what CheckAlignment runs on them: the vision
 pipeline's corner joint poses (C-3PO, the shipped weights; the twin's segmentation, as the launch
-set runs vision) and :func:`tlt_vision.inspection.cross_frame_alignment`.
+set runs vision) and :func:`tlt_vision.inspection.held_part_alignment`. The same for the far
+vertical ``bay1/vertical/x0_y1`` that ARS X adds once the cross frame is in place.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frames import CameraFrame
-from tlt_vision.inspection import cross_frame_alignment
+from tlt_vision.inspection import expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import TwinLabels
@@ -37,6 +39,7 @@ RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
 MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
 MEMBER = MISSION.member("bay1/cross_frame")
 CAMERAS = ("ars_x/d405_a", "ars_x/d405_b")
+RESOLUTION = load_scene_config().planning["dense_check_resolution"]
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +52,8 @@ def placement():
     target = placement_targets(cfg, MISSION, MEMBER, "ars_x")[0]
     _, q = reach_target(free, contact, target, cfg.home("ars_x"), cfg.planning["dense_check_resolution"])
     vision = load_config().raw["site"]
-    origin = np.asarray(vision["base_origin"]) + [0.0, 0.0, vision["build_level"] + MISSION.bay_height]
+    level = vision["build_level"] + MISSION.bay_height
+    origin = np.asarray(vision["base_origin"]) + np.array([0.0, 0.0, level])
     corners = np.array([origin + np.asarray(p) for _, p in MEMBER.joints])
     return q, cfg.kinematics("ars_x").forward(q), corners
 
@@ -95,7 +99,7 @@ def test_each_d405_sees_the_corner_joint_at_its_end_and_the_frame_is_aligned(pla
     _, tool, corners = placement
     seen = _corners_seen(placement, inspector, tmp_path, 0.0)
     assert len(seen) == 2, seen
-    result = cross_frame_alignment(corners, seen, tool, inspector.tol, gate=0.1)
+    result = held_part_alignment("cross_frame", corners, seen, tool, inspector.tol, gate=0.1)
     assert result.aligned, result.reason
     assert result.matched == 2 and result.position_error < 0.002
     assert np.linalg.norm(result.held[:3, 3] - tool[:3, 3]) < 0.002
@@ -106,7 +110,7 @@ def test_a_frame_caught_off_centre_is_measured_and_the_correction_puts_it_in_pla
 ):
     _, tool, corners = placement
     seen = _corners_seen(placement, inspector, tmp_path, 0.01)
-    result = cross_frame_alignment(corners, seen, tool, inspector.tol, gate=0.1)
+    result = held_part_alignment("cross_frame", corners, seen, tool, inspector.tol, gate=0.1)
     assert not result.aligned and result.position_error == pytest.approx(0.01, abs=0.002), result
     assert "from its place" in result.reason
     # The ARS's correction (tlt_ars.behaviours.vision.corrected_target, target = the tool now) moves
@@ -114,3 +118,61 @@ def test_a_frame_caught_off_centre_is_measured_and_the_correction_puts_it_in_pla
     corrected = tool @ np.linalg.inv(result.held) @ tool
     moved = [corrected @ np.linalg.inv(tool) @ np.append(p, 1.0) for p in seen]
     assert max(np.min(np.linalg.norm(corners - m[:3], axis=1)) for m in moved) < 0.002
+
+
+def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    return a, np.cross(u, a)
+
+
+def test_a_held_vertical_is_aligned_from_the_end_fittings_each_d405_sees(inspector, tmp_path):
+    member = MISSION.member("bay1/vertical/x0_y1")
+    cfg = load_scene_config()
+    kw = dict(placed={"bay1/cross_frame"}, bay=1, carrying="vertical")
+    free = build_scene(cfg, "ars_x", MISSION, contact=False, **kw)
+    contact = build_scene(cfg, "ars_x", MISSION, contact=True, **kw)
+    q = None
+    for target in placement_targets(cfg, MISSION, member, "ars_x"):
+        try:
+            _, q = reach_target(free, contact, target, cfg.home("ars_x"), RESOLUTION)
+            break
+        except ValueError:  # this candidate is unusable: the ARS takes the next one too
+            continue
+    assert q is not None
+    tool = cfg.kinematics("ars_x").forward(q)
+    scene = scene_mod.Scene(out_dir=tmp_path)
+    seen = []
+    with scene:
+        scene.stage_member("bay1/cross_frame")
+        for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
+            scene.set_joint_state(j, float(v))
+        mujoco.mj_forward(scene.model, scene.data)
+        part = scene.part(scene.next_part("vertical_dispenser_x"))
+        centre, axis = scene.assembly.grasp_line("ars_x")
+        along = part.ends["b"] - part.ends["a"]
+        along /= np.linalg.norm(along)
+        onto = np.column_stack([axis, *_perpendiculars(axis)])
+        seated = onto @ np.column_stack([along, *_perpendiculars(along)]).T
+        scene.place_part(part.name, centre - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
+        size = RUN["cameras"]["d405"]
+        for camera in CAMERAS:
+            f = scene.render(camera, size["width"], size["height"])
+            labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
+            frame = CameraFrame(
+                camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
+                {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
+            )  # fmt: skip
+            fittings = [d for d in labels.detect(frame) if d.object_class == "end_fitting"]
+            for o in inspector.observe("vertical", fittings, f.depth, f.intrinsics, f.rgb):
+                if o.estimate is not None and o.estimate.certified:
+                    seen.append(f.rotation @ o.estimate.translation + f.position)
+    site = load_config().raw["site"]
+    origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
+    joints = [origin + np.asarray(p) for _, p in member.joints]
+    result = held_part_alignment(
+        "vertical", expected_pieces("vertical", joints, inspector.parts), seen, tool, inspector.tol, gate=0.1
+    )
+    assert result.aligned and result.matched == 2, result
+    assert result.position_error < 0.002
+    assert np.linalg.norm(result.held[:3, 3] - tool[:3, 3]) < 0.002
