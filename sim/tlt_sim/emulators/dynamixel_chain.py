@@ -58,9 +58,10 @@ class DynamixelChain(SerialChain):
         """Step every servo by ``dt`` seconds (in sub-steps of at most 5 ms)."""
         with self._lock:
             steps = max(1, min(2000, int(dt / self.MAX_STEP_S + 0.999)))
-            for _ in range(steps):
+            for k in range(steps):
+                last = k == steps - 1  # the present-value registers only need the final state
                 for servo in self.servos.values():
-                    servo.step(dt / steps)
+                    servo.step(dt / steps, refresh=last)
             self._elapsed += dt
 
     # --- protocol ---------------------------------------------------------------------------------

@@ -143,6 +143,16 @@ def _unpack(item: Item, data: bytes) -> int:
     return struct.unpack("<" + fmt, data)[0]
 
 
+def _codec(item: Item) -> tuple[int, struct.Struct]:
+    fmt = {1: "b", 2: "h", 4: "i"}[item.size] if item.signed else {1: "B", 2: "H", 4: "I"}[item.size]
+    return item.address, struct.Struct("<" + fmt)
+
+
+# name -> (address, compiled little-endian format): the twin reads and writes the table several
+# times per servo every sync period, so the format is compiled once, not per access.
+_CODEC = {item.name: _codec(item) for item in ITEMS}
+
+
 class DynamixelServo:
     """An MX-106(2.0) at ``dxl_id``; positions are in ticks (4096 per turn) as the servo counts them."""
 
@@ -174,12 +184,12 @@ class DynamixelServo:
         return self.get("id")
 
     def get(self, name: str) -> int:
-        item = ITEM_BY_NAME[name]
-        return _unpack(item, bytes(self.table[item.address : item.address + item.size]))
+        address, codec = _CODEC[name]
+        return codec.unpack_from(self.table, address)[0]
 
     def _set(self, name: str, value: int) -> None:
-        item = ITEM_BY_NAME[name]
-        self.table[item.address : item.address + item.size] = _pack(item, value)
+        address, codec = _CODEC[name]
+        codec.pack_into(self.table, address, int(value))
 
     def read(self, address: int, length: int) -> bytes:
         """Bytes of the control table; Data Range Error past its end."""
@@ -268,8 +278,9 @@ class DynamixelServo:
         units = min(units, self.get("velocity_limit")) or 1
         return units * VELOCITY_UNIT_RPM / 60.0 * TICKS_PER_REV
 
-    def step(self, dt: float) -> None:
-        """Advance the shaft by ``dt`` seconds."""
+    def step(self, dt: float, refresh: bool = True) -> None:
+        """Advance the shaft by ``dt`` seconds. ``refresh=False`` leaves the present-value registers
+        for a later step to write (they depend only on the state the last step leaves)."""
         if dt <= 0:
             return
         self._time += dt
@@ -281,7 +292,8 @@ class DynamixelServo:
             self.velocity = 0.0
             self.current = 0.0
             self._at_limit_time = 0.0
-            self._refresh_present()
+            if refresh:
+                self._refresh_present()
             return
         vmax = self._max_speed()
         if mode == MODE_VELOCITY:
@@ -321,7 +333,8 @@ class DynamixelServo:
         self._at_limit_time = self._at_limit_time + dt if at_max else 0.0
         if self._at_limit_time >= self.overload_time_s:
             self.inject_hardware_error(HW_OVERLOAD)
-        self._refresh_present()
+        if refresh:
+            self._refresh_present()
 
     def _refresh_present(self) -> None:
         self._set("present_position", round(self.position))

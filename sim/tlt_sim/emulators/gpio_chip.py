@@ -58,7 +58,9 @@ class EmulatedGpioChip:
                 self._map[: _HEADER.size] = _HEADER.pack(MAGIC, num_lines, 0)
             elif lines != num_lines:
                 raise ValueError(f"{self.path} holds {lines} lines, not {num_lines}")
-        self._seen = [self.edges(i) for i in range(num_lines)]
+        # Every line's change counter in one read (poll runs every sync period of the twin).
+        self._counters = struct.Struct(f"<{num_lines}I")
+        self._seen = list(self._counters.unpack_from(self._map, self._count_at(0)))
 
     def _check(self, line: int) -> None:
         if not 0 <= line < self.num_lines:
@@ -105,11 +107,12 @@ class EmulatedGpioChip:
         """Changes made since the last poll (by any process): (line, level now, edges seen)."""
         changes = []
         with self._lock:
-            for line in range(self.num_lines):
-                count = self.edges(line)
-                if count != self._seen[line]:
-                    changes.append((line, self.level(line), (count - self._seen[line]) & 0xFFFFFFFF))
-                    self._seen[line] = count
+            counts = self._counters.unpack_from(self._map, self._count_at(0))
+            if counts != tuple(self._seen):
+                for line, count in enumerate(counts):
+                    if count != self._seen[line]:
+                        changes.append((line, self.level(line), (count - self._seen[line]) & 0xFFFFFFFF))
+                        self._seen[line] = count
             callbacks = list(self._callbacks)
         for change in changes:
             for callback in callbacks:

@@ -252,6 +252,14 @@ class LifterFirmware:
             self.positions[motor] = float(counts)
             self._update_drive()
 
+    def set_positions(self, counts: list[float]) -> None:
+        """Move every encoder reading at once (one drive decision, not one per motor)."""
+        if len(counts) != NUM_MOTORS:
+            raise ValueError(f"expected {NUM_MOTORS} encoder readings, got {len(counts)}")
+        with self.lock:
+            self.positions[:] = [float(c) for c in counts]
+            self._update_drive()
+
     def drop_link(self, duration_s: float) -> None:
         """Read and write nothing for ``duration_s`` of model time; bytes sent meanwhile are lost."""
         with self.lock:

@@ -170,14 +170,25 @@ class Assembly:
         self._watch_thr = np.array(thresholds)
         self._watch_low = self._watch_thr.copy()
         self._watch_low[8:] = ee["jaw_contact"] - JAW_OPEN  # jaws: hysteresis before counting as open
-        self._watch_state = np.zeros(len(joints), dtype=bool)
+        self._set_watch_state(np.zeros(len(joints), dtype=bool))
+
+    def _set_watch_state(self, state: np.ndarray) -> None:
+        # Each watched joint keeps its state while below its upper bound and at or above its lower
+        # one: two comparisons per step instead of recomputing the state (this runs every step).
+        self._watch_state = state
+        self._watch_upper = np.where(state, np.inf, self._watch_thr)
+        self._watch_lower = np.where(state, self._watch_low, -np.inf)
 
     def update(self) -> None:
         """Apply grasp, gripper and slip rules to the present state (called after each step)."""
         q = self.d.qpos[self._watch_adr]
-        state = np.where(self._watch_state, q >= self._watch_low, q >= self._watch_thr)
-        if self._slip_at or not np.array_equal(state, self._watch_state) or self._pending:
-            self._watch_state = state
+        if (
+            self._pending
+            or self._slip_at
+            or (q >= self._watch_upper).any()
+            or (q < self._watch_lower).any()
+        ):
+            self._set_watch_state(np.where(self._watch_state, q >= self._watch_low, q >= self._watch_thr))
             self._pending = False
             self._apply_rules()
 

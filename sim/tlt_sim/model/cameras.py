@@ -78,7 +78,7 @@ class Frame:
 
     camera: str
     time: float
-    rgb: np.ndarray  # (h, w, 3) uint8
+    rgb: np.ndarray | None  # (h, w, 3) uint8; None when not asked for
     depth: np.ndarray | None  # (h, w) float32 metres along the optical axis, 0 where nothing
     segmentation: np.ndarray | None  # (h, w) int32 instance ids
     intrinsics: Intrinsics
@@ -126,17 +126,36 @@ def _close_all() -> None:
 
 
 class CameraRenderer:
-    """Offscreen renderer bound to one model; ``close`` frees the GL context."""
+    """Offscreen renderer bound to one model; ``close`` frees the GL context.
+
+    ``antialias`` (the default) renders with the model's multisampling (``visual/quality
+    offsamples``), as the vision's detectors were trained on. Without it a frame costs a third to
+    40 % less CPU on OSMesa and segmentation edges are exact (multisampling blends the id colours
+    of neighbouring geoms at their borders into ids of geoms that are not there), but the frames
+    differ at every edge from what those detectors learned on.
+    """
 
     def __init__(
-        self, model: mujoco.MjModel, max_width: int | None = None, max_height: int | None = None
+        self,
+        model: mujoco.MjModel,
+        max_width: int | None = None,
+        max_height: int | None = None,
+        antialias: bool = True,
     ) -> None:
         self.model = model
+        self.antialias = antialias
         self.max_width = max_width or model.vis.global_.offwidth
         self.max_height = max_height or model.vis.global_.offheight
         self._gl = _gl_context(self.max_width, self.max_height)
         self._gl.make_current()
-        self._ctx = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        # MjrContext takes its sample count from the model: lend it ours for the moment it is made.
+        samples = model.vis.quality.offsamples
+        if not antialias:
+            model.vis.quality.offsamples = 0
+        try:
+            self._ctx = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        finally:
+            model.vis.quality.offsamples = samples
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._ctx)
         self._scene = mujoco.MjvScene(model, maxgeom=max(1000, 2 * model.ngeom))
         self.option = mujoco.MjvOption()
@@ -177,8 +196,11 @@ class CameraRenderer:
         height: int,
         depth: bool = True,
         segmentation: bool = True,
+        rgb: bool = True,
     ) -> Frame:
-        """Render ``camera`` (a camera name, or a free ``MjvCamera``) at ``width`` x ``height``."""
+        """Render ``camera`` (a camera name, or a free ``MjvCamera``) at ``width`` x ``height``.
+        Only the images asked for are made: with neither ``rgb`` nor ``depth`` the colour pass is
+        skipped altogether (``Frame.rgb`` and ``Frame.depth`` are then None)."""
         if self._gl is None:
             raise RuntimeError("renderer is closed")
         if not (0 < width <= self.max_width and 0 < height <= self.max_height):
@@ -189,11 +211,13 @@ class CameraRenderer:
         mujoco.mjv_updateScene(
             self.model, data, self.option, None, cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene
         )
-        rgb = np.empty((height, width, 3), dtype=np.uint8)
+        colour = np.empty((height, width, 3), dtype=np.uint8) if rgb else None
         zbuf = np.empty((height, width), dtype=np.float32) if depth else None
-        mujoco.mjr_render(viewport, self._scene, self._ctx)
-        mujoco.mjr_readPixels(rgb, zbuf, viewport, self._ctx)
-        rgb = np.flipud(rgb)
+        if rgb or depth:
+            mujoco.mjr_render(viewport, self._scene, self._ctx)
+            mujoco.mjr_readPixels(colour, zbuf, viewport, self._ctx)
+        if colour is not None:
+            colour = np.flipud(colour)
         metres = None
         if zbuf is not None:
             zbuf = np.flipud(zbuf)
@@ -210,7 +234,7 @@ class CameraRenderer:
         return Frame(
             name,
             float(data.time),
-            rgb,
+            colour,
             metres,
             seg,
             intrinsics(fovy, width, height),
@@ -225,20 +249,27 @@ class CameraRenderer:
         scn.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
         try:
             mujoco.mjr_render(viewport, scn, self._ctx)
+            # The colour is (scene geom index + 1) in little-endian RGB, 0 where nothing was drawn:
+            # read it into the low three bytes of a 32-bit word and it is the number itself.
+            words = np.zeros((height, width, 4), dtype=np.uint8)
             ids = np.empty((height, width, 3), dtype=np.uint8)
             mujoco.mjr_readPixels(ids, None, viewport, self._ctx)
         finally:
             scn.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
             scn.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
-        ids = np.flipud(ids).astype(np.int32)
-        index = ids[..., 0] + (ids[..., 1] << 8) + (ids[..., 2] << 16) - 1  # scene geom index, -1 none
-        lookup = np.full(scn.ngeom + 1, -1, dtype=np.int32)
-        for i in range(scn.ngeom):
-            g = scn.geoms[i]
+        words[..., :3] = ids
+        code = words.view("<u4")[..., 0]
+        none = scn.ngeom + 1
+        np.minimum(code, none, out=code)  # anything not a scene geom reads as nothing
+        # lookup[code]: 0 and ngeom + 1 -> -1; k -> instance of scene geom k - 1.
+        lookup = np.full(scn.ngeom + 2, -1, dtype=np.int32)
+        # Only the scene geoms that show in the frame (a few dozen of some hundreds): reading a
+        # scene geom from Python costs microseconds each.
+        for k in np.flatnonzero(np.bincount(code.ravel(), minlength=none + 1)[1:none]).tolist():
+            g = scn.geoms[k]
             if g.objtype == mujoco.mjtObj.mjOBJ_GEOM:
-                lookup[i] = self.labels.geom_instance[g.objid]
-        index[(index < 0) | (index >= scn.ngeom)] = scn.ngeom
-        return lookup[index]
+                lookup[k + 1] = self.labels.geom_instance[g.objid]
+        return lookup[np.flipud(code)]
 
     def _free_camera_pose(self) -> np.ndarray:
         return np.asarray(self._scene.camera[0].pos, dtype=float).copy()

@@ -130,9 +130,9 @@ class LifterBinding:
             self._velocities = velocities
 
     def sense(self, scene: Scene, dt: float) -> None:
-        with self.firmware.lock:
-            for i, joint in enumerate(self.joints):
-                self.firmware.set_position(i, scene.position(joint) * self.counts_per_m[i])
+        self.firmware.set_positions(
+            [scene.position(joint) * c for joint, c in zip(self.joints, self.counts_per_m, strict=True)]
+        )
 
 
 @dataclass

@@ -10,7 +10,9 @@ Once everything answers, the file ``$TLT_RUN_DIR/twin.ready`` appears (launch se
 The twin owns time: it publishes ``/clock`` and steps at ``--rtf`` (1 by default, 0 = as fast as
 the CPU allows); the drivers run with ``use_sim_time``. Cameras and ground truth are published
 on demand (:mod:`tlt_sim.twin.ros_streams`). Runs until SIGINT/SIGTERM or ``--duration`` seconds
-of sim time, then withdraws its links. Exit status 0, or 2 for a bad configuration.
+of sim time, then withdraws its links. ``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens
+MuJoCo's viewer window on the running model for people (:mod:`tlt_sim.twin.viewer`); without a
+display the twin refuses to start. Exit status 0, or 2 for a bad configuration or no viewer.
 
     python -m tlt_sim.twin.main --scenario config/twin/scenarios/device_faults.yaml --rtf 0
 """
@@ -33,6 +35,7 @@ from tlt_sim.model.scene import ModelCompileError, Scene
 from tlt_sim.twin.pacing import Pacer
 from tlt_sim.twin.settings import DEFAULT_SETTINGS, load_settings
 from tlt_sim.twin.simulation import Twin
+from tlt_sim.twin.viewer import ViewerSync, ViewerUnavailable, open_viewer, probe
 
 READY_FILE = "twin.ready"
 # Wall time the loop sleeps at least per sync period, so that the pty and socket threads answer
@@ -55,6 +58,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-rate", type=float, help="camera frames per simulated second")
     p.add_argument("--final-png", type=Path, help="on the way out, a PNG of the scene as it stands")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this much sim time (0: never)")
+    p.add_argument("--viewer", action="store_true", default=None,
+                   help="open MuJoCo's viewer window on the running twin (needs a display)")
     return p
 
 
@@ -90,14 +95,30 @@ def main(argv: list[str] | None = None) -> int:
             changes["camera_rate_hz"] = args.camera_rate
         hosts = dict(settings.ur_hosts)
         hosts.update({k: v for k, v in (("ur_x", args.ur_x_host), ("ur_y", args.ur_y_host)) if v})
+        if args.viewer:
+            changes["viewer"] = True
         settings = settings.replace(ur_hosts=hosts, **changes)
+        if settings.viewer:
+            probe()  # refuse before anything is built or served
         # An empty --scenario (a launch set's unset variable) means the nominal run.
         scene = Scene(args.edu, args.mission, args.scenario or None)
         run_dir = args.run_dir or default_run_dir()
         twin = Twin(scene, settings, run_dir)
+    except ViewerUnavailable as exc:
+        print(f"tlt twin run: no viewer: {exc}", file=sys.stderr)
+        return 2
     except (ConfigError, ModelCompileError, ValueError) as exc:
         print(f"tlt twin run: {exc}", file=sys.stderr)
         return 2
+    view: ViewerSync | None = None
+    if settings.viewer:
+        try:
+            view = open_viewer(scene.model, scene.data, settings.viewer_rate_hz, scene.edu["render"])
+        except ViewerUnavailable as exc:
+            twin.close()
+            scene.close()
+            print(f"tlt twin run: no viewer: {exc}", file=sys.stderr)
+            return 2
 
     # rclpy's own handler would invalidate the context under a publish in the loop: the loop stops
     # on a flag instead (a list append: a signal handler must not take locks, see lifter_main).
@@ -135,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
             clock.publish(t)
             cameras.publish_due(t)
             truth.publish_due(t)
+            if view is not None:
+                view.maybe_sync()
             pacer.wait(t)
             if args.duration and t >= args.duration - 1e-9:
                 break
@@ -146,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         with contextlib.suppress(FileNotFoundError):
             ready.unlink()
+        if view is not None:
+            view.close()
         twin.close()
         scene.close()
         node.destroy_node()

@@ -88,7 +88,7 @@ class CameraStreams:
         self._labels_sent = False
 
     def _publish_labels(self) -> None:
-        labels = self.scene.renderer().labels
+        labels = self.scene.renderer(antialias=self.settings.camera_antialias).labels
         self._labels.publish(String(data=json.dumps(
             {"instances": labels.instance_names, "classes": labels.classes})))
         self._labels_sent = True
@@ -103,8 +103,9 @@ class CameraStreams:
             if not self._labels_sent:
                 self._publish_labels()
             width, height = self.settings.camera_size(camera)
-            frame = self.scene.render(camera, width, height,
-                                      depth="depth" in wanted, segmentation="segmentation" in wanted)
+            frame = self.scene.render(camera, width, height, depth="depth" in wanted,
+                                      segmentation="segmentation" in wanted, rgb="rgb" in wanted,
+                                      antialias=self.settings.camera_antialias)
             self.renders[camera] += 1
             frame_id = topics.camera_frame(camera)
             if "rgb" in wanted:

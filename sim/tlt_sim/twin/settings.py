@@ -1,4 +1,4 @@
-"""How the twin process runs (``config/twin/run.yaml``): time, emulator addresses, cameras.
+"""How the twin process runs (``config/twin/run.yaml``): time, emulator addresses, cameras, viewer.
 
 :func:`load_settings` validates the file with ``tlt_common.config_schema``; a bad value raises
 ``ConfigError`` naming the file, the key and the reason. Command-line options of
@@ -42,9 +42,18 @@ SCHEMA = {
             "rate_hz": Field("float", minimum=0.1, maximum=60.0),
             "zed": Field("dict", schema=_SIZE),
             "d405": Field("dict", schema=_SIZE),
+            "antialias": opt("bool", True, doc="multisampled frames, as the vision's detectors learned on"),
         },
     ),
     "ground_truth_rate_hz": opt("float", 10.0, minimum=0.1, maximum=500.0),
+    "viewer": opt(
+        "dict",
+        {"enabled": False, "rate_hz": 30.0},
+        schema={
+            "enabled": opt("bool", False, doc="open MuJoCo's viewer window (needs a display)"),
+            "rate_hz": opt("float", 30.0, minimum=1.0, maximum=120.0, doc="window updates per wall second"),
+        },
+    ),
 }
 
 
@@ -61,7 +70,10 @@ class TwinSettings:
     camera_rate_hz: float = 10.0
     zed_size: tuple[int, int] = (320, 240)
     d405_size: tuple[int, int] = (320, 240)
+    camera_antialias: bool = True
     ground_truth_rate_hz: float = 10.0
+    viewer: bool = False
+    viewer_rate_hz: float = 30.0
 
     def replace(self, **changes: object) -> TwinSettings:
         return dataclasses.replace(self, **changes)
@@ -82,7 +94,10 @@ def load_settings(path: str | Path = DEFAULT_SETTINGS) -> TwinSettings:
         camera_rate_hz=cams["rate_hz"],
         zed_size=(cams["zed"]["width"], cams["zed"]["height"]),
         d405_size=(cams["d405"]["width"], cams["d405"]["height"]),
+        camera_antialias=cams["antialias"],
         ground_truth_rate_hz=doc["ground_truth_rate_hz"],
+        viewer=doc["viewer"]["enabled"],
+        viewer_rate_hz=doc["viewer"]["rate_hz"],
     )
 
 

@@ -273,6 +273,23 @@ def test_switches_assert_from_positions_and_stop_the_motor() -> None:
     assert fw.velocities[:2] == [0, 0]
 
 
+def test_encoders_written_together_decide_the_drive_as_one_by_one() -> None:
+    """The twin writes all four carriage positions at once; the firmware ends where four single
+    writes would leave it: the switches follow, and a motor on its switch stops."""
+    together, apart = firmware_in(S.CRS_CONTROL), firmware_in(S.CRS_CONTROL)
+    readings = [10_500.0, 4000.0, -10.0, 0.0]
+    for fw in (together, apart):
+        command(fw, [700, 700, -700, 700])
+    together.set_positions(readings)
+    for i, c in enumerate(readings):
+        apart.set_position(i, c)
+    assert together.positions == apart.positions == readings
+    assert together.limit_switches() == apart.limit_switches()
+    assert together.velocities == apart.velocities == [0, 700, 0, 700]
+    with pytest.raises(ValueError, match="4 encoder readings"):
+        together.set_positions([1.0, 2.0])
+
+
 # --- the watchdog ------------------------------------------
 
 

@@ -68,6 +68,27 @@ def test_released_part_that_nothing_holds_falls(scene, mover):
     assert scene.contact_force(body)[2] == pytest.approx(weight, rel=0.1)  # the floor carries it
 
 
+def test_grasp_holds_while_jaws_ease_and_lets_go_once_they_open(scene, mover):
+    """The jaws count as closed past the contact angle less JAW_CLOSED and as open again only below
+    it less JAW_OPEN: a jaw easing off in between keeps the part (no flicker), one opening lets go.
+    The rules run on crossings of these thresholds only, so this checks that both are seen."""
+    from tlt_sim.model.assembly import JAW_CLOSED, JAW_OPEN
+
+    arm, part = "ars_x", "vertical_dispenser_x/0"
+    mover(scene, arm).pick(part)
+    body = scene.part(part).body
+    assert scene.holding(arm) == body
+    contact = scene.edu["end_effector"]["jaw_contact"]
+    jaws = [names.grasp_joint(arm, side) for side in ("a", "b")]
+    for jaw in jaws:
+        scene.set_joint_state(jaw, contact - (JAW_CLOSED + JAW_OPEN) / 2)
+    scene.assembly.update()
+    assert scene.holding(arm) == body, "easing off between the thresholds keeps the grasp"
+    scene.set_joint_state(jaws[0], contact - JAW_OPEN - 0.01)
+    scene.assembly.update()
+    assert scene.holding(arm) is None and scene.part_state(part) != "grasped"
+
+
 def test_top_grippers_carry_the_payloads_weight(scene):
     scene.advance(0.2)
     total = sum(scene.constraint_force(f"top/{i}/payload") for i in range(4))

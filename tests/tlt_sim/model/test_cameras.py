@@ -97,9 +97,9 @@ def test_dispenser_apriltag_is_detected_with_its_id(scene):
 def test_renderer_is_made_only_when_a_frame_is_asked_for(tmp_path):
     with Scene(out_dir=tmp_path / "model") as scene:
         scene.advance(0.1)
-        assert scene._renderer is None
+        assert not scene._renderers
         scene.render(names.d405_camera("ars_y", "b"), 64, 48, depth=False, segmentation=False)
-        assert scene._renderer is not None
+        assert list(scene._renderers) == [True]
         with pytest.raises(ValueError, match="exceeds"):
             scene.render(names.zed_camera(0), 5000, 10)
 
@@ -121,3 +121,35 @@ def test_a_loaded_rivet_is_seen_in_the_gun_and_gone_once_fired(scene, mover):
     assert seen.instances().get(rivet, 0) > 100 and seen.class_of(rivet) == "rivet"
     assert scene.fire_rivet("ars_x", "a").loaded
     assert rivet not in scene.render("ars_x/d405_a", 320, 240).instances()
+
+
+def test_frames_without_antialiasing_come_from_a_renderer_without_multisampling(tmp_path):
+    """By default frames are multisampled as the model says (what the vision's detectors learned
+    on); ``antialias=False`` renders without (cheaper on the CPU, exact segmentation edges) and
+    leaves the model's setting as it was."""
+    with Scene(out_dir=tmp_path / "model") as scene:
+        samples = scene.model.vis.quality.offsamples
+        assert samples > 0
+        camera = names.d405_camera("ars_x", "a")
+        smooth = scene.render(camera, 64, 48)
+        assert scene.renderer()._ctx.offSamples == samples
+        sharp = scene.render(camera, 64, 48, antialias=False)
+        assert scene.renderer(antialias=False)._ctx.offSamples == 0
+        assert scene.model.vis.quality.offsamples == samples, "the model's setting is left as it was"
+        assert sharp.rgb.shape == smooth.rgb.shape == (48, 64, 3)
+        # Every segmented pixel names an instance the labels know.
+        for frame in (smooth, sharp):
+            ids = np.unique(frame.segmentation)
+            assert ids.min() >= -1 and ids.max() < len(frame.labels.instance_names)
+
+
+def test_only_the_images_asked_for_are_made(scene):
+    camera = names.d405_camera("ars_x", "b")
+    full = scene.render(camera, 64, 48)
+    seg_only = scene.render(camera, 64, 48, depth=False, segmentation=True, rgb=False)
+    assert seg_only.rgb is None and seg_only.depth is None
+    assert np.array_equal(seg_only.segmentation, full.segmentation)
+    depth_only = scene.render(camera, 64, 48, depth=True, segmentation=False, rgb=False)
+    assert depth_only.rgb is None and depth_only.segmentation is None
+    assert np.array_equal(depth_only.depth, full.depth)
+    assert (full.depth > 0).any() and (full.segmentation >= 0).any()
