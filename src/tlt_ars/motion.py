@@ -146,7 +146,7 @@ class MotionPlanner:
                 break
             else:
                 raise PlanningFailed(
-                    "ik", f"none of {len(goal.targets)} candidate(s) is usable; first: {reasons[0]}"
+                    "ik", f"none of {len(goal.targets)} candidate(s) is usable: " + "; ".join(reasons)
                 )
         traj = time_parameterise(plan.path, self.velocity, self.acceleration)
         return PlannedMotion(self.to_msg(traj), traj.duration, chosen)
