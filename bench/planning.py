@@ -179,8 +179,9 @@ def segment_distances(p0, p1, q0, q1):
 
 def compare_collision_checkers(cfg, mission, n: int = 2000) -> None:
     """Time per configuration of the three ways to check the arm's links against the capsules of
-    a mid-build scene (tower, posts, other arm): coal with its AABB tree, coal over every pair, and
-    capsule-capsule distances in numpy (which cannot do the boxes: floor, racks, payload, EE)."""
+    a mid-build scene (tower, posts, other arm): coal with the scene's broad phase (naive AABB
+    manager), coal over every pair, and capsule-capsule distances in numpy (which cannot do the
+    boxes: floor, racks, payload, EE)."""
     from tlt_ars.planning.collision_scene import Capsule, CollisionScene, arm_link_segments
 
     placed = [m.id for m in mission.members if m.bay == 1]
@@ -212,7 +213,7 @@ def compare_collision_checkers(cfg, mission, n: int = 2000) -> None:
     qs[:, 2] = rng.uniform(-np.pi, np.pi, n)
     results = {}
     for name, fn in (
-        ("coal + AABB tree", scene.in_collision),
+        ("coal + broad phase", scene.in_collision),
         ("coal, every pair", scene.in_collision_all_pairs),
         ("numpy capsules", numpy_check),
     ):
@@ -221,13 +222,13 @@ def compare_collision_checkers(cfg, mission, n: int = 2000) -> None:
         results[name] = [fn(q) for q in qs]
         per = (time.perf_counter() - t0) / n * 1e6
         print(f"  {name:18s} {per:7.1f} us per configuration ({m} obstacle capsules x 6 links)")
-    agree = sum(a == b for a, b in zip(results["coal + AABB tree"], results["numpy capsules"], strict=True))
+    agree = sum(a == b for a, b in zip(results["coal + broad phase"], results["numpy capsules"], strict=True))
     print(f"  numpy and coal agree on {agree}/{n} configurations")
-    # The whole planning scene (boxes, end effector, a carried strut): where the AABB tree pays.
+    # The whole planning scene (boxes, end effector, a carried strut): where the broad phase pays.
     carrying = build_scene(cfg, "ars_x", mission, placed=placed, bay=2, carrying="vertical")
     free = [q for q in qs if not carrying.in_collision(q)][:300]
     for name, fn in (
-        ("coal + AABB tree", carrying.in_collision),
+        ("coal + broad phase", carrying.in_collision),
         ("coal, every pair", carrying.in_collision_all_pairs),
     ):
         t0 = time.perf_counter()

@@ -12,12 +12,14 @@ A request succeeds only with a path the arm may follow. The order of work:
    collision are dropped; none left fails with the pose named.
 3. If the joint-space straight line to a goal is free, it is the answer: no sampling.
 4. Otherwise a few few-segment detours are tried (base first or last, arm raised straight up,
-   arm folded, through home), then RRTConnect searches (to all collision-free IK solutions at
-   once for a Cartesian goal) within the time limit.
-5. Every returned segment is re-checked at ``dense_check_resolution`` (finer than the planner's
-   ``check_resolution``); a segment that fails is re-planned once at the dense resolution, and
-   fails the request if that fails too. The arm never gets a path that was not checked.
-6. Shortcuts are taken only where the dense check passes.
+   arm folded, through home), then start -> via -> goal through each collision-free configured
+   via configuration, then RRTConnect searches (to all collision-free IK solutions at once for a
+   Cartesian goal) within the time limit.
+5. Shortcuts are taken only where the dense check passes.
+6. Every segment not already checked end to end at ``dense_check_resolution`` (finer than the
+   planner's ``check_resolution``) is re-checked at it; a segment that fails is re-planned once at
+   the dense resolution, and fails the request if that fails too. The arm never gets a path that
+   was not checked.
 
 Cartesian approaches (:meth:`Planner.plan_cartesian`) move the tool along a straight line
 instead, through IK solutions that follow each other, with the same dense check.
@@ -81,7 +83,8 @@ def _fmt(q: Sequence[float]) -> str:
 class Planner:
     """Plans for the arm of ``scene``. Resolutions are the largest joint step (rad) between
     checked configurations; ``planning_time_s`` bounds the OMPL search of one request; ``home``
-    is a via point of the detours; ``detours=False`` goes from the straight line to the search."""
+    is a via point of the detours; ``vias`` are joint configurations tried as start -> via -> goal
+    after the detours; ``detours=False`` goes from the straight line to the search."""
 
     def __init__(
         self,
@@ -95,6 +98,7 @@ class Planner:
         home: Sequence[float] | None = None,
         repair_time_s: float = 0.2,
         detours: bool = True,
+        vias: Sequence[Sequence[float]] = (),
     ) -> None:
         if dense_check_resolution > check_resolution:
             raise ValueError("dense_check_resolution must not be coarser than check_resolution")
@@ -108,6 +112,10 @@ class Planner:
         self.home = None if home is None else np.asarray(home, dtype=float)
         self.repair_time_s = float(repair_time_s)
         self.detours = bool(detours)
+        self.vias = [np.asarray(v, dtype=float) for v in vias]
+        for v in self.vias:
+            if v.shape != (6,):
+                raise ValueError(f"a via configuration must be six joint angles, got {v.tolist()!r}")
 
     @classmethod
     def from_config(
@@ -122,6 +130,7 @@ class Planner:
             planning_time_s=planning["planning_time_s"],
             simplify_time_s=planning["simplify_time_s"],
             max_ik_solutions=planning["max_ik_solutions"],
+            vias=planning.get("via_configurations", ()),
         )
 
     # ----- requests -----
@@ -293,16 +302,20 @@ class Planner:
         return q
 
     # ----- search -----
-    def _free(self, path: list[np.ndarray]) -> bool:
-        """Every segment free: all at the planner's resolution first (a cheap rejection), then all
-        at the dense resolution."""
+    def _free(self, path: list[np.ndarray], verified: set[bytes] | None = None) -> bool:
+        """Every segment free: all at four times the planner's resolution, then all at its
+        resolution (cheap rejections: a detour whose second segment collides is rejected before
+        its first is checked finely), then all at the dense resolution. Segments found free are
+        added to ``verified``."""
         pairs = list(pairwise(path))
-        for resolution in (self.check_resolution, self.dense_check_resolution):
+        for resolution in (4 * self.check_resolution, self.check_resolution, self.dense_check_resolution):
             if not all(self.scene.segment_free(a, b, resolution) for a, b in pairs):
                 return False
+        if verified is not None:
+            verified.update(_segment_key(a, b) for a, b in pairs)
         return True
 
-    def _detours(self, start: np.ndarray, goal: np.ndarray) -> list[list[np.ndarray]]:
+    def _detours(self, start: np.ndarray, goal: np.ndarray) -> list[tuple[str, list[np.ndarray]]]:
         """Few-segment paths a pick-and-place arm usually takes: turn the base first or last;
         raise the arm straight up, turn, lower; fold the arm (shoulder, elbow, wrist 1 to home),
         turn, unfold; through home."""
@@ -327,7 +340,7 @@ class Planner:
             fold_goal[1:4] = self.home[1:4]
             out.append([start, fold_start, fold_goal, goal])
             out.append([start, self.home, goal])
-        return [_drop_duplicates(p) for p in out if all(self._within_limits(q) for q in p)]
+        return [("detour", _drop_duplicates(p)) for p in out if all(self._within_limits(q) for q in p)]
 
     def _within_limits(self, q: np.ndarray) -> bool:
         return bool(np.all(q >= self.kin.lower) and np.all(q <= self.kin.upper))
@@ -357,31 +370,50 @@ class Planner:
         goals = [g for g in goals if ok(g)]
         if not goals:
             raise PlanningFailed("goal_rejected", "no collision-free goal configuration is acceptable")
-        # Detours get a quarter of the time; the search keeps the rest.
+        deadline = t0 + limit
+        # Segments checked end to end at the dense resolution: the shortcuts keep them, and the
+        # final re-check skips them.
+        verified: set[bytes] = set()
+        # Detours and via configurations get a quarter of the time; the search keeps the rest.
         detour_until = t0 + 0.25 * limit
+        vias = [v for v in self.vias if self._within_limits(v) and not self.scene.in_collision(v)]
         for goal in goals[:4] if self.detours else []:
-            for path in self._detours(start, goal):
+            for note, path in self._detours(start, goal) + self._via_paths(start, goal, vias):
                 if time.perf_counter() > detour_until:
                     break
-                if self._free(path):
-                    path = self._shortcut(path, time.perf_counter() + self.simplify_time_s)
-                    return Plan(path, time.perf_counter() - t0, False, notes=["detour"])
-        deadline = t0 + limit
+                if self._free(path, verified):
+                    return self._finish(path, verified, t0, deadline, note)
         raw = self._rrt(start, goals, deadline - time.perf_counter(), self.check_resolution)
-        path = self._dense_recheck(raw, deadline)
-        path = self._shortcut(path, time.perf_counter() + self.simplify_time_s)
-        return Plan(path, time.perf_counter() - t0, False, notes=["rrt"])
+        return self._finish(raw, verified, t0, deadline, "rrt")
 
-    def _shortcut(self, path: list[np.ndarray], until: float) -> list[np.ndarray]:
-        """Shorten a free path, accepting only densely checked shortcuts: first the farthest free
-        waypoint from each one, then random shortcuts between points on the path until ``until``."""
+    def _finish(self, path: list[np.ndarray], verified: set[bytes], t0: float, deadline: float,
+                note: str) -> Plan:  # fmt: skip
+        """Shorten a path, then densely re-check every segment not already checked end to end
+        (the search's own segments, and the pieces a shortcut leaves of a segment)."""
+        path = self._shortcut(path, time.perf_counter() + self.simplify_time_s, verified)
+        path = self._dense_recheck(path, deadline, verified)
+        return Plan(path, time.perf_counter() - t0, False, notes=[note])
+
+    def _via_paths(
+        self, start: np.ndarray, goal: np.ndarray, vias: list[np.ndarray]
+    ) -> list[tuple[str, list[np.ndarray]]]:
+        """start -> via -> goal through each collision-free via configuration, shortest first."""
+        def length(v: np.ndarray) -> float:
+            return float(np.max(np.abs(v - start)) + np.max(np.abs(goal - v)))
+
+        return [("via", [start, v, goal]) for v in sorted(vias, key=length)]
+
+    def _shortcut(self, path: list[np.ndarray], until: float, verified: set[bytes]) -> list[np.ndarray]:
+        """Shorten a path, accepting only densely checked shortcuts (added to ``verified``): first
+        the farthest free waypoint from each one, then random shortcuts between points on the path
+        until ``until``. Segments of ``path`` it keeps are not checked here."""
         dense = self.dense_check_resolution
         out = [path[0]]
         i = 0
         while i < len(path) - 1:
             # Farthest waypoint reachable in a straight line (coarse check first: a cheap rejection).
             j = len(path) - 1
-            while j > i + 1 and not self._free([path[i], path[j]]):
+            while j > i + 1 and not self._free([path[i], path[j]], verified):
                 j -= 1
             out.append(path[j])
             i = j
@@ -403,6 +435,7 @@ class Planner:
             if np.max(np.abs(pv - pu)) >= old - 1e-6:
                 continue
             if self.scene.segment_free(pu, pv, dense):
+                verified.add(_segment_key(pu, pv))
                 path = [*path[: ku + 1], pu, pv, *path[kv + 1 :]]
                 path = _drop_duplicates(path)
         return path
@@ -467,11 +500,16 @@ class Planner:
         path[0] = start.copy()
         return _drop_duplicates(path)
 
-    def _dense_recheck(self, path: list[np.ndarray], deadline: float) -> list[np.ndarray]:
-        """Re-check every segment at the dense resolution; re-plan a failing one at that
-        resolution (with what is left of the time, and at least ``repair_time_s``)."""
+    def _dense_recheck(
+        self, path: list[np.ndarray], deadline: float, verified: set[bytes]
+    ) -> list[np.ndarray]:
+        """Re-check every segment not in ``verified`` at the dense resolution; re-plan a failing
+        one at that resolution (with what is left of the time, and at least ``repair_time_s``)."""
         out = [path[0]]
         for a, b in pairwise(path):
+            if _segment_key(a, b) in verified:
+                out.append(b)
+                continue
             bad = self.scene.segment_collision(a, b, self.dense_check_resolution)
             if bad is None:
                 out.append(b)
@@ -520,6 +558,11 @@ def _interpolate_pose(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
     rot = np.eye(3) + math.sin(th) * k + (1 - math.cos(th)) * (k @ k)
     out[:3, :3] = a[:3, :3] @ rot
     return out
+
+
+def _segment_key(a: np.ndarray, b: np.ndarray) -> bytes:
+    """Identifies the segment a -> b exactly (the same end points, bit for bit)."""
+    return np.asarray(a, dtype=float).tobytes() + np.asarray(b, dtype=float).tobytes()
 
 
 def _drop_duplicates(path: list[np.ndarray]) -> list[np.ndarray]:

@@ -130,6 +130,7 @@ SCHEMA = {
             "planning_time_s": Field("float", minimum=0.001),
             "simplify_time_s": Field("float", minimum=0.0),
             "max_ik_solutions": Field("int", minimum=1, maximum=8),
+            "via_configurations": opt("list", [], item=_vec(6)),
         },
     ),
     "limits": Field(

@@ -55,6 +55,7 @@ def test_unknown_key_is_named():
         (("arms", "ars_x", "home"), [0.0, -1.57, 9.0, 0.0, 0.0, 0.0], "arms.ars_x.home[2]"),
         (("limits", "position_lower"), [7.0, -6.0, -3.0, -6.0, -6.0, -6.0], "limits.position_lower[0]"),
         (("planning", "check_resolution"), 0.0, "planning.check_resolution"),
+        (("planning", "via_configurations"), [[0.0, -1.57, 1.57]], "planning.via_configurations[0]"),
         (
             ("dispensers", "cross_frame", "uprights", "section"),
             0.0,
