@@ -261,8 +261,8 @@ class VisionNode(Node):
         return response
 
     def _log_report(self, what: str, report: InspectionReport, started: float) -> None:
-        """One line per answered inspection (and alignment check, in ``_check_alignment``): what was
-        asked, the verdict with its reasons, and the wall time it took."""
+        """One line per answered inspection (alignment checks and tag locations likewise, in their
+        own handlers): what was asked, the verdict with its reasons, and the wall time it took."""
         verdict = "passed" if report.passed else "failed: " + "; ".join(report.reasons)
         self.get_logger().info(
             f"{what} {report.target_id}: {verdict} ({time.monotonic() - started:.1f} s wall)"
@@ -510,11 +510,24 @@ class VisionNode(Node):
         return tag_mount(self.config.raw["tag_mount"], self.mission, dispenser, self.tags.config.tag_side)
 
     def _locate_tag(self, request: Any, response: Any) -> Any:
+        started = time.monotonic()
         try:
             self.locate_tag(request, response)
         except Exception as exc:
             log.exception("locate_tag failed")
             response.found, response.reason = False, f"vision error: {exc}"
+        if response.found:
+            p, q = response.pose.pose.position, response.pose.pose.orientation
+            verdict = (
+                f"at ({p.x:.4f}, {p.y:.4f}, {p.z:.4f}) m, quaternion ({q.x:.4f}, {q.y:.4f}, {q.z:.4f},"
+                f" {q.w:.4f}), reprojection {response.reprojection_error:.2f} px"
+            )
+        else:
+            verdict = f"not found: {response.reason}"
+        self.get_logger().info(
+            f"locate_tag {request.dispenser} via {request.camera}: {verdict}"
+            f" ({time.monotonic() - started:.1f} s wall)"
+        )
         return response
 
     def locate_tag(self, request: Any, response: Any) -> Any:
