@@ -50,6 +50,7 @@ SCHEMA = {
             "velocity_scale": opt("float", 0.5, minimum=0.01, maximum=1.0),
             "sample_period_s": opt("float", 0.05, minimum=0.005, maximum=1.0),
             "stopped_velocity": opt("float", 0.01, minimum=0.0),
+            "settle_s": opt("float", 1.0, minimum=0.0),
             # JointTolerance convention: 0 takes the driver's default, negative means no limit.
             "path_tolerance": opt("float", 0.25),
             "goal_tolerance": opt("float", 0.01, minimum=0.0),

@@ -259,6 +259,42 @@ class PlanMotion(Action):
             self._future = None
 
 
+class Settle(Action):
+    """Wait until the arm has stood still for ``arm.settle_s`` of mission time.
+
+    Reads: the arm's JointState velocities. Writes: nothing. RUNNING while the arm moves (faster
+    than ``arm.stopped_velocity``) or has not yet stood still long enough; SUCCESS then. FAILURE
+    without a fresh joint state, or when the arm has not settled within ``timeouts.planning_s``.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+        self._started = 0.0
+        self._still_since: float | None = None
+
+    def initialise(self) -> None:
+        self._started = self.ctx.clock()
+        self._still_since = None
+
+    def update(self) -> Status:
+        now = self.ctx.clock()
+        velocity = self.ctx.arm_velocity()
+        if velocity is None:
+            return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
+        if float(np.max(np.abs(velocity))) > self.ctx.config.arm["stopped_velocity"]:
+            self._still_since = None
+        elif self._still_since is None:
+            self._still_since = now
+        if self._still_since is not None and now - self._still_since >= self.ctx.config.arm["settle_s"]:
+            return Status.SUCCESS
+        limit = self.ctx.config.timeouts["planning_s"]
+        if now - self._started > limit:
+            return self.fail(f"the arm did not settle within {limit:g} s")
+        self.feedback_message = "settling"
+        return Status.RUNNING
+
+
 def _trajectory_ok(result: Any) -> tuple[bool, str]:
     code = getattr(result, "error_code", 0)
     return code == 0, f"error {code}: {getattr(result, 'error_string', '')}"

@@ -13,14 +13,14 @@ subtree                     figure     children
 Add Cross Frame             28         Get Inspected Cross Frame (Get Cross Frame, Inspect Cross Frame,
                                        replaced after a discard), Place Cross Frame
 Get Cross Frame / Grab      29 / 34    Dispenser Has Parts?, Set Width (Extend Width for a diagonal),
-Member                                 Open Grasp, Approach Dispenser, Locate Dispenser Tag, Fine
+Member                                 Open Grasp, Approach Dispenser, Settle, Locate Dispenser Tag, Fine
                                        Approach, Grasp (Close Grasp, Verify Grasp), Take Part, Lift Part
 Inspect Cross Frame /       30 / 35    Move To Inspection, Inspection (Inspection Passed, or Discard
 Inspect Member                         Part: Move To Discard, Release, Count Discard)
 Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Verify
                                        Placement, Placed?, Retreat, Record Placed
 Add Member                  32         Load Rivet, Get Inspected Member, Place Member, Rivet Member
-Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Locate Dispenser Tag,
+Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Settle, Locate Dispenser Tag,
                                        Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
                                        Loaded
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
@@ -57,7 +57,7 @@ from tlt_ars.behaviours.vision import (
 )
 from tlt_ars.config import PoseSpec
 from tlt_ars.context import ArsContext
-from tlt_ars.motion import MotionGoal, MotionPlanner, move
+from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_common.bt.nodes import Action
@@ -144,6 +144,7 @@ class SubtreeBuilder:
                 SetWidth(width_name, ctx, kind),
                 MoveGrasp("Open Grasp", ctx, close=False),
                 self._move("Approach Dispenser", lambda: pose_goal(self._dispenser_pose(dispenser))),
+                Settle("Settle", ctx),
                 LocateDispenser("Locate Dispenser Tag", ctx, dispenser),
                 self._move(
                     "Fine Approach",
@@ -267,6 +268,7 @@ class SubtreeBuilder:
             [
                 DispenserHasParts("Rivets Left?", ctx, dispenser),
                 self._move("Approach Rivet Dispenser", lambda: pose_goal(self._dispenser_pose(dispenser))),
+                Settle("Settle", ctx),
                 LocateDispenser("Locate Dispenser Tag", ctx, dispenser),
                 self._move(
                     "Fine Approach",

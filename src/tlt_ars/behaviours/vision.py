@@ -95,7 +95,12 @@ def located_dispenser_targets(ctx: ArsContext, dispenser: str) -> list[Target]:
     mission: Any = ctx.mission
     if seen is not None:
         origin = np.asarray(ctx.scene.raw["site"]["base_origin"], dtype=float)
-        disp = replace(disp, position=tuple(seen[:3, 3] - origin), rpy=tuple(rpy_from_matrix(seen[:3, :3])))
+        # A dispenser stands on the floor: its roll and pitch are the mission's, and only its place
+        # and heading are taken from the tag, whose tilt is the least certain part of its pose (a
+        # degree of it tilts the tool's whole bar, which passes centimetres from the pedestal).
+        roll, pitch, _ = disp.rpy
+        yaw = rpy_from_matrix(seen[:3, :3])[2]
+        disp = replace(disp, position=tuple(seen[:3, 3] - origin), rpy=(roll, pitch, float(yaw)))
         mission = SimpleNamespace(dispensers={dispenser: disp}, bay_width=ctx.mission.bay_width)
     return dispenser_targets(ctx.scene, mission, dispenser, ctx.ars, remaining=ctx.state.remaining[dispenser])
 
