@@ -68,7 +68,6 @@ def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarr
     """Certified corner joints (world) in both D405 frames, the frame ``shift`` m along its side."""
     q, _, _ = placement
     scene = scene_mod.Scene(out_dir=tmp_path)
-    seen = []
     with scene:
         for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
             scene.set_joint_state(j, float(v))
@@ -80,18 +79,24 @@ def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarr
         y /= np.linalg.norm(y)
         start = centre - axis * (part.length / 2 - shift)
         scene.place_part(part.name, start, np.column_stack([axis, y, np.cross(axis, y)]))
-        size = RUN["cameras"]["d405"]
-        for camera in CAMERAS:
-            f = scene.render(camera, size["width"], size["height"])
-            labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
-            frame = CameraFrame(
-                camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
-                {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
-            )  # fmt: skip
-            joints = [d for d in labels.detect(frame) if d.object_class == "corner_joint"]
-            for o in inspector.observe("bay", joints, f.depth, f.intrinsics, f.rgb):
-                if o.estimate is not None and o.estimate.certified:
-                    seen.append(f.rotation @ o.estimate.translation + f.position)
+        return _pieces_seen(scene, inspector, "corner_joint", "bay")
+
+
+def _pieces_seen(scene, inspector, piece: str, pipeline: str) -> list[np.ndarray]:
+    """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them."""
+    seen = []
+    size = RUN["cameras"]["d405"]
+    for camera in CAMERAS:
+        f = scene.render(camera, size["width"], size["height"])
+        labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
+        frame = CameraFrame(
+            camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
+            {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
+        )  # fmt: skip
+        found = [d for d in labels.detect(frame) if d.object_class == piece]
+        for o in inspector.observe(pipeline, found, f.depth, f.intrinsics, f.rgb):
+            if o.estimate is not None and o.estimate.certified:
+                seen.append(f.rotation @ o.estimate.translation + f.position)
     return seen
 
 
@@ -142,7 +147,6 @@ def test_a_held_vertical_is_aligned_from_the_end_fittings_each_d405_sees(inspect
     assert q is not None
     tool = cfg.kinematics("ars_x").forward(q)
     scene = scene_mod.Scene(out_dir=tmp_path)
-    seen = []
     with scene:
         scene.stage_member("bay1/cross_frame")
         for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
@@ -155,18 +159,7 @@ def test_a_held_vertical_is_aligned_from_the_end_fittings_each_d405_sees(inspect
         onto = np.column_stack([axis, *_perpendiculars(axis)])
         seated = onto @ np.column_stack([along, *_perpendiculars(along)]).T
         scene.place_part(part.name, centre - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
-        size = RUN["cameras"]["d405"]
-        for camera in CAMERAS:
-            f = scene.render(camera, size["width"], size["height"])
-            labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
-            frame = CameraFrame(
-                camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
-                {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
-            )  # fmt: skip
-            fittings = [d for d in labels.detect(frame) if d.object_class == "end_fitting"]
-            for o in inspector.observe("vertical", fittings, f.depth, f.intrinsics, f.rgb):
-                if o.estimate is not None and o.estimate.certified:
-                    seen.append(f.rotation @ o.estimate.translation + f.position)
+        seen = _pieces_seen(scene, inspector, "end_fitting", "vertical")
     site = load_config().raw["site"]
     origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
     joints = [origin + np.asarray(p) for _, p in member.joints]
