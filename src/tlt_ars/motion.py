@@ -262,9 +262,10 @@ class PlanMotion(Action):
 class Settle(Action):
     """Wait until the arm has stood still for ``arm.settle_s`` of mission time.
 
-    Reads: the arm's JointState velocities. Writes: nothing. RUNNING while the arm moves (faster
-    than ``arm.stopped_velocity``) or has not yet stood still long enough; SUCCESS then. FAILURE
-    without a fresh joint state, or when the arm has not settled within ``timeouts.planning_s``.
+    Reads: the arm's JointState (velocities, or positions tick to tick where it has none). Writes:
+    nothing. RUNNING while the arm moves (faster than ``arm.stopped_velocity``) or has not yet
+    stood still long enough; SUCCESS then. FAILURE without a fresh joint state, or when the arm
+    has not settled within ``timeouts.planning_s``.
     """
 
     def __init__(self, name: str, ctx: ArsContext) -> None:
@@ -276,13 +277,26 @@ class Settle(Action):
     def initialise(self) -> None:
         self._started = self.ctx.clock()
         self._still_since = None
+        self._last: tuple[float, np.ndarray] | None = None
+
+    def _moving(self, now: float, q: np.ndarray) -> bool:
+        """Faster than ``stopped_velocity``, by the state's velocities or, where the driver sends
+        none, by the positions since the last tick."""
+        limit = self.ctx.config.arm["stopped_velocity"]
+        velocity = self.ctx.arm_velocity()
+        last, self._last = self._last, (now, q)
+        if velocity is not None:
+            return float(np.max(np.abs(velocity))) > limit
+        if last is None or now <= last[0]:
+            return True  # no speed to judge by yet
+        return float(np.max(np.abs(q - last[1]))) / (now - last[0]) > limit
 
     def update(self) -> Status:
         now = self.ctx.clock()
-        velocity = self.ctx.arm_velocity()
-        if velocity is None:
+        q = self.ctx.arm_q()
+        if q is None:
             return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
-        if float(np.max(np.abs(velocity))) > self.ctx.config.arm["stopped_velocity"]:
+        if self._moving(now, np.asarray(q, dtype=float)):
             self._still_since = None
         elif self._still_since is None:
             self._still_since = now

@@ -12,7 +12,7 @@ class Arm:
     """Mission clock and joint velocities as the ARS context reads them."""
 
     def __init__(self) -> None:
-        self.now, self.velocity = 0.0, np.zeros(6)
+        self.now, self.velocity, self.q = 0.0, np.zeros(6), np.zeros(6)
         self.joint_topic = "/ur_x/joint_states"
         self.config = SimpleNamespace(
             arm={"stopped_velocity": 0.01, "settle_s": 1.0}, timeouts={"planning_s": 15.0}
@@ -23,6 +23,9 @@ class Arm:
 
     def arm_velocity(self):
         return self.velocity
+
+    def arm_q(self):
+        return self.q
 
 
 def _tick(b: Settle, arm: Arm, t: float, moving: bool = False) -> Status:
@@ -49,7 +52,20 @@ def test_fails_when_the_arm_keeps_moving_or_its_state_is_stale():
     assert _tick(b, arm, 0.0, moving=True) == Status.RUNNING
     assert _tick(b, arm, 16.0, moving=True) == Status.FAILURE
     assert "did not settle within 15 s" in b.feedback_message
-    arm.arm_velocity = lambda: None
+    arm.arm_q = lambda: None
     b = Settle("Settle", arm)
     assert _tick(b, arm, 20.0) == Status.FAILURE
     assert "no fresh joint state on '/ur_x/joint_states'" in b.feedback_message
+
+
+def test_without_velocities_the_positions_tell_whether_the_arm_moves():
+    arm = Arm()
+    arm.arm_velocity = lambda: None
+    b = Settle("Settle", arm)
+    for t, q in ((0.0, 0.0), (0.1, 0.05), (0.2, 0.05), (0.7, 0.05), (1.1, 0.05)):
+        arm.now, arm.q = t, np.full(6, q)
+        b.tick_once()
+        assert b.status == Status.RUNNING, t  # first tick: no speed yet; then moving; then still from 0.2
+    arm.now = 1.25
+    b.tick_once()
+    assert b.status == Status.SUCCESS
