@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import rclpy
-from rclpy.action import ActionClient
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -31,6 +30,7 @@ from tlt_interfaces.srv import SetActuatorState, SetLifterMode
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tlt_common import ros_names
+from tlt_common.action_client import SerialisedActionClient
 
 COMPONENTS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
 
@@ -94,7 +94,9 @@ class BringupCheck(Node):
         key = (kind, name)
         if key not in self._kept_clients:
             self._kept_clients[key] = (
-                ActionClient(self, msg_type, name) if kind == "action" else self.create_client(msg_type, name)
+                SerialisedActionClient(self, msg_type, name)
+                if kind == "action"
+                else self.create_client(msg_type, name)
             )
         return self._kept_clients[key]
 

@@ -28,7 +28,6 @@ import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
-from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
@@ -44,6 +43,7 @@ from tlt_ars.planning.kinematics import pose_error
 from tlt_ars.planning.targets import dispenser_targets, placement_targets
 from tlt_ars.planning.world import dispenser_frame
 from tlt_common import ros_names
+from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
 from tlt_drivers.dynamixel.config import validate_chain
 from tlt_drivers.nodes.ee import EndEffectorNode
@@ -300,7 +300,8 @@ class Stack:
         self.client.create_service(CheckAlignment, ros_names.VISION_CHECK_ALIGNMENT, self._check_alignment)
         self.ground = self.client.create_client(GroundCommand, ros_names.ground_command_service("ars_x"))
         self.actions = {
-            k: ActionClient(self.client, t, ros_names.ars_action("ars_x", k)) for k, t in ACTIONS.items()
+            k: SerialisedActionClient(self.client, t, ros_names.ars_action("ars_x", k))
+            for k, t in ACTIONS.items()
         }
         self.drivers = SingleThreadedExecutor(context=self.context)
         self.drivers.add_node(self.ur)

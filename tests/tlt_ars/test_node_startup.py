@@ -10,7 +10,6 @@ import pytest
 import rclpy
 import yaml
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember, AffixMember
@@ -21,6 +20,7 @@ from tlt_ars.config import ars_config_from_dict, default_config_path
 from tlt_ars.node import ArsNode, main
 from tlt_ars.planning.reachability import UnreachableMember
 from tlt_common import ros_names
+from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
 
 pytestmark = pytest.mark.timeout(60)
@@ -86,7 +86,7 @@ def _wait(future, timeout=10.0):
 
 def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars):
     ars, client = idle_ars
-    action = ActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+    action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
     ground = client.create_client(GroundCommand, ros_names.ground_command_service("ars_x"))
     assert action.wait_for_server(timeout_sec=10) and ground.wait_for_service(timeout_sec=10)
 
@@ -161,7 +161,7 @@ def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):
     arrive just after the goal: the ARS judges the goal on that newer message, not the old one."""
     ars, client = idle_ars
     ars.started = True
-    action = ActionClient(client, AffixMember, ros_names.ars_action("ars_x", "affix_member"))
+    action = SerialisedActionClient(client, AffixMember, ros_names.ars_action("ars_x", "affix_member"))
     progress = client.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
     assert action.wait_for_server(timeout_sec=10)
     member = "bay1/vertical/x0_y0"

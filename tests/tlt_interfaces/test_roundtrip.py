@@ -16,7 +16,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from tlt_common.bt.ros import SerialisedActionClient
+from tlt_common.action_client import SerialisedActionClient
 from tlt_common.interfaces import iter_interfaces, message_parts, sample_message
 
 INTERFACES = list(iter_interfaces())

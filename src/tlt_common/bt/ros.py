@@ -15,7 +15,6 @@ fresh one.
 
 from __future__ import annotations
 
-import threading
 import time
 import weakref
 from collections.abc import Callable
@@ -29,6 +28,7 @@ from rclpy.clock import ClockChange, JumpThreshold, ROSClock, TimeJump
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from tlt_common.action_client import SerialisedActionClient
 from tlt_common.bt.nodes import Action, Condition
 from tlt_common.bt.server_readiness import readiness_of
 from tlt_common.bt.status_codec import DEFAULT_MAX_STATUS_BYTES, TreeShape, encode
@@ -101,37 +101,6 @@ def _clients_of(node: Node) -> dict[tuple[str, str], Any]:
         clients = {}
         node._tlt_shared_clients = clients
     return clients
-
-
-class SerialisedActionClient(ActionClient):
-    """An ActionClient safe to use from a thread other than the executor's.
-
-    rclpy's ActionClient sends a goal (cancel, result) request and only then registers the future
-    waiting for its response. When a tree ticks in one thread and the executor takes responses in
-    another, a fast server's response can be taken in between and is dropped ("Ignoring unexpected
-    goal response"), leaving the behaviour waiting for an answer that already came. Sending and
-    taking are serialised here, so a response is taken only once its request is registered.
-    """
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._serial = threading.RLock()
-
-    def send_goal_async(self, *args: Any, **kwargs: Any) -> Any:
-        with self._serial:
-            return super().send_goal_async(*args, **kwargs)
-
-    def _cancel_goal_async(self, goal_handle: Any) -> Any:
-        with self._serial:
-            return super()._cancel_goal_async(goal_handle)
-
-    def _get_result_async(self, goal_handle: Any) -> Any:
-        with self._serial:
-            return super()._get_result_async(goal_handle)
-
-    def take_data(self) -> Any:
-        with self._serial:
-            return super().take_data()
 
 
 def shared_action_client(node: Node, action_type: Any, action_name: str) -> ActionClient:
@@ -625,7 +594,6 @@ class TreeStatusPublisher:
 __all__ = [
     "ActionGoal",
     "RosSeconds",
-    "SerialisedActionClient",
     "ServiceCall",
     "TopicCache",
     "TopicCondition",

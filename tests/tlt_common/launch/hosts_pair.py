@@ -20,10 +20,12 @@ import sys
 import time
 
 import rclpy
-from rclpy.action import ActionClient, ActionServer
+from rclpy.action import ActionServer
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember
+
+from tlt_common.action_client import SerialisedActionClient
 
 ACTION = "hosts/add_member"
 
@@ -55,7 +57,7 @@ def serve() -> None:
 class Client:
     def __init__(self, hold_s: float) -> None:
         self.node = Node("hosts_client")
-        self.action = ActionClient(self.node, AddMember, ACTION)
+        self.action = SerialisedActionClient(self.node, AddMember, ACTION)
         self.hold_s = hold_s
         self.present = False
         self.lost_while_pending = False

@@ -12,7 +12,6 @@ from collections.abc import Iterator
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import FollowJointTrajectory
@@ -21,6 +20,7 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware, PtyFirmwareServer
 from trajectory_msgs.msg import JointTrajectoryPoint
 
+from tlt_common.action_client import SerialisedActionClient
 from tlt_drivers.lifter.config import load_lifter_config
 from tlt_drivers.lifter.node import STATE_TOPIC, STATUS_TOPIC, LifterNode, main
 
@@ -52,7 +52,9 @@ class Harness:
         self.client.create_subscription(LifterState, STATE_TOPIC, self.states.append, 50)
         self.client.create_subscription(HardwareStatus, STATUS_TOPIC, self.statuses.append, 10)
         self.set_mode = self.client.create_client(SetLifterMode, "lifter/set_mode")
-        self.action = ActionClient(self.client, FollowJointTrajectory, "lifter/follow_joint_trajectory")
+        self.action = SerialisedActionClient(
+            self.client, FollowJointTrajectory, "lifter/follow_joint_trajectory"
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)

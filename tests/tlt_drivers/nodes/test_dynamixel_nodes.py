@@ -11,7 +11,6 @@ import time
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -24,6 +23,7 @@ from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD
 from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 from trajectory_msgs.msg import JointTrajectoryPoint
 
+from tlt_common.action_client import SerialisedActionClient
 from tlt_drivers.dynamixel.config import load_chain, validate_chain
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.active_grippers import GripperGroupNode
@@ -93,7 +93,7 @@ def harness():
     h.close()
 
 
-def send_goal(h: Harness, action: ActionClient, names, positions, seconds: float):
+def send_goal(h: Harness, action: SerialisedActionClient, names, positions, seconds: float):
     goal = FollowJointTrajectory.Goal()
     goal.trajectory.joint_names = list(names)
     point = JointTrajectoryPoint(positions=list(positions))
@@ -118,7 +118,7 @@ def test_active_grippers_follow_a_trajectory_and_refuse_out_of_limit_goals(harne
         harness.client.create_subscription(
             HardwareStatus, "/active_grippers/hardware_status", statuses.append, 50
         )
-        action = ActionClient(
+        action = SerialisedActionClient(
             harness.client, FollowJointTrajectory, "/active_grippers/follow_joint_trajectory"
         )
         harness.spin()
@@ -187,7 +187,9 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
         harness.add(CameraMountsNode(config, context=harness.context))
         joint_states: list[JointState] = []
         harness.client.create_subscription(JointState, "/camera_mounts/joint_states", joint_states.append, 50)
-        action = ActionClient(harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory")
+        action = SerialisedActionClient(
+            harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory"
+        )
         harness.spin()
         names = ["camera_mount_1", "camera_mount_2"]
         slow = FollowJointTrajectory.Goal()
@@ -216,7 +218,9 @@ def test_cancel_stops_the_goal_where_the_joints_stand(harness):
         config["port"] = chain.port
         config["comm"]["latency_timer_ms"] = LATENCY_MS
         node = harness.add(CameraMountsNode(config, context=harness.context))
-        action = ActionClient(harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory")
+        action = SerialisedActionClient(
+            harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory"
+        )
         harness.spin()
         goal = FollowJointTrajectory.Goal()
         goal.trajectory.joint_names = ["camera_mount_1"]
@@ -326,7 +330,9 @@ def test_ee_refuses_motion_until_calibrated_then_moves(harness):
         harness.client.create_subscription(String, "/ee_x/position_command/rejected", rejected.append, 10)
         commands = harness.client.create_publisher(Float64MultiArray, "/ee_x/position_command", 10)
         calibrate = harness.client.create_client(Trigger, "/ee_x/calibrate")
-        action = ActionClient(harness.client, FollowJointTrajectory, "/ee_x/follow_joint_trajectory")
+        action = SerialisedActionClient(
+            harness.client, FollowJointTrajectory, "/ee_x/follow_joint_trajectory"
+        )
         harness.spin()
 
         harness.wait(lambda: commands.get_subscription_count() > 0, "command subscription")

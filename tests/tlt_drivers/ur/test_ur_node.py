@@ -13,7 +13,6 @@ from collections.abc import Iterator
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -25,6 +24,7 @@ from tlt_sim.emulators.ur_controller_process import URControllerProcess
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common import ros_names
+from tlt_common.action_client import SerialisedActionClient
 from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
 from tlt_drivers.ur.node import URNode
 
@@ -55,7 +55,9 @@ class Harness:
             HardwareStatus, ros_names.hardware_status_topic("ur_x"), self.statuses.append, 50
         )
         self.unlock = self.client.create_client(Trigger, ros_names.ur_unlock_service("ur_x"))
-        self.action = ActionClient(self.client, FollowJointTrajectory, ros_names.trajectory_action("ur_x"))
+        self.action = SerialisedActionClient(
+            self.client, FollowJointTrajectory, ros_names.trajectory_action("ur_x")
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.client)
