@@ -9,6 +9,7 @@ and switched on here with the bodies' pose at that instant, so nothing jumps:
   Opening the jaws releases it; a part that nothing else holds then falls.
 * Top Gripper ``top/<i>/<cf>`` and Active Gripper ``active/<i>/<cf>`` (connect at corner i): when
   the pin or latch passes its engaged position with a cross frame corner within reach.
+* a rivet gun loads when its muzzle is inserted at a rivet dispenser's pickup that has rivets left.
 * rivet ``rivet/<strut>/<cf>`` (weld): when a loaded rivet gun fires with a strut end and a cross
   frame corner both within ``rivet_reach`` of the gun; ``foundation/<i>/<cf>`` when a corner is at
   the foundation pad instead.
@@ -365,14 +366,15 @@ class Assembly:
         self.m.geom_rgba[self.m.geom(names.loaded_rivet_geom(arm, side)).id, 3] = 1.0 if shown else 0.0
 
     def load_rivet(self, arm: str, side: str) -> bool:
-        """Take a rivet into gun ``side`` if it is at a rivet dispenser that has one."""
+        """Take a rivet into gun ``side`` if its muzzle is within ``rivet_reach`` of the pickup of
+        a rivet dispenser that has one (the gun inserted into the feeder)."""
         if self.loaded[(arm, side)]:
             return True
         gun = self.site_pos(names.rivet_gun_site(arm, side))
         for name, left in self.rivets_left.items():
             if left <= 0:
                 continue
-            if np.linalg.norm(self.site_pos(f"dispenser/{name}/pickup") - gun) <= 2 * self.ee["rivet_reach"]:
+            if np.linalg.norm(self.site_pos(f"dispenser/{name}/pickup") - gun) <= self.ee["rivet_reach"]:
                 self.rivets_left[name] -= 1
                 self.loaded[(arm, side)] = True
                 self._show_loaded_rivet(arm, side, True)

@@ -321,6 +321,9 @@ class Scene:
     def load_rivet(self, arm: str, side: str) -> bool:
         return self.assembly.load_rivet(arm, side)
 
+    def rivet_loaded(self, arm: str, side: str) -> bool:
+        return self.assembly.loaded[(arm, side)]
+
     def fire_rivet(self, arm: str, side: str) -> RivetShot:
         return self.assembly.fire_rivet(arm, side)
 

@@ -18,7 +18,7 @@ Every binding has two halves the twin calls once per sync period, from its one s
   process: :mod:`tlt_sim.twin.ur_host`) is the arm's commanded path; the model joints follow it at
   their rated speeds.
 * :class:`EEGpioBinding`: the EE limit switch input is the model's width switch; a rising edge on a
-  rivet-gun output fires that gun in the model.
+  rivet-gun output fires that gun in the model; a gun inserted at a rivet feeder takes a rivet.
 """
 
 from __future__ import annotations
@@ -165,6 +165,7 @@ class EEGpioBinding:
     switch_active_low: bool
     guns: dict[int, tuple[str, bool]]  # line -> (side "a"/"b", active_low)
     shots: list[tuple[float, str, str]] = field(default_factory=list)  # (sim time, side, outcome)
+    loads: list[tuple[float, str]] = field(default_factory=list)  # (sim time, side) of each rivet taken
 
     def drive(self, scene: Scene, dt: float) -> None:
         for line, level, edges in self.chip.poll():
@@ -182,6 +183,12 @@ class EEGpioBinding:
                 log.info("%s rivet gun %s fired at %.3f s: %s", self.arm, side, scene.time, outcome)
 
     def sense(self, scene: Scene, dt: float) -> None:
+        # The guns take rivets mechanically (a gun pushed into a feeder), not through a GPIO line;
+        # checked here because this binding is the EE's, once a sync period.
+        for side, _ in self.guns.values():
+            if not scene.rivet_loaded(self.arm, side) and scene.load_rivet(self.arm, side):
+                self.loads.append((scene.time, side))
+                log.info("%s rivet gun %s took a rivet at %.3f s", self.arm, side, scene.time)
         pressed = scene.limit_switch(self.arm)
         self.chip.drive(self.switch_line, (not pressed) if self.switch_active_low else pressed)
 

@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 from tlt_sim.emulators.gpio_chip import EmulatedGpioChip, EmulatedLines
-from tlt_sim.model import names
+from tlt_sim.model import ik, names
+from tlt_sim.model.geometry import frame_from_axes
 
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
@@ -120,6 +121,28 @@ def test_ee_limit_switch_input_and_rivet_gun_output_through_gpio(make_twin):
     shots = twin.devices.gpio["ee_x"].shots
     assert [(side, outcome) for _, side, outcome in shots] == [("b", "dry shot")]
     chip.close()
+
+
+def test_a_rivet_gun_pushed_into_a_feeder_takes_one_rivet(make_twin):
+    twin = make_twin()
+    scene, binding = twin.scene, twin.devices.gpio["ee_x"]
+    feeder = "rivet_dispenser_x"
+    count = scene.dispenser_count(feeder)
+    twin.tick()
+    assert binding.loads == [] and not scene.rivet_loaded("ars_x", "a")
+    pickup = scene.site_position(f"dispenser/{feeder}/pickup")
+    tool = frame_from_axes([1, -1, 0], [0, 0, -1])
+    # 8 cm short of the pickup (the gun on its way in) is not in; at the pickup it is.
+    for depth, loaded in ((0.08, False), (0.0, True)):
+        target = pickup - depth * tool[:, 2]
+        q = ik.plan(scene.model, scene.data.qpos, "ars_x", target, tool, scene.ee_point("ars_x", "gun_a"))
+        for i, value in enumerate(q[-1]):
+            scene.set_joint_state(names.arm_joint("ars_x", i), float(value))
+        twin.tick()
+        twin.tick()  # a gun staying at the feeder takes no second rivet
+        assert scene.rivet_loaded("ars_x", "a") is loaded
+    assert [side for _, side in binding.loads] == ["a"]
+    assert scene.dispenser_count(feeder) == count - 1
 
 
 def test_the_width_carriage_stops_on_its_end_stop_and_the_servo_sees_it(make_twin):
