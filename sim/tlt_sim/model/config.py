@@ -160,7 +160,7 @@ SCHEMA = {
             "slot_pitch": _pos(),
             "first_slot_height": _pos(),
             "tag_size": _pos(),
-            "rivet_pickup_height": _pos(),
+            "rivet_pickup_height": Field("float", minimum=0.0),
         },
     ),
     "render": Field(

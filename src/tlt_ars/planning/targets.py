@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -172,7 +173,7 @@ def dispenser_targets(
     count = disp.count if remaining is None else remaining
     top = racks["first_slot_height"] + max(count - 1, 0) * racks["slot_pitch"]
     if disp.part_kind == "rivet":
-        pick = (frame @ np.array([0.0, 0.0, racks["rivet"]["top"] + 0.02, 1.0]))[:3]
+        pick = rivet_pickup_point(cfg, disp)
         out = []
         for k, yaw in enumerate(np.arange(4) * math.pi / 2):
             x = rpy_matrix((0.0, 0.0, yaw)) @ np.array([1.0, 0.0, 0.0])
@@ -193,6 +194,12 @@ def dispenser_targets(
         pose = frame_from_axes(centre, sign * axis, _DOWN)
         out.append(_target(f"bar {'+' if sign > 0 else '-'}", pose, up))
     return out
+
+
+def rivet_pickup_point(cfg: SceneConfig, dispenser: Any) -> np.ndarray:
+    """World point where a gun's muzzle takes a rivet: just over the top of the feeder's tray."""
+    top = cfg.raw["dispensers"]["rivet"]["top"]
+    return (dispenser_frame(cfg, dispenser) @ np.array([0.0, 0.0, top + 0.02, 1.0]))[:3]
 
 
 def _lift(pose: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -225,6 +232,7 @@ __all__ = [
     "inspection_targets",
     "placement_targets",
     "poses",
+    "rivet_pickup_point",
     "rivet_targets",
     "strut_targets",
 ]

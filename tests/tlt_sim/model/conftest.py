@@ -27,6 +27,21 @@ class Mover:
         assert waypoints is not None, f"no clear way to {position}"
         assert s.move_arm(self.arm, waypoints), "the arm did not reach its waypoints"
 
+    def load_rivet(self, side: str, feeder: str) -> None:
+        """Push gun ``side`` into ``feeder`` (tool down, the first heading with a clear way) and
+        take a rivet."""
+        s = self.scene
+        pickup = s.site_position(f"dispenser/{feeder}/pickup")
+        point = s.ee_point(self.arm, f"gun_{side}")
+        for yaw in np.arange(8) * np.pi / 4:
+            rotation = frame([np.cos(yaw), np.sin(yaw), 0.0], [0.0, 0.0, -1.0])
+            waypoints = ik.plan(s.model, s.data.qpos, self.arm, pickup, rotation, point)
+            if waypoints is not None:
+                assert s.move_arm(self.arm, waypoints), "the arm did not reach its waypoints"
+                assert s.load_rivet(self.arm, side)
+                return
+        raise AssertionError(f"no clear way to {feeder}'s pickup for gun {side}")
+
     def jaws(self, close: bool, settle_s: float = 0.8) -> None:
         opened, closed = self.scene.edu["end_effector"]["jaw_range"]
         for side in ("a", "b"):

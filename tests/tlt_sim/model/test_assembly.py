@@ -11,11 +11,9 @@ from tlt_sim.model.scene import Scene
 def test_strut_is_picked_carried_placed_riveted_and_holds_under_compression(scene, mover):
     arm, part = "ars_x", "vertical_dispenser_x/0"
     m = mover(scene, arm)
-    pickup = scene.site_position("dispenser/rivet_dispenser_x/pickup")
     for side in ("a", "b"):
         assert not scene.fire_rivet(arm, side).loaded  # nothing loaded yet: a dry shot
-        m.to(pickup, frame([1, -1, 0], [0, 0, -1]), which=f"gun_{side}")
-        assert scene.load_rivet(arm, side)
+        m.load_rivet(side, "rivet_dispenser_x")
     assert (
         scene.dispenser_count("rivet_dispenser_x") == scene.mission.dispensers["rivet_dispenser_x"].count - 2
     )
@@ -168,8 +166,7 @@ def test_last_bay_is_riveted_to_the_foundation(scene, mover):
     frame_body = scene.part(placed["bay1/cross_frame"]).body
     arm = "ars_x"
     m = mover(scene, arm)
-    m.to(scene.site_position("dispenser/rivet_dispenser_x/pickup"), frame([1, -1, 0], [0, 0, -1]), "gun_a")
-    assert scene.load_rivet(arm, "a")
+    m.load_rivet("a", "rivet_dispenser_x")
     corner = scene.site_position(names.corner_site(frame_body, 0))
     m.to(corner, frame([0, 0, 1], [-0.3, 1.0, 0]), "gun_a")
     shot = scene.fire_rivet(arm, "a")

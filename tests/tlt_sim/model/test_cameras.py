@@ -108,14 +108,11 @@ def test_a_loaded_rivet_is_seen_in_the_gun_and_gone_once_fired(scene, mover):
     """The ARS checks a loaded gun with its D405 (vision's rivet inspection): the rivet is drawn at
     the muzzle from loading to firing, and nowhere else."""
     from tlt_sim.model import names
-    from tlt_sim.model.geometry import frame_from_axes
 
     rivet = names.loaded_rivet_geom("ars_x", "a")
     scene.advance(0.01)
     assert rivet not in scene.render("ars_x/d405_a", 320, 240).instances()
-    pickup = scene.site_position("dispenser/rivet_dispenser_x/pickup")
-    mover(scene, "ars_x").to(pickup, frame_from_axes([1, -1, 0], [0, 0, -1]), which="gun_a")
-    assert scene.load_rivet("ars_x", "a")
+    mover(scene, "ars_x").load_rivet("a", "rivet_dispenser_x")
     scene.advance(0.01)
     seen = scene.render("ars_x/d405_a", 320, 240)
     assert seen.instances().get(rivet, 0) > 100 and seen.class_of(rivet) == "rivet"

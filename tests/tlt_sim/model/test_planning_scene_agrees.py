@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 from tlt_sim.model import names
 
-from tlt_ars.planning.world import load_scene_config, rack_upright_height, rack_upright_positions
+from tlt_ars.planning.targets import rivet_pickup_point
+from tlt_ars.planning.world import (
+    dispenser_shapes,
+    load_scene_config,
+    rack_upright_height,
+    rack_upright_positions,
+)
 
 
 def test_posts_and_arm_bases_agree(scene):
@@ -45,3 +51,22 @@ def test_dispenser_rack_uprights_agree(scene):
         assert all(t[2] == pytest.approx(rack_upright_height(planning, disp)) for t in twin), name
         checked += 1
     assert checked >= 3
+
+
+def test_rivet_feeders_agree(scene):
+    """A gun sent to the planner's pickup point takes a rivet in the twin, and the planner's box
+    covers the twin's feeder (a pickup point 35 cm down inside the column loaded no rivet at all)."""
+    planning = load_scene_config()
+    m, d = scene.model, scene.data
+    boxes = {s.name: s for s in dispenser_shapes(planning, scene.mission)}
+    feeders = [n for n, disp in scene.mission.dispensers.items() if disp.part_kind == "rivet"]
+    assert feeders
+    for name in feeders:
+        pickup = scene.site_position(f"dispenser/{name}/pickup")
+        planned = rivet_pickup_point(planning, scene.mission.dispensers[name])
+        assert np.linalg.norm(planned - pickup) < 0.01, name
+        box = boxes[f"dispenser/{name}"]
+        box_top = box.pose[2, 3] + box.size[2] / 2
+        column, tray = m.geom(f"dispenser/{name}/column"), m.geom(f"dispenser/{name}/box")
+        assert d.geom_xpos[column.id][2] + column.size[1] <= box_top + 1e-6, name  # half-length
+        assert d.geom_xpos[tray.id][2] + tray.size[2] == pytest.approx(box_top, abs=1e-6), name
