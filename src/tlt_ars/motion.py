@@ -263,9 +263,10 @@ class Settle(Action):
     """Wait until the arm has stood still for ``arm.settle_s`` of mission time.
 
     Reads: the arm's JointState (velocities, or positions tick to tick where it has none). Writes:
-    nothing. RUNNING while the arm moves (faster than ``arm.stopped_velocity``) or has not yet
-    stood still long enough; SUCCESS then. FAILURE without a fresh joint state, or when the arm
-    has not settled within ``timeouts.planning_s``.
+    nothing. RUNNING while the arm moves (faster than ``arm.stopped_velocity``), has not yet stood
+    still long enough, or its joint state is stale (a gap of a second under load is no fault);
+    SUCCESS then. FAILURE when the arm has not settled within ``timeouts.planning_s``, naming a
+    stale joint state if that is why.
     """
 
     def __init__(self, name: str, ctx: ArsContext) -> None:
@@ -294,18 +295,19 @@ class Settle(Action):
     def update(self) -> Status:
         now = self.ctx.clock()
         q = self.ctx.arm_q()
-        if q is None:
-            return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
-        if self._moving(now, np.asarray(q, dtype=float)):
+        if q is None or self._moving(now, np.asarray(q, dtype=float)):
             self._still_since = None
+            if q is None:
+                self._last = None  # judge the speed afresh once states come again
         elif self._still_since is None:
             self._still_since = now
         if self._still_since is not None and now - self._still_since >= self.ctx.config.arm["settle_s"]:
             return Status.SUCCESS
         limit = self.ctx.config.timeouts["planning_s"]
         if now - self._started > limit:
-            return self.fail(f"the arm did not settle within {limit:g} s")
-        self.feedback_message = "settling"
+            why = f"no fresh joint state on '{self.ctx.joint_topic}'" if q is None else "still moving"
+            return self.fail(f"the arm did not settle within {limit:g} s: {why}")
+        self.feedback_message = "settling" if q is not None else "waiting for a fresh joint state"
         return Status.RUNNING
 
 

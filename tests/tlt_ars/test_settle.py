@@ -51,11 +51,25 @@ def test_fails_when_the_arm_keeps_moving_or_its_state_is_stale():
     b = Settle("Settle", arm)
     assert _tick(b, arm, 0.0, moving=True) == Status.RUNNING
     assert _tick(b, arm, 16.0, moving=True) == Status.FAILURE
-    assert "did not settle within 15 s" in b.feedback_message
+    assert "did not settle within 15 s: still moving" in b.feedback_message
     arm.arm_q = lambda: None
     b = Settle("Settle", arm)
-    assert _tick(b, arm, 20.0) == Status.FAILURE
+    assert _tick(b, arm, 20.0) == Status.RUNNING
+    assert _tick(b, arm, 36.0) == Status.FAILURE
     assert "no fresh joint state on '/ur_x/joint_states'" in b.feedback_message
+
+
+def test_a_gap_in_the_joint_states_is_waited_out_and_restarts_the_stillness():
+    arm = Arm()
+    b = Settle("Settle", arm)
+    assert _tick(b, arm, 0.0) == Status.RUNNING  # still since 0
+    fresh = arm.arm_q
+    arm.arm_q = lambda: None
+    assert _tick(b, arm, 0.8) == Status.RUNNING
+    assert b.feedback_message == "waiting for a fresh joint state"
+    arm.arm_q = fresh
+    assert _tick(b, arm, 1.5) == Status.RUNNING  # still since 1.5, not since 0
+    assert _tick(b, arm, 2.5) == Status.SUCCESS
 
 
 def test_without_velocities_the_positions_tell_whether_the_arm_moves():
