@@ -73,15 +73,21 @@ def _horizontal_approaches(axis: np.ndarray, towards: np.ndarray) -> list[np.nda
 
 
 def strut_targets(
-    p0: np.ndarray, p1: np.ndarray, arm_base: np.ndarray, approach: float, origin_shift: float = 0.0
+    p0: np.ndarray,
+    p1: np.ndarray,
+    arm_base: np.ndarray,
+    approach: float,
+    origin_shift: float = 0.0,
+    signs: tuple[float, ...] = (1.0, -1.0),
 ) -> list[Target]:
     """Candidates for holding the strut p0..p1 at its middle (shifted by ``origin_shift`` along
-    it), coming from the arm's side, with the bar either way along the strut."""
+    it), coming from the arm's side, with the bar along the strut: tool x towards p1 ("bar +",
+    rivet gun 0 at p0) and/or towards p0 ("bar -"), as ``signs`` say."""
     mid = (p0 + p1) / 2
     u = (p1 - p0) / np.linalg.norm(p1 - p0)
     out = []
     for k, d in enumerate(_horizontal_approaches(u, mid - arm_base[:3, 3])):
-        for sign in (1.0, -1.0):
+        for sign in signs:
             pose = frame_from_axes(mid + origin_shift * sign * u, sign * u, d)
             out.append(_target(f"approach {k} bar {'+' if sign > 0 else '-'}", pose, -approach * d))
     return out
@@ -107,7 +113,8 @@ def cross_frame_targets(corners: list[np.ndarray], arm_base: np.ndarray, approac
 
 
 def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: str) -> list[Target]:
-    """Where ``arm`` holds ``member`` when placing it (tower frame at the build level of its bay)."""
+    """Where ``arm`` holds ``member`` when placing it (tower frame at the build level of its bay).
+    A strut is held with rivet gun 0, the one loaded for it, on the joint of its ``add`` rivet."""
     approach = cfg.raw["end_effector"]["approach_distance"]
     base = cfg.base(arm)
     origin = tower_origin(cfg, mission, member.bay)
@@ -116,7 +123,11 @@ def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: st
         return cross_frame_targets(corners, base, cfg.raw["end_effector"]["cross_frame_approach_distance"])
     if member.kind in ("vertical", "diagonal"):
         (p0, p1) = member_segments(member, origin)[0]
-        return strut_targets(p0, p1, base, approach)
+        add = [r.joint for r in getattr(member, "rivets", ()) if r.step == "add"]
+        # A whole run placed a near vertical with gun 0 at the wrong end: its add rivet joined the
+        # bottom joint, and the affix rivet meant for it found that end taken.
+        signs = (1.0, -1.0) if not add else (1.0,) if add[0] == member.joints[0][0] else (-1.0,)
+        return strut_targets(p0, p1, base, approach, signs=signs)
     return []
 
 
