@@ -28,8 +28,8 @@ Rivet Member                37         Fire Rivet Gun, Release, Record Placed, R
                                        for a diagonal)
 Foundation Rivet            38         Load Rivet, Place Rivet, Record Riveted
 Affix Member                39         Load Rivet, Place Rivet, Record Affixed
-Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Fire Rivet Gun,
-                                       Retreat
+Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
+                                       Member (Fire Rivet Gun, Retreat)
 ==========================  =========  ================================================================
 """
 
@@ -314,6 +314,9 @@ class SubtreeBuilder:
                     ),
                 ),
                 self._move("Fine Approach Joint", lambda: chosen(ctx, "joint", contact=True)),
+                # Nothing held to align first, so the gun would fire the moment the controller's
+                # path ends; a near vertical's affix rivet in a whole run missed its strut end.
+                Settle("Settle", ctx),
                 self.rivet_member("rivet", holding=False),
             ],
         )
