@@ -125,6 +125,15 @@ class ArsContext:
             return None
         return entry
 
+    def ee_width(self, max_age: float = 1.0) -> float | None:
+        """Where the EE width joint stands (m), or None without a fresh EndEffectorState."""
+        entry = self.ee_state(max_age)
+        if entry is None:
+            return None
+        names = list(entry[0].joint_names)
+        joint = self.config.ee["width_joint"]
+        return float(entry[0].position[names.index(joint)]) if joint in names else None
+
     # ----- request -----
     def begin(self, request: Request) -> None:
         self.data = RequestData(request=request, member=self.state.member(request.member_id))

@@ -103,9 +103,11 @@ class MotionPlanner:
         bay: int,
         carrying: str | None,
         other_q: np.ndarray | None,
+        width: float = 0.0,
     ) -> PlannedMotion:
-        """A checked, time-parameterised trajectory from ``start`` to ``goal``; PlanningFailed if none."""
-        kwargs = dict(placed=placed, bay=bay, other_arm_q=other_q, carrying=carrying)
+        """A checked, time-parameterised trajectory from ``start`` to ``goal`` with the EE ``width``
+        wide; PlanningFailed if none."""
+        kwargs = dict(placed=placed, bay=bay, other_arm_q=other_q, carrying=carrying, width=width)
         scene = build_scene(self.scene, self.arm, self.mission, contact=goal.contact, **kwargs)
         planner = Planner.from_config(scene, self.scene.planning, home=self.scene.home(self.arm))
         chosen = None
@@ -226,6 +228,7 @@ class PlanMotion(Action):
                 bay=bay,
                 carrying=data.holding,
                 other_q=self.ctx.other_arm_q(),
+                width=self.ctx.ee_width() or 0.0,
             )
             self.feedback_message = "planning"
             return Status.RUNNING

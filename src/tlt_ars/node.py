@@ -121,7 +121,7 @@ class ArsNode(Node):
             # A member out of this arm's reach is found now, not mid-build (§V.D).
             from tlt_ars.planning.reachability import require_reachable
 
-            require_reachable(scene, mission, [self.ars])
+            require_reachable(scene, mission, [self.ars], config.ee["width"])
         self.ctx = ArsContext(self, config, mission, scene)
         self.planner = MotionPlanner(
             scene,

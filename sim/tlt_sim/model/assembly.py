@@ -4,8 +4,10 @@ Everything that joins two bodies is an equality constraint declared inactive by 
 and switched on here with the bodies' pose at that instant, so nothing jumps:
 
 * grasp ``grasp/<arm>/<part>`` (weld EE-part): when both grasp jaws close past the point where they
-  meet a tube and a part's grasp line lies within ``grasp_reach`` of the EE's, roughly parallel.
-  The jaws then stop on the tube (their range is narrowed), so the servo positions show the grasp.
+  meet a tube and a part's grasp line lies within ``grasp_reach`` of the EE's, roughly parallel,
+  with both jaws on its tube. The part is drawn onto the EE's grasp line but keeps where it lies
+  along it (a diagonal is held off its middle). The jaws then stop on the tube (their range is
+  narrowed), so the servo positions show the grasp.
   Opening the jaws releases it; a part that nothing else holds then falls.
 * Top Gripper ``top/<i>/<cf>`` and Active Gripper ``active/<i>/<cf>`` (connect at corner i): when
   the pin or latch passes its engaged position with a cross frame corner within reach.
@@ -33,6 +35,22 @@ _PARALLEL_COS = np.cos(np.radians(20.0))
 # Jaw angles (rad) short of the contact angle at which they count as closed on a part, and as
 # open again (the gap between the two keeps a jaw resting on a tube from flickering).
 JAW_CLOSED, JAW_OPEN = 0.03, 0.15
+
+
+@dataclass(frozen=True)
+class GraspFit:
+    """An EE's grasp line against one of a part's: the distance between the lines (m), the angle
+    (deg), how far the jaws reach past the part's tube (m, <= 0 when both close on it) and the
+    part's line (point, direction in the part's frame)."""
+
+    distance: float
+    angle_deg: float
+    overhang: float
+    line: tuple[np.ndarray, np.ndarray]
+
+    def catches(self, reach: float) -> bool:
+        """Closing jaws take the part."""
+        return self.distance <= reach and self.overhang <= 0.0
 
 
 @dataclass
@@ -258,22 +276,41 @@ class Assembly:
         a, b = self.site_pos(f"{arm}/grip_a"), self.site_pos(f"{arm}/grip_b")
         return (a + b) / 2, (b - a) / np.linalg.norm(b - a)
 
+    def grasp_fit(self, arm: str, part: PartInfo) -> GraspFit:
+        """How ``arm``'s grasp line meets the nearest roughly parallel grasp line of ``part``
+        (distance inf when none is)."""
+        centre, axis = self.grasp_line(arm)
+        jaws = float(np.linalg.norm(self.site_pos(f"{arm}/grip_b") - self.site_pos(f"{arm}/grip_a"))) / 2
+        pos, rot = self.body_pose(part.body)
+        best = GraspFit(np.inf, 90.0, np.inf, part.grasps[0])
+        for point, direction in part.grasps:
+            u = rot @ direction
+            cos = min(1.0, abs(float(axis @ u)))
+            if cos < _PARALLEL_COS:
+                continue
+            rel = centre - (pos + rot @ point)
+            along = float(rel @ u)
+            dist = float(np.linalg.norm(rel - along * u))
+            if dist < best.distance:
+                best = GraspFit(dist, float(np.degrees(np.arccos(cos))), abs(along) + jaws - part.grasp_span,
+                                (point, direction))  # fmt: skip
+        return best
+
     def _try_grasp(self, arm: str) -> None:
         centre, axis = self.grasp_line(arm)
-        best, dist = None, self.ee["grasp_reach"]
+        best, fit = None, None
         for part in self.info.parts.values():
             if self.state[part.name] in ("grasped",) or self._held_by_other(part.body, arm):
                 continue
-            pos, rot = self.body_pose(part.body)
-            for point, direction in part.grasps:
-                dd = float(np.linalg.norm(pos + rot @ point - centre))
-                if dd <= dist and abs(float(axis @ (rot @ direction))) >= _PARALLEL_COS:
-                    best, dist = part, dd
+            f = self.grasp_fit(arm, part)
+            if f.catches(self.ee["grasp_reach"]) and (fit is None or f.distance < fit.distance):
+                best, fit = part, f
         if best is None:
             return
         offset = self.info.scenario.offsets.get(best.name)
         shift = np.asarray(offset) if offset is not None else None
-        self._weld(f"grasp/{arm}/{best.body}", centre, shift2=shift, pose2=self._seated(best, centre, axis))
+        seated = self._seated(best, fit.line, centre, axis)
+        self._weld(f"grasp/{arm}/{best.body}", centre, shift2=shift, pose2=seated)
         self.held[arm] = best.body
         self.state[best.name] = "grasped"
         for side in ("a", "b"):  # the jaws now stop on the tube
@@ -285,10 +322,14 @@ class Assembly:
         if slip is not None:
             self._slip_at[arm] = self.d.time + slip
 
-    def _seated(self, part: PartInfo, centre: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where closing jaws draw ``part``: its nearest grasp line onto the EE's, turned the least."""
+    def _seated(
+        self, part: PartInfo, line: tuple[np.ndarray, np.ndarray], centre: np.ndarray, axis: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where closing jaws draw ``part``: its grasp ``line`` (point, direction in the part) onto
+        the EE's, turned the least, its point staying where it lies along the EE's line."""
         pos, rot = self.body_pose(part.body)
-        point, direction = min(part.grasps, key=lambda g: float(np.linalg.norm(pos + rot @ g[0] - centre)))
+        point, direction = line
+        along = float((pos + rot @ point - centre) @ axis)
         current = rot @ direction
         target = axis if float(current @ axis) >= 0 else -axis
         turn = np.cross(current, target)
@@ -299,7 +340,7 @@ class Assembly:
             kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
             align = np.eye(3) + sin * kx + (1 - cos) * kx @ kx
         seated = align @ rot
-        return centre - seated @ point, seated
+        return centre + along * axis - seated @ point, seated
 
     def _held_by_other(self, body: str, arm: str) -> bool:
         return any(h == body for a, h in self.held.items() if a != arm)

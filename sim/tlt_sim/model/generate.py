@@ -63,6 +63,8 @@ class PartInfo:
     slot_pos: np.ndarray
     slot_quat: np.ndarray
     defect: Defect | None = None
+    # Half the length of tube along each grasp line, either side of its point: jaws close on it there.
+    grasp_span: float = 0.0
 
 
 @dataclass
@@ -697,8 +699,10 @@ class _Builder:
         wquat = mat_to_quat(wrot)
         body = _sub(self.world, "body", name=bname, pos=wpos, quat=wquat, gravcomp=1)
         _sub(body, "freejoint", name=bname)
+        half = self.edu["parts"]["corner_size"] / 2
         if kind == "cross_frame":
             grasps = self._cross_frame_geoms(body, bname, self.edu["parts"]["cross_frame_mass"])
+            span = self.w / 2 - half
             ends = {
                 str(i): np.array([x * self.w, y * self.w, 0.0]) for i, (x, y) in enumerate(names.CORNER_XY)
             }
@@ -707,8 +711,9 @@ class _Builder:
         else:
             ends = self._strut_geoms(body, bname, length, defect)
             grasps = [(np.array([0.0, 0.0, length / 2]), np.array([0.0, 0.0, 1.0]))]
+            span = length / 2 - half - self.edu["parts"]["fitting_length"]
         self.info.parts[pname] = PartInfo(
-            pname, bname, kind, dispenser, index, length, ends, grasps, wpos, wquat, defect
+            pname, bname, kind, dispenser, index, length, ends, grasps, wpos, wquat, defect, span
         )
 
     # -- arms and end effectors --------------------------------------------------------------

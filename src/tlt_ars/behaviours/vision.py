@@ -25,7 +25,7 @@ from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 
 from tlt_ars.context import ArsContext
 from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_from_matrix
-from tlt_ars.planning.targets import Target, dispenser_targets
+from tlt_ars.planning.targets import Target, dispenser_targets, part_in_tool
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Condition
 from tlt_common.bt.ros import ServiceCall
@@ -101,7 +101,11 @@ def located_dispenser_targets(ctx: ArsContext, dispenser: str) -> list[Target]:
         roll, pitch, _ = disp.rpy
         yaw = rpy_from_matrix(seen[:3, :3])[2]
         disp = replace(disp, position=tuple(seen[:3, 3] - origin), rpy=(roll, pitch, float(yaw)))
-        mission = SimpleNamespace(dispensers={dispenser: disp}, bay_width=ctx.mission.bay_width)
+        mission = SimpleNamespace(
+            dispensers={dispenser: disp},
+            bay_width=ctx.mission.bay_width,
+            strut_lengths=ctx.mission.strut_lengths,
+        )
     return dispenser_targets(ctx.scene, mission, dispenser, ctx.ars, remaining=ctx.state.remaining[dispenser])
 
 
@@ -172,7 +176,9 @@ def corrected_target(ctx: ArsContext, key: str) -> Target:
         raise RuntimeError("no fresh joint state")
     tool = ctx.scene.kinematics(ctx.ars).forward(q)
     measured = pose_to_matrix(a.pose.pose)
-    pose = target.pose @ invert(measured) @ tool
+    # Vision reports the part's frame (its middle); a diagonal's is off the tool (held_offset).
+    part_target = target.pose @ part_in_tool(ctx.mission, ctx.data.member.kind)
+    pose = part_target @ invert(measured) @ tool
     return Target(f"{target.label} corrected", pose, target.pre_pose)
 
 

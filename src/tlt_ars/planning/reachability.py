@@ -19,7 +19,7 @@ naming them. Nothing here moves an arm.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -178,32 +178,38 @@ def first_reachable(
     return None, f"{len(reasons)} candidates fail, first: {reasons[0]}"
 
 
-def check_mission_reach(cfg: SceneConfig, mission: object, arms: Iterable[str] | None = None) -> ReachReport:
-    """Check every place and rivet step of ``mission`` (for the arms in ``arms``; all when None)."""
+def check_mission_reach(
+    cfg: SceneConfig,
+    mission: object,
+    arms: Iterable[str] | None = None,
+    widths: Mapping[str, float] | None = None,
+) -> ReachReport:
+    """Check every place and rivet step of ``mission`` (for the arms in ``arms``; all when None),
+    a part held with the EE as wide as ``widths`` says for its kind (0 when not given), as while
+    it is placed and its add rivet set."""
+    widths = {} if widths is None else widths
     wanted = set(cfg.arm_names if arms is None else arms)
     report = ReachReport()
     placed: list[str] = []
     scenes: dict[tuple, tuple[CollisionScene, CollisionScene]] = {}
     resolution = cfg.planning["dense_check_resolution"]
 
-    def scene_for(arm: str, bay: int, carrying: str | None, tower: tuple[str, ...]):
-        key = (arm, bay, carrying, tower)
+    def scene_for(arm: str, bay: int, carrying: str | None, tower: tuple[str, ...], width: float):
+        key = (arm, bay, carrying, tower, width)
         if key not in scenes:
             scenes.clear()  # one scene at a time: each step sees a different tower
-            scenes[key] = tuple(
-                build_scene(cfg, arm, mission, placed=tower, bay=bay, carrying=carrying, contact=contact)
-                for contact in (False, True)
-            )
+            kw = dict(placed=tower, bay=bay, carrying=carrying, width=width)
+            scenes[key] = tuple(build_scene(cfg, arm, mission, contact=c, **kw) for c in (False, True))
         return scenes[key]
 
     def check(member: object, arm: str, step: str, carrying: str | None, tower: tuple[str, ...],
-              targets: Callable[[], list[Target]]) -> None:  # fmt: skip
+              targets: Callable[[], list[Target]], width: float = 0.0) -> None:  # fmt: skip
         if arm not in wanted:
             return
         if arm not in cfg.arm_names:
             report.issues.append(ReachIssue(member.id, arm, step, f"no arm '{arm}' in {cfg.source}"))
             return
-        full, contact = scene_for(arm, member.bay, carrying, tower)
+        full, contact = scene_for(arm, member.bay, carrying, tower, width)
         candidates = targets()
         found, reason = first_reachable(full, contact, candidates, cfg.home(arm), resolution)
         if found is None:
@@ -222,18 +228,26 @@ def check_mission_reach(cfg: SceneConfig, mission: object, arms: Iterable[str] |
                   lambda m=member, j=joint, a=arm: rivet_targets(cfg, mission, m, j, a))  # fmt: skip
             continue
         arm = member.add_ars
+        width = float(widths.get(member.kind, 0.0))
         check(member, arm, "place", member.kind, before,
-              lambda m=member, a=arm: placement_targets(cfg, mission, m, a))  # fmt: skip
+              lambda m=member, a=arm: placement_targets(cfg, mission, m, a), width)  # fmt: skip
         # Rivets go in with the member placed, but the gun engages it: leave it out of the obstacles.
+        # The add rivet is set before the EE lets go of the member, at the member's width.
         for rivet in member.rivets:
+            w = width if rivet.step == "add" else 0.0
             check(member, rivet.ars, f"{rivet.step} rivet at {rivet.joint}", None, before,
-                  lambda m=member, r=rivet: rivet_targets(cfg, mission, m, r.joint, r.ars))  # fmt: skip
+                  lambda m=member, r=rivet: rivet_targets(cfg, mission, m, r.joint, r.ars), w)  # fmt: skip
     return report
 
 
-def require_reachable(cfg: SceneConfig, mission: object, arms: Iterable[str] | None = None) -> ReachReport:
+def require_reachable(
+    cfg: SceneConfig,
+    mission: object,
+    arms: Iterable[str] | None = None,
+    widths: Mapping[str, float] | None = None,
+) -> ReachReport:
     """:func:`check_mission_reach`, raising :class:`UnreachableMember` when anything is out of reach."""
-    report = check_mission_reach(cfg, mission, arms)
+    report = check_mission_reach(cfg, mission, arms, widths)
     if not report.ok:
         raise UnreachableMember(getattr(mission, "name", "?"), report.issues)
     return report

@@ -12,6 +12,11 @@ Tool frame conventions (docs/motion-planning.md):
 * A cross frame is held at the middle of one side, along tool x, the frame extending along
   tool +y; tool z points down.
 * A rivet gun sits at tool (+-gun_offset, 0, 0): riveting a joint puts one gun on it.
+* A strut is held with gun 0 on one end, ready for its add rivet: one longer than the guns' span
+  (a diagonal) has its middle off the tool, towards gun 1 (:func:`held_offset`). Jaws closing on
+  a tube hold it where it lies along them, so the offset is kept from the grasp to the placement.
+* The end effector widens by sliding gripper b and gun b out along tool +x: a diagonal is grasped
+  with the grippers spread (its width in the ARS configuration), which moves no target.
 """
 
 from __future__ import annotations
@@ -24,10 +29,16 @@ from typing import Any
 import numpy as np
 
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
-from tlt_ars.planning.world import SceneConfig, dispenser_frame, member_segments, tower_origin
+from tlt_ars.planning.world import (
+    GUN_OFFSET,
+    SceneConfig,
+    dispenser_frame,
+    held_offset,
+    member_segments,
+    tower_origin,
+)
 
-# Distance of each rivet gun from the grasp centre along the bar (grip spacing / 2 + gun offset).
-DEFAULT_GUN_OFFSET = 0.375
+DEFAULT_GUN_OFFSET = GUN_OFFSET
 _DOWN = np.array([0.0, 0.0, -1.0])
 
 
@@ -72,23 +83,36 @@ def _horizontal_approaches(axis: np.ndarray, towards: np.ndarray) -> list[np.nda
     return sorted(good, key=lambda d: -float(np.dot(d, flat)))
 
 
+def part_in_tool(mission: Any, kind: str) -> np.ndarray:
+    """The frame of a held ``kind`` part (its middle, x along it) in the tool frame (4x4)."""
+    return pose_matrix((held_offset(mission, kind), 0.0, 0.0))
+
+
+def _holding(targets: list[Target], offset: float) -> list[Target]:
+    """Tool targets holding a part with its middle ``offset`` along tool x, from ``targets`` that
+    put the tool on the part's middle."""
+    if offset == 0.0:
+        return targets
+    back = pose_matrix((-offset, 0.0, 0.0))
+    return [Target(t.label, t.pose @ back, t.pre_pose @ back) for t in targets]
+
+
 def strut_targets(
     p0: np.ndarray,
     p1: np.ndarray,
     arm_base: np.ndarray,
     approach: float,
-    origin_shift: float = 0.0,
     signs: tuple[float, ...] = (1.0, -1.0),
 ) -> list[Target]:
-    """Candidates for holding the strut p0..p1 at its middle (shifted by ``origin_shift`` along
-    it), coming from the arm's side, with the bar along the strut: tool x towards p1 ("bar +",
-    rivet gun 0 at p0) and/or towards p0 ("bar -"), as ``signs`` say."""
+    """Candidates for holding the strut p0..p1 at its middle, coming from the arm's side, with
+    the bar along the strut: tool x towards p1 ("bar +", rivet gun 0 at p0) and/or towards p0
+    ("bar -"), as ``signs`` say."""
     mid = (p0 + p1) / 2
     u = (p1 - p0) / np.linalg.norm(p1 - p0)
     out = []
     for k, d in enumerate(_horizontal_approaches(u, mid - arm_base[:3, 3])):
         for sign in signs:
-            pose = frame_from_axes(mid + origin_shift * sign * u, sign * u, d)
+            pose = frame_from_axes(mid, sign * u, d)
             out.append(_target(f"approach {k} bar {'+' if sign > 0 else '-'}", pose, -approach * d))
     return out
 
@@ -127,7 +151,7 @@ def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: st
         # A whole run placed a near vertical with gun 0 at the wrong end: its add rivet joined the
         # bottom joint, and the affix rivet meant for it found that end taken.
         signs = (1.0, -1.0) if not add else (1.0,) if add[0] == member.joints[0][0] else (-1.0,)
-        return strut_targets(p0, p1, base, approach, signs=signs)
+        return _holding(strut_targets(p0, p1, base, approach, signs=signs), held_offset(mission, member.kind))
     return []
 
 
@@ -174,7 +198,8 @@ def dispenser_targets(
     gun_offset: float = DEFAULT_GUN_OFFSET,
 ) -> list[Target]:
     """Where ``arm`` grasps the top part of ``dispenser`` (``remaining`` parts, full when omitted);
-    the pre-pose is straight above it. A rivet is picked up by a gun."""
+    the pre-pose is straight above it. A strut is grasped off its middle by :func:`held_offset`;
+    a rivet is picked up by gun 0."""
     disp = mission.dispensers[dispenser]
     racks = cfg.raw["dispensers"]
     approach = cfg.raw["end_effector"]["approach_distance"]
@@ -204,7 +229,7 @@ def dispenser_targets(
     for sign in (1.0, -1.0):
         pose = frame_from_axes(centre, sign * axis, _DOWN)
         out.append(_target(f"bar {'+' if sign > 0 else '-'}", pose, up))
-    return out
+    return _holding(out, held_offset(mission, disp.part_kind, gun_offset))
 
 
 def rivet_pickup_point(cfg: SceneConfig, dispenser: Any) -> np.ndarray:
@@ -241,6 +266,7 @@ __all__ = [
     "dispenser_targets",
     "frame_from_axes",
     "inspection_targets",
+    "part_in_tool",
     "placement_targets",
     "poses",
     "rivet_pickup_point",

@@ -64,7 +64,13 @@ _ARM = {
     ),
 }
 _POSE = {"position": _vec(3), "rpy": _vec(3)}
-_BOX = {"name": Field("str"), "position": _vec(3), "size": _positive_vec(3)}
+# A box on the width slide (gripper b, gun b) moves out along flange x with the EE width joint.
+_BOX = {
+    "name": Field("str"),
+    "position": _vec(3),
+    "size": _positive_vec(3),
+    "on_width_slide": opt("bool", False),
+}
 # Uprights of a part rack: each stands `beyond_part` (x, y) out from the stowed parts' ends/sides
 # (a strut has no y extent), a square post of side `section`, rising `above_top_slot` above the
 # top part of a full dispenser.
@@ -201,8 +207,14 @@ class SceneConfig:
         lower, upper = self.joint_limits(arm)
         return Ur10eKinematics(base=self.base(arm), tool=self.tool(), lower=lower, upper=upper)
 
-    def ee_boxes(self) -> list[tuple[str, np.ndarray, Sequence[float]]]:
-        return [(b["name"], pose_matrix(b["position"]), b["size"]) for b in self.raw["end_effector"]["boxes"]]
+    def ee_boxes(self, width: float = 0.0) -> list[tuple[str, np.ndarray, Sequence[float]]]:
+        """The end effector's boxes (flange frame) with the width joint at ``width`` (m)."""
+        out = []
+        for b in self.raw["end_effector"]["boxes"]:
+            x, y, z = b["position"]
+            slide = width if b["on_width_slide"] else 0.0
+            out.append((b["name"], pose_matrix((x + slide, y, z)), b["size"]))
+        return out
 
 
 def _check_semantics(raw: dict[str, Any], source: str) -> None:
@@ -233,6 +245,11 @@ def scene_config_from_dict(data: dict[str, Any], source: str = "<scene>") -> Sce
     raw = validate(data, SCHEMA, source=source)
     _check_semantics(raw, source)
     return SceneConfig(raw, source)
+
+
+# Distance of each rivet gun from the tool along the bar with the width joint at 0 (grip spacing
+# / 2 + gun offset; the twin's end effector, config/twin/edu.yaml).
+GUN_OFFSET = 0.375
 
 
 # ----- shapes of the world -----
@@ -378,9 +395,19 @@ def tower_shapes(cfg: SceneConfig, mission: Any, placed: Iterable[str], bay: int
     return shapes
 
 
+def held_offset(mission: Any, kind: str, gun_offset: float = GUN_OFFSET) -> float:
+    """How far along tool x the middle of a held ``kind`` part is from the tool: a strut sits with
+    its end at gun 0 (0 for a vertical, which spans both guns; 0.155 m for the EDU's diagonal); a
+    cross frame is held at the middle of its side."""
+    if kind not in ("vertical", "diagonal"):
+        return 0.0
+    return mission.strut_lengths[kind] / 2 - gun_offset
+
+
 def carried_capsules(cfg: SceneConfig, mission: Any, kind: str) -> list[Capsule]:
-    """A part held at the tool, in the tool frame: a strut along tool x centred on the tool; a cross
-    frame held at the middle of one side (along tool x), the frame extending along tool +y."""
+    """A held part in the tool frame: a strut along tool x, its middle where :func:`held_offset`
+    says; a cross frame held at the middle of one side (along tool x), the frame extending along
+    tool +y."""
     tw = cfg.raw["tower"]
     r, c = tw["member_radius"], tw["end_clearance"]
     if kind == "cross_frame":
@@ -392,8 +419,8 @@ def carried_capsules(cfg: SceneConfig, mission: Any, kind: str) -> list[Capsule]
             out.append(Capsule(f"cross_frame/side_{i}", tuple(a), tuple(b), r))
         return out
     if kind in ("vertical", "diagonal"):
-        length = mission.strut_lengths[kind]
-        a, b = _shortened(np.array([-length / 2, 0, 0]), np.array([length / 2, 0, 0]), c)
+        mid, half = held_offset(mission, kind), mission.strut_lengths[kind] / 2
+        a, b = _shortened(np.array([mid - half, 0, 0]), np.array([mid + half, 0, 0]), c)
         return [Capsule(kind, tuple(a), tuple(b), r)]
     return []
 
@@ -408,16 +435,18 @@ def build_scene(
     other_arm_q: Sequence[float] | None = None,
     carrying: str | None = None,
     contact: bool = False,
+    width: float = 0.0,
 ) -> CollisionScene:
     """A collision scene for ``arm``: the static world, the tower as built while bay ``bay`` is
     under construction (members in ``placed``), the other arm at ``other_arm_q`` (its home when
     omitted) and, when ``carrying`` names a part kind, that part in the tool. With ``contact`` the
-    end effector and the part may touch the tower (the final move onto a joint)."""
+    end effector and the part may touch the tower (the final move onto a joint). ``width`` is
+    where the EE width joint stands (gripper b and gun b move with it)."""
     kin = cfg.kinematics(arm)
     scene = CollisionScene(
         kin,
         link_radii=cfg.raw["link_radii"],
-        ee_boxes=cfg.ee_boxes(),
+        ee_boxes=cfg.ee_boxes(width),
         padding=cfg.padding,
         name=arm,
         allowed=[("link_1", f"{arm}/pedestal")],
@@ -439,12 +468,14 @@ def build_scene(
 
 __all__ = [
     "DEFAULT_SCENE",
+    "GUN_OFFSET",
     "SCHEMA",
     "SceneConfig",
     "build_scene",
     "carried_capsules",
     "dispenser_frame",
     "dispenser_shapes",
+    "held_offset",
     "load_scene_config",
     "member_segments",
     "scene_config_from_dict",

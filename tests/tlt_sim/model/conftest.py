@@ -48,13 +48,14 @@ class Mover:
             self.scene.command_position(names.grasp_joint(self.arm, side), closed if close else opened)
         self.scene.advance(settle_s)
 
-    def pick(self, part: str) -> None:
-        """Grasp ``part`` where it lies: tool down, grasp line along the part's axis."""
+    def pick(self, part: str, along: float = 0.0) -> None:
+        """Grasp ``part`` where it lies, ``along`` its grasp line from its grasp point: tool down,
+        grasp line along the part's axis."""
         s = self.scene
         info = s.part(part)
         pos, rot = s.body_pose(info.body)
         point, axis = info.grasps[0]
-        target = pos + rot @ point
+        target = pos + rot @ point + along * (rot @ axis)
         r = frame(rot @ axis, [0.0, 0.0, -1.0])
         self.to(target + np.array([0.0, 0.0, 0.1]), r)
         self.to(target, r)

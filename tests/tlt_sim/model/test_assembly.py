@@ -87,6 +87,28 @@ def test_grasp_holds_while_jaws_ease_and_lets_go_once_they_open(scene, mover):
     assert scene.holding(arm) is None and scene.part_state(part) != "grasped"
 
 
+def test_jaws_hold_a_diagonal_where_it_lies_along_them_and_miss_it_past_its_tube(scene, mover):
+    """The ARS takes a diagonal off its middle (gun 0 on its end): the grasp keeps that offset. A
+    grasp with a jaw beyond the tube, on an end fitting, takes nothing."""
+    arm, part = "ars_x", "diagonal_dispenser_x/0"
+    info = scene.part(part)
+    m = mover(scene, arm)
+    m.pick(part, along=-0.155)
+    body = scene.part(part).body
+    assert scene.holding(arm) == body
+    centre, axis = scene.assembly.grasp_line(arm)
+    pos, rot = scene.body_pose(body)
+    middle = pos + rot @ info.grasps[0][0]
+    assert abs(abs(float((middle - centre) @ axis)) - 0.155) < 0.005
+    assert np.linalg.norm(np.cross(middle - centre, axis)) < 0.005  # drawn onto the jaws' line
+
+    m.jaws(False, settle_s=0.3)
+    scene.reset()
+    jaws = np.linalg.norm(scene.site_position(f"{arm}/grip_b") - scene.site_position(f"{arm}/grip_a")) / 2
+    m.pick(part, along=info.grasp_span - jaws + 0.02)
+    assert scene.holding(arm) is None
+
+
 def test_top_grippers_carry_the_payloads_weight(scene):
     scene.advance(0.2)
     total = sum(scene.constraint_force(f"top/{i}/payload") for i in range(4))

@@ -70,3 +70,24 @@ def test_rivet_feeders_agree(scene):
         column, tray = m.geom(f"dispenser/{name}/column"), m.geom(f"dispenser/{name}/box")
         assert d.geom_xpos[column.id][2] + column.size[1] <= box_top + 1e-6, name  # half-length
         assert d.geom_xpos[tray.id][2] + tray.size[2] == pytest.approx(box_top, abs=1e-6), name
+
+
+@pytest.mark.parametrize("width", [0.0, 0.2])
+def test_end_effector_grippers_and_guns_agree_at_any_width(scene, width):
+    """The planner's gripper and gun boxes stand where the twin's are, on the width slide too (a
+    diagonal is carried at 0.2 m, gun 1 passing a lifter post by centimetres)."""
+    planning = load_scene_config()
+    boxes = {name: pose[:3, 3] for name, pose, _ in planning.ee_boxes(width)}
+    m, d = scene.model, scene.data
+    for arm in names.ARMS:
+        scene.set_joint_state(names.width_joint(arm), width)
+        flange_pos, flange_rot = scene.body_pose(names.ee_body(arm))
+        for side in ("a", "b"):
+            for twin_geom, planned in ((f"{arm}/rivet_gun_{side}/body", f"rivet_gun_{side}"),
+                                       (f"{arm}/grip_{side}", f"gripper_{side}")):  # fmt: skip
+                if twin_geom.endswith("body"):
+                    world = d.geom_xpos[m.geom(twin_geom).id]
+                else:
+                    world = scene.site_position(twin_geom)
+                local = flange_rot.T @ (world - flange_pos)
+                assert local[:2] == pytest.approx(boxes[planned][:2], abs=1e-3), (arm, twin_geom)
