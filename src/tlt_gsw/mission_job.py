@@ -25,7 +25,9 @@ not cleared in time, 2 bad usage, configuration, key or archive, 3 no acknowledg
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -310,6 +312,10 @@ def _print_summary(archive: Path, plot: Path | None, out: IO[str]) -> None:
 
 
 def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
+    if threading.current_thread() is threading.main_thread():
+        # A script's background job starts with SIGINT ignored, and Python then raises no
+        # KeyboardInterrupt: Ctrl-C or `kill -INT` must still end the job with its summary.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     defs = load_definitions(args.definitions)
     conf = load_link_config(args.config)
     gsw = conf["gsw"]

@@ -363,9 +363,11 @@ def test_ctrl_c_exits_130_and_prints_the_summary(tmp_path, keys):
     crs = FakeCrs(tmp_path, keys, gsw_port)
     try:
         link = link_yaml(tmp_path, keys, crs.port, gsw_port)
+        # Started as a script's background job is (SIGINT ignored), which CI's runner may do.
         proc = subprocess.Popen(
             [sys.executable, "-m", "tlt_gsw.mission_job", "--config", str(link), "mission", "--no-plot"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
         )  # fmt: skip
         deadline = time.monotonic() + 60
         while crs.commands != ["start"]:
