@@ -48,6 +48,7 @@ from tlt_ars.behaviours.parts import (
     request_inspection,
 )
 from tlt_ars.behaviours.vision import (
+    AlignmentSeen,
     LocateDispenser,
     MeasureAlignment,
     PartAligned,
@@ -212,6 +213,19 @@ class SubtreeBuilder:
             self.fine_alignment(),
         ]
 
+    def measure_alignment(self, name: str) -> Sequence:
+        """Measure the held or placed part with the EE cameras; a measurement that did not see it
+        (a whole run once found one of a placed cross frame's two corner joints missing from a
+        view, then both on a second look) is taken once more before it is judged."""
+        ctx = self.ctx
+        return _seq(
+            name,
+            [
+                MeasureAlignment("Measure", ctx),
+                _fallback("Seen", [AlignmentSeen("Part Seen?", ctx), MeasureAlignment("Look Again", ctx)]),
+            ],
+        )
+
     def fine_alignment(self) -> Sequence:
         """Measure the held part with the EE camera; if it is off, move it by the measured error
         and measure again."""
@@ -224,14 +238,14 @@ class SubtreeBuilder:
             "Correct Alignment",
             [
                 self._move("Correct Pose", correction),
-                MeasureAlignment("Measure Again", ctx),
+                self.measure_alignment("Measure Again"),
                 PartAligned("Aligned After Correction?", ctx),
             ],
         )
         return _seq(
             "Fine Alignment",
             [
-                MeasureAlignment("Measure Alignment", ctx),
+                self.measure_alignment("Measure Alignment"),
                 _fallback("Align", [PartAligned("Aligned?", ctx), correct]),
             ],
         )
@@ -251,7 +265,7 @@ class SubtreeBuilder:
                 release(ctx),
                 # Measured before the retreat: the D405s see the frame's corner joints from the
                 # grasp; from the pre-pose 0.7 m back they look at the floor in front of it.
-                MeasureAlignment("Verify Placement", ctx),
+                self.measure_alignment("Verify Placement"),
                 PartAligned("Placed?", ctx),
                 self._move("Retreat", lambda: back_out(ctx, "place")),
                 RecordMember("Record Placed", ctx, "placed"),

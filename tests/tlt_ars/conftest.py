@@ -40,7 +40,7 @@ from tlt_sim.emulators.ur_controller_process import URControllerProcess
 from tlt_ars.config import ars_config_from_dict, default_config_path
 from tlt_ars.node import ArsNode
 from tlt_ars.planning.kinematics import pose_error
-from tlt_ars.planning.targets import dispenser_targets, placement_targets
+from tlt_ars.planning.targets import dispenser_targets, part_in_tool, placement_targets
 from tlt_ars.planning.world import dispenser_frame
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
@@ -356,8 +356,11 @@ class Stack:
         except RuntimeError as exc:
             response.aligned, response.reason = False, str(exc)
             return response
+        # Vision reports the part's own frame (its middle), off the tool for a diagonal.
+        part = part @ part_in_tool(self.mission, member.kind)
         errors = [
-            pose_error(part, t.pose) for t in placement_targets(self.scene, self.mission, member, "ars_x")
+            pose_error(part, t.pose @ part_in_tool(self.mission, member.kind))
+            for t in placement_targets(self.scene, self.mission, member, "ars_x")
         ]
         pos, ang = min(errors, key=lambda e: e[0] + 0.1 * e[1])  # the candidate the part is nearest
         response.position_error, response.angle_error = float(pos), float(ang)

@@ -17,7 +17,8 @@ from tlt_ars.mission_state import Request
 from tlt_ars.motion import ExecuteTrajectory, MotionGoal, TrajectorySlot
 from tlt_ars.planning.kinematics import pose_error
 from tlt_ars.planning.planner import PlanningFailed
-from tlt_ars.planning.targets import placement_targets
+from tlt_ars.planning.targets import part_in_tool, placement_targets
+from tlt_ars.planning.world import tower_origin
 from tlt_ars.tree import failure_reason
 
 pytestmark = pytest.mark.timeout(240)
@@ -89,6 +90,8 @@ def test_add_member_vertical_loads_rivet_grabs_inspects_places_and_rivets(stack)
 
 
 def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspection(stack):
+    """The diagonal is placed where it belongs: held off its middle, with its middle on the middle
+    of its joints (vision reports the part's own frame)."""
     state = stack.ars.ctx.state
     before = state.remaining["diagonal_dispenser_x"]
     stack.inspection_verdicts[:] = [False]  # the CRS fails the first part
@@ -108,6 +111,10 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     assert stack.inspections[-2:] == ["bay1/diagonal/face_x0"] * 2
     assert max(widths) == pytest.approx(0.02, abs=0.002)  # extended before the grasp
     assert stack.width() == pytest.approx(0.0, abs=0.002)  # retracted after the rivet
+    middle = (stack.world.part_pose @ part_in_tool(stack.mission, "diagonal"))[:3, 3]
+    joints = [np.asarray(p) for _, p in stack.mission.member("bay1/diagonal/face_x0").joints]
+    origin = tower_origin(stack.scene, stack.mission, 1)
+    assert np.linalg.norm(middle - origin - (joints[0] + joints[1]) / 2) < 0.005
 
 
 def test_empty_dispenser_fails_the_request_with_that_reason(stack):

@@ -160,6 +160,22 @@ class PartAligned(Condition):
         return bool(a.aligned)
 
 
+class AlignmentSeen(Condition):
+    """True when the latest alignment measurement saw the part: its pose is certified, however far
+    off it is. False when vision did not see enough of it (a view missed an end piece), which is
+    worth a second look before the measurement is judged. Reads ``RequestData.alignment``."""
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+
+    def evaluate(self) -> bool:
+        a = self.ctx.data.alignment
+        seen = a is not None and bool(a.pose.certified)
+        self.feedback_message = "seen" if seen else "not seen" if a is None else f"not seen: {a.reason}"
+        return seen
+
+
 def corrected_target(ctx: ArsContext, key: str) -> Target:
     """The tool pose that moves the held part from where vision saw it to the chosen placement
     target ``RequestData.targets[key]`` (the part frame is the tool frame at the grasp)."""
@@ -206,6 +222,7 @@ def verify_rivet_loaded(ctx: ArsContext, name: str = "Verify Rivet Loaded") -> S
 
 
 __all__ = [
+    "AlignmentSeen",
     "LocateDispenser",
     "MeasureAlignment",
     "PartAligned",
