@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from tlt_ars.planning.reachability import reach_target
-from tlt_ars.planning.targets import placement_targets
+from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
@@ -36,6 +36,7 @@ names = pytest.importorskip("tlt_sim.model.names")
 
 ROOT = Path(__file__).resolve().parents[2]
 RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
+ARS_X = load_yaml(ROOT / "config" / "ars" / "ars_x.yaml")
 MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
 MEMBER = MISSION.member("bay1/cross_frame")
 CAMERAS = ("ars_x/d405_a", "ars_x/d405_b")
@@ -131,10 +132,15 @@ def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, np.cross(u, a)
 
 
-def test_a_held_vertical_is_aligned_from_the_end_fittings_each_d405_sees(inspector, tmp_path):
-    member = MISSION.member("bay1/vertical/x0_y1")
+@pytest.mark.parametrize("member_id", ["bay1/vertical/x0_y1", "bay1/diagonal/face_x0"])
+def test_a_held_strut_is_aligned_from_the_end_fittings_each_d405_sees(inspector, tmp_path, member_id):
+    """A diagonal is held off its middle, the EE widened (config/ars/ars_x.yaml): D405 b, on the
+    width slide, still sees the fitting at the far end."""
+    member = MISSION.member(member_id)
+    width = ARS_X["end_effector"]["width"][member.kind]
     cfg = load_scene_config()
-    kw = dict(placed={"bay1/cross_frame"}, bay=1, carrying="vertical")
+    before = [m.id for m in MISSION.members if m.kind in ("cross_frame", "vertical") and m.id != member_id]
+    kw = dict(placed=set(before), bay=1, carrying=member.kind, width=width)
     free = build_scene(cfg, "ars_x", MISSION, contact=False, **kw)
     contact = build_scene(cfg, "ars_x", MISSION, contact=True, **kw)
     q = None
@@ -148,24 +154,26 @@ def test_a_held_vertical_is_aligned_from_the_end_fittings_each_d405_sees(inspect
     tool = cfg.kinematics("ars_x").forward(q)
     scene = scene_mod.Scene(out_dir=tmp_path)
     with scene:
-        scene.stage_member("bay1/cross_frame")
+        for placed in before:
+            scene.stage_member(placed)
         for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
             scene.set_joint_state(j, float(v))
+        scene.set_joint_state(names.width_joint("ars_x"), width)
         mujoco.mj_forward(scene.model, scene.data)
-        part = scene.part(scene.next_part("vertical_dispenser_x"))
-        centre, axis = scene.assembly.grasp_line("ars_x")
+        part = scene.part(scene.next_part(member.dispenser))
+        middle = (tool @ part_in_tool(MISSION, member.kind))[:3, 3]
+        axis = tool[:3, 0]
         along = part.ends["b"] - part.ends["a"]
         along /= np.linalg.norm(along)
         onto = np.column_stack([axis, *_perpendiculars(axis)])
         seated = onto @ np.column_stack([along, *_perpendiculars(along)]).T
-        scene.place_part(part.name, centre - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
-        seen = _pieces_seen(scene, inspector, "end_fitting", "vertical")
+        scene.place_part(part.name, middle - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
+        seen = _pieces_seen(scene, inspector, "end_fitting", member.kind)
     site = load_config().raw["site"]
     origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
     joints = [origin + np.asarray(p) for _, p in member.joints]
-    result = held_part_alignment(
-        "vertical", expected_pieces("vertical", joints, inspector.parts), seen, tool, inspector.tol, gate=0.1
-    )
-    assert result.aligned and result.matched == 2, result
+    pieces = expected_pieces(member.kind, joints, inspector.parts)
+    result = held_part_alignment(member.kind, pieces, seen, tool, inspector.tol, gate=0.1)
+    assert result.aligned and result.matched == 2, (result, seen, pieces)
     assert result.position_error < 0.002
-    assert np.linalg.norm(result.held[:3, 3] - tool[:3, 3]) < 0.002
+    assert np.linalg.norm(result.held[:3, 3] - middle) < 0.002

@@ -72,10 +72,10 @@ def test_rivet_feeders_agree(scene):
         assert d.geom_xpos[tray.id][2] + tray.size[2] == pytest.approx(box_top, abs=1e-6), name
 
 
-@pytest.mark.parametrize("width", [0.0, 0.2])
+@pytest.mark.parametrize("width", [0.0, 0.25])
 def test_end_effector_grippers_and_guns_agree_at_any_width(scene, width):
     """The planner's gripper and gun boxes stand where the twin's are, on the width slide too (a
-    diagonal is carried at 0.2 m, gun 1 passing a lifter post by centimetres)."""
+    diagonal is carried at 0.25 m, gun 1 passing a lifter post by centimetres)."""
     planning = load_scene_config()
     boxes = {name: pose[:3, 3] for name, pose, _ in planning.ee_boxes(width)}
     m, d = scene.model, scene.data
