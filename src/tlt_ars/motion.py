@@ -347,9 +347,12 @@ class ExecuteTrajectory(ActionGoal):
             raise RuntimeError("nothing was planned")
         q = self.ctx.arm_q()
         start = np.asarray(self.slot.motion.trajectory.points[0].positions)
-        if q is None or float(np.max(np.abs(q - start))) > START_TOLERANCE:
+        if q is None:
+            raise RuntimeError(f"no fresh joint state on '{self.ctx.joint_topic}' to start from")
+        off = float(np.max(np.abs(q - start)))
+        if off > START_TOLERANCE:
             # The path was checked from where the arm stood when it was planned, and only from there.
-            raise RuntimeError("the arm is not where this trajectory was planned from")
+            raise RuntimeError(f"the arm is {off:.3f} rad from where this trajectory was planned from")
         arm = self.ctx.config.arm
         goal = FollowJointTrajectory.Goal()
         goal.trajectory = self.slot.motion.trajectory

@@ -255,7 +255,7 @@ def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
         time.sleep(0.05)
         execute.tick_once()
     assert execute.status == py_trees.common.Status.FAILURE
-    assert "not where this trajectory was planned from" in execute.feedback_message
+    assert "rad from where this trajectory was planned from" in execute.feedback_message
     assert np.allclose(ctx.arm_q(), q, atol=1e-3)
 
 
