@@ -8,7 +8,8 @@ bar points); the planner or the reachability check takes the first that works.
 
 Tool frame conventions (docs/motion-planning.md):
 
-* A strut is held at its middle, along tool x; the tool z is the approach direction.
+* A strut is held along tool x (a vertical at its middle, a diagonal off it: below); the tool z is
+  the approach direction.
 * A cross frame is held at the middle of one side, along tool x, the frame extending along
   tool +y; tool z points down.
 * A rivet gun sits at tool (+-gun_offset, 0, 0): riveting a joint puts one gun on it.
