@@ -39,7 +39,6 @@ from tlt_ars.planning.world import (
     tower_origin,
 )
 
-DEFAULT_GUN_OFFSET = GUN_OFFSET
 _DOWN = np.array([0.0, 0.0, -1.0])
 
 
@@ -89,12 +88,10 @@ def part_in_tool(mission: Any, kind: str) -> np.ndarray:
     return pose_matrix((held_offset(mission, kind), 0.0, 0.0))
 
 
-def _holding(targets: list[Target], offset: float) -> list[Target]:
-    """Tool targets holding a part with its middle ``offset`` along tool x, from ``targets`` that
-    put the tool on the part's middle."""
-    if offset == 0.0:
-        return targets
-    back = pose_matrix((-offset, 0.0, 0.0))
+def _holding(targets: list[Target], mission: Any, kind: str) -> list[Target]:
+    """Tool targets holding a ``kind`` part where :func:`part_in_tool` has it, from ``targets``
+    that put the tool on the part's middle."""
+    back = np.linalg.inv(part_in_tool(mission, kind))
     return [Target(t.label, t.pose @ back, t.pre_pose @ back) for t in targets]
 
 
@@ -152,7 +149,7 @@ def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: st
         # A whole run placed a near vertical with gun 0 at the wrong end: its add rivet joined the
         # bottom joint, and the affix rivet meant for it found that end taken.
         signs = (1.0, -1.0) if not add else (1.0,) if add[0] == member.joints[0][0] else (-1.0,)
-        return _holding(strut_targets(p0, p1, base, approach, signs=signs), held_offset(mission, member.kind))
+        return _holding(strut_targets(p0, p1, base, approach, signs=signs), mission, member.kind)
     return []
 
 
@@ -162,7 +159,7 @@ def rivet_targets(
     member: object,
     joint: str,
     arm: str,
-    gun_offset: float = DEFAULT_GUN_OFFSET,
+    gun_offset: float = GUN_OFFSET,
 ) -> list[Target]:
     """Where the tool goes to put a rivet gun on ``joint`` of ``member`` (bar along the member,
     or vertical for a foundation rivet)."""
@@ -196,7 +193,7 @@ def dispenser_targets(
     dispenser: str,
     arm: str,
     remaining: int | None = None,
-    gun_offset: float = DEFAULT_GUN_OFFSET,
+    gun_offset: float = GUN_OFFSET,
 ) -> list[Target]:
     """Where ``arm`` grasps the top part of ``dispenser`` (``remaining`` parts, full when omitted);
     the pre-pose is straight above it. A strut is grasped off its middle by :func:`held_offset`;
@@ -230,7 +227,7 @@ def dispenser_targets(
     for sign in (1.0, -1.0):
         pose = frame_from_axes(centre, sign * axis, _DOWN)
         out.append(_target(f"bar {'+' if sign > 0 else '-'}", pose, up))
-    return _holding(out, held_offset(mission, disp.part_kind, gun_offset))
+    return _holding(out, mission, disp.part_kind)
 
 
 def rivet_pickup_point(cfg: SceneConfig, dispenser: Any) -> np.ndarray:
@@ -261,7 +258,6 @@ def poses(targets: Iterable[Target]) -> list[np.ndarray]:
 
 
 __all__ = [
-    "DEFAULT_GUN_OFFSET",
     "Target",
     "cross_frame_targets",
     "dispenser_targets",

@@ -8,16 +8,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tlt_ars.planning.targets import DEFAULT_GUN_OFFSET, dispenser_targets, part_in_tool, placement_targets
-from tlt_ars.planning.world import carried_capsules, dispenser_frame, load_scene_config, tower_origin
+from tlt_ars.planning.targets import dispenser_targets, part_in_tool, placement_targets
+from tlt_ars.planning.world import (
+    GUN_OFFSET,
+    carried_capsules,
+    dispenser_frame,
+    load_scene_config,
+    tower_origin,
+)
 from tlt_common.mission.schema import load_mission
 
 MISSION = load_mission(Path(__file__).resolve().parents[3] / "missions" / "one_bay.yaml")
 
 
 def _gun_0(pose: np.ndarray) -> np.ndarray:
-    # Rivet gun 0 sits DEFAULT_GUN_OFFSET along tool -x (as rivet_targets puts it on a joint).
-    return (pose @ np.array([-DEFAULT_GUN_OFFSET, 0.0, 0.0, 1.0]))[:3]
+    # Rivet gun 0 sits GUN_OFFSET along tool -x (as rivet_targets puts it on a joint).
+    return (pose @ np.array([-GUN_OFFSET, 0.0, 0.0, 1.0]))[:3]
 
 
 @pytest.mark.parametrize(
@@ -50,7 +56,7 @@ def test_a_diagonal_is_held_the_same_way_from_its_grasp_to_its_placement():
     cfg = load_scene_config()
     member = MISSION.member("bay1/diagonal/face_x0")
     in_tool = part_in_tool(MISSION, "diagonal")
-    assert in_tool[0, 3] == pytest.approx(MISSION.strut_lengths["diagonal"] / 2 - DEFAULT_GUN_OFFSET)
+    assert in_tool[0, 3] == pytest.approx(MISSION.strut_lengths["diagonal"] / 2 - GUN_OFFSET)
     disp = MISSION.dispensers[member.dispenser]
     frame = dispenser_frame(cfg, disp)
     for t in dispenser_targets(cfg, MISSION, member.dispenser, member.add_ars):
