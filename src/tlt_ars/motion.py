@@ -185,9 +185,10 @@ class PlanMotion(Action):
     Reads: the arm's JointState (start), the mission state (tower), the held part, the other arm.
     Writes: the slot's trajectory; ``RequestData.targets[goal.key]`` when a candidate is chosen.
     RUNNING while the arm still moves (an aborted motion decelerating: a plan from a moving start
-    would not match where the arm is when it is sent) and while planning, together at most
-    ``timeouts.planning_s``. SUCCESS with a checked trajectory. FAILURE without a fresh arm state,
-    when the goal cannot be built, or with the planner's reason.
+    would not match where the arm is when it is sent), while its joint state is stale (a gap of a
+    second under load is no fault) and while planning, together at most ``timeouts.planning_s``.
+    SUCCESS with a checked trajectory. FAILURE when no fresh arm state comes in that time, when the
+    goal cannot be built, or with the planner's reason.
     """
 
     def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
@@ -206,13 +207,15 @@ class PlanMotion(Action):
     def update(self) -> Status:
         if self._future is None:
             start = self.ctx.arm_q()
-            if start is None:
-                return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
-            if not self._arm_stopped():
+            if start is None or not self._arm_stopped():
                 limit = self.ctx.config.timeouts["planning_s"]
                 if self.ctx.clock() - self._started > limit:
-                    return self.fail(f"the arm did not stop within {limit:g} s")
-                self.feedback_message = "waiting for the arm to stop"
+                    stale = f"no fresh joint state on '{self.ctx.joint_topic}'"
+                    why = stale if start is None else "the arm did not stop"
+                    return self.fail(f"{why} within {limit:g} s")
+                self.feedback_message = (
+                    "waiting for a fresh joint state" if start is None else "waiting for the arm to stop"
+                )
                 return Status.RUNNING
             try:
                 self._goal = self.goal()

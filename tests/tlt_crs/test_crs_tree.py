@@ -79,7 +79,8 @@ def test_start_is_refused_while_a_driver_is_silent_and_taken_once_it_reports(rig
     assert not crs_node.ctx.started and rig.recorder.requests == []
     rig.lifter.publishing = True
     crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="lifter state back")
-    assert _submit(crs_node, crs, "start").final[0] == AckStage.COMPLETED
+    final = _submit(crs_node, crs, "start").final
+    assert final[0] == AckStage.COMPLETED, final[1]
 
 
 def test_pause_holds_the_build_and_resume_continues_where_it_paused(rig, crs, crs_node):
@@ -246,4 +247,5 @@ def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
                                    f"vision: {ros_names.VISION_INSPECT_BAY} not up"
     rig.vision.serve()
     crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="vision back")
-    assert _submit(crs_node, crs, "start").final[0] == AckStage.COMPLETED
+    final = _submit(crs_node, crs, "start").final
+    assert final[0] == AckStage.COMPLETED, final[1]

@@ -23,7 +23,7 @@ def _config(tmp_path, crs, mission=None, **extra):
         "state_file": str(tmp_path / "state" / "tower.json"),
         "writable_blackboard": str(crs.REGISTRY),
         "tick_rate_hz": 50.0,
-        "timeouts": {"ars_server_s": 10.0, "service_s": 10.0, "forward_s": 0.5, "sensor_max_age_s": 0.5},
+        "timeouts": {"ars_server_s": 10.0, "service_s": 10.0, "forward_s": 0.5, "sensor_max_age_s": 1.5},
     }
     data.update(extra)
     path = tmp_path / "crs.yaml"
