@@ -55,7 +55,7 @@ class GripperSetup:
 @dataclass(frozen=True)
 class CameraSetup:
     joints: tuple[str, ...] = ("camera_mount_1", "camera_mount_2")
-    inward: tuple[float, ...] = (0.9, -0.9)  # rad: ZEDs look into the bay (Fig. 26)
+    inward: tuple[float, ...] = (1.15, 1.15)  # rad: ZEDs look into the bay (Fig. 26)
     outward: tuple[float, ...] = (0.0, 0.0)  # rad: ZEDs look at parts held by an ARS (Fig. 22)
     move_time_s: float = 1.5
     part_camera: str = "zed_left"

@@ -320,6 +320,14 @@ class VisionNode(Node):
         return self._report_msg(report, frame.stamp, frame.frame_id, {})
 
     # ----- InspectBay -----
+    def _tower_origin(self, bay: int) -> np.ndarray:
+        """Where the mission's tower frame stands (world) while bay ``bay`` is built and tested:
+        the lifter holds the bays above at the build level, bay ``bay``'s frame on the floor."""
+        site = self.config.raw["site"]
+        return np.asarray(site["base_origin"]) + np.array(
+            [0.0, 0.0, site["build_level"] + bay * self.mission.bay_height]
+        )
+
     def _inspect_bay(self, request: Any, response: Any) -> Any:
         started = time.monotonic()
         try:
@@ -334,7 +342,8 @@ class VisionNode(Node):
         deadline = self._deadline()
         target = f"bay{bay}"
         try:
-            expected = inspection.bay_joints(self.mission, bay)
+            origin, joints = self._tower_origin(bay), inspection.bay_joints(self.mission, bay)
+            expected = {k: origin + np.asarray(p) for k, p in joints.items()}
         except KeyError as exc:
             return self._failed(target, "bay", str(exc.args[0]))
         world = self.config.raw["world_frame"]
@@ -375,7 +384,10 @@ class VisionNode(Node):
             ):
                 continue  # the same joint seen by the other camera
             merged.append((o, oid))
-        report = inspection.inspect_bay(bay, expected, [o for o, _ in merged], self.tol)
+        report = inspection.inspect_bay(
+            bay, expected, [o for o, _ in merged], self.tol, self.config.raw["held_piece_gate"],
+            self.config.raw["bay_min_corner_joints"],
+        )  # fmt: skip
         if not report.passed and problems:
             report = replace(report, reasons=(*report.reasons, *problems))
         ids = {id(o.estimate): oid for o, oid in merged if o.estimate is not None}
@@ -416,10 +428,7 @@ class VisionNode(Node):
             request.position_tolerance if request.position_tolerance > 0 else self.tol.position,
             request.angle_tolerance if request.angle_tolerance > 0 else self.tol.angle,
         )
-        site = self.config.raw["site"]
-        origin = np.asarray(site["base_origin"]) + np.array(
-            [0.0, 0.0, site["build_level"] + member.bay * self.mission.bay_height]
-        )
+        origin = self._tower_origin(member.bay)
         joints = [origin + np.asarray(p, dtype=float) for _, p in member.joints]
         try:
             camera = self._camera(request.camera)

@@ -88,9 +88,10 @@ SCHEMA = {
     ),
     "camera_aliases": opt("map", {}, item=Field("str")),
     "part_depth_range": _vec(2),
-    "min_part_pixels": Field("int", minimum=1),
+    "min_part_area": Field("float", minimum=0.0, maximum=1.0),
     "part_gap": opt("float", 0.03, minimum=0.001),
     "held_piece_gate": opt("float", 0.1, minimum=0.001),
+    "bay_min_corner_joints": opt("int", 4, minimum=3),
     "lifter_cameras": Field(
         "map", item=Field("dict", schema={"joint": Field("str"), "hinge": _POSE, "optical": _POSE})
     ),

@@ -208,7 +208,9 @@ class PartInspector:
     ) -> list[Detection]:
         """The instances of the ``kind`` part (vertical, diagonal, cross_frame) presented."""
         raw = self.config.raw
-        common = {"depth_range": raw["part_depth_range"], "min_pixels": raw["min_part_pixels"]}
+        shape = depth.shape if depth is not None else next((d.mask.shape for d in detections), (0, 0))
+        min_pixels = max(1, round(raw["min_part_area"] * shape[0] * shape[1]))
+        common = {"depth_range": raw["part_depth_range"], "min_pixels": min_pixels}
         if kind == "cross_frame":
             return select_part(
                 detections,

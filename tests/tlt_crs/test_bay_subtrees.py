@@ -165,7 +165,7 @@ def test_test_bay_compresses_inspects_and_marks_the_bay_inspected(rig, crs, tmp_
     assert crs.tick_until(bay_test(ctx, 1, Actuators(ctx))) == Status.SUCCESS
     assert rig.top.engaged == [True] * 4 and rig.active.engaged == [True] * 4
     assert rig.vision.bay_calls == [1]
-    assert [g for g in rig.cameras.trajectories.goals] == [[0.9, -0.9], [0.0, 0.0]]
+    assert [g for g in rig.cameras.trajectories.goals] == [[1.15, 1.15], [0.0, 0.0]]
     # 50 N / 50000 N/m = 1 mm above the lowered position.
     assert all(abs(p - 0.101) < 1e-9 for p in rig.lifter.positions)
     assert all(ctx.model.states[m.id] == INSPECTED for m in ctx.mission.bay_members(1))

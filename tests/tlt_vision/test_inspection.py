@@ -178,36 +178,59 @@ def test_cross_frame_inspection():
     moved = inspect_cross_frame(
         "c", MISSION.bay_width, _cross_frame(np.random.default_rng(3), shift_corner=1), TOL
     )
-    assert not moved.passed and moved.reasons[0].startswith("corner joint at corner 1 off by 20.")
+    # The square fitted to the four joints spreads one corner's 2 cm; that corner is furthest off.
+    off = {r.split()[4]: float(r.split()[7]) for r in moved.reasons if r.startswith("corner joint at corner")}
+    assert not moved.passed and max(off, key=off.get) == "1" and off["1"] > 10.0, moved.reasons
     none = inspect_cross_frame("c", MISSION.bay_width, [], TOL)
     assert none.reasons == ("part not in view: no cross frame detected",)
 
 
-def _bay(rng, shift: str | None = None, drop: str | None = None) -> list[Observation]:
+def _bay(rng, shift: str | None = None, only: tuple[str, ...] | None = None,
+         stray: np.ndarray | None = None) -> list[Observation]:  # fmt: skip
+    """Certified corner joint poses of bay 1 (tower frame), as the ZEDs report them: ``shift``
+    moves one joint 2 cm (a sheared bay), ``only`` keeps those joints, ``stray`` adds a corner
+    joint there (another frame's, in view)."""
     joint = MODELS["corner_joint"]
     cam_r, cam_t = _rx(2.5) @ _ry(0.4), np.array([-0.3, 0.2, 1.2])  # tower frame -> camera frame
+    places = dict(bay_joints(MISSION, 1))
+    if stray is not None:
+        places["stray"] = tuple(stray)
     obs = []
-    for name, p in bay_joints(MISSION, 1).items():
-        if name == drop:
+    for name, p in places.items():
+        if only is not None and name not in only and name != "stray":
             continue
-        p = np.array(p) + (np.array([0.02, 0.0, 0.0]) if name == shift else 0.0)  # a sheared bay
+        p = np.array(p) + (np.array([0.02, 0.0, 0.0]) if name == shift else 0.0)
         t = cam_r @ p + cam_t
-        c = synthetic_view(joint, cam_r, t, 200, rng, noise=0.0005)
-        obs.append(Observation("corner_joint", _estimate(joint, c, cam_r, t)))
+        e = _estimate(joint, synthetic_view(joint, cam_r, t, 200, rng, noise=0.0005), cam_r, t)
+        in_tower = dataclasses.replace(e, translation=cam_r.T @ (np.asarray(e.translation) - cam_t))
+        obs.append(Observation("corner_joint", in_tower))
     return obs[::-1]  # the order of detections says nothing about which joint is which
 
 
 def test_bay_inspection():
     expected = bay_joints(MISSION, 1)
-    assert sorted(expected) == ["bay1/x0_y0", "bay1/x0_y1", "bay1/x1_y0", "bay1/x1_y1"]
-    good = inspect_bay(1, expected, _bay(np.random.default_rng(4)), TOL)
+    assert sorted(expected) == [f"bay{b}/x{x}_y{y}" for b in (0, 1) for x in (0, 1) for y in (0, 1)]
+
+    def inspect(observations):
+        return inspect_bay(1, expected, observations, TOL, gate=0.1, min_joints=4)
+
+    good = inspect(_bay(np.random.default_rng(4)))
     assert good.passed, good.reasons
-    bad = inspect_bay(1, expected, _bay(np.random.default_rng(4), shift="bay1/x1_y1"), TOL)
-    # A rigid fit spreads one joint's error over the square: the bay fails, naming joints off.
-    assert not bad.passed and all(r.startswith("corner joint bay1/") and "off by" in r for r in bad.reasons)
-    three = inspect_bay(1, expected, _bay(np.random.default_rng(4), drop="bay1/x0_y0"), TOL)
-    assert not three.passed and three.reasons[0] == "only 3 of 4 corner joints certified"
-    assert inspect_bay(1, expected, [], TOL).reasons[0] == "part not in view: no corner joint detected"
+    bad = inspect(_bay(np.random.default_rng(4), shift="bay1/x1_y1"))
+    # A rigid fit spreads one joint's error over the bay: it fails, naming joints off.
+    assert not bad.passed and all(r.startswith("corner joint bay") and "off by" in r for r in bad.reasons)
+    # What the ZEDs turned inward see: the corners beside them, top and bottom.
+    beside = ("bay0/x0_y0", "bay0/x1_y1", "bay1/x0_y0", "bay1/x1_y1")
+    assert inspect(_bay(np.random.default_rng(4), only=beside)).passed
+    sheared = inspect(_bay(np.random.default_rng(4), only=beside, shift="bay1/x1_y1"))
+    assert not sheared.passed
+    # Another frame's corner joint in view (a dispenser's stacked cross frame) is not the bay's.
+    stray = inspect(_bay(np.random.default_rng(4), only=beside, stray=np.array([-0.5, 0.0, -0.7])))
+    assert stray.passed, stray.reasons
+    top = inspect(_bay(np.random.default_rng(4), only=tuple(n for n in expected if n.startswith("bay0/"))))
+    assert not top.passed and top.reasons[0].startswith("only 4 of 8 corner joints seen where the bay stands")
+    assert "not seen: bay1/x0_y0, bay1/x0_y1" in top.reasons[0]
+    assert inspect([]).reasons[0] == "part not in view: no corner joint detected"
     with pytest.raises(KeyError):
         bay_joints(MISSION, 7)
 
