@@ -224,10 +224,10 @@ def inspect_cross_frame(
     hw = bay_width / 2
     square = np.array([[x, y, 0.0] for x, y in ((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))])
     joints, joint_bad = _split(observations, "corner_joint")
-    found: dict[int, np.ndarray] = {}
+    found: dict[int, int] = {}  # corner -> index into joints
     for i, c in enumerate(square @ rot.T + t):
         dists = [np.linalg.norm(np.asarray(j.translation) - c) for j in joints]
-        order = [k for k in np.argsort(dists) if not any(k == f for f in found.values())] if joints else []
+        order = [int(k) for k in np.argsort(dists) if k not in found.values()] if joints else []
         if not order or dists[order[0]] > tol.position * 4:
             reasons.append(f"missing corner joint at corner {i}")
         else:
