@@ -300,8 +300,16 @@ def default_plot_path(archive: Path) -> Path:
     return archive.with_name(archive.stem + "_timeline.png")
 
 
-def _print_summary(archive: Path, plot: Path | None, out: IO[str]) -> None:
-    summary = summarize_file(archive)
+def _last_packet_id(archive: Path) -> int:
+    conn = archive_query.open_archive(archive)
+    try:
+        return int(conn.execute("SELECT COALESCE(MAX(id), 0) FROM packets").fetchone()[0])
+    finally:
+        conn.close()
+
+
+def _print_summary(archive: Path, plot: Path | None, out: IO[str], after: int = 0) -> None:
+    summary = summarize_file(archive, after)
     print(format_summary(summary), file=out, flush=True)
     if plot is not None:
         from tlt_gsw.timeline_plot import plot_timeline
@@ -333,6 +341,8 @@ def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
     archive.parent.mkdir(parents=True, exist_ok=True)
     plot = None if args.no_plot else Path(args.plot) if args.plot else default_plot_path(archive)
     recorder = Recorder(archive)
+    # An archive kept across runs holds earlier runs: this job's summary starts after them.
+    first = _last_packet_id(archive)
     try:
         link = GswLink(
             defs,
@@ -377,7 +387,7 @@ def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
             pass
         link.close()
         print(f"wall time {time.monotonic() - started:.1f} s, exit status {code}", file=out, flush=True)
-    _print_summary(archive, plot, out)
+    _print_summary(archive, plot, out, after=first)
     return code
 
 
@@ -399,7 +409,8 @@ def add_mission_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--key-file", help="key file (default: link.yaml key_file or $TLT_GROUND_KEY_FILE)")
     p.add_argument("--key-id", type=int)
     p.add_argument("--archive", help="archive SQLite file (default: link.yaml gsw.archive)")
-    p.add_argument("--timeout", type=float, default=3600.0, help="give up after this many s (exit 3)")
+    # A one-bay build took 62 min of wall time on a loaded 2-core machine.
+    p.add_argument("--timeout", type=float, default=14400.0, help="give up after this many s (exit 3)")
     p.add_argument(
         "--fault-timeout", type=float, default=300.0,
         help="end when a fault stands this many s without being cleared (exit 1)",

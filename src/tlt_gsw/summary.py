@@ -19,6 +19,7 @@ in progress when it arrived.
 
 from __future__ import annotations
 
+import itertools
 import re
 import sqlite3
 from dataclasses import dataclass, field
@@ -157,16 +158,17 @@ class MissionSummary:
         return next((f for f in reversed(self.faults) if f.standing), None)
 
 
-def load_records(conn: sqlite3.Connection, kinds: tuple[str, ...] = KINDS) -> list[Record]:
-    """Every accepted packet of ``kinds`` and every command sent, with fields, in archive order.
+def load_records(conn: sqlite3.Connection, kinds: tuple[str, ...] = KINDS, after: int = 0) -> list[Record]:
+    """Every accepted packet of ``kinds`` and every command sent after packet id ``after``, with
+    fields, in archive order.
 
     Reads each field's range of the fields b-tree (clustered by field id) rather than scanning.
     """
     kind_list = ",".join("?" * len(kinds))
     rows = conn.execute(
-        f"SELECT id, direction, recorded_at, kind FROM packets WHERE status = 'ok' AND "
+        f"SELECT id, direction, recorded_at, kind FROM packets WHERE id > ? AND status = 'ok' AND "
         f"(kind IN ({kind_list}) OR (direction = 'tx' AND packet_type = 'tc')) ORDER BY id",
-        kinds,
+        (after, *kinds),
     ).fetchall()
     fields: dict[int, dict[str, Any]] = {row[0]: {} for row in rows}
     wanted = {row[3] for row in rows}
@@ -207,11 +209,12 @@ def _clearing_action(command: CommandRecord) -> str | None:
 _BAY_NUMBER = re.compile(r"bay (\d+)")
 
 
-def summarize(conn: sqlite3.Connection, archive: str = "") -> MissionSummary:
-    """Compute the summary of everything in the archive ``conn``."""
+def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> MissionSummary:
+    """Compute the summary of the archive ``conn`` from packet id ``after`` on (0: all of it; an
+    archive kept across runs holds earlier runs' packets before a job's first)."""
     summary = MissionSummary(archive=archive)
-    records = load_records(conn)
-    summary.packets = conn.execute("SELECT COUNT(*) FROM packets").fetchone()[0]
+    records = load_records(conn, after=after)
+    summary.packets = conn.execute("SELECT COUNT(*) FROM packets WHERE id > ?", (after,)).fetchone()[0]
     if records:
         summary.wall_start, summary.wall_end = records[0].recorded_at, records[-1].recorded_at
     by_security_seq: dict[int, CommandRecord] = {}
@@ -385,11 +388,12 @@ def _unpack_states(data: bytes, count: int) -> list[int]:
     return out
 
 
-def summarize_file(path: str | Path) -> MissionSummary:
-    """Open ``path`` read-only and summarize it (raises ArchiveError if it is not an archive)."""
+def summarize_file(path: str | Path, after: int = 0) -> MissionSummary:
+    """Open ``path`` read-only and summarize it from packet id ``after`` on (raises ArchiveError
+    if it is not an archive)."""
     conn = archive_query.open_archive(path)
     try:
-        return summarize(conn, str(path))
+        return summarize(conn, str(path), after)
     finally:
         conn.close()
 
@@ -437,8 +441,12 @@ def format_summary(s: MissionSummary) -> str:
     lines.append(f"    {'whole run':<14}{_seconds(sim_total):>9}  {_seconds(wall_total):>9}")
     refused = [c for c in s.commands if c.stage in ("rejected", "failed")]
     lines.append(f"  commands sent:    {len(s.commands)} ({len(refused)} rejected or failed)")
-    for c in refused:
-        lines.append(f"    {c.name} {c.stage}: {c.reason} {c.detail}".rstrip())
+    # A job asks for Start again while the system comes up: one line per run of like refusals.
+    for _, run in itertools.groupby(refused, key=lambda c: (c.name, c.stage, c.reason)):
+        same = list(run)
+        c, times = same[-1], f" {len(same)} times" if len(same) > 1 else ""
+        last = "last: " if len(same) > 1 else ""
+        lines.append(f"    {c.name} {c.stage}{times}: {c.reason} {last}{c.detail}".rstrip())
     return "\n".join(lines)
 
 

@@ -66,6 +66,12 @@ def two_bay_archive(tmp_path):
     """Two bays of one member each and a foundation rivet; a failed part, a fault the operator clears."""
     path = tmp_path / "run.sqlite"
     a = Archive(path)
+    _two_bay_run(a)
+    a.close()
+    return path
+
+
+def _two_bay_run(a: Archive) -> None:
     a.command(1000.0, "start", {}, 100, ("accepted", "none", ""), ("completed", "none", ""))
     a.step(1001.0, 50.0, "running", 1, "Index Payload 1", "Move Lifter Raise", 0, 0, 0)
     a.step(1003.0, 60.0, "running", 1, "bay1/cross_frame", "Send AddCrossFrame bay1/cross_frame", 0, 0, 0)
@@ -95,8 +101,6 @@ def two_bay_archive(tmp_path):
         "members_total": 3, "members_placed": 3, "members_riveted": 2, "current_step": "", "fault": "",
     })  # fmt: skip
     a.tm(1013.2, "hk_tower", {"member_count": 3, "member_states": bytes([0b11_11_10_00])})
-    a.close()
-    return path
 
 
 def test_summary_of_a_hand_made_archive_is_exact(two_bay_archive):
@@ -162,6 +166,24 @@ def test_summary_of_a_hand_made_archive_is_exact(two_bay_archive):
         assert line in text.splitlines(), (line, text)
 
 
+def test_a_job_summarizes_its_own_run_of_an_archive_kept_across_runs(tmp_path, two_bay_archive):
+    path = tmp_path / "kept.sqlite"
+    a = Archive(path)
+    a.command(500.0, "start", {}, 90, ("accepted", "none", ""), ("completed", "none", ""))
+    a.step(501.0, 10.0, "running", 1, "bay1/cross_frame", "Send AddCrossFrame bay1/cross_frame", 0, 0, 0)
+    a.event(502.0, "warning", "INSPECTION_FAILED", "bay1/vertical/x0_y0: part failed inspection: bent tube")
+    earlier = a.seq  # one packet each: the id of the earlier run's last
+    _two_bay_run(a)
+    a.close()
+    whole, own = summarize_file(path), summarize_file(path, after=earlier)
+    alone = summarize_file(two_bay_archive)
+    assert whole.wall_start == 500.0 and whole.inspection_counts() == (1, 2)
+    assert own.wall_start == alone.wall_start == 1000.0
+    assert own.inspection_counts() == alone.inspection_counts() == (1, 1)
+    assert [p.wall_s for p in own.phases] == [p.wall_s for p in alone.phases]
+    assert own.packets == alone.packets
+
+
 def test_a_fault_cleared_by_a_restart_and_one_that_stands(tmp_path):
     path = tmp_path / "faults.sqlite"
     a = Archive(path)
@@ -209,3 +231,17 @@ def test_plot_of_the_timeline_rows_and_categories(two_bay_archive, tmp_path):
     assert category("Wait For Help")[0] == "fault: waiting for help"
     path = plot_timeline(summarize_file(two_bay_archive), tmp_path / "t.png", title="two bays")
     assert path.read_bytes().startswith(b"\x89PNG")
+
+
+def test_like_refusals_in_a_row_are_one_line_with_their_count(tmp_path):
+    a = Archive(tmp_path / "run.sqlite")
+    refusals = ("not ready: lifter: no state yet", "not ready: vision not up", "not ready: vision not up")
+    for i, why in enumerate(refusals):
+        a.command(100.0 + i, "start", {}, 10 + i, ("rejected", "refused", why))
+    a.command(104.0, "start", {}, 14, ("accepted", "none", ""), ("completed", "none", ""))
+    a.command(105.0, "pause", {}, 15, ("rejected", "refused", "not started"))
+    a.close()
+    text = format_summary(summarize_file(tmp_path / "run.sqlite"))
+    assert "  commands sent:    5 (4 rejected or failed)" in text
+    assert "    start rejected 3 times: refused last: not ready: vision not up" in text
+    assert "    pause rejected: refused not started" in text
