@@ -128,7 +128,9 @@ msgs_stage() {
 # --- 5. this project --------------------------------------------------------------------------
 project_stage() {
     local h
-    h=$(hash_of pyproject.toml)
+    # The checkout is part of the stamp: a venv shared with another checkout ($TLT_VENV) must
+    # point its editable install at this one's sources.
+    h=$(hash_of pyproject.toml)-$(printf '%s' "$ROOT" | sha256sum | cut -c1-8)
     stamp_ok project "$h" && return 0
     say "installing the tlt project (editable)"
     pip_install --no-deps --no-build-isolation -e "$ROOT"
