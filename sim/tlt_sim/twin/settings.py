@@ -68,7 +68,7 @@ class TwinSettings:
         default_factory=lambda: {"ur_x": "127.0.0.2", "ur_y": "127.0.0.3"}
     )
     camera_rate_hz: float = 10.0
-    zed_size: tuple[int, int] = (320, 240)
+    zed_size: tuple[int, int] = (640, 480)
     d405_size: tuple[int, int] = (320, 240)
     camera_antialias: bool = True
     ground_truth_rate_hz: float = 10.0

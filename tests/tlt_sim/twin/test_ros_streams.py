@@ -70,15 +70,16 @@ def test_camera_renders_only_when_subscribed_and_segments_the_part_in_view(make_
     assert set(cams.renders) == {"zed_1"}, "only the subscribed camera renders"
     assert cams.renders["zed_1"] <= 10.0 * sim_span + 1, "no more than rate_hz frames per sim second"
     msg = got["seg"][0]
-    assert (msg.encoding, msg.width, msg.height) == ("32SC1", 320, 240)
+    w, h = cams.settings.zed_size
+    assert (msg.encoding, msg.width, msg.height) == ("32SC1", w, h)
     assert msg.header.frame_id == "zed_1_optical"
-    ids = np.frombuffer(bytes(msg.data), dtype=np.int32).reshape(240, 320)
+    ids = np.frombuffer(bytes(msg.data), dtype=np.int32).reshape(h, w)
     labels = json.loads(got["labels"][0].data)
     seen = {labels["instances"][i] for i in np.unique(ids[ids >= 0])}
     assert f"{part.body}/tube" in seen
     assert labels["classes"][labels["instances"].index(f"{part.body}/tube")] == "strut_tube"
     info = got["info"][0]
-    assert info.k[0] == pytest.approx(120.0 / np.tan(np.radians(scene.camera_fovy("zed_1")) / 2))
+    assert info.k[0] == pytest.approx(h / 2 / np.tan(np.radians(scene.camera_fovy("zed_1")) / 2))
 
 
 def test_ground_truth_poses_match_the_model(make_twin, ros):
