@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -48,6 +49,15 @@ class TwinLabels:
                 continue
             out.append(Detection(classes[i], seg == i, 1.0, names[i]))
         return out
+
+    @classmethod
+    def detect_render(cls, render: Any, camera: str) -> list[Detection]:
+        """The instances of a twin frame rendered in this process (``tlt_sim.model.Scene.render``)
+        by its own labels, as the launch set's vision takes the twin's frames over ROS."""
+        labels = cls(lambda: (render.labels.instance_names, render.labels.classes))
+        images = {"depth": render.depth, "segmentation": render.segmentation, "rgb": render.rgb}
+        k = render.intrinsics
+        return labels.detect(CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images))
 
 
 class MaskRcnnSegmenter:

@@ -20,7 +20,6 @@ import pytest
 
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.frames import CameraRig
 from tlt_vision.inspection import Observation, bay_joints, inspect_bay
 from tlt_vision.node_config import load_config
@@ -54,12 +53,7 @@ def _seen(tmp_path: Path, shift_bottom_frame: float = 0.0) -> list[Observation]:
         mujoco.mj_forward(scene.model, scene.data)
         for camera in CONFIG.raw["bay_cameras"]:
             f = scene.render(camera, ZED["width"], ZED["height"])
-            labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
-            frame = CameraFrame(
-                camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
-                {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
-            )  # fmt: skip
-            found = [d for d in labels.detect(frame) if d.object_class == "corner_joint"]
+            found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == "corner_joint"]
             pose = rig.pose_from_joints(camera, hinges)
             for o in inspector.observe("bay", found, f.depth, f.intrinsics, f.rgb):
                 if o.estimate is not None:

@@ -25,7 +25,6 @@ from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.inspection import expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
@@ -89,12 +88,7 @@ def _pieces_seen(scene, inspector, piece: str, pipeline: str) -> list[np.ndarray
     size = RUN["cameras"]["d405"]
     for camera in CAMERAS:
         f = scene.render(camera, size["width"], size["height"])
-        labels = TwinLabels(lambda f=f: (f.labels.instance_names, f.labels.classes))
-        frame = CameraFrame(
-            camera, 0.0, "optical", f.intrinsics, f.intrinsics.matrix,
-            {"depth": f.depth, "segmentation": f.segmentation, "rgb": f.rgb},
-        )  # fmt: skip
-        found = [d for d in labels.detect(frame) if d.object_class == piece]
+        found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == piece]
         for o in inspector.observe(pipeline, found, f.depth, f.intrinsics, f.rgb):
             if o.estimate is not None and o.estimate.certified:
                 seen.append(f.rotation @ o.estimate.translation + f.position)

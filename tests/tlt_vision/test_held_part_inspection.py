@@ -34,7 +34,6 @@ from tlt_ars.planning.kinematics import rpy_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.inspection import inspect_cross_frame, inspect_strut
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
@@ -95,16 +94,7 @@ def inspector(presented):
 
 
 def _detections(frame, camera=CAMERA):
-    labels = TwinLabels(lambda: (frame.labels.instance_names, frame.labels.classes))
-    camera_frame = CameraFrame(
-        camera,
-        0.0,
-        f"{camera}_optical",
-        frame.intrinsics,
-        frame.intrinsics.matrix,
-        {"depth": frame.depth, "segmentation": frame.segmentation, "rgb": frame.rgb},
-    )
-    return labels.detect(camera_frame)
+    return TwinLabels.detect_render(frame, camera)
 
 
 @pytest.fixture(scope="module")
