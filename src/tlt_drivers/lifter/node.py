@@ -287,6 +287,11 @@ def main(argv: list[str] | None = None) -> int:
         help="how long the firmware has to answer a state or mode request, overriding the YAML's (the "
         "twin answers from a busy process)",
     )
+    parser.add_argument(
+        "--link-timeout-s", type=float,
+        help="how long without telemetry is a link fault, overriding the YAML's (an emulated firmware "
+        "on a busy machine pauses longer than a Teensy)",
+    )
     own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-lifter", *args])[1:])
     try:
         config = load_lifter_config(own.config)
@@ -300,6 +305,11 @@ def main(argv: list[str] | None = None) -> int:
             print("tlt-lifter: --answer-timeout-s must be in (0, 10] s", file=sys.stderr)
             return 2
         config = dataclasses.replace(config, answer_timeout_s=own.answer_timeout_s)
+    if own.link_timeout_s is not None:
+        if not 0.0 < own.link_timeout_s <= 10.0:
+            print("tlt-lifter: --link-timeout-s must be in (0, 10] s", file=sys.stderr)
+            return 2
+        config = dataclasses.replace(config, link_timeout_s=own.link_timeout_s)
     rclpy.init(args=["tlt-lifter", *args])
     node = LifterNode(config)
     try:

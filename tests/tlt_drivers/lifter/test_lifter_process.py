@@ -77,8 +77,10 @@ def test_driver_process_publishes_serves_and_stops(tmp_path) -> None:
         assert code == 0, output
 
 
-def test_an_answer_timeout_out_of_range_is_refused_before_anything_starts(capsys):
+def test_an_answer_or_link_timeout_out_of_range_is_refused_before_anything_starts(capsys):
     from tlt_drivers.lifter.node import main
 
     assert main(["--answer-timeout-s", "0"]) == 2
     assert "--answer-timeout-s must be in (0, 10] s" in capsys.readouterr().err
+    assert main(["--link-timeout-s", "11"]) == 2
+    assert "--link-timeout-s must be in (0, 10] s" in capsys.readouterr().err
