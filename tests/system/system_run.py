@@ -410,10 +410,18 @@ class SystemRun:
     def recorded(self, topic: str) -> list[Any]:
         """The decoded messages of ``topic`` in the run's MCAP recording (complete once the
         launcher has stopped: the recorder closes the file on its way out)."""
+        from mcap.exceptions import McapError
+
         from tlt_common.recording.reading import read_messages
 
         path = self.run_dir / "recording.mcap"
-        return [decoded for _s, _c, _m, decoded in read_messages(path, topics=[topic])]
+        try:
+            return [decoded for _s, _c, _m, decoded in read_messages(path, topics=[topic])]
+        except McapError as exc:
+            said = [line for line in self.log_path.read_text(errors="replace").splitlines()
+                    if line.startswith("[recorder]") or (line.startswith("[launch]") and "recorder" in line)]
+            raise AssertionError(f"{path} is not a complete recording ({exc}); what the launch log "
+                                 "says of the recorder:\n" + "\n".join(said[-40:])) from exc
 
     # -- helpers ----------------------------------------------------------------------------
     def _wait(self, condition: Callable[[], bool], timeout: float, what: str) -> None:

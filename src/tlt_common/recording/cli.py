@@ -4,8 +4,12 @@ Writes ``--out`` (default ``${TLT_RUN_DIR:-/tmp/tlt-run}/recording.mcap``). A fi
 path is kept, renamed to ``recording.1.mcap`` (the first free number), so a restarted recorder
 never overwrites what a previous one wrote. On SIGINT or SIGTERM it stops subscribing, writes the
 summary and footer and exits 0; a second signal while it finishes is ignored so the file is
-completed. Exit 2: bad options or the file cannot be created; 1: writing failed midway (disk
-full), the messages written so far being recoverable with ``tlt-mcap-recover``.
+completed, and one that comes while it is still starting (the file just created) finishes it too.
+The signals only raise a flag that the spin loop checks between callbacks: rclpy's own handler
+raises ``KeyboardInterrupt`` wherever the interpreter is, halfway through writing a chunk or
+before the code that finishes the file is reached. Exit 2: bad options or the file cannot be
+created; 1: writing failed midway (disk full), the messages written so far being recoverable
+with ``tlt-mcap-recover``.
 
 ROS arguments (``--ros-args -p use_sim_time:=true``, ``-r __node:=name``) are passed to rclpy.
 """
@@ -19,11 +23,14 @@ import sys
 from pathlib import Path
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 from tlt_common.recording.mcap_writer import McapRecordingWriter, available_compressions
 from tlt_common.recording.recorder import RecorderTiming, TopicRecorder
 from tlt_common.recording.topic_filter import IMAGE_PATTERN, TopicFilter
+
+SIGNAL_CHECK_S = 0.1  # longest wait for traffic before the loop looks at the stop flag again
 
 
 def default_output() -> Path:
@@ -102,26 +109,29 @@ def main(argv: list[str] | None = None) -> int:
     if moved is not None:
         print(f"tlt-record: kept the previous {out.name} as {moved}", file=sys.stderr)
 
-    rclpy.init(args=["tlt-record", *argv])
+    # From here on a signal only asks to stop, and the file is finished however early it comes.
+    stop: list[int] = []  # a list append: a signal handler must not take locks
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop.append(signum))
     node = None
     status = 0
     try:
+        rclpy.init(args=["tlt-record", *argv], signal_handler_options=SignalHandlerOptions.NO)
         node = TopicRecorder(
             writer,
             topic_filter,
             RecorderTiming(args.discovery_period, args.flush_period, args.progress_period),
         )
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop and rclpy.ok():
+            executor.spin_once(timeout_sec=SIGNAL_CHECK_S)
+    except ExternalShutdownException:
         pass
     except OSError as exc:  # the disk filled up or the file went away: say so, keep what is there
         print(f"tlt-record: writing {out} failed: {exc}", file=sys.stderr)
         status = 1
     finally:
-        # The launcher follows SIGINT with SIGTERM after a grace period: finishing the file must
-        # not be cut short by either.
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, signal.SIG_IGN)
         status = max(status, _finish(node, writer, out))
         if node is not None:
             node.destroy_node()

@@ -323,3 +323,55 @@ def test_bad_options_exit_2_before_touching_ros(tmp_path: Path, capsys):
     assert main(["--out", str(blocker / "x.mcap")]) == 2
     assert "cannot write" in capsys.readouterr().err
     assert not rclpy.ok()  # the default context was never initialised
+
+
+def test_sigint_while_messages_pour_in_still_leaves_a_complete_file(ros_node, tmp_path: Path):
+    """The signal lands while the recorder is writing (tiny chunks, so nearly every message writes
+    one): the file must still close with its summary, readable by a seeking reader."""
+    import threading
+
+    topic = f"{PREFIX}/flood"
+    pub = ros_node.create_publisher(String, topic, 100)
+    payload = "x" * 4000
+    pouring = threading.Event()
+    pouring.set()
+
+    def pour() -> None:
+        while pouring.is_set():
+            pub.publish(String(data=payload))
+
+    pourer = threading.Thread(target=pour, daemon=True)
+    try:
+        for attempt in range(2):
+            out = tmp_path / f"flood{attempt}.mcap"
+            recorder = Recorder(out, "--topics", topic, "--chunk-size", "1024")
+            try:
+                wait_until(lambda: pub.get_subscription_count() > 0, "the recorder to subscribe")
+                if not pourer.is_alive():
+                    pourer.start()
+                wait_until(lambda out=out: flushed_counts(out)[topic] >= 200, "messages to be flushed")
+                assert recorder.stop(signal.SIGINT) == 0, recorder.log
+            finally:
+                recorder.stop(signal.SIGKILL)
+            recorded = list(read_messages(out, topics=[topic]))
+            assert len(recorded) >= 200 and all(m.decoded_message.data == payload for m in recorded)
+            wait_until(lambda: pub.get_subscription_count() == 0, "the recorder to leave the graph")
+    finally:
+        pouring.clear()
+        if pourer.is_alive():
+            pourer.join(timeout=5)
+        ros_node.destroy_publisher(pub)
+
+
+def test_a_signal_as_soon_as_the_file_exists_still_completes_it(tmp_path: Path):
+    """A launch set stopped while the recorder is still starting (a restart just before the
+    stop): the file it created must still get its summary and footer."""
+    for attempt in range(3):
+        out = tmp_path / f"early{attempt}.mcap"
+        recorder = Recorder(out, "--topics", f"{PREFIX}/nothing")
+        try:
+            wait_until(out.exists, "the recorder to create its file", timeout=30.0)
+            assert recorder.stop(signal.SIGINT) == 0, recorder.log
+        finally:
+            recorder.stop(signal.SIGKILL)
+        assert list(read_messages(out)) == [], recorder.log
