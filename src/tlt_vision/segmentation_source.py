@@ -5,9 +5,10 @@
   (``tlt_vision.cad.models.CLASSES``) becomes a :class:`~tlt_vision.pipeline.Detection` with
   score 1; the machine, tags and anything else are dropped. It needs the ``segmentation`` stream.
 * :class:`MaskRcnnSegmenter` runs the plain-torch Mask R-CNN on the RGB image with trained
-  weights; it needs the ``rgb`` stream. Weights that are missing or do not fit the model are
-  refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the path and the
-  tensor shape expected).
+  weights; it needs the ``rgb`` stream. The model's configuration and input size are the ones
+  the weights' manifest records (``segmentation.inference``). Weights that are missing or do not
+  fit the model are refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the
+  path and the tensor shape expected).
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
 labels received, no image).
@@ -20,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frames import CameraFrame
@@ -64,23 +64,21 @@ class MaskRcnnSegmenter:
     streams = ("rgb",)
 
     def __init__(self, weights: str | Path, min_score: float) -> None:
-        from tlt_vision.segmentation.config import MaskRCNNConfig
-        from tlt_vision.segmentation.model import MaskRCNN
-        from tlt_vision.weights import load_weights
+        from tlt_vision.segmentation.inference import load_mask_rcnn
 
-        self.cfg = MaskRCNNConfig()
-        self.model = MaskRCNN(self.cfg)
-        load_weights(self.model, weights, MASK_RCNN_KIND, list(self.cfg.classes))
-        self.model.eval()
+        # The configuration and the image size come from the weights' manifest, as trained.
+        self.model, manifest = load_mask_rcnn(weights)
+        self.cfg = self.model.cfg
+        self.max_size: int | None = manifest["settings"].get("max_size")
         self.min_score = min_score
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
+        from tlt_vision.segmentation.inference import detect_rgb
+
         rgb = frame.get("rgb")
         if rgb is None:
             raise ValueError("no RGB image")
-        image = torch.from_numpy(rgb.astype(np.float32) / 255.0).permute(2, 0, 1)[None]
-        with torch.no_grad():
-            result = self.model(image)[0]
+        result = detect_rgb(self.model, rgb, self.max_size)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
 

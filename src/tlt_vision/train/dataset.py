@@ -1,0 +1,130 @@
+"""Rendered training images on disk: one directory, an ``index.json`` and one ``.npz`` per image.
+
+The image renderer (:mod:`tlt_vision.train.render_dataset`) writes it and the Mask R-CNN trainer,
+the self-supervised C-3PO and the vision benchmarks read it, so the format lives here once.
+
+``index.json``::
+
+    {"format": "tlt-vision-images", "version": 1, "classes": [...], "width": 640, "height": 480,
+     "images": ["00000.npz", ...], "settings": {...how it was rendered...}}
+
+Each ``NNNNN.npz`` holds (``N`` instances, ``H`` x ``W`` pixels):
+
+===============  ================  =====================================================
+``rgb``          (H, W, 3) uint8   the colour image
+``depth``        (H, W) float32    metres along the optical axis, 0 where nothing was hit
+``masks``        (N, H, W) bool    one mask per visible part instance (stored bit-packed
+                                   along W as ``masks_packed``: the bool array is eight
+                                   times larger and compressing it took as long as rendering)
+``labels``       (N,) int64        1-based into ``classes`` (0 is the background)
+``names``        (N,) str          the twin's instance name (``bay1/vertical_x0_y0/tube``)
+``poses``        (N, 4, 4) float64 model-to-camera transform of each part (optical frame)
+``defects``      (N,) str          ``""`` for a good part, else the defect kind
+``intrinsics``   (3, 3) float64    the pinhole matrix K
+===============  ================  =====================================================
+
+:func:`read_index` and :class:`ImageSet` refuse a directory that is not such a set with an error
+naming the path and what is wrong.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FORMAT = "tlt-vision-images"
+VERSION = 1
+INDEX = "index.json"
+ARRAYS = ("rgb", "depth", "masks", "labels", "names", "poses", "defects", "intrinsics")
+
+
+class DatasetError(ValueError):
+    """A directory that is not a readable image set; the message names the path."""
+
+
+@dataclass
+class Sample:
+    rgb: np.ndarray
+    depth: np.ndarray
+    masks: np.ndarray
+    labels: np.ndarray
+    names: np.ndarray
+    poses: np.ndarray
+    defects: np.ndarray
+    intrinsics: np.ndarray
+
+
+def write_sample(path: str | Path, sample: Sample) -> None:
+    """Write one image's arrays (compressed: masks and depth compress tenfold)."""
+    n = len(sample.labels)
+    shapes = {"masks": (n, *sample.depth.shape), "names": (n,), "poses": (n, 4, 4), "defects": (n,)}
+    for key, shape in shapes.items():
+        if getattr(sample, key).shape != shape:
+            raise ValueError(f"{key} has shape {getattr(sample, key).shape}, expected {shape}")
+    arrays = {key: getattr(sample, key) for key in ARRAYS if key != "masks"}
+    arrays["masks_packed"] = np.packbits(sample.masks.astype(bool), axis=-1)
+    np.savez_compressed(path, **arrays)
+
+
+def write_index(root: str | Path, classes: list[str], width: int, height: int, images: list[str],
+                settings: dict[str, Any]) -> None:
+    index = {"format": FORMAT, "version": VERSION, "classes": list(classes), "width": width,
+             "height": height, "images": list(images), "settings": settings}
+    tmp = Path(root) / (INDEX + ".tmp")
+    tmp.write_text(json.dumps(index, indent=1))
+    tmp.replace(Path(root) / INDEX)  # a set interrupted mid-write keeps its last whole index
+
+
+def read_index(root: str | Path) -> dict[str, Any]:
+    path = Path(root) / INDEX
+    try:
+        index = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise DatasetError(f"{path}: no such file: not a rendered image set") from exc
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path}: not JSON: {exc}") from exc
+    if not isinstance(index, dict) or index.get("format") != FORMAT:
+        raise DatasetError(f"{path}: format is not {FORMAT!r}")
+    if index.get("version") != VERSION:
+        raise DatasetError(f"{path}: version {index.get('version')!r}, this code reads {VERSION}")
+    for key in ("classes", "width", "height", "images"):
+        if key not in index:
+            raise DatasetError(f"{path}: {key} is missing")
+    return index
+
+
+class ImageSet:
+    """A rendered image set, read lazily: ``len(s)``, ``s[i] -> Sample``."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.index = read_index(self.root)
+        self.classes: list[str] = list(self.index["classes"])
+        self.files: list[str] = list(self.index["images"])
+
+    def __len__(self) -> int:
+        return len(self.files)
+
+    def __getitem__(self, i: int) -> Sample:
+        path = self.root / self.files[i]
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                stored = [key for key in ARRAYS if key != "masks"] + ["masks_packed"]
+                missing = [key for key in stored if key not in data.files]
+                if missing:
+                    raise DatasetError(f"{path}: missing arrays {', '.join(missing)}")
+                arrays = {key: data[key] for key in stored if key != "masks_packed"}
+                width = arrays["depth"].shape[1]
+                arrays["masks"] = np.unpackbits(data["masks_packed"], axis=-1, count=width).astype(bool)
+                return Sample(**arrays)
+        except (OSError, ValueError) as exc:
+            if isinstance(exc, DatasetError):
+                raise
+            raise DatasetError(f"{path}: cannot read: {exc}") from exc
+
+
+__all__ = ["DatasetError", "ImageSet", "Sample", "read_index", "write_index", "write_sample"]

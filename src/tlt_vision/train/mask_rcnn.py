@@ -1,0 +1,543 @@
+"""Train the plain-torch Mask R-CNN on rendered image sets, and evaluate its mask AP50.
+
+Train (``--train`` and optionally ``--val`` are sets in the format of :mod:`tlt_vision.train.dataset`)::
+
+    python -m tlt_vision.train.mask_rcnn --train DIR [--val DIR] --out build/vision/mask_rcnn.pt \\
+        [--epochs 20] [--batch 4] [--lr 1e-3] [--seed 0] [--threads 2] [--max-size 320] \\
+        [--config key=value ...] [--resume CKPT]
+
+Every ``--log-every`` steps it prints the epoch, step, images per second, the five losses and the
+time left; after each epoch the validation mask AP50 per class and mean. It keeps the weights of
+the best epoch by validation AP (the last epoch without ``--val``) in ``--out`` with their manifest
+(kind ``mask_rcnn``; settings: the model configuration and ``max_size``, the input size the
+node then uses too; figures: epochs, images, losses, AP50 per class, seconds). Beside it:
+``<stem>_checkpoint.pt`` after every epoch (``--resume`` continues from it), ``<stem>_curves.png``
+(losses per step, smoothed; validation AP per epoch) and ``<stem>_samples.png`` (validation images
+with the predicted masks, boxes, classes and scores).
+
+Evaluate saved weights::
+
+    python -m tlt_vision.train.mask_rcnn --evaluate build/vision/mask_rcnn.pt --val DIR [--threads 2]
+
+prints AP50 per class and mean and the mean inference time per image (as the node runs it:
+:func:`tlt_vision.segmentation.inference.detect_rgb`, full-size image in, full-size masks out).
+
+An input that cannot be used (not an image set, another class list, no images, unreadable or
+mismatched checkpoint or weights) ends the command with exit status 2 and the path and reason on
+stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from tlt_vision.segmentation.config import MaskRCNNConfig
+from tlt_vision.segmentation.evaluate import MaskAP
+from tlt_vision.segmentation.inference import (
+    KIND,
+    detect_rgb,
+    load_mask_rcnn,
+    resize_image,
+    resize_masks,
+    rgb_to_tensor,
+    scaled_size,
+    weights_settings,
+)
+from tlt_vision.segmentation.model import MaskRCNN, train_step
+from tlt_vision.train.dataset import DatasetError, ImageSet
+from tlt_vision.weights import WeightsError, save_weights
+
+VERSION = "1"
+LOSSES = ("rpn_objectness", "rpn_box", "roi_cls", "roi_box", "roi_mask")
+SHORT = {"rpn_objectness": "rpn_obj", "rpn_box": "rpn_box", "roi_cls": "cls", "roi_box": "box",
+         "roi_mask": "mask"}
+
+
+class InputError(Exception):
+    """An input the command cannot use; the message names the path and the reason (exit 2)."""
+
+
+@dataclass(frozen=True)
+class Augment:
+    """Image augmentation for the twin's renders: the scenes have no preferred left and right,
+    and exposure varies with lighting and camera; geometry otherwise stays as rendered."""
+
+    flip: float = 0.5  # probability of a horizontal flip
+    brightness: float = 0.1  # added, uniform in +-
+    contrast: float = 0.2  # factor about the image mean, uniform in 1 +-
+
+
+# ---------------------------------------------------------------------------------------- data
+
+
+def open_set(root: str | Path, classes: Sequence[str]) -> ImageSet:
+    """The image set at ``root``, checked to use the model's ``classes`` and to hold images."""
+    try:
+        images = ImageSet(root)
+    except DatasetError as exc:
+        raise InputError(str(exc)) from exc
+    if list(images.classes) != list(classes):
+        raise InputError(f"{images.root / 'index.json'}: classes {images.classes} differ from the "
+                         f"model's {list(classes)}")
+    if len(images) == 0:
+        raise InputError(f"{images.root / 'index.json'}: the set has no images")
+    return images
+
+
+def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
+    """Tight (x1, y1, x2, y2) pixel-edge boxes (N, 4) of non-empty masks (N, H, W)."""
+    if masks.shape[0] == 0:
+        return torch.zeros((0, 4))
+    rows, cols = masks.any(dim=2), masks.any(dim=1)
+    h, w = masks.shape[-2:]
+    ar_h, ar_w = torch.arange(h), torch.arange(w)
+    y1 = torch.where(rows, ar_h, h).min(dim=1).values
+    y2 = torch.where(rows, ar_h, -1).max(dim=1).values + 1
+    x1 = torch.where(cols, ar_w, w).min(dim=1).values
+    x2 = torch.where(cols, ar_w, -1).max(dim=1).values + 1
+    return torch.stack([x1, y1, x2, y2], dim=1).to(torch.float32)
+
+
+def load_sample(
+    images: ImageSet, i: int, max_size: int | None, min_area: int
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Image ``i`` as the model trains on it: float (3, h, w) at the model's size, and its target
+    (masks resized with it, instances under ``min_area`` pixels dropped, boxes from the masks)."""
+    s = images[i]
+    path = images.root / images.files[i]
+    if s.rgb.dtype != np.uint8 or s.rgb.ndim != 3 or s.rgb.shape[2] != 3:
+        raise InputError(f"{path}: rgb is {s.rgb.dtype} {s.rgb.shape}, expected uint8 (H, W, 3)")
+    h, w = s.rgb.shape[:2]
+    if s.masks.shape[1:] != (h, w):
+        raise InputError(f"{path}: masks have shape {s.masks.shape}, the image is {h}x{w}")
+    labels = torch.as_tensor(s.labels, dtype=torch.long)
+    if len(labels) and (labels.min() < 1 or labels.max() > len(images.classes)):
+        raise InputError(f"{path}: labels outside 1..{len(images.classes)}: {sorted(set(s.labels.tolist()))}")
+    size = scaled_size(h, w, max_size)
+    image = resize_image(rgb_to_tensor(s.rgb), size)[0]
+    masks = resize_masks(torch.as_tensor(s.masks, dtype=torch.bool), size)
+    keep = masks.flatten(1).sum(1) >= min_area
+    masks, labels = masks[keep], labels[keep]
+    return image, {"boxes": boxes_from_masks(masks), "labels": labels, "masks": masks}
+
+
+def augment(
+    image: torch.Tensor, target: dict[str, torch.Tensor], aug: Augment, rng: np.random.Generator
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """A horizontally flipped (masks and boxes with it) and exposure-jittered copy."""
+    target = dict(target)
+    if rng.random() < aug.flip:
+        w = image.shape[-1]
+        image = image.flip(-1)
+        target["masks"] = target["masks"].flip(-1)
+        b = target["boxes"]
+        target["boxes"] = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], dim=1)
+    c = 1.0 + rng.uniform(-aug.contrast, aug.contrast)
+    b = rng.uniform(-aug.brightness, aug.brightness)
+    mean = image.mean()
+    return ((image - mean) * c + mean + b).clamp(0.0, 1.0), target
+
+
+# ---------------------------------------------------------------------------------- evaluation
+
+
+def evaluate(
+    model: MaskRCNN, images: ImageSet, max_size: int | None, limit: int | None = None
+) -> dict[str, Any]:
+    """Mask AP50 of ``model`` on the set at full resolution: ``map``, ``per_class`` {name: AP}
+    (classes with ground truth), ``seconds_per_image`` (inference only), ``images``."""
+    n = len(images) if limit is None else min(limit, len(images))
+    acc = MaskAP(len(images.classes))
+    seconds = 0.0
+    for i in range(n):
+        s = images[i]
+        t0 = time.perf_counter()
+        pred = detect_rgb(model, s.rgb, max_size)
+        seconds += time.perf_counter() - t0
+        gt = {"masks": torch.as_tensor(s.masks, dtype=torch.bool),
+              "labels": torch.as_tensor(s.labels, dtype=torch.long)}
+        acc.add(pred, gt)
+    result = acc.result()
+    per_class = {images.classes[label - 1]: ap for label, ap in result["per_class"].items()}
+    return {"map": result["map"], "per_class": per_class, "seconds_per_image": seconds / max(n, 1),
+            "images": n}
+
+
+def format_ap(result: dict[str, Any], classes: Sequence[str]) -> str:
+    parts = [f"{c} {result['per_class'][c]:.3f}" if c in result["per_class"] else f"{c} -" for c in classes]
+    return f"mask AP50 {result['map']:.3f} ({', '.join(parts)})"
+
+
+# ------------------------------------------------------------------------------------- figures
+
+
+def _smooth(values: Sequence[float], window: int) -> np.ndarray:
+    v = np.asarray(values, dtype=float)
+    if window <= 1 or len(v) < 2:
+        return v
+    c = np.cumsum(np.insert(v, 0, 0.0))
+    out = np.empty_like(v)
+    for i in range(len(v)):  # trailing mean; short at the start
+        lo = max(0, i + 1 - window)
+        out[i] = (c[i + 1] - c[lo]) / (i + 1 - lo)
+    return out
+
+
+def plot_curves(path: Path, step_losses: Sequence[dict[str, float]], history: Sequence[dict[str, Any]],
+                classes: Sequence[str]) -> None:
+    """Losses per step (trailing mean over ~2 % of the run) and validation AP50 per epoch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, (ax_loss, ax_ap) = plt.subplots(1, 2, figsize=(12, 4.5))
+    window = max(1, len(step_losses) // 50)
+    steps = np.arange(1, len(step_losses) + 1)
+    for key in (*LOSSES, "total"):
+        values = [s[key] for s in step_losses]
+        if values:
+            ax_loss.plot(steps, _smooth(values, window), label=key, lw=2.0 if key == "total" else 1.0)
+    ax_loss.set_yscale("log")
+    ax_loss.set_xlabel("step")
+    ax_loss.set_ylabel(f"loss (mean of {window} steps)")
+    ax_loss.legend(fontsize=8)
+    ax_loss.grid(alpha=0.3)
+    val = [h for h in history if h.get("val_map") is not None]
+    if val:
+        epochs = [h["epoch"] for h in val]
+        ax_ap.plot(epochs, [h["val_map"] for h in val], "k-o", lw=2, label="mean")
+        for c in classes:
+            ys = [h["val_ap50"].get(c, np.nan) for h in val]
+            if not all(np.isnan(ys)):
+                ax_ap.plot(epochs, ys, "-", marker=".", lw=1, label=c)
+        ax_ap.set_ylim(0, 1)
+        ax_ap.legend(fontsize=8)
+    else:
+        ax_ap.text(0.5, 0.5, "no validation set", ha="center", va="center", transform=ax_ap.transAxes)
+    ax_ap.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax_ap.set_xlabel("epoch")
+    ax_ap.set_ylabel("validation mask AP50")
+    ax_ap.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_samples(path: Path, model: MaskRCNN, images: ImageSet, max_size: int | None,
+                 count: int = 4, min_score: float = 0.5) -> None:
+    """The first ``count`` images of the set with the detections scoring ``min_score`` or more."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    n = min(count, len(images))
+    cols = min(2, n)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.4 * cols, 4.8 * rows), squeeze=False)
+    colours = plt.get_cmap("tab10")
+    for k, ax in enumerate(axes.flat):
+        ax.axis("off")
+        if k >= n:
+            continue
+        s = images[k]
+        det = detect_rgb(model, s.rgb, max_size)
+        shown = s.rgb.astype(np.float32) / 255.0
+        keep = det["scores"] >= min_score
+        for box, label, score, mask in zip(det["boxes"][keep], det["labels"][keep], det["scores"][keep],
+                                           det["masks"][keep], strict=True):
+            colour = np.array(colours(int(label) - 1)[:3])
+            m = mask.numpy()
+            shown[m] = 0.5 * shown[m] + 0.5 * colour
+            x1, y1, x2, y2 = box.tolist()
+            ax.add_patch(Rectangle((x1, y1), x2 - x1, y2 - y1, fill=False, color=colour, lw=1.2))
+            ax.text(x1, y1, f"{images.classes[int(label) - 1]} {float(score):.2f}", color="white",
+                    fontsize=7, va="bottom", bbox={"facecolor": colour, "alpha": 0.7, "pad": 1, "lw": 0})
+        ax.imshow(shown)
+        ax.set_title(f"{images.files[k]}: {int(keep.sum())} detections, {len(s.labels)} true", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------ training
+
+
+def output_paths(out: Path) -> dict[str, Path]:
+    stem = out.with_suffix("")
+    return {"checkpoint": Path(f"{stem}_checkpoint.pt"), "curves": Path(f"{stem}_curves.png"),
+            "samples": Path(f"{stem}_samples.png")}
+
+
+def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """``key=value`` pairs (values as JSON: ``fpn_channels=32``, ``backbone_channels=[8,8,16,16]``)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise InputError(f"--config {item!r}: expected key=value")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def build_config(overrides: dict[str, Any]) -> MaskRCNNConfig:
+    try:
+        return MaskRCNNConfig.from_dict({**MaskRCNNConfig().to_dict(), **overrides})
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"--config: {exc}") from exc
+
+
+def learning_rate(step: int, total: int, base: float) -> float:
+    """Linear warm-up over the first 5 % of steps (at most 200) from base/10, then cosine to base/20:
+    a from-scratch detector's first steps have wild RPN gradients."""
+    warm = max(1, min(200, total // 20))
+    if step < warm:
+        return base * (0.1 + 0.9 * step / warm)
+    t = (step - warm) / max(1, total - warm)
+    return base * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t)))
+
+
+def _duration(seconds: float) -> str:
+    seconds = round(seconds)
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m" if h else f"{m}m{s:02d}s"
+
+
+def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    tmp = path.with_suffix(".tmp")
+    torch.save(state, tmp)
+    tmp.replace(path)  # a run killed while writing keeps its previous checkpoint
+
+
+def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str]) -> dict[str, Any]:
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError as exc:
+        raise InputError(f"{path}: checkpoint not found") from exc
+    except Exception as exc:  # torch raises several types for a corrupt file
+        raise InputError(f"{path}: unreadable checkpoint: {exc}") from exc
+    if not isinstance(ckpt, dict) or ckpt.get("kind") != f"{KIND}_checkpoint":
+        raise InputError(f"{path}: not a Mask R-CNN training checkpoint")
+    if ckpt["classes"] != list(classes):
+        raise InputError(f"{path}: checkpoint classes {ckpt['classes']} differ from {list(classes)}")
+    if ckpt["settings"] != settings:
+        diff = sorted(k for k in set(settings["model"]) | set(ckpt["settings"]["model"])
+                      if settings["model"].get(k) != ckpt["settings"]["model"].get(k))
+        if ckpt["settings"].get("max_size") != settings.get("max_size"):
+            diff.append("max_size")
+        raise InputError(f"{path}: checkpoint was trained with other settings ({', '.join(diff)}); "
+                         "resume with the same --config and --max-size")
+    return ckpt
+
+
+def train(args: argparse.Namespace) -> int:
+    cfg = build_config(parse_overrides(args.config))
+    settings = weights_settings(cfg, args.max_size)
+    train_set = open_set(args.train, cfg.classes)
+    val_set = open_set(args.val, cfg.classes) if args.val else None
+    out = Path(args.out)
+    if out.suffix != ".pt":
+        raise InputError(f"{out}: --out must end in .pt")
+    paths = output_paths(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(args.seed)
+    model = MaskRCNN(cfg)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
+    aug = Augment()
+    steps_per_epoch = math.ceil(len(train_set) / args.batch)
+    total_steps = args.epochs * steps_per_epoch
+    history: list[dict[str, Any]] = []
+    step_losses: list[dict[str, float]] = []
+    best_map, start_epoch, seconds_before = -1.0, 0, 0.0
+    if args.resume:
+        ckpt = _load_checkpoint(Path(args.resume), settings, cfg.classes)
+        model.load_state_dict(ckpt["model"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        torch.set_rng_state(ckpt["torch_rng"])
+        history, step_losses = ckpt["history"], ckpt["step_losses"]
+        best_map, start_epoch, seconds_before = ckpt["best_map"], ckpt["epoch"], ckpt["seconds"]
+        print(f"resuming {args.resume} after epoch {start_epoch}", flush=True)
+        if start_epoch >= args.epochs:
+            print(f"nothing to do: the checkpoint has {start_epoch} epochs, --epochs is {args.epochs}")
+    print(f"train {train_set.root} ({len(train_set)} images)"
+          + (f", val {val_set.root} ({len(val_set)} images)" if val_set else ", no validation set")
+          + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
+          f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads",
+          flush=True)
+    t_start = time.perf_counter()
+    steps_done = 0
+    for epoch in range(start_epoch, args.epochs):
+        # Order and augmentation depend only on (seed, epoch): a resumed run sees what it would have.
+        rng = np.random.default_rng([args.seed, epoch])
+        order = rng.permutation(len(train_set))
+        t_epoch = t_window = time.perf_counter()
+        window_images = 0
+        epoch_losses: list[dict[str, float]] = []
+        for step in range(steps_per_epoch):
+            batch = [augment(*load_sample(train_set, int(i), args.max_size, args.min_area), aug, rng)
+                     for i in order[step * args.batch:(step + 1) * args.batch]]
+            sizes = {tuple(b[0].shape[-2:]) for b in batch}
+            if len(sizes) > 1:
+                raise InputError(f"{train_set.root}: images of different sizes {sorted(sizes)} in one set")
+            global_step = epoch * steps_per_epoch + step
+            for group in optimizer.param_groups:
+                group["lr"] = learning_rate(global_step, total_steps, args.lr)
+            losses = train_step(model, optimizer, torch.stack([b[0] for b in batch]), [b[1] for b in batch])
+            if not math.isfinite(losses["total"]):
+                print(f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
+                      "try a lower --lr", file=sys.stderr)
+                return 1
+            step_losses.append(losses)
+            epoch_losses.append(losses)
+            steps_done += 1
+            window_images += len(batch)
+            if (step + 1) % args.log_every == 0 or step + 1 == steps_per_epoch:
+                now = time.perf_counter()
+                rate = window_images / max(now - t_window, 1e-9)
+                left = (now - t_start) / steps_done * (total_steps - global_step - 1)
+                terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in LOSSES)
+                print(f"epoch {epoch + 1}/{args.epochs} step {step + 1}/{steps_per_epoch} | "
+                      f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
+                      f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
+                t_window, window_images = now, 0
+        record: dict[str, Any] = {
+            "epoch": epoch + 1,
+            "train_losses": {k: float(np.mean([s[k] for s in epoch_losses])) for k in (*LOSSES, "total")},
+            "train_seconds": time.perf_counter() - t_epoch,
+            "val_map": None,
+            "val_ap50": {},
+        }
+        improved = True
+        if val_set is not None:
+            result = evaluate(model, val_set, args.max_size, args.val_limit)
+            record.update(val_map=result["map"], val_ap50=result["per_class"],
+                          val_seconds_per_image=result["seconds_per_image"])
+            improved = result["map"] > best_map
+            print(f"epoch {epoch + 1}/{args.epochs} val {format_ap(result, cfg.classes)} | "
+                  f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
+                  f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
+                  flush=True)
+        history.append(record)
+        seconds = seconds_before + time.perf_counter() - t_start
+        if improved:
+            best_map = record["val_map"] if record["val_map"] is not None else best_map
+            figures = {
+                "epochs": epoch + 1,
+                "best_epoch": epoch + 1,
+                "images": len(train_set),
+                "val_images": len(val_set) if val_set else 0,
+                "train": str(train_set.root),
+                "val": str(val_set.root) if val_set else None,
+                "final_losses": record["train_losses"],
+                "val_map": record["val_map"],
+                "val_ap50": record["val_ap50"],
+                "seconds": round(seconds, 1),
+                "batch": args.batch, "lr": args.lr, "seed": args.seed, "min_area": args.min_area,
+                "augment": asdict(aug),
+                "history": history,
+            }
+            save_weights(model, out, KIND, VERSION, cfg.classes, settings, {"figures": figures})
+            print(f"saved {out} (epoch {epoch + 1})", flush=True)
+        _save_checkpoint(paths["checkpoint"], {
+            "kind": f"{KIND}_checkpoint", "classes": list(cfg.classes), "settings": settings,
+            "epoch": epoch + 1, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "torch_rng": torch.get_rng_state(), "history": history, "step_losses": step_losses,
+            "best_map": best_map, "seconds": seconds,
+        })
+        plot_curves(paths["curves"], step_losses, history, cfg.classes)
+    if not out.is_file():
+        raise InputError(f"{out}: no weights written (no epoch was trained)")
+    best, _ = load_mask_rcnn(out, cfg.classes)  # the saved file, checked as the node will load it
+    plot_samples(paths["samples"], best, val_set or train_set, args.max_size)
+    plot_curves(paths["curves"], step_losses, history, cfg.classes)
+    print(f"wrote {out}, {paths['checkpoint']}, {paths['curves']}, {paths['samples']} in "
+          f"{_duration(time.perf_counter() - t_start)}", flush=True)
+    return 0
+
+
+def evaluate_command(args: argparse.Namespace) -> int:
+    torch.set_num_threads(args.threads)
+    try:
+        model, manifest = load_mask_rcnn(args.evaluate)
+    except WeightsError as exc:
+        raise InputError(str(exc)) from exc
+    max_size = manifest["settings"].get("max_size")
+    images = open_set(args.val, model.cfg.classes)
+    result = evaluate(model, images, max_size, args.val_limit)
+    print(f"{args.evaluate} on {images.root} ({result['images']} images, max size {max_size or 'full'}, "
+          f"{args.threads} threads)")
+    for c in model.cfg.classes:
+        ap = result["per_class"].get(c)
+        print(f"  {c:<14} AP50 {ap:.3f}" if ap is not None else f"  {c:<14} AP50 -  (no instances)")
+    print(f"  mean           AP50 {result['map']:.3f}")
+    print(f"  inference {result['seconds_per_image'] * 1e3:.0f} ms per image")
+    return 0
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m tlt_vision.train.mask_rcnn",
+                                description=__doc__.split("\n")[0])
+    p.add_argument("--train", help="training image set (directory with index.json)")
+    p.add_argument("--val", help="validation image set: AP50 after each epoch, best epoch kept")
+    p.add_argument("--out", default="build/vision/mask_rcnn.pt",
+                   help="weights file (.pt); manifest beside it")
+    p.add_argument("--epochs", type=int, default=20)
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--lr", type=float, default=1e-3, help="AdamW peak learning rate")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--max-size", type=int, default=None,
+                   help="downscale images so the longest side is at most this (pixels); recorded in the "
+                        "manifest so inference uses the same size (default: full size)")
+    p.add_argument("--min-area", type=int, default=4,
+                   help="drop training instances with fewer pixels than this at the model's size")
+    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                   help="MaskRCNNConfig field (JSON value), e.g. fpn_channels=32; repeatable")
+    p.add_argument("--log-every", type=int, default=10, help="steps between progress lines")
+    p.add_argument("--val-limit", type=int, default=None, help="evaluate on the first N validation images")
+    p.add_argument("--resume", help="checkpoint (<out stem>_checkpoint.pt) to continue from")
+    p.add_argument("--evaluate", metavar="WEIGHTS",
+                   help="evaluate these weights on --val instead of training")
+    args = p.parse_args(argv)
+    for name in ("epochs", "batch", "threads", "log_every"):
+        if getattr(args, name) < 1:
+            p.error(f"--{name.replace('_', '-')} must be at least 1")
+    if args.max_size is not None and args.max_size < 32:
+        p.error("--max-size must be at least 32 pixels")
+    if args.evaluate and not args.val:
+        p.error("--evaluate needs --val")
+    if not args.evaluate and not args.train:
+        p.error("--train is required (or --evaluate WEIGHTS --val DIR)")
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        return evaluate_command(args) if args.evaluate else train(args)
+    except (InputError, DatasetError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

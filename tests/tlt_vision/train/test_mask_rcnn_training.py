@@ -1,0 +1,203 @@
+"""The Mask R-CNN training command on a tiny set of drawn shapes: it learns, saves weights the node
+loads, resumes, draws its figures, evaluates, and refuses bad input with exit status 2."""
+
+import contextlib
+import io
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from tlt_vision.segmentation.config import CLASSES
+from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
+from tlt_vision.segmentation.model import MaskRCNN
+from tlt_vision.train.dataset import Sample, write_index, write_sample
+from tlt_vision.train.mask_rcnn import (
+    Augment,
+    augment,
+    boxes_from_masks,
+    build_config,
+    evaluate,
+    main,
+    open_set,
+    parse_overrides,
+)
+from tlt_vision.weights import WeightsError, read_manifest
+
+SIZE = 48
+TINY = {
+    "backbone_channels": [8, 8, 16, 16], "fpn_channels": 16, "representation": 32, "mask_convs": 1,
+    "rpn_pre_nms_top_n": 100, "rpn_post_nms_top_n_train": 50, "rpn_post_nms_top_n_test": 30,
+    "rpn_batch_per_image": 64, "roi_batch_per_image": 32,
+}  # fmt: skip
+CONFIG_ARGS = [a for k, v in TINY.items() for a in ("--config", f"{k}={json.dumps(v)}")]
+EPOCHS = 12
+SEED = 0
+BLOCK = CLASSES.index("corner_joint") + 1
+
+
+def write_set(root, n, seed, classes=CLASSES):
+    """``n`` images of one blue block (class corner_joint) on a dark noisy background: a problem a
+    0.05 M-parameter model learns in a few dozen steps, so the test is about the command."""
+    root.mkdir(parents=True)
+    rng = np.random.default_rng(seed)
+    files = []
+    for i in range(n):
+        rgb = rng.integers(0, 50, size=(SIZE, SIZE, 3), dtype=np.uint8)
+        half = int(rng.integers(7, 12))
+        cx, cy = rng.integers(half + 1, SIZE - half - 1, size=2)
+        mask = np.zeros((SIZE, SIZE), dtype=bool)
+        mask[cy - half : cy + half, cx - half : cx + half] = True
+        rgb[mask] = (40, 90, 190)
+        sample = Sample(
+            rgb=rgb, depth=np.ones((SIZE, SIZE), np.float32), masks=mask[None], labels=np.array([BLOCK]),
+            names=np.array(["block"]), poses=np.eye(4)[None], defects=np.array([""]), intrinsics=np.eye(3),
+        )  # fmt: skip
+        name = f"{i:05d}.npz"
+        write_sample(root / name, sample)
+        files.append(name)
+    write_index(root, list(classes), SIZE, SIZE, files, {"drawn": "blocks"})
+    return root
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    base = tmp_path_factory.mktemp("mask_rcnn")
+    train, val = write_set(base / "train", 16, seed=1), write_set(base / "val", 6, seed=2)
+    out = base / "out" / "mrcnn.pt"
+    args = ["--train", str(train), "--val", str(val), "--out", str(out), "--epochs", str(EPOCHS),
+            "--batch", "4", "--lr", "5e-3", "--seed", str(SEED), "--threads", "1", "--log-every", "2",
+            *CONFIG_ARGS]  # fmt: skip
+    # The same model before training, for the AP it starts from.
+    torch.manual_seed(SEED)
+    before = evaluate(MaskRCNN(build_config(TINY)), open_set(val, CLASSES), None)["map"]
+    return {"base": base, "train": train, "val": val, "out": out, "args": args, "before": before}
+
+
+@pytest.fixture(scope="module")
+def run(trained):
+    buf = io.StringIO()  # capsys is per test; the run is shared by the module's tests
+    with contextlib.redirect_stdout(buf):
+        rc = main(trained["args"])
+    return {**trained, "rc": rc, "text": buf.getvalue()}
+
+
+def test_training_reduces_the_loss_raises_ap50_and_writes_its_outputs(run):
+    assert run["rc"] == 0
+    text = run["text"]
+    assert f"epoch 1/{EPOCHS} step 2/4" in text and "img/s" in text and "ETA" in text
+    assert "rpn_obj" in text and "mask" in text
+    assert f"epoch {EPOCHS}/{EPOCHS} val mask AP50" in text and "corner_joint" in text
+    manifest = read_manifest(run["out"])
+    assert manifest["kind"] == "mask_rcnn" and manifest["classes"] == list(CLASSES)
+    assert manifest["settings"]["model"]["fpn_channels"] == 16 and manifest["settings"]["max_size"] is None
+    figures = manifest["extra"]["figures"]
+    history = figures["history"]
+    assert history[-1]["train_losses"]["total"] < 0.7 * history[0]["train_losses"]["total"]
+    best = max(h["val_map"] for h in history)
+    assert figures["val_map"] == best and figures["images"] == 16 and figures["seconds"] > 0
+    assert set(figures["val_ap50"]) == {"corner_joint"}  # the only class with ground truth
+    assert best >= run["before"] + 0.5, (run["before"], [h["val_map"] for h in history])
+    stem = run["out"].with_suffix("")
+    for suffix in ("_curves.png", "_samples.png"):
+        data = (stem.parent / f"{stem.name}{suffix}").read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    assert (stem.parent / f"{stem.name}_checkpoint.pt").is_file()
+
+
+def test_saved_weights_load_in_the_node_and_a_mismatched_manifest_is_refused(run, tmp_path):
+    from tlt_vision.camera_frames import CameraFrame
+    from tlt_vision.segmentation_source import MaskRcnnSegmenter
+
+    # A dozen epochs on sixteen images leave the class scores near 0.3 (of six classes).
+    seg = MaskRcnnSegmenter(run["out"], min_score=0.2)
+    sample = open_set(run["val"], CLASSES)[0]
+    frame = CameraFrame("zed_1", 0.0, "zed_1_optical", None, np.eye(3), {"rgb": sample.rgb})
+    dets = seg.detect(frame)
+    assert dets and all(d.mask.shape == (SIZE, SIZE) for d in dets)
+    assert max(dets, key=lambda d: d.score).object_class == "corner_joint"
+    iou = max((d.mask & sample.masks[0]).sum() / (d.mask | sample.masks[0]).sum() for d in dets)
+    assert iou > 0.5
+
+    for key, value, reason in (("classes", list(reversed(CLASSES)), "classes"),
+                               ("kind", "c3po_detector", "expected 'mask_rcnn'")):  # fmt: skip
+        bad = tmp_path / f"{key}.pt"
+        shutil.copy(run["out"], bad)
+        manifest = json.loads(run["out"].with_suffix(".json").read_text())
+        manifest[key] = value
+        if key == "classes":
+            manifest["settings"]["model"]["classes"] = value
+        bad.with_suffix(".json").write_text(json.dumps(manifest))
+        with pytest.raises(WeightsError, match=reason):
+            MaskRcnnSegmenter(bad, min_score=0.5)
+    wider = tmp_path / "wider.pt"
+    shutil.copy(run["out"], wider)
+    manifest = json.loads(run["out"].with_suffix(".json").read_text())
+    manifest["settings"]["model"]["fpn_channels"] = 24
+    wider.with_suffix(".json").write_text(json.dumps(manifest))
+    with pytest.raises(WeightsError, match="expected"):
+        load_mask_rcnn(wider)
+
+
+def test_resume_continues_after_the_checkpoint_epoch(run, capsys):
+    ckpt = run["out"].parent / "mrcnn_checkpoint.pt"
+    args = [a if a != str(EPOCHS) else str(EPOCHS + 1) for a in run["args"]]
+    assert main([*args, "--resume", str(ckpt)]) == 0
+    text = capsys.readouterr().out
+    assert f"after epoch {EPOCHS}" in text
+    assert f"epoch {EPOCHS + 1}/{EPOCHS + 1} step 4/4" in text and "epoch 1/" not in text
+    state = torch.load(ckpt, weights_only=True)
+    assert state["epoch"] == EPOCHS + 1 and len(state["history"]) == EPOCHS + 1
+    assert [h["epoch"] for h in state["history"]] == list(range(1, EPOCHS + 2))
+    # Other settings than the checkpoint's are refused.
+    other = [*run["args"], "--config", "fpn_channels=8", "--resume", str(ckpt)]
+    assert main(other) == 2
+    assert "fpn_channels" in capsys.readouterr().err
+
+
+def test_evaluate_prints_ap_per_class_and_time(run, capsys):
+    assert main(["--evaluate", str(run["out"]), "--val", str(run["val"]), "--threads", "1"]) == 0
+    text = capsys.readouterr().out
+    figures = read_manifest(run["out"])["extra"]["figures"]
+    assert f"corner_joint   AP50 {figures['val_ap50']['corner_joint']:.3f}" in text
+    assert f"mean           AP50 {figures['val_map']:.3f}" in text
+    assert "strut_tube     AP50 -" in text and "ms per image" in text
+
+
+def test_bad_inputs_exit_2_naming_the_path(tmp_path, capsys):
+    out = str(tmp_path / "w.pt")
+    assert main(["--train", str(tmp_path), "--out", out]) == 2
+    assert f"{tmp_path / 'index.json'}: no such file" in capsys.readouterr().err
+    other = write_set(tmp_path / "other", 1, seed=0, classes=["a", "b"])
+    assert main(["--train", str(other), "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert str(other / "index.json") in err and "differ from the model's" in err
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    write_index(empty, list(CLASSES), SIZE, SIZE, [], {})
+    assert main(["--train", str(empty), "--out", out]) == 2
+    assert "no images" in capsys.readouterr().err
+    assert main(["--evaluate", str(tmp_path / "none.pt"), "--val", str(other)]) == 2
+    assert "weights file not found" in capsys.readouterr().err
+    assert main(["--train", str(other), "--out", out, "--config", "nope=1"]) == 2
+    assert "unknown Mask R-CNN settings: nope" in capsys.readouterr().err
+    assert parse_overrides(["backbone_channels=[8,8,16,16]"]) == {"backbone_channels": [8, 8, 16, 16]}
+
+
+def test_flip_keeps_boxes_on_their_masks_and_full_size_detections_from_a_downscaled_model():
+    rng = np.random.default_rng(0)
+    masks = torch.zeros(2, 20, 30, dtype=torch.bool)
+    masks[0, 2:5, 3:10] = True
+    masks[1, 10:18, 20:29] = True
+    target = {"boxes": boxes_from_masks(masks), "labels": torch.tensor([1, 2]), "masks": masks}
+    assert target["boxes"].tolist() == [[3, 2, 10, 5], [20, 10, 29, 18]]
+    image = torch.rand(3, 20, 30)
+    flipped, t = augment(image, target, Augment(flip=1.0, brightness=0.0, contrast=0.0), rng)
+    assert torch.equal(t["boxes"], boxes_from_masks(t["masks"])) and torch.allclose(flipped, image.flip(-1))
+    torch.manual_seed(0)
+    model = MaskRCNN(build_config({**TINY, "score_threshold": 0.0}))
+    det = detect_rgb(model, (np.random.default_rng(1).random((60, 90, 3)) * 255).astype(np.uint8), 45)
+    assert det["masks"].shape[1:] == (60, 90) and len(det["boxes"]) > 0
+    assert (det["boxes"][:, 2] <= 90 + 1e-3).all() and (det["boxes"][:, 3] <= 60 + 1e-3).all()

@@ -1,0 +1,176 @@
+"""The training-image renderer against the twin: the set reads back, masks, depth, classes and poses
+agree with each other and with the CAD models, seeds reproduce, defects are recorded, bad options
+exit 2. Tiny images (160x120) keep it to seconds."""
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from tlt_vision.cad.models import models_for_mission
+from tlt_vision.segmentation.config import CLASSES
+from tlt_vision.train.dataset import ImageSet
+
+pytest.importorskip("tlt_sim.model.scene")
+from tlt_vision.train.render_dataset import (
+    PREVIEW,
+    ZED,
+    RenderSettings,
+    TwinRenderer,
+    main,
+)
+
+W, H = 160, 120
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    out = tmp_path_factory.mktemp("set")
+    rc = main(["--out", str(out), "--count", "3", "--seed", "1", "--width", str(W), "--height", str(H)])
+    assert rc == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    r = TwinRenderer(RenderSettings(width=W, height=H, seed=1))
+    yield r
+    r.close()
+
+
+def _interior(mask: np.ndarray) -> np.ndarray:
+    """The mask less its 1-px border: border pixels mix the part's depth with the background's."""
+    m = mask.copy()
+    m[1:] &= mask[:-1]
+    m[:-1] &= mask[1:]
+    m[:, 1:] &= mask[:, :-1]
+    m[:, :-1] &= mask[:, 1:]
+    return m
+
+
+def _points(mask: np.ndarray, depth: np.ndarray, k: np.ndarray) -> np.ndarray:
+    v, u = np.nonzero(mask)
+    z = depth[v, u].astype(float)
+    return np.column_stack([(u - k[0, 2]) * z / k[0, 0], (v - k[1, 2]) * z / k[1, 1], z])
+
+
+def test_set_reads_back_with_consistent_masks_depth_and_poses(rendered, renderer, capsys):
+    images = ImageSet(rendered)
+    assert len(images) == 3 and images.classes == list(CLASSES)
+    assert images.index["width"] == W and images.index["settings"]["min_pixels"] >= 20
+    assert (rendered / PREVIEW).stat().st_size > 1000
+    models = models_for_mission(renderer.scene.mission)
+    checked = 0
+    for i in range(len(images)):
+        s = images[i]
+        assert s.rgb.shape == (H, W, 3) and s.depth.dtype == np.float32 and len(s.labels) > 0
+        assert (s.depth >= 0).all() and (s.depth > 0).any()
+        assert (s.labels >= 1).all() and (s.labels <= len(CLASSES)).all()
+        rows = zip(s.masks, s.labels, s.names, s.poses, s.defects, strict=True)
+        for mask, label, name, pose, defect in rows:
+            assert mask.sum() >= images.index["settings"]["min_pixels"], name
+            inner = _interior(mask)
+            assert (s.depth[inner] > 0).all(), name  # the part was hit wherever it is labelled
+            cls = CLASSES[label - 1]
+            if inner.sum() < 10 or defect == "bent_tube":  # a bent tube has no straight model to fit
+                continue
+            # The masked depth, back-projected, lies on the CAD model at the stored pose.
+            pts = _points(inner, s.depth, s.intrinsics)
+            local = (pts - pose[:3, 3]) @ pose[:3, :3]
+            names = [n for n in models if n.startswith("strut_tube/")] if cls == "strut_tube" else [cls]
+            d = min(
+                float(np.percentile(models[n].surface(torch.tensor(local, dtype=torch.float32)).numpy(), 90))
+                for n in names
+            )
+            assert d < 0.006, (name, d)
+            checked += 1
+    assert checked >= 5
+
+
+def test_a_part_placed_in_view_is_found_with_its_class_name_and_pose(renderer):
+    scene = renderer.scene
+    part = next(p for p in renderer.struts["vertical"] if renderer.parts[p].defect is None)
+    body = scene.part(part).body
+    scene.reset()
+    scene.place_in_view(part, ZED, 0.5)  # across the view, centred 0.5 m ahead
+    sample = renderer._capture(ZED)
+    names = list(sample.names)
+    tube = names.index(f"{body}/tube")
+    assert CLASSES[sample.labels[tube] - 1] == "strut_tube" and sample.defects[tube] == ""
+    # At 160x120 a fitting is a few dozen pixels; one may fall under min_pixels where it is partly hidden.
+    fittings = [i for i, n in enumerate(names) if n.startswith(f"{body}/fitting_")]
+    assert fittings and all(CLASSES[sample.labels[i] - 1] == "end_fitting" for i in fittings)
+    found = {CLASSES[label - 1] for n, label in zip(names, sample.labels, strict=True) if n.startswith(body)}
+    assert found == {"strut_tube", "end_fitting"}
+    pose = sample.poses[tube]
+    np.testing.assert_allclose(pose[:3, 3], [0.0, 0.0, 0.5], atol=1e-6)
+    assert abs(pose[0, 2]) > 1 - 1e-6  # the strut's axis along the image's x
+    # Each part's centre projects into its own mask (a fitting's centre is on its visible face).
+    for i in (tube, *fittings):
+        u, v, w = sample.intrinsics @ sample.poses[i][:3, 3]
+        assert sample.masks[i][round(v / w), round(u / w)], names[i]
+
+
+def test_rivets_in_a_feeder_are_labelled_and_posed(renderer):
+    settings = renderer.settings
+    # At 160x120 a rivet 0.4 m away covers about 20 pixels, under the default threshold.
+    renderer.settings = replace(settings, min_pixels=8)
+    try:
+        renderer.scene.reset()
+        sample = renderer._capture(renderer._feeder(np.random.default_rng(2)))
+    finally:
+        renderer.settings = settings
+    rivets = [i for i, label in enumerate(sample.labels) if CLASSES[label - 1] == "rivet"]
+    assert rivets
+    for i in rivets:
+        assert sample.names[i].startswith("dispenser/rivet_dispenser_")
+        u, v, w = sample.intrinsics @ sample.poses[i][:3, 3]
+        assert sample.masks[i][round(v / w), round(u / w)], sample.names[i]
+
+
+def test_same_seed_same_images_another_seed_others(rendered, renderer):
+    first = ImageSet(rendered)[0]
+    again, _ = renderer.sample(0)
+    np.testing.assert_array_equal(again.rgb, first.rgb)
+    np.testing.assert_array_equal(again.masks, first.masks)
+    np.testing.assert_array_equal(again.poses, first.poses)
+    other = TwinRenderer(RenderSettings(width=W, height=H, seed=2, defective_fraction=1.0))
+    try:
+        assert not np.array_equal(other.sample(0)[0].rgb, first.rgb)
+        # Every strut put in view is defective, and the defect is recorded on its instances.
+        struts = 0
+        for i in range(1, 3):
+            s, _ = other.sample(i)
+            for name, label, defect in zip(s.names, s.labels, s.defects, strict=True):
+                if CLASSES[label - 1] == "strut_tube":
+                    struts += 1
+                    part = other.by_body[name.rsplit("/", 1)[0]]
+                    assert defect == part.defect.kind and defect in ("missing_end_fitting", "bent_tube")
+        assert struts > 0
+        assert all(d["kind"] in ("missing_end_fitting", "bent_tube") for d in other.defects.values())
+        assert len(other.defects) == sum(len(v) for v in other.struts.values())
+    finally:
+        other.close()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--count", "0"], "--count"),
+        (["--count", "1", "--mission", "missions/nope.yaml"], "nope.yaml"),
+        (["--count", "1", "--defective-fraction", "1.5"], "--defective-fraction"),
+        (["--count", "1", "--width", "5000"], "offscreen buffer"),
+    ],
+)
+def test_bad_options_exit_2(tmp_path, capsys, args, message):
+    assert main(["--out", str(tmp_path / "set"), *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_unwritable_out_exits_2(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert main(["--out", str(Path(blocker) / "set"), "--count", "1"]) == 2
+    assert "cannot write" in capsys.readouterr().err
