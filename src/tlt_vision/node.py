@@ -60,7 +60,7 @@ from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, Segment
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
 from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
-from tlt_vision.pipeline import Detection
+from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 from tlt_vision.tag_mounts import tag_mount
@@ -212,6 +212,16 @@ class VisionNode(Node):
             pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
         )
 
+    def _near(
+        self, detections: list[Detection], frame: CameraFrame, camera_pose: np.ndarray,
+        places: np.ndarray, piece: str,
+    ) -> list[Detection]:
+        """Only the ``piece`` detections that a check gated by ``held_piece_gate`` around
+        ``places`` (world) could count; the others would cost a pose each for nothing."""
+        radius = self.config.raw["held_piece_gate"] + self.inspector.estimators[piece].model.diameter / 2
+        return detections_near(detections, frame.get("depth"), frame.intrinsics, camera_pose, places,
+                               radius)
+
     def _report_msg(
         self, report: inspection.InspectionReport, stamp: float, frame_id: str, object_ids: dict[int, str]
     ) -> InspectionReport:
@@ -359,6 +369,8 @@ class VisionNode(Node):
                 problems.append(f"{camera}: {exc}")
                 continue
             stamp = frame.stamp
+            detections = self._near(detections, frame, pose, np.array(list(expected.values())),
+                                    "corner_joint")
             for o in self._observe("bay", detections, frame):
                 est = _in_world(o.estimate, pose) if o.estimate is not None else None
                 found.append((replace(o, estimate=est), o.object_id))
@@ -469,6 +481,7 @@ class VisionNode(Node):
                 tool = self.rig.tool_pose(cam, frame.stamp, self.tool) if tool is None else tool
             except (NoFrame, FrameUnavailable) as exc:
                 problems.append(f"{cam}: {exc}")
+        places = inspection.expected_pieces(member.kind, joints, self.parts)
         for frame, cam_pose in frames:
             stamp = frame.stamp
             try:
@@ -476,6 +489,7 @@ class VisionNode(Node):
             except NoFrame as exc:
                 problems.append(f"{frame.camera}: {exc}")
                 continue
+            detections = self._near(detections, frame, cam_pose, places, piece)
             for o in self._observe(pipeline, detections, frame):
                 e = o.estimate
                 if e is None or not e.certified:
@@ -493,7 +507,7 @@ class VisionNode(Node):
             return response
         result = inspection.held_part_alignment(
             member.kind,
-            inspection.expected_pieces(member.kind, joints, self.parts),
+            places,
             [e.translation for e in seen],
             tool,
             tol,

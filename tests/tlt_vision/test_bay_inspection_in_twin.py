@@ -24,6 +24,7 @@ from tlt_vision.frames import CameraRig
 from tlt_vision.inspection import Observation, bay_joints, inspect_bay
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
+from tlt_vision.pipeline import detections_near
 from tlt_vision.segmentation_source import TwinLabels
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")
@@ -55,6 +56,10 @@ def _seen(tmp_path: Path, shift_bottom_frame: float = 0.0) -> list[Observation]:
             f = scene.render(camera, ZED["width"], ZED["height"])
             found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == "corner_joint"]
             pose = rig.pose_from_joints(camera, hinges)
+            # As the node does: only the joints within the gate's reach of a place get a pose.
+            radius = CONFIG.raw["held_piece_gate"] + inspector.estimators["corner_joint"].model.diameter / 2
+            found = detections_near(found, f.depth, f.intrinsics, pose, np.array(list(_expected().values())),
+                                    radius)
             for o in inspector.observe("bay", found, f.depth, f.intrinsics, f.rgb):
                 if o.estimate is not None:
                     world = pose[:3, :3] @ o.estimate.translation + pose[:3, 3]
@@ -63,10 +68,15 @@ def _seen(tmp_path: Path, shift_bottom_frame: float = 0.0) -> list[Observation]:
     return out
 
 
-def _inspect(seen: list[Observation]):
+def _expected() -> dict[str, np.ndarray]:
+    """Bay 1's corner joints in the world while it is built (the node's ``_tower_origin``)."""
     site = CONFIG.raw["site"]
     origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
-    expected = {k: origin + np.asarray(p) for k, p in bay_joints(MISSION, 1).items()}
+    return {k: origin + np.asarray(p) for k, p in bay_joints(MISSION, 1).items()}
+
+
+def _inspect(seen: list[Observation]):
+    expected = _expected()
     tol = PartInspector(CONFIG, MISSION).tol
     gate, least = CONFIG.raw["held_piece_gate"], CONFIG.raw["bay_min_corner_joints"]
     return inspect_bay(1, expected, seen, tol, gate, least)

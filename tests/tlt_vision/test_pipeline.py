@@ -6,7 +6,13 @@ import numpy as np
 import torch
 
 from tlt_vision.cad.models import build_models
-from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn, merge_instances
+from tlt_vision.pipeline import (
+    Detection,
+    PartPipeline,
+    detections_from_mask_rcnn,
+    detections_near,
+    merge_instances,
+)
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.detector import KeypointDetector
 from tlt_vision.pose.estimator import PoseEstimator
@@ -82,3 +88,23 @@ def test_cross_frame_sides_are_merged_and_mask_rcnn_output_converted():
         result, ("strut_tube", "end_fitting", "cross_frame", "corner_joint", "rivet")
     )
     assert [d.object_class for d in dets] == ["end_fitting"]
+
+
+def test_only_detections_near_a_place_are_kept_and_one_without_depth_is_kept_for_its_reason():
+    joint = MODELS["corner_joint"]
+    near_t, far_t = np.array([-0.1, 0.0, 0.8]), np.array([0.12, 0.0, 1.0])
+    depth, ids = _render([(joint, np.eye(3), near_t), (joint, np.eye(3), far_t)])
+    near = Detection("corner_joint", ids == 0, 1.0, "near")
+    far = Detection("corner_joint", ids == 1, 1.0, "far")
+    blind = Detection("corner_joint", (depth == 0) & (np.arange(SIZE[1]) < 3), 1.0, "blind")  # no depth
+    # The camera stands 2 m up the world's x axis, looking the same way: world = camera + (2, 0, 0).
+    camera_pose = np.eye(4)
+    camera_pose[:3, 3] = (2.0, 0.0, 0.0)
+    places = np.array([near_t + camera_pose[:3, 3] + (0.03, 0.0, 0.0), (9.0, 9.0, 9.0)])
+    radius = 0.05 + joint.diameter / 2
+    kept = detections_near([near, far, blind], depth, K, camera_pose, places, radius)
+    assert [d.object_id for d in kept] == ["near", "blind"]
+    # Moving the place onto the far joint keeps that one instead.
+    places[0] = far_t + camera_pose[:3, 3]
+    kept = detections_near([near, far], depth, K, camera_pose, places, radius)
+    assert [d.object_id for d in kept] == ["far"]
