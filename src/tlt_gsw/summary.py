@@ -410,7 +410,7 @@ def format_summary(s: MissionSummary) -> str:
     lines.append(f"  bays built:       {s.bays_built}/{s.bays_total}")
     members = f"  members:          {s.members_placed}/{s.members_total} placed, {s.members_riveted} riveted"
     if s.member_states:
-        members += " (" + ", ".join(f"{n} {c}" for n, c in s.member_states.items() if c) + ")"
+        members += " (last state: " + ", ".join(f"{n} {c}" for n, c in s.member_states.items() if c) + ")"
     lines.append(members)
     for group, names in s.members_by_group.items():
         lines.append(f"    {group}: {len(names)} worked on: {', '.join(names)}")

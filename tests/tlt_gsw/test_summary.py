@@ -149,7 +149,7 @@ def test_summary_of_a_hand_made_archive_is_exact(two_bay_archive):
     for line in (
         "  result:           tower built",
         "  bays built:       2/2",
-        "  members:          3/3 placed, 2 riveted (riveted 1, inspected 2)",
+        "  members:          3/3 placed, 2 riveted (last state: riveted 1, inspected 2)",
         "  part inspections: 1 passed, 1 failed (bay1/cross_frame)",
         "  bay inspections:  1 passed, 0 failed",
         "  parts discarded:  1",
