@@ -325,7 +325,8 @@ def _trajectory_ok(result: Any) -> tuple[bool, str]:
 class ExecuteTrajectory(ActionGoal):
     """Send the slot's trajectory to the UR driver and follow it to its end.
 
-    Reads: the slot. Writes: nothing. RUNNING while the arm moves (≤ duration +
+    Reads: the slot. Writes: nothing. RUNNING while no fresh joint state has come to start from (up
+    to ``timeouts.planning_s``) and while the arm moves (≤ duration +
     ``timeouts.trajectory_margin_s``). SUCCESS when the driver reports it reached the goal within
     tolerance. FAILURE on rejection, abort (tolerance, protective stop) or timeout, with the
     driver's reason. Pre-empted: the goal is canceled and the driver holds the arm.
@@ -367,8 +368,20 @@ class ExecuteTrajectory(ActionGoal):
 
     def initialise(self) -> None:
         super().initialise()
+        self._waiting_since = self.ctx.clock()
         duration = self.slot.motion.duration if self.slot.motion is not None else 0.0
         self.result_timeout = duration + self.ctx.config.timeouts["trajectory_margin_s"]
+
+    def update(self) -> Status:
+        # The goal's start is checked against the arm's state when it is built; a gap in the joint
+        # states while planning kept the executor busy is waited out, as PlanMotion does, up to
+        # timeouts.planning_s, after which building the goal fails with the reason.
+        waited = self.ctx.clock() - self._waiting_since
+        if (self._send_future is None and self.ctx.arm_q() is None
+                and waited <= self.ctx.config.timeouts["planning_s"]):
+            self.feedback_message = "waiting for a fresh joint state to start from"
+            return Status.RUNNING
+        return super().update()
 
 
 class RetryMotion(py_trees.decorators.Retry):

@@ -1,12 +1,18 @@
-"""PlanMotion: a stale joint state is waited out (a gap under load is no fault), not failed at once."""
+"""PlanMotion and ExecuteTrajectory: a stale joint state is waited out (a gap under load is no fault),
+not failed at once."""
 
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
+import rclpy
 from py_trees.common import Status
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from tlt_ars.motion import MotionGoal, PlanMotion, TrajectorySlot
+from tlt_ars.motion import ExecuteTrajectory, MotionGoal, PlanMotion, TrajectorySlot
 
 
 class Arm:
@@ -72,3 +78,88 @@ def test_without_a_fresh_joint_state_within_planning_s_it_fails_naming_the_topic
     assert _run(b, arm, 0.0) == Status.RUNNING
     assert _run(b, arm, 16.0) == Status.FAILURE
     assert "no fresh joint state on '/ur_x/joint_states' within 15 s" in b.feedback_message
+
+
+class Driver:
+    """A FollowJointTrajectory server in the test's own rclpy context, on a spinning thread: the
+    goals it received."""
+
+    def __init__(self) -> None:
+        from rclpy.action import ActionServer
+        from rclpy.executors import SingleThreadedExecutor
+        from tlt_interfaces.action import FollowJointTrajectory
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("execute_trajectory_test", context=self.context)
+        self.goals: list = []
+
+        def execute(handle):
+            self.goals.append(handle.request)
+            handle.succeed()
+            return FollowJointTrajectory.Result()
+
+        self.server = ActionServer(self.node, FollowJointTrajectory, "/ur_x/follow_joint_trajectory", execute)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.server.destroy()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+        self.thread.join(timeout=5)
+
+
+@pytest.fixture
+def driver():
+    d = Driver()
+    try:
+        yield d
+    finally:
+        d.close()
+
+
+def _execute(driver: Driver, arm: Arm) -> ExecuteTrajectory:
+    arm.node, arm.ars = driver.node, "ars_x"
+    arm.config.timeouts.update(server_s=30.0, trajectory_margin_s=5.0)
+    arm.config.arm.update(path_tolerance=0.1, goal_tolerance=0.01, goal_time_tolerance_s=1.0)
+    slot = TrajectorySlot()
+    slot.motion = SimpleNamespace(duration=1.0, trajectory=JointTrajectory(
+        joint_names=[f"j{i}" for i in range(6)], points=[JointTrajectoryPoint(positions=[0.0] * 6)]))
+    return ExecuteTrajectory("Execute", arm, slot)
+
+
+def _tick_until(b: ExecuteTrajectory, done, seconds: float = 10.0) -> None:
+    deadline = time.monotonic() + seconds
+    while not done():
+        assert time.monotonic() < deadline, b.feedback_message
+        b.tick_once()
+        time.sleep(0.02)
+
+
+def test_execute_waits_for_a_fresh_joint_state_before_it_sends_the_goal(driver):
+    arm = Arm()
+    b = _execute(driver, arm)
+    arm.q = None
+    for _ in range(20):
+        b.tick_once()
+        time.sleep(0.01)
+    assert b.status == Status.RUNNING
+    assert b.feedback_message == "waiting for a fresh joint state to start from" and driver.goals == []
+    arm.now, arm.q = 3.0, np.zeros(6)
+    _tick_until(b, lambda: b.status == Status.SUCCESS)
+    assert len(driver.goals) == 1
+
+
+def test_execute_without_a_fresh_joint_state_within_planning_s_fails_naming_the_topic(driver):
+    arm = Arm()
+    b = _execute(driver, arm)
+    arm.q = None
+    b.tick_once()
+    arm.now = 16.0
+    _tick_until(b, lambda: b.status == Status.FAILURE)
+    assert "no fresh joint state on '/ur_x/joint_states' to start from" in b.feedback_message
+    assert driver.goals == []

@@ -28,6 +28,7 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.inspection import expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
+from tlt_vision.pipeline import detections_near
 from tlt_vision.segmentation_source import TwinLabels
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")
@@ -79,16 +80,21 @@ def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarr
         y /= np.linalg.norm(y)
         start = centre - axis * (part.length / 2 - shift)
         scene.place_part(part.name, start, np.column_stack([axis, y, np.cross(axis, y)]))
-        return _pieces_seen(scene, inspector, "corner_joint", "bay")
+        return _pieces_seen(scene, inspector, "corner_joint", "bay", placement[2])
 
 
-def _pieces_seen(scene, inspector, piece: str, pipeline: str) -> list[np.ndarray]:
-    """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them."""
+def _pieces_seen(scene, inspector, piece: str, pipeline: str, places: np.ndarray) -> list[np.ndarray]:
+    """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them: only
+    the pieces within the gate's reach of ``places`` get a pose."""
     seen = []
     size = RUN["cameras"]["d405"]
+    radius = load_config().raw["held_piece_gate"] + inspector.estimators[piece].model.diameter / 2
     for camera in CAMERAS:
         f = scene.render(camera, size["width"], size["height"])
         found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == piece]
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = f.rotation, f.position
+        found = detections_near(found, f.depth, f.intrinsics, pose, places, radius)
         for o in inspector.observe(pipeline, found, f.depth, f.intrinsics, f.rgb):
             if o.estimate is not None and o.estimate.certified:
                 seen.append(f.rotation @ o.estimate.translation + f.position)
@@ -162,11 +168,12 @@ def test_a_held_strut_is_aligned_from_the_end_fittings_each_d405_sees(inspector,
         onto = np.column_stack([axis, *_perpendiculars(axis)])
         seated = onto @ np.column_stack([along, *_perpendiculars(along)]).T
         scene.place_part(part.name, middle - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
-        seen = _pieces_seen(scene, inspector, "end_fitting", member.kind)
-    site = load_config().raw["site"]
-    origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
-    joints = [origin + np.asarray(p) for _, p in member.joints]
-    pieces = expected_pieces(member.kind, joints, inspector.parts)
+        site = load_config().raw["site"]
+        level = site["build_level"] + MISSION.bay_height
+        origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, level])
+        joints = [origin + np.asarray(p) for _, p in member.joints]
+        pieces = expected_pieces(member.kind, joints, inspector.parts)
+        seen = _pieces_seen(scene, inspector, "end_fitting", member.kind, pieces)
     result = held_part_alignment(member.kind, pieces, seen, tool, inspector.tol, gate=0.1)
     assert result.aligned and result.matched == 2, (result, seen, pieces)
     assert result.position_error < 0.002
