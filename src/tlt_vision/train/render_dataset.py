@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 
 from tlt_common.config_schema import ConfigError
+from tlt_vision.cad.views import random_rotation
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.train.dataset import Sample, write_index, write_sample
 
@@ -103,19 +104,6 @@ def look_at(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.n
     y = np.cross(z, x)
     c, s = math.cos(roll), math.sin(roll)
     return np.column_stack([c * x + s * y, -s * x + c * y, z])
-
-
-def random_rotation(rng: np.random.Generator) -> np.ndarray:
-    """Uniform on SO(3) (a normalised Gaussian quaternion)."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
