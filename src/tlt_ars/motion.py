@@ -40,6 +40,7 @@ from tlt_ars.planning.world import SceneConfig, build_scene
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal
+from tlt_common.stamps import split_seconds
 
 # Largest joint offset (rad) between the arm and a trajectory's first point when it is sent.
 START_TOLERANCE = 0.05
@@ -168,8 +169,8 @@ class MotionPlanner:
 
 def duration_msg(seconds: float) -> Duration:
     """builtin_interfaces/Duration of ``seconds`` (>= 0), rounded to the nanosecond."""
-    ns = round(seconds * 1e9)
-    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = split_seconds(seconds)
+    return Duration(sec=sec, nanosec=nanosec)
 
 
 class TrajectorySlot:

@@ -31,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.stamps import set_stamp
 
 COMPONENTS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
 
@@ -117,8 +118,7 @@ class BringupCheck(Node):
         trajectory = JointTrajectory(joint_names=joints)
         for t, positions in ((0.0, start), (duration_s, goal)):
             point = JointTrajectoryPoint(positions=[float(p) for p in positions])
-            point.time_from_start.sec = int(t)
-            point.time_from_start.nanosec = int((t % 1) * 1e9)
+            set_stamp(point.time_from_start, t)
             trajectory.points.append(point)
         handle = _wait_future(
             client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory)),

@@ -33,6 +33,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
+from tlt_common.stamps import set_stamp
 from tlt_sim.model import names
 from tlt_sim.model.geometry import mat_to_quat
 from tlt_sim.model.scene import Scene
@@ -48,18 +49,13 @@ def _next_due(due: float, period: float, t: float) -> float:
     return due if due > t + 1e-9 else t + period
 
 
-def _stamp(msg_stamp, t: float) -> None:
-    sec = int(t)
-    msg_stamp.sec, msg_stamp.nanosec = sec, round((t - sec) * 1e9) % 1_000_000_000
-
-
 class ClockPublisher:
     def __init__(self, node: Node) -> None:
         self._pub = node.create_publisher(Clock, topics.CLOCK, 10)
         self._msg = Clock()
 
     def publish(self, t: float) -> None:
-        _stamp(self._msg.clock, t)
+        set_stamp(self._msg.clock, t)
         self._pub.publish(self._msg)
 
 
@@ -120,7 +116,7 @@ class CameraStreams:
 
 def _image(array: np.ndarray, encoding: str, step: int, t: float, frame_id: str) -> Image:
     msg = Image()
-    _stamp(msg.header.stamp, t)
+    set_stamp(msg.header.stamp, t)
     msg.header.frame_id = frame_id
     msg.height, msg.width = int(array.shape[0]), int(array.shape[1])
     msg.encoding = encoding
@@ -132,7 +128,7 @@ def _image(array: np.ndarray, encoding: str, step: int, t: float, frame_id: str)
 
 def _camera_info(k, t: float, frame_id: str) -> CameraInfo:
     msg = CameraInfo()
-    _stamp(msg.header.stamp, t)
+    set_stamp(msg.header.stamp, t)
     msg.header.frame_id = frame_id
     msg.width, msg.height = k.width, k.height
     msg.distortion_model = "plumb_bob"
@@ -170,7 +166,7 @@ class GroundTruth:
         self._next = _next_due(self._next, self.period, t)
         for name, (pos, rot) in self.poses().items():
             msg = TransformStamped()
-            _stamp(msg.header.stamp, t)
+            set_stamp(msg.header.stamp, t)
             msg.header.frame_id = topics.WORLD_FRAME
             msg.child_frame_id = name
             msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (

@@ -29,6 +29,7 @@ from py_trees.common import Status
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCondition
+from tlt_common.stamps import set_stamp
 from tlt_crs.context import CrsContext
 
 Predicate = Callable[[Any], bool]
@@ -137,7 +138,6 @@ class MotionGoal(ActionGoal):
 
 
 def trajectory_goal(joints: tuple[str, ...], positions: list[float], seconds: float) -> Any:
-    from builtin_interfaces.msg import Duration
     from tlt_interfaces.action import FollowJointTrajectory
     from trajectory_msgs.msg import JointTrajectoryPoint
 
@@ -146,7 +146,7 @@ def trajectory_goal(joints: tuple[str, ...], positions: list[float], seconds: fl
     point = JointTrajectoryPoint()
     point.positions = [float(p) for p in positions]
     seconds = max(seconds, 0.05)
-    point.time_from_start = Duration(sec=int(seconds), nanosec=int((seconds % 1.0) * 1e9))
+    set_stamp(point.time_from_start, seconds)
     goal.trajectory.points = [point]
     return goal
 
