@@ -54,6 +54,7 @@ from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import Mission, load_mission
+from tlt_common.stamps import set_stamp
 from tlt_vision import inspection
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
@@ -76,11 +77,6 @@ def pose_msg(t: np.ndarray) -> Pose:
     x, y, z, w = rotation_to_quaternion(t[:3, :3])
     p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = x, y, z, w
     return p
-
-
-def _stamp(header: Any, t: float) -> None:
-    sec = math.floor(t)
-    header.stamp.sec, header.stamp.nanosec = int(sec), round((t - sec) * 1e9) % 1_000_000_000
 
 
 def _estimate_matrix(e: PoseEstimate) -> np.ndarray:
@@ -226,7 +222,7 @@ class VisionNode(Node):
         self, report: inspection.InspectionReport, stamp: float, frame_id: str, object_ids: dict[int, str]
     ) -> InspectionReport:
         msg = InspectionReport()
-        _stamp(msg.header, stamp)
+        set_stamp(msg.header.stamp, stamp)
         msg.header.frame_id = frame_id
         msg.target_id, msg.target_kind = report.target_id, report.target_kind
         msg.passed = bool(report.passed)
@@ -240,7 +236,7 @@ class VisionNode(Node):
     def _certified_pose(e: PoseEstimate, stamp: float, frame_id: str, object_id: str = "") -> CertifiedPose:
         f = e.certified_pose_fields(object_id)
         p = CertifiedPose()
-        _stamp(p.header, stamp)
+        set_stamp(p.header.stamp, stamp)
         p.header.frame_id = frame_id
         p.object_class, p.object_id = f["object_class"], f["object_id"]
         p.pose.position.x, p.pose.position.y, p.pose.position.z = f["position"]
@@ -255,7 +251,7 @@ class VisionNode(Node):
 
     def _failed(self, target: str, kind: str, reason: str) -> InspectionReport:
         msg = InspectionReport()
-        _stamp(msg.header, self._now())
+        set_stamp(msg.header.stamp, self._now())
         msg.target_id, msg.target_kind, msg.passed, msg.reasons = target, kind, False, [reason]
         return msg
 
@@ -473,6 +469,8 @@ class VisionNode(Node):
         # Every camera's frame and pose first, then the poses (seconds each on a busy CPU): the
         # frames are of one moment, and the request's time is not spent before the last is taken.
         frames: list[tuple[CameraFrame, np.ndarray]] = []
+        counts: list[str] = []  # what each camera saw, for a check that fails
+        uncertified: list[str] = []
         for cam in sorted(c.name for c in self.rig.ee.values() if c.arm == arm):
             try:
                 frame = self._grab(cam, self._frame_streams(), deadline)
@@ -489,16 +487,21 @@ class VisionNode(Node):
             except NoFrame as exc:
                 problems.append(f"{frame.camera}: {exc}")
                 continue
-            detections = self._near(detections, frame, cam_pose, places, piece)
-            for o in self._observe(pipeline, detections, frame):
+            near = self._near(detections, frame, cam_pose, places, piece)
+            certified = 0
+            for o in self._observe(pipeline, near, frame):
                 e = o.estimate
                 if e is None or not e.certified:
+                    uncertified.append(f"{frame.camera}: {o.reason or e.certificate.reason}")
                     continue
+                certified += 1
                 e = _in_world(e, cam_pose)
                 if all(np.linalg.norm(m.translation - e.translation) >= BAY_DUPLICATE_M for m in seen):
                     seen.append(e)
+            counts.append(f"{frame.camera}: {len(detections)} segmented, {len(near)} near a place,"
+                          f" {certified} certified")
         p = response.pose
-        _stamp(p.header, stamp)
+        set_stamp(p.header.stamp, stamp)
         p.header.frame_id = self.config.raw["world_frame"]
         p.object_class = "cross_frame" if member.kind == "cross_frame" else "strut_tube"
         p.object_id = member.id
@@ -515,7 +518,13 @@ class VisionNode(Node):
         )
         response.aligned = bool(result.aligned)
         response.position_error, response.angle_error = result.position_error, result.angle_error
-        response.reason = "; ".join([r for r in (result.reason, *problems) if r])
+        seen_how = []
+        if not result.aligned:
+            off = [np.linalg.norm(np.asarray(places) - e.translation, axis=1).min() * 1000 for e in seen]
+            seen_how = [f"{piece}s: {', '.join(counts)}",
+                        f"certified ones {', '.join(f'{d:.0f}' for d in off) or '-'} mm from a place",
+                        *uncertified]
+        response.reason = "; ".join([r for r in (result.reason, *problems, *seen_how) if r])
         p.keypoint_groups_visible, p.keypoint_groups_required = result.matched, 2
         p.certified = result.held is not None
         if seen:
@@ -577,7 +586,7 @@ class VisionNode(Node):
         tag = pose_matrix(result.pose.translation, result.pose.rotation)
         dispenser = cam_pose @ tag @ invert(self.tag_mount(request.dispenser))
         response.found = True
-        _stamp(response.pose.header, frame.stamp)
+        set_stamp(response.pose.header.stamp, frame.stamp)
         response.pose.header.frame_id = self.config.raw["world_frame"]
         response.pose.pose = pose_msg(dispenser)
         return response
