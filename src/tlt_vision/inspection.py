@@ -21,7 +21,7 @@ never counted as a found part.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -307,6 +307,23 @@ def expected_pieces(kind: str, joints: Sequence[Sequence[float]], parts: Mapping
     return np.array([pts[0] + lay["fitting_a"] * u, pts[0] + lay["fitting_b"] * u])
 
 
+def corner_joint_prior(
+    places: np.ndarray, camera_pose: np.ndarray
+) -> Callable[[str, np.ndarray], np.ndarray]:
+    """The pose prior of a held cross frame's corner joints (PartPipeline.observe): a cloud's
+    joint is expected at the place nearest it, its cube square to the tower (world axes; a
+    cube's symmetries make any square turn the same)."""
+    to_camera = np.linalg.inv(camera_pose)
+
+    def prior(_cls: str, points: np.ndarray) -> np.ndarray:
+        centre = camera_pose[:3, :3] @ np.median(points, axis=0) + camera_pose[:3, 3]
+        place = np.eye(4)
+        place[:3, 3] = places[int(np.argmin(np.linalg.norm(places - centre, axis=1)))]
+        return to_camera @ place
+
+    return prior
+
+
 def held_part_alignment(
     kind: str,
     pieces: Sequence[Sequence[float]],
@@ -446,6 +463,7 @@ __all__ = [
     "Observation",
     "Tolerances",
     "bay_joints",
+    "corner_joint_prior",
     "expected_pieces",
     "held_part_alignment",
     "inspect_bay",

@@ -489,7 +489,9 @@ class VisionNode(Node):
                 continue
             near = self._near(detections, frame, cam_pose, places, piece)
             certified = 0
-            for o in self._observe(pipeline, near, frame):
+            prior = inspection.corner_joint_prior(places, cam_pose) if piece == "corner_joint" else None
+            for o in self.inspector.observe(pipeline, near, frame.get("depth"), frame.intrinsics,
+                                            frame.get("rgb"), prior):
                 e = o.estimate
                 if e is None or not e.certified:
                     uncertified.append(f"{frame.camera}: {o.reason or e.certificate.reason}")

@@ -21,7 +21,7 @@ instance (a tube) is the anchor and every instance within ``reach`` of its centr
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -202,9 +202,10 @@ class PartInspector:
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
+        prior: Callable[[str, np.ndarray], np.ndarray | None] | None = None,
     ) -> list[inspection.Observation]:
         with self._locks[pipeline]:
-            return self.pipelines[pipeline].observe(detections, depth, intrinsics, rgb)
+            return self.pipelines[pipeline].observe(detections, depth, intrinsics, rgb, prior)
 
     def select(
         self,

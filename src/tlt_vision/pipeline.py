@@ -20,7 +20,7 @@ in the twin read the floor a metre behind it).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -134,7 +134,11 @@ class PartPipeline:
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
+        prior: Callable[[str, np.ndarray], np.ndarray | None] | None = None,
     ) -> list[Observation]:
+        """Poses of ``detections``; ``prior(object_class, points)``, when given, says where a piece
+        with those points (camera frame) is expected (4x4, camera frame) or None
+        (:meth:`PoseEstimator.estimate_batch`)."""
         dets = merge_instances(detections, self.merge)
         out: list[Observation | None] = [None] * len(dets)
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
@@ -159,7 +163,8 @@ class PartPipeline:
             else:
                 pending.setdefault(d.object_class, []).append((i, cloud.points))
         for cls, items in pending.items():
-            estimates = self.estimators[cls].estimate_batch([p for _, p in items])
+            priors = [prior(cls, p) for _, p in items] if prior is not None else None
+            estimates = self.estimators[cls].estimate_batch([p for _, p in items], priors)
             for (i, _), e in zip(items, estimates, strict=True):
                 out[i] = Observation(cls, e, "", dets[i].object_id)
         return [o for o in out if o is not None]

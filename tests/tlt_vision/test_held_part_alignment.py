@@ -25,7 +25,7 @@ from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.inspection import expected_pieces, held_part_alignment
+from tlt_vision.inspection import corner_joint_prior, expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.pipeline import detections_near
@@ -65,9 +65,11 @@ def inspector():
     return PartInspector(cfg, load_mission(cfg.mission_path))
 
 
-def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarray]:
-    """Certified corner joints (world) in both D405 frames, the frame ``shift`` m along its side."""
-    q, _, _ = placement
+def _corners_seen(placement, inspector, tmp_path, shift: float, dq=(0.0,) * 6, prior: bool = True
+                  ) -> list[np.ndarray]:
+    """Certified corner joints (world) in both D405 frames, the frame ``shift`` m along its side,
+    the arm ``dq`` (rad) off the placement configuration (a controller's tracking error)."""
+    q = np.asarray(placement[0]) + np.asarray(dq)
     scene = scene_mod.Scene(out_dir=tmp_path)
     with scene:
         for j, v in zip(names.arm_joints("ars_x"), q, strict=True):
@@ -80,22 +82,25 @@ def _corners_seen(placement, inspector, tmp_path, shift: float) -> list[np.ndarr
         y /= np.linalg.norm(y)
         start = centre - axis * (part.length / 2 - shift)
         scene.place_part(part.name, start, np.column_stack([axis, y, np.cross(axis, y)]))
-        return _pieces_seen(scene, inspector, "corner_joint", "bay", placement[2])
+        return _pieces_seen(scene, inspector, "corner_joint", "bay", placement[2], prior)
 
 
-def _pieces_seen(scene, inspector, piece: str, pipeline: str, places: np.ndarray) -> list[np.ndarray]:
+def _pieces_seen(scene, inspector, piece: str, pipeline: str, places: np.ndarray, prior: bool = False
+                 ) -> list[np.ndarray]:
     """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them: only
-    the pieces within the gate's reach of ``places`` get a pose."""
+    the pieces within the gate's reach of ``places`` get a pose, a corner joint's fit also
+    started from its place (``prior``)."""
     seen = []
     size = RUN["cameras"]["d405"]
     radius = load_config().raw["held_piece_gate"] + inspector.estimators[piece].model.diameter / 2
     for camera in CAMERAS:
-        f = scene.render(camera, size["width"], size["height"])
+        f = scene.render(camera, size["width"], size["height"], antialias=RUN["cameras"]["antialias"])
         found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == piece]
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = f.rotation, f.position
         found = detections_near(found, f.depth, f.intrinsics, pose, places, radius)
-        for o in inspector.observe(pipeline, found, f.depth, f.intrinsics, f.rgb):
+        start = corner_joint_prior(places, pose) if prior else None
+        for o in inspector.observe(pipeline, found, f.depth, f.intrinsics, f.rgb, start):
             if o.estimate is not None and o.estimate.certified:
                 seen.append(f.rotation @ o.estimate.translation + f.position)
     return seen
@@ -124,6 +129,25 @@ def test_a_frame_caught_off_centre_is_measured_and_the_correction_puts_it_in_pla
     corrected = tool @ np.linalg.inv(result.held) @ tool
     moved = [corrected @ np.linalg.inv(tool) @ np.append(p, 1.0) for p in seen]
     assert max(np.min(np.linalg.norm(corners - m[:3], axis=1)) for m in moved) < 0.002
+
+
+def test_corner_joints_are_certified_with_the_arm_a_little_off_its_placement(placement, inspector, tmp_path):
+    """The arm a few milliradians off its placement configuration (as the controller leaves it)
+    and the frame a millimetre or two along its grasp. In a sweep of such offsets the keypoint
+    detector's fit of D405 a's partial cube view once settled turned (3.8 mm Chamfer, no face
+    matched) and the joint was not certified, as whole runs failed CheckAlignment of the cross
+    frame; the fit also started at the joint's place (:func:`corner_joint_prior`) certified it.
+    Which offsets fit turned hangs on the last digits of the rendered view, so the passes over a
+    few offsets (that one first) are what is asserted."""
+    _, tool, corners = placement
+    rng = np.random.default_rng(7)
+    cases = [((0.000427286, 0.000434644, 0.004235678, -0.002224042, -0.000755210, 0.004085543), 0.0012934)]
+    cases += [(tuple(rng.normal(0.0, 0.002, 6)), float(rng.normal(0.0, 0.002))) for _ in range(2)]
+    for dq, shift in cases:
+        seen = _corners_seen(placement, inspector, tmp_path, shift, dq)
+        assert len(seen) == 2, (dq, shift, seen)
+        result = held_part_alignment("cross_frame", corners, seen, tool, inspector.tol, gate=0.1)
+        assert result.matched == 2 and result.position_error < 0.01, (dq, shift, result)
 
 
 def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
