@@ -358,30 +358,30 @@ class SystemRun:
             timeout, f"{ars}'s arm moving away from {ref}", since=since)
         return tuple(fields[f"q{i}"] for i in range(6))
 
-    def wait_build_moves_arm(self, ars: str, timeout: float, *, clear_faults: int = 2) -> list[str]:
-        """Wait until ``ars``'s arm moves in the build. A fault raised before it does (on this
-        loaded machine an end-effector servo sometimes misses a read and the ARS fails its
-        request) is cleared from the ground, as an operator would, up to ``clear_faults`` times;
-        the tree then sends the request again. Returns the faults cleared."""
-        start = self.arm_q(ars)[0] if self.arm_q(ars) else None
+    def wait_through_faults(
+        self, predicate: Callable[[Packet], bool], timeout: float, what: str, *, clear_faults: int = 2,
+        since: int | None = None,
+    ) -> tuple[Packet, list[str]]:
+        """Wait for a packet that satisfies ``predicate``. A fault raised meanwhile (on this loaded
+        machine an end-effector servo sometimes misses a read and the ARS fails its request) is
+        cleared from the ground, as an operator would, up to ``clear_faults`` times; the tree then
+        sends the request again. Returns the packet and the faults cleared."""
         cleared: list[str] = []
         deadline = time.monotonic() + timeout
-        since = len(self.packets)
+        since = len(self.packets) if since is None else since
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise AssertionError(f"{ars}'s arm did not move within {timeout:g} s "
-                                     f"(faults cleared: {cleared}); last: {self.last_of_each()}")
+                raise AssertionError(f"{what}: not seen within {timeout:g} s (faults cleared: {cleared}); "
+                                     f"last: {self.last_of_each()}")
             packet = self.wait_packet(
-                lambda p: (p.kind == "hk_mission" and p.fields["run_state"] == "fault")
-                or (p.kind == "hk_arm_joints" and p.fields["ars"] == ars and start is not None
-                    and max(abs(p.fields[f"q{i}"] - start[i]) for i in range(6)) > 0.01),
-                left, f"{ars}'s arm moving", since=since)
+                lambda p: predicate(p) or (p.kind == "hk_mission" and p.fields["run_state"] == "fault"),
+                left, what, since=since)
             since = len(self.packets)
-            if packet.kind == "hk_arm_joints":
-                return cleared
+            if predicate(packet):
+                return packet, cleared
             if len(cleared) >= clear_faults:
-                raise AssertionError(f"the build faulted before {ars}'s arm moved: {packet.fields['fault']} "
+                raise AssertionError(f"the build faulted before {what}: {packet.fields['fault']} "
                                      f"(faults cleared before: {cleared})")
             cleared.append(packet.fields["fault"])
             ack = self.command("set_blackboard_value", {"key": "clear_fault", "value": True})
@@ -389,6 +389,16 @@ class SystemRun:
             self.wait_kind("hk_mission", lambda f: f["run_state"] != "fault", 30, "the fault cleared",
                            since=since)
             since = len(self.packets)
+
+    def wait_build_moves_arm(self, ars: str, timeout: float, *, clear_faults: int = 2) -> list[str]:
+        """Wait until ``ars``'s arm moves in the build, clearing faults on the way
+        (:meth:`wait_through_faults`); return the faults cleared."""
+        start = self.arm_q(ars)[0] if self.arm_q(ars) else None
+        _, cleared = self.wait_through_faults(
+            lambda p: p.kind == "hk_arm_joints" and p.fields["ars"] == ars and start is not None
+            and max(abs(p.fields[f"q{i}"] - start[i]) for i in range(6)) > 0.01,
+            timeout, f"{ars}'s arm moving", clear_faults=clear_faults)
+        return cleared
 
     def wait_arm_still(self, ars: str, timeout: float, *, samples: int = 5, tolerance: float = 1e-3
                        ) -> tuple[float, ...]:
