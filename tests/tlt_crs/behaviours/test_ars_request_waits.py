@@ -88,7 +88,7 @@ def test_server_that_came_up_behind_the_cache_gets_the_goal_instead_of_a_fault(r
             assert send.status is Status.RUNNING and send.feedback_message.startswith("waiting for")
             seconds.now += LIMIT + 0.01
             send.tick_once()  # past the limit: the fresh answer says the server is there
-            assert send.status is Status.RUNNING and send.feedback_message == "sent to ars_x", send.feedback_message
+            assert (send.status, send.feedback_message) == (Status.RUNNING, "sent to ars_x")
             assert crs.tick_until(send) == Status.SUCCESS
             assert received == [MEMBER]
         finally:
