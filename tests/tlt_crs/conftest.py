@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import gc
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -185,6 +186,8 @@ class VisionStandIn:
         self.part_calls: list[str] = []
         self.part_cameras: list[str] = []
         self.bay_calls: list[int] = []
+        self.cameras: CameraStandIn | None = None  # the mounts, read when the bay is inspected
+        self.mounts_at_bay_calls: list[tuple[list[float], list[float]]] = []
         self._node, self._group = node, group
         self._services: list[Any] = []
         self.serve()
@@ -216,6 +219,8 @@ class VisionStandIn:
 
     def _bay(self, request: Any, response: Any) -> Any:
         self.bay_calls.append(request.bay)
+        if self.cameras is not None:
+            self.mounts_at_bay_calls.append(self.cameras.reading())
         response.report.target_id = f"bay{request.bay}"
         response.report.passed = self.bay_passes
         response.report.reasons = [] if self.bay_passes else ["corner x0_y0 misaligned"]
@@ -358,14 +363,43 @@ class GripperStandIn:
 
 
 class CameraStandIn:
+    """The camera mounts: a trajectory server, and joint states at 50 Hz that trail its end by
+    ``trail_s`` (servos behind their controller), moving at a constant speed to the goal."""
+
+    JOINTS = ("camera_mount_1", "camera_mount_2")
+
     def __init__(self, node: Node, group: Any) -> None:
-        self.positions: list[float] = [0.0, 0.0]
+        from sensor_msgs.msg import JointState
+
+        self.JointState = JointState
+        self.positions: list[float] = [0.0, 0.0]  # the goal of the last trajectory
+        self.trail_s = 0.3
+        self._from, self._since = [0.0, 0.0], -math.inf
         self.trajectories = _Trajectories(
             node, ros_names.trajectory_action(ros_names.CAMERA_MOUNTS), self._apply, group
         )
+        topic = ros_names.joint_states_topic(ros_names.CAMERA_MOUNTS)
+        self._pub = node.create_publisher(JointState, topic, 10)
+        self._clock = node.get_clock()
+        node.create_timer(0.02, self._publish, callback_group=group)
 
     def _apply(self, names: list[str], positions: list[float]) -> None:
+        self._from, self._since = self.reading()[0], time.monotonic()
         self.positions = positions
+
+    def reading(self) -> tuple[list[float], list[float]]:
+        """Where the mounts stand now and their speeds."""
+        f = min(1.0, (time.monotonic() - self._since) / self.trail_s)
+        pairs = list(zip(self._from, self.positions, strict=True))
+        at = [a + f * (b - a) for a, b in pairs]
+        speed = [0.0 if f >= 1.0 else (b - a) / self.trail_s for a, b in pairs]
+        return at, speed
+
+    def _publish(self) -> None:
+        at, speed = self.reading()
+        msg = self.JointState(name=list(self.JOINTS), position=at, velocity=speed)
+        msg.header.stamp = self._clock.now().to_msg()
+        self._pub.publish(msg)
 
 
 class Rig:
@@ -392,6 +426,7 @@ class Rig:
                 self.node, self.group, ros_names.ACTIVE_GRIPPERS, defaults.active_grippers.joints, 1.2
             )
             self.cameras = CameraStandIn(self.node, self.group)
+            self.vision.cameras = self.cameras
             self.top.set_engaged(True)  # a bay starts with the Top Grippers holding the tower
         self.nodes: list[Node] = []
         self.executor = MultiThreadedExecutor(num_threads=8)

@@ -3,6 +3,7 @@ vision services (real ROS actions and services), and their effect on the tower m
 
 from __future__ import annotations
 
+import pytest
 from py_trees.common import Status
 
 from tlt_common.mission.tower_model import INSPECTED, NOT_PLACED, PLACED, RIVETED
@@ -166,6 +167,10 @@ def test_test_bay_compresses_inspects_and_marks_the_bay_inspected(rig, crs, tmp_
     assert rig.top.engaged == [True] * 4 and rig.active.engaged == [True] * 4
     assert rig.vision.bay_calls == [1]
     assert [g for g in rig.cameras.trajectories.goals] == [[1.15, 1.15], [0.0, 0.0]]
+    # The ZEDs looked once the mounts stood still inward, not when their trajectory ended (the
+    # stand-in's servos trail it by 0.3 s).
+    (at, speed), = rig.vision.mounts_at_bay_calls
+    assert at == pytest.approx([1.15, 1.15], abs=0.005) and speed == [0.0, 0.0], (at, speed)
     # 50 N / 50000 N/m = 1 mm above the lowered position.
     assert all(abs(p - 0.101) < 1e-9 for p in rig.lifter.positions)
     assert all(ctx.model.states[m.id] == INSPECTED for m in ctx.mission.bay_members(1))

@@ -20,6 +20,7 @@ joints stand.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -55,6 +56,10 @@ def lifter_at(target: float, tolerance: float) -> Predicate:
 
 def lifter_in(state: int) -> Predicate:
     return lambda msg: bool(msg.link_ok) and msg.state == state
+
+
+CAMERA_MOUNT_SETTLED_RAD = 0.005  # a ZED ~1 m from the joints it inspects: 5 mm
+CAMERA_MOUNT_STILL_RAD_S = 0.01
 
 
 class WaitFor(Action):
@@ -358,13 +363,44 @@ class Actuators:
         )
 
     # ----- camera mounts -----
-    def cameras(self, inward: bool) -> MotionGoal:
+    def cameras(self, inward: bool) -> py_trees.behaviour.Behaviour:
+        """Turn the ZED mounts, then wait until their joint states stand still at the goal.
+
+        The mounts' trajectory ends while the servos still trail it, and vision places a frame by
+        the joint states near its stamp: a whole run inspected its good bay as the mounts came to
+        rest, and every corner joint came out 5-8 mm off."""
+        from sensor_msgs.msg import JointState
+
         setup = self.ctx.config.camera_mounts
         positions = list(setup.inward if inward else setup.outward)
-        return self._goal(
-            "Rotate Cameras Inward" if inward else "Rotate Cameras Outward",
-            ros_names.trajectory_action(ros_names.CAMERA_MOUNTS),
-            lambda: trajectory_goal(setup.joints, positions, setup.move_time_s),
+        way = "Inward" if inward else "Outward"
+
+        def still(msg: Any) -> bool:
+            at = dict(zip(msg.name, msg.position, strict=False))
+            speeds = [abs(v) for v in msg.velocity]
+            return all(
+                abs(at.get(j, math.inf) - p) <= CAMERA_MOUNT_SETTLED_RAD
+                for j, p in zip(setup.joints, positions, strict=True)
+            ) and max(speeds, default=0.0) <= CAMERA_MOUNT_STILL_RAD_S
+
+        return py_trees.composites.Sequence(
+            f"Rotate Cameras {way}",
+            memory=True,
+            children=[
+                self._goal(
+                    f"Turn Camera Mounts {way}",
+                    ros_names.trajectory_action(ros_names.CAMERA_MOUNTS),
+                    lambda: trajectory_goal(setup.joints, positions, setup.move_time_s),
+                ),
+                WaitFor(
+                    f"Wait Cameras Still {way}",
+                    self.ctx,
+                    ros_names.joint_states_topic(ros_names.CAMERA_MOUNTS),
+                    JointState,
+                    still,
+                    self.ctx.config.timeouts.actuator_s,
+                ),
+            ],
         )
 
     # ----- Figs. 18 and 19 -----
