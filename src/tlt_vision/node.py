@@ -202,10 +202,10 @@ class VisionNode(Node):
         return ("depth", *self.segmenter.streams)
 
     def _observe(
-        self, pipeline: str, detections: list[Detection], frame: CameraFrame
+        self, pipeline: str, detections: list[Detection], frame: CameraFrame, prior: Any = None
     ) -> list[inspection.Observation]:
         return self.inspector.observe(
-            pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
+            pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb"), prior
         )
 
     def _near(
@@ -365,9 +365,9 @@ class VisionNode(Node):
                 problems.append(f"{camera}: {exc}")
                 continue
             stamp = frame.stamp
-            detections = self._near(detections, frame, pose, np.array(list(expected.values())),
-                                    "corner_joint")
-            for o in self._observe("bay", detections, frame):
+            places = np.array(list(expected.values()))
+            detections = self._near(detections, frame, pose, places, "corner_joint")
+            for o in self._observe("bay", detections, frame, inspection.corner_joint_prior(places, pose)):
                 est = _in_world(o.estimate, pose) if o.estimate is not None else None
                 found.append((replace(o, estimate=est), o.object_id))
         merged: list[tuple[inspection.Observation, str]] = []
@@ -490,8 +490,7 @@ class VisionNode(Node):
             near = self._near(detections, frame, cam_pose, places, piece)
             certified = 0
             prior = inspection.corner_joint_prior(places, cam_pose) if piece == "corner_joint" else None
-            for o in self.inspector.observe(pipeline, near, frame.get("depth"), frame.intrinsics,
-                                            frame.get("rgb"), prior):
+            for o in self._observe(pipeline, near, frame, prior):
                 e = o.estimate
                 if e is None or not e.certified:
                     uncertified.append(f"{frame.camera}: {o.reason or e.certificate.reason}")

@@ -21,7 +21,7 @@ import pytest
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.frames import CameraRig
-from tlt_vision.inspection import Observation, bay_joints, inspect_bay
+from tlt_vision.inspection import Observation, bay_joints, corner_joint_prior, inspect_bay
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.pipeline import detections_near
@@ -58,9 +58,11 @@ def _seen(tmp_path: Path, shift_bottom_frame: float = 0.0) -> list[Observation]:
             pose = rig.pose_from_joints(camera, hinges)
             # As the node does: only the joints within the gate's reach of a place get a pose.
             radius = CONFIG.raw["held_piece_gate"] + inspector.estimators["corner_joint"].model.diameter / 2
-            found = detections_near(found, f.depth, f.intrinsics, pose, np.array(list(_expected().values())),
-                                    radius)
-            for o in inspector.observe("bay", found, f.depth, f.intrinsics, f.rgb):
+            places = np.array(list(_expected().values()))
+            found = detections_near(found, f.depth, f.intrinsics, pose, places, radius)
+            # As the node does: each joint's fit also starts from its place.
+            prior = corner_joint_prior(places, pose)
+            for o in inspector.observe("bay", found, f.depth, f.intrinsics, f.rgb, prior):
                 if o.estimate is not None:
                     world = pose[:3, :3] @ o.estimate.translation + pose[:3, 3]
                     o = replace(o, estimate=replace(o.estimate, translation=world))
