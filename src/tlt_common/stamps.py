@@ -1,4 +1,4 @@
-"""Seconds as float <-> ``builtin_interfaces`` Time/Duration fields (``sec``, ``nanosec``).
+"""Float seconds into ``builtin_interfaces`` Time/Duration fields (``sec``, ``nanosec``).
 
 Sim time is a float summed step by step, so a whole second often arrives as 36.99999999996:
 splitting that into ``int(t)`` seconds and the rounded rest gives 36 s and 1e9 ns, and wrapping
@@ -22,8 +22,3 @@ def split_seconds(t: float) -> tuple[int, int]:
 def set_stamp(stamp: Any, t: float) -> None:
     """Write ``t`` seconds into a Time or Duration message's ``sec`` and ``nanosec``."""
     stamp.sec, stamp.nanosec = split_seconds(t)
-
-
-def seconds(stamp: Any) -> float:
-    """A Time or Duration message's ``sec`` and ``nanosec`` as float seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9

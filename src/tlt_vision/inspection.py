@@ -310,9 +310,10 @@ def expected_pieces(kind: str, joints: Sequence[Sequence[float]], parts: Mapping
 def corner_joint_prior(
     places: np.ndarray, camera_pose: np.ndarray
 ) -> Callable[[str, np.ndarray], np.ndarray]:
-    """The pose prior of a held cross frame's corner joints (PartPipeline.observe): a cloud's
-    joint is expected at the place nearest it, its cube square to the tower (world axes; a
-    cube's symmetries make any square turn the same)."""
+    """The pose prior of corner joints seen by a camera at ``camera_pose`` (for
+    PartPipeline.observe; CheckAlignment of a held cross frame, InspectBay): a cloud's joint is
+    expected at the place nearest it, its cube square to the tower (world axes; a cube's
+    symmetries make any square turn the same)."""
     to_camera = np.linalg.inv(camera_pose)
 
     def prior(_cls: str, points: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Duration, Time
 
-from tlt_common.stamps import seconds, set_stamp, split_seconds
+from tlt_common.stamps import set_stamp, split_seconds
 
 
 def test_sim_time_summed_in_steps_is_stamped_in_order_and_on_the_whole_second():
@@ -20,11 +20,11 @@ def test_sim_time_summed_in_steps_is_stamped_in_order_and_on_the_whole_second():
     assert stamps == sorted(stamps)
 
 
-def test_split_and_back():
+def test_split_seconds():
     assert split_seconds(1.5) == (1, 500_000_000)
     assert split_seconds(2.9999999999) == (3, 0)
     assert split_seconds(0.0) == (0, 0)
     assert split_seconds(-0.25) == (-1, 750_000_000)  # Time's convention: nanosec is never negative
     d = Duration()
     set_stamp(d, 12.000000001)
-    assert (d.sec, d.nanosec) == (12, 1) and abs(seconds(d) - 12.000000001) < 1e-12
+    assert (d.sec, d.nanosec) == (12, 1)
