@@ -10,6 +10,7 @@ time, as the driver nodes publish them on the twin. The vision node runs on sim 
 
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -37,7 +38,7 @@ from tlt_ars.planning.targets import placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
-from tlt_vision.frames import arm_joint_names, width_joint_name
+from tlt_vision.frames import FrameUnavailable, arm_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main, spin
 from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
 
@@ -317,7 +318,19 @@ def test_a_cross_frame_held_at_its_place_is_aligned_from_the_d405s(rig):
         )
 
     rig.twin.do(hold)
-    time.sleep(0.5)  # joint states of the new pose reach the vision node
+    # The node keeps the latest joint states: wait until they are the new pose's (a fixed half
+    # second was too short on a loaded CI machine, and the D405s were placed from the old pose).
+    def heard() -> bool:
+        try:
+            now = rig.vision.rig.joints.get(arm_joint_names("ars_x"), 0.0, math.inf)
+            return np.allclose(now, q, atol=1e-3)
+        except FrameUnavailable:  # none heard yet
+            return False
+
+    deadline = time.monotonic() + 20.0
+    while not heard():
+        assert time.monotonic() < deadline, "the vision node never heard the new arm pose"
+        time.sleep(0.05)
     res = rig.call(
         CheckAlignment,
         ros_names.VISION_CHECK_ALIGNMENT,
