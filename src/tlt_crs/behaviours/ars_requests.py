@@ -107,17 +107,24 @@ class ArsRequest:
         return f"{self.title} for '{self.member.id}' on {self.ars_name or self.ars()}"
 
     def cancel(self) -> None:
-        """Cancel the goal in flight (also one not yet accepted); forget it."""
-        if self.handle is not None and not self.finished:
-            self.handle.cancel_goal_async()
-        elif self.send_future is not None and not self.send_future.done():
+        """Cancel the goal in flight (also one not yet accepted, or accepted since the last tick);
+        forget it."""
+        if self.handle is not None:
+            if not self.finished:
+                self.handle.cancel_goal_async()
+        elif self.send_future is not None:
 
             def cancel_when_accepted(future: Any) -> None:
                 handle = future.result()
                 if handle is not None and handle.accepted:
                     handle.cancel_goal_async()
 
-            self.send_future.add_done_callback(cancel_when_accepted)
+            # A goal accepted between two ticks has its handle only in the future: a Stop there
+            # left the ARS working on after the CRS had stopped.
+            if self.send_future.done():
+                cancel_when_accepted(self.send_future)
+            else:
+                self.send_future.add_done_callback(cancel_when_accepted)
         if self.inspected:
             self.ctx.desk.withdraw(self.member.id, "the CRS stopped following this request")
         self.reset()

@@ -1,6 +1,7 @@
 """Send ARS Request waiting for an ARS action server: the server's readiness is read from a cache
 between ticks, but "ARS missing" is decided exactly at ``timeouts.ars_server_s`` of mission time on
-a fresh answer, and a server that came up meanwhile gets the goal instead.
+a fresh answer, and a server that came up meanwhile gets the goal instead. A goal accepted between
+two ticks is still canceled when the request is.
 
 The mission clock is injected (exact timeouts on a loaded machine); the action servers are real."""
 
@@ -104,5 +105,26 @@ def test_server_that_came_up_behind_the_cache_gets_the_goal_instead_of_a_fault(r
             assert received == [MEMBER]
         finally:
             server.destroy()
+    finally:
+        rig.close()
+
+
+def test_a_goal_accepted_since_the_last_tick_is_canceled_too(ros, crs, tmp_path):
+    rig = crs.Rig(with_drivers=False)
+    try:
+        rig.ars["ars_x"].hold_s = 30.0
+        rig.ars["ars_x"].present_parts = False
+        ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+        request = add_member_request(ctx, ctx.mission.member(MEMBER))
+        send = SendArsRequest(request)
+        crs.wait_for(lambda: request.server("ars_x").readiness.ready_now(), 10.0, "ARS X discovered")
+        send.tick_once()
+        assert send.feedback_message == "sent to ars_x"
+        crs.wait_for(lambda: request.send_future.done(), 10.0, "goal accepted")
+        assert request.handle is None  # accepted, but no tick has taken the handle yet
+        request.cancel()
+        crs.wait_for(
+            lambda: [r.outcome for r in rig.recorder.requests] == ["canceled"], 10.0, "ARS goal canceled"
+        )
     finally:
         rig.close()
