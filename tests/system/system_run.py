@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -255,6 +256,13 @@ class SystemRun:
                 self.gsw.poll(0.2)
             else:
                 time.sleep(0.2)
+
+    def pid(self, name: str) -> int:
+        """The pid of the launch set's process ``name`` as last started (the launcher says
+        "started <name> (pid N)" on every start and restart)."""
+        found = re.findall(rf"started {re.escape(name)} \(pid (\d+)\)", self.launch_output())
+        assert found, f"the launcher has not started {name}"
+        return int(found[-1])
 
     # -- ground link ------------------------------------------------------------------------
     @property

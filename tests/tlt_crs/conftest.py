@@ -78,6 +78,7 @@ class ArsStandIn:
 
         self.node, self.ars, self.recorder = node, ars, recorder
         self.hold_s = 0.0  # how long each request takes
+        self.present_after_s = 0.0  # how long the ARS works before it presents the part
         self.fail: dict[str, str] = {}  # member id -> reason to fail with
         self.present_parts = True
         self.max_parts = 3
@@ -128,6 +129,9 @@ class ArsStandIn:
         if request in ("add_cross_frame", "add_member") and self.present_parts:
             from tlt_interfaces.srv import InspectPart
 
+            deadline = time.monotonic() + self.present_after_s
+            while time.monotonic() < deadline and not CLOSING.is_set() and not handle.is_cancel_requested:
+                time.sleep(0.01)
             passed = False
             for _ in range(self.max_parts):
                 if not handle.is_active or handle.is_cancel_requested or CLOSING.is_set():
@@ -570,4 +574,5 @@ def crs():
         tick_until=tick_until,
         wait_for=wait_for,
         Rig=Rig,
+        ArsStandIn=ArsStandIn,
     )

@@ -130,6 +130,36 @@ def test_ars_gone_mid_request_fails_instead_of_waiting_forever(rig, crs, tmp_pat
     assert "gone while running" in subtree.children[1].children[-1].feedback_message
 
 
+def _restart_ars_x(rig, crs):
+    """ARS X's servers go away and a new process's come up at once (a launcher restart)."""
+    import rclpy
+
+    for server in rig.ars["ars_x"].servers:
+        server.destroy()
+    node = rclpy.create_node("ars_x_restarted")
+    rig.add(node)
+    rig.ars["ars_x"] = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
+
+
+@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
+def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_had(rig, crs, tmp_path, phase):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    rig.ars["ars_x"].hold_s = 30.0
+    if phase == "waiting for the part":
+        rig.ars["ars_x"].present_after_s = 30.0
+    subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
+    crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and (
+        rig.vision.part_calls != [] or phase == "waiting for the part"))
+    _restart_ars_x(rig, crs)
+    assert crs.tick_until(subtree, timeout=10.0) == Status.FAILURE
+    assert rig.recorder.requests[1:] == []  # nothing sent to the new server
+    failed = [b for b in subtree.iterate() if b.status == Status.FAILURE and b.children == []]
+    message = failed[0].feedback_message
+    assert "gone while running" in message and "does not know the goal" in message, message
+    waiting = "Wait For Part" if phase == "waiting for the part" else "Wait For AddMember"
+    assert failed[0].name.startswith(waiting), failed[0].name
+
+
 def test_member_the_model_says_placed_is_never_requested(rig, crs, tmp_path):
     ctx = crs.make_context(rig, crs.fast_config(tmp_path))
     member = _member(ctx, "bay1/vertical/x0_y1")

@@ -8,8 +8,10 @@ behaviours share it: :class:`SendArsRequest` (the acknowledgement), the Inspecti
 (a fault, Stop), so no goal is left running on an ARS that the CRS no longer follows.
 
 Failures name the ARS and the action: server not found within ``timeouts.ars_server_s``, goal
-rejected, server gone while the goal runs (not discoverable for ``ars_server_s``), no result
-within blackboard ``ars_result_timeout``, aborted, or a result of failure with the ARS's reason.
+rejected, server gone while the goal runs (not discoverable for ``ars_server_s``, or only a new
+server is: the ARS process that took the goal was replaced, say restarted by the launcher, and the
+new one will never answer it), no result within blackboard ``ars_result_timeout``, aborted, or a
+result of failure with the ARS's reason.
 Every wait is measured on the mission clock, which stands still while the CRS is paused. Whether
 a server is there is read through :mod:`tlt_common.bt.server_readiness`: waiting uses an answer up
 to a quarter second old, and the "missing" and "gone" failures are decided on a fresh one.
@@ -17,6 +19,7 @@ to a quarter second old, and the "missing" and "gone" failures are decided on a 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -27,7 +30,7 @@ from py_trees.common import Status
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import default_feedback_text, shared_action_client
-from tlt_common.bt.server_readiness import Readiness, readiness_of
+from tlt_common.bt.server_readiness import READINESS_PERIOD_S, Readiness, readiness_of
 from tlt_common.mission.schema import Member
 from tlt_crs.context import CrsContext
 
@@ -98,10 +101,57 @@ class ArsRequest:
         self.result_future: Any = None
         self.feedback: Any = None
         self.accepted_at = 0.0
+        self._serving: frozenset[bytes] = frozenset()  # endpoints of the server that took the goal
+        self._serving_seen = (-float("inf"), True)  # (monotonic time, any of them in the graph)
+        self._lost_since: float | None = None
 
     @property
     def finished(self) -> bool:
         return self.result_future is not None and self.result_future.done()
+
+    def _status_publishers(self) -> frozenset[bytes]:
+        topic = f"{ros_names.ars_action(self.ars_name, self.request)}/_action/status"
+        return frozenset(bytes(i.endpoint_gid) for i in self.ctx.node.get_publishers_info_by_topic(topic))
+
+    def accepted(self, handle: Any, now: float) -> None:
+        """Follow the goal ``handle`` accepted at mission time ``now``, and note which server took it."""
+        self.handle = handle
+        self.accepted_at = now
+        self.result_future = handle.get_result_async()
+        self._serving = self._status_publishers()
+        self._serving_seen = (time.monotonic(), True)
+        self._lost_since = None
+
+    def _serving_present(self, fresh: bool) -> bool:
+        # Asked of the graph at most every READINESS_PERIOD_S of wall time, as server readiness is.
+        if not self._serving:
+            return True  # not known (the graph did not list it yet at acceptance): readiness decides
+        at, present = self._serving_seen
+        now = time.monotonic()
+        if fresh or now - at >= READINESS_PERIOD_S:
+            present = bool(self._serving & self._status_publishers())
+            self._serving_seen = (now, present)
+        return present
+
+    def server_gone(self, now: float) -> str:
+        """Why the goal in flight can no longer finish ('' while it can): the server that took it
+        has been undiscoverable, or replaced by another, for ``timeouts.ars_server_s`` of mission
+        time up to ``now`` (decided on a fresh look at the graph). The goal is then canceled."""
+        readiness = self.server(self.ars_name).readiness
+        if readiness.ready() and self._serving_present(fresh=False):
+            self._lost_since = None
+            return ""
+        self._lost_since = now if self._lost_since is None else self._lost_since
+        if now - self._lost_since <= self.ctx.config.timeouts.ars_server_s:
+            return ""
+        up, present = readiness.ready_now(), self._serving_present(fresh=True)
+        if up and present:  # back (or the cached answer was old): not gone
+            self._lost_since = None
+            return ""
+        name = self.describe()
+        why = "" if not up else f": a new '{self.server(self.ars_name).action}' server does not know the goal"
+        self.cancel()
+        return f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}{why}"
 
     def describe(self) -> str:
         return f"{self.title} for '{self.member.id}' on {self.ars_name or self.ars()}"
@@ -216,9 +266,7 @@ class SendArsRequest(Action):
             name = req.describe()
             req.cancel()
             return self.fail(f"{name} rejected by the ARS")
-        req.handle = handle
-        req.accepted_at = now
-        req.result_future = handle.get_result_async()
+        req.accepted(handle, now)
         self.feedback_message = f"acknowledged by {req.ars_name}"
         return Status.SUCCESS
 
@@ -229,18 +277,17 @@ class AwaitArsResult(Action):
     Reads: blackboard ``ars_result_timeout``. Writes: the tower model (through the request's recorder).
     RUNNING: the goal runs (feedback shows the ARS's step). SUCCESS: result success.
     FAILURE: result failure (the ARS's reason), aborted/canceled, no result in time (the goal is
-    canceled), the server gone for ``timeouts.ars_server_s``, or no goal was sent.
+    canceled), the server that took the goal gone (:meth:`ArsRequest.server_gone`), or no goal
+    was sent.
     """
 
     def __init__(self, request: ArsRequest) -> None:
         super().__init__(f"Wait For {request.title} {request.member.id}")
         self.req = request
         self.ctx = request.ctx
-        self._lost_since: float | None = None
         self._shown: Any = None
 
     def initialise(self) -> None:
-        self._lost_since = None
         self._shown = None
 
     def update(self) -> Status:
@@ -257,19 +304,8 @@ class AwaitArsResult(Action):
                 name = req.describe()
                 req.cancel()
                 return self.fail(f"no result for {name} within {timeout:g} s")
-            readiness = req.server(req.ars_name).readiness
-            if readiness.ready():
-                self._lost_since = None
-                return Status.RUNNING
-            self._lost_since = now if self._lost_since is None else self._lost_since
-            if now - self._lost_since > self.ctx.config.timeouts.ars_server_s:
-                if readiness.ready_now():  # back (or the cached answer was old): not gone
-                    self._lost_since = None
-                    return Status.RUNNING
-                name = req.describe()
-                req.cancel()
-                return self.fail(f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}")
-            return Status.RUNNING
+            gone = req.server_gone(now)
+            return self.fail(gone) if gone else Status.RUNNING
         ok, reason = req.conclude()
         if not ok:
             return self.fail(reason)

@@ -131,7 +131,8 @@ class WaitForPart(Action):
     Reads: the inspection desk. Writes: nothing.
     RUNNING: no call yet. SUCCESS: the call is waiting for a report.
     FAILURE: the ARS finished the request without presenting a part (its result is recorded in
-    the tower model first and its reason reported), or none came within ``timeouts.part_presented_s``.
+    the tower model first and its reason reported), the server that took the goal is gone
+    (``ArsRequest.server_gone``), or no part came within ``timeouts.part_presented_s``.
     """
 
     def __init__(self, request: ArsRequest) -> None:
@@ -158,6 +159,9 @@ class WaitForPart(Action):
             if ok:
                 reason += " without presenting a part for inspection"
             return self.fail(reason)
+        gone = self.req.server_gone(self.ctx.clock()) if self.req.handle is not None else ""
+        if gone:
+            return self.fail(gone)
         limit = self.ctx.config.timeouts.part_presented_s
         if self.ctx.clock() - self._started > limit:
             return self.fail(f"no part presented for '{self.req.member.id}' within {limit:g} s")
