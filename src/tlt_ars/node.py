@@ -10,6 +10,11 @@ Serves, for the CRS:
   ``result.reason``**: rclpy's goal callback can only accept or reject, and a rejection cannot
   carry a reason, so "rejected with a reason" is an accepted goal aborted before any motion
   (``result.success`` false, reason e.g. ``busy: running add_member bay1/vertical/x0_y1``).
+  The one exception to "busy": a goal for the very request running now (same request, member and
+  parameters, not being canceled) takes the running job over, and the older goal ends aborted as
+  superseded. That is what a restarted CRS sends (its persisted model does not know the goal its
+  predecessor had in flight), and what a CRS sends after it lost sight of the ARS on a broken
+  link: either way the member is placed once and the result reaches the CRS that asks now.
   Feedback is the running leaf's path in the tree (``Add Member/Load Rivet/Approach Rivet
   Dispenser/Execute Approach Rivet Dispenser``) and the fraction of the branch's leaves done.
   The result is success, or failure with the failing step and its reason. Cancel pre-empts the
@@ -103,6 +108,7 @@ class ActiveGoal:
     cancel_requested: bool = False
     stopping_since: float | None = None
     parts_discarded: int = 0
+    successor: ActiveGoal | None = None  # the newer goal for the same request that took the job over
 
 
 class ArsNode(Node):
@@ -197,9 +203,12 @@ class ArsNode(Node):
             # topic: the mission check is made on a progress message newer than the goal.
             self._await_progress(FRESH_PROGRESS_WAIT_S)
         with self._lock:
-            reason = self._refusal(request)
             goal = ActiveGoal(kind, handle, request, threading.Event())
-            if reason is not None:
+            running = self.active
+            if (running is not None and running.request == request and not running.cancel_requested
+                    and not self.stop_requested):
+                self._take_over(running, goal)
+            elif (reason := self._refusal(request)) is not None:
                 goal.outcome = ("aborted", f"rejected: {reason}")
                 goal.done.set()
             else:
@@ -209,6 +218,17 @@ class ArsNode(Node):
         with self._lock:
             self._goals[bytes(handle.goal_id.uuid)] = goal
         handle.execute()
+
+    def _take_over(self, running: ActiveGoal, goal: ActiveGoal) -> None:
+        """``goal`` follows the job of ``running`` (the same request) from here; ``running`` ends."""
+        running.successor = goal
+        running.outcome = ("aborted", "superseded: a newer goal for the same request follows the job")
+        running.done.set()
+        self.active = goal
+        self.get_logger().warning(
+            f"a new goal for the running {goal.kind} of '{goal.request.member_id}' takes it over"
+            " (the CRS restarted, or lost sight of this ARS)"
+        )
 
     def _execute(self, kind: str, handle: Any) -> Any:
         with self._lock:
@@ -245,6 +265,8 @@ class ArsNode(Node):
 
     def _finish(self, goal: ActiveGoal, ok: bool, reason: str) -> None:
         """Called from the tick (Report Result, or a build failure)."""
+        while goal.successor is not None:  # the job was taken over by a newer goal
+            goal = goal.successor
         goal.parts_discarded = self.ctx.data.parts_discarded
         goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
         with self._lock:

@@ -58,6 +58,7 @@ def test_a_member_out_of_reach_stops_the_start(tmp_path):
 def idle_ars():
     raw = load_yaml(default_config_path("ars_x"))
     raw.update(started_on_launch=False, check_reach=False)
+    raw["timeouts"]["planning_s"] = 3.0  # no arm here: a request that gets to planning fails soon
     context = rclpy.Context()
     rclpy.init(context=context)
     ars = ArsNode(ars_config_from_dict(raw), context=context)
@@ -178,3 +179,34 @@ def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):
     progress.publish(placed)
     result = _wait(handle.get_result_async(), timeout=60.0)
     assert "not placed" not in result.result.reason  # taken: it went on to the tree (no arm here)
+
+
+def test_a_goal_for_the_running_request_takes_the_job_over(idle_ars):
+    """A restarted CRS sends the request its predecessor had in flight again: the new goal follows
+    the running job (the member is placed once) and the old one ends as superseded; any other
+    request is still refused as busy."""
+    ars, client = idle_ars
+    ars.started = True
+    action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+    assert action.wait_for_server(timeout_sec=10)
+    goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
+    first = _wait(action.send_goal_async(goal))
+    deadline = time.monotonic() + 10
+    while ars.active is None or ars.active.handle.goal_id != first.goal_id:
+        assert time.monotonic() < deadline, "the first goal never ran"
+        time.sleep(0.02)
+    job = ars.tree.job
+    second = _wait(action.send_goal_async(goal))
+    superseded = _wait(first.get_result_async())
+    assert superseded.status == GoalStatus.STATUS_ABORTED
+    assert superseded.result.reason.startswith("superseded"), superseded.result.reason
+    assert ars.active.handle.goal_id == second.goal_id and ars.tree.job is job  # the same job, not a new one
+
+    other = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x1_y0", position="x1_y0", ars="ars_x")
+    busy = _wait(_wait(action.send_goal_async(other)).get_result_async())
+    assert busy.result.reason == "rejected: busy: ars_x is running add_member for 'bay1/vertical/x0_y0'"
+    # No arm here: the job fails in the end, and its outcome reaches the goal that took it over.
+    result = _wait(second.get_result_async(), timeout=60.0)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert "no fresh joint state on '/ur_x/joint_states'" in result.result.reason, result.result.reason
+    assert ars.active is None
