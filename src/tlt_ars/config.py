@@ -98,6 +98,7 @@ SCHEMA = {
             "planning_s": opt("float", 5.0, minimum=0.01),
             "trajectory_margin_s": opt("float", 10.0, minimum=0.0),
             "service_s": opt("float", 30.0, minimum=0.0),
+            "present_part_s": opt("float", 300.0, minimum=0.0),
             "width_s": opt("float", 120.0, minimum=0.0),
             "sensor_s": opt("float", 2.0, minimum=0.0),
             "stop_s": opt("float", 5.0, minimum=0.0),

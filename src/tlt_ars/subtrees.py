@@ -43,9 +43,10 @@ from tlt_ars.behaviours.end_effector import FireRivetGun, MoveGrasp, SetWidth, g
 from tlt_ars.behaviours.parts import (
     CountDiscard,
     DispenserHasParts,
+    PartPassed,
+    PresentPart,
     ReplaceDiscarded,
     TakePart,
-    request_inspection,
 )
 from tlt_ars.behaviours.vision import (
     AlignmentSeen,
@@ -169,7 +170,8 @@ class SubtreeBuilder:
     def inspect_part(self, name: str, kind: str) -> Sequence:
         """Fig. 30 / Fig. 35: show the part to the CRS's camera; discard it if it fails."""
         ctx = self.ctx
-        passed = request_inspection(ctx, "Inspection Passed")
+        present = PresentPart("Present Part", ctx)
+        passed = PartPassed("Inspection Passed", present)
         discard = _seq(
             "Discard Part",
             [
@@ -185,6 +187,7 @@ class SubtreeBuilder:
                 # The CRS's camera compares the part with where the arm says it holds it: a whole
                 # run failed a good cross frame, every corner 6 mm off, seen before the arm stood.
                 Settle("Settle", ctx),
+                present,
                 _fallback("Inspection", [passed, discard]),
             ],
         )

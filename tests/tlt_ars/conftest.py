@@ -289,7 +289,7 @@ class Stack:
         self.ars = ArsNode(ars_config_from_dict(ars_test_config(), "ars_x test config"), context=self.context)
         self.scene, self.mission = self.ars.ctx.scene, self.ars.ctx.mission
         self.world = World(self)
-        self.inspection_verdicts: list[bool] = []  # next CRS verdicts; empty: pass
+        self.inspection_verdicts: list[bool | None] = []  # next verdicts (None: not inspected); none: pass
         self.inspections: list[str] = []
         self.handles: list = []
         self.client = Node("ars_test_crs", context=self.context)
@@ -329,6 +329,10 @@ class Stack:
         self.inspections.append(request.member_id)
         passed = self.inspection_verdicts.pop(0) if self.inspection_verdicts else True
         response.report.target_id, response.report.target_kind = request.member_id, request.part_kind
+        if passed is None:  # the CRS did not inspect it (say, restarted and not expecting it yet)
+            response.report.not_inspected = True
+            response.report.reasons = ["the CRS is not expecting a part for inspection"]
+            return response
         response.report.passed = passed and self.world.held is not None
         if not response.report.passed:
             response.report.reasons = [

@@ -3,8 +3,9 @@ failed it, and fetching a replacement (paper §IV.B "tracking the available comp
 
 * :class:`DispenserHasParts` (condition) and :class:`TakePart` read and decrease the count of a
   dispenser in the ARS's :class:`~tlt_ars.mission_state.MissionState`.
-* :func:`request_inspection` calls the CRS's ``InspectPart`` (``ros_names.CRS_INSPECT_PART``), which
-  has vision look at the held part with the lifter camera; it succeeds when the report passed.
+* :class:`PresentPart` calls the CRS's ``InspectPart`` (``ros_names.CRS_INSPECT_PART``), which has
+  vision look at the held part with the lifter camera, until a report judges the part (a
+  presentation the CRS did not inspect is made again); :class:`PartPassed` reads the verdict.
 * :class:`CountDiscard` records a discarded part (dispenser's ``discarded``, the request's
   ``parts_discarded``), then fails with the inspection's reason so the attempt ends.
 * :class:`ReplaceDiscarded` (decorator) runs its child again after an attempt that ended with a
@@ -61,11 +62,49 @@ class TakePart(Action):
         return Status.SUCCESS
 
 
-def request_inspection(ctx: ArsContext, name: str = "Request Inspection") -> ServiceCall:
-    """Ask the CRS to inspect the held part; SUCCESS when the report passed, else FAILURE with
-    the report's reasons."""
+# How long after a presentation nobody inspected the part is presented again, s of mission time.
+PRESENT_AGAIN_S = 2.0
 
-    def make() -> Any:
+
+class PresentPart(ServiceCall):
+    """Hold the part up to the CRS's camera: call ``/crs/inspect_part`` until a report judges it.
+
+    Reads: ``RequestData.member``. Writes: :attr:`report` (the judging report);
+    ``RequestData.alignment`` = None (the part was moved since any earlier alignment).
+    RUNNING: waiting for the CRS's service or its answer; after no answer, or an answer that judged
+    nothing (``not_inspected``: the CRS was not expecting the part, say restarted and not started
+    again, or it withdrew it), presenting again after ``PRESENT_AGAIN_S``.
+    SUCCESS: a report judged the part, passed or not (:class:`PartPassed` tells which).
+    FAILURE: no judgement within ``timeouts.present_part_s``; the part is kept (never discarded
+    for a failure of the hand-off, only for a judgement).
+    """
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        timeouts = ctx.config.timeouts
+        super().__init__(
+            name,
+            ctx.node,
+            InspectPart,
+            ros_names.CRS_INSPECT_PART,
+            self._make,
+            service_timeout=timeouts["server_s"],
+            timeout=timeouts["service_s"],
+            response_ok=self._judged,
+            clock=ctx.clock,
+        )
+        self.ctx = ctx
+        self.report: Any = None
+        self._deadline = 0.0
+        self._again_at: float | None = None
+
+    def initialise(self) -> None:
+        super().initialise()
+        self.report = None
+        self._deadline = self.clock() + self.ctx.config.timeouts["present_part_s"]
+        self._again_at = None
+
+    def _make(self) -> Any:
+        ctx = self.ctx
         member = ctx.data.member
         if member is None:
             raise RuntimeError("no member to inspect")
@@ -73,22 +112,50 @@ def request_inspection(ctx: ArsContext, name: str = "Request Inspection") -> Ser
             member_id=member.id, part_kind=member.kind, camera=ctx.config.cameras["inspection"]
         )
 
-    def ok(response: Any) -> tuple[bool, str]:
+    def _judged(self, response: Any) -> tuple[bool, str]:
         report = response.report
-        ctx.data.alignment = None
-        return bool(report.passed), "inspection failed: " + ("; ".join(report.reasons) or "no reason given")
+        if report.not_inspected:
+            return False, "; ".join(report.reasons) or "not inspected"
+        self.report = report
+        self.ctx.data.alignment = None
+        return True, ""
 
-    return ServiceCall(
-        name,
-        ctx.node,
-        InspectPart,
-        ros_names.CRS_INSPECT_PART,
-        make,
-        service_timeout=ctx.config.timeouts["server_s"],
-        timeout=ctx.config.timeouts["service_s"],
-        response_ok=ok,
-        clock=ctx.clock,
-    )
+    def update(self) -> Status:
+        now = self.clock()
+        if self._again_at is not None:
+            if now < self._again_at:
+                return Status.RUNNING
+            self._again_at = None
+            super().initialise()
+        status = super().update()
+        if status == Status.SUCCESS:
+            self.feedback_message = "judged: " + ("passed" if self.report.passed else "failed")
+        if status != Status.FAILURE:
+            return status
+        why = self.feedback_message
+        if now >= self._deadline:
+            limit = self.ctx.config.timeouts["present_part_s"]
+            return self.fail(f"the part was not inspected within {limit:g} s (kept): {why}")
+        self._again_at = now + PRESENT_AGAIN_S
+        self.feedback_message = f"presenting again in {PRESENT_AGAIN_S:g} s: {why}"
+        return Status.RUNNING
+
+
+class PartPassed(Condition):
+    """Reads: ``present``'s report. SUCCESS when it passed; FAILURE with its reasons otherwise."""
+
+    def __init__(self, name: str, present: PresentPart) -> None:
+        super().__init__(name)
+        self.present = present
+
+    def evaluate(self) -> bool:
+        report = self.present.report
+        if report is None:
+            self.feedback_message = "no inspection report"
+            return False
+        if not report.passed:
+            self.feedback_message = "inspection failed: " + ("; ".join(report.reasons) or "no reason given")
+        return bool(report.passed)
 
 
 class CountDiscard(Action):
@@ -135,4 +202,4 @@ class ReplaceDiscarded(py_trees.decorators.Decorator):
         return status
 
 
-__all__ = ["CountDiscard", "DispenserHasParts", "ReplaceDiscarded", "TakePart", "request_inspection"]
+__all__ = ["CountDiscard", "DispenserHasParts", "PartPassed", "PresentPart", "ReplaceDiscarded", "TakePart"]

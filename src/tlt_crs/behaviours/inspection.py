@@ -9,10 +9,12 @@ and that call is the "forwarding" channel: its response *is* the result the CRS 
 * :class:`InspectionDesk` sits between the service and the tree. When the CRS sends a request
   whose ARS will present a part, it *expects* that member. A call for the expected member waits
   (in the service's own thread, at most ``timeouts.inspect_handoff_s``) until the tree answers it;
-  any other call is answered at once with a failed report saying why (no inspection expected, a
+  any other call is answered at once with a report saying why (no inspection expected, a
   different member expected, one already being inspected). A call the tree did not answer in time,
-  or that the tree withdrew (request finished, fault, Stop), is answered with a failed report that
-  says so. The ARS never waits unboundedly and never gets a report for another member.
+  or that the tree withdrew (request finished, fault, Stop), is answered with a report that says
+  so. Those reports are not passed and have ``not_inspected`` set: nothing judged the part, so the
+  ARS keeps it and may present it again (a restarted CRS not yet expecting it, say). The ARS never
+  waits unboundedly and never gets a report for another member.
 * In the tree, Inspection Check is a Sequence with memory: :class:`WaitForPart` (the ARS's call
   arrived), ``Inspect Part`` (a ``ServiceCall`` to ``/vision/inspect_part``), and
   :class:`ForwardResult` (answers the waiting call with vision's report, passed or not).
@@ -38,13 +40,16 @@ from tlt_crs.behaviours.ars_requests import ArsRequest
 from tlt_crs.context import CrsContext
 
 
-def failed_report(member_id: str, part_kind: str, reason: str) -> Any:
+def not_inspected_report(member_id: str, part_kind: str, reason: str) -> Any:
+    """The answer to a presentation nobody inspected: not passed, ``not_inspected`` set, so the
+    ARS keeps the part (it was not judged) and may present it again."""
     from tlt_interfaces.msg import InspectionReport
 
     report = InspectionReport()
     report.target_id = member_id
     report.target_kind = part_kind
     report.passed = False
+    report.not_inspected = True
     report.reasons = [reason]
     return report
 
@@ -95,7 +100,9 @@ class InspectionDesk:
                 self.expected = None
             pending = self.pending
             if pending is not None and pending.member_id == member_id:
-                pending.report = failed_report(member_id, pending.part_kind, f"inspection withdrawn: {why}")
+                pending.report = not_inspected_report(
+                    member_id, pending.part_kind, f"inspection withdrawn: {why}"
+                )
                 pending.answered.set()
                 self.pending = None
 
@@ -104,13 +111,15 @@ class InspectionDesk:
         """Answer one ``/crs/inspect_part`` call (blocks the calling service thread ≤ ``timeout`` s)."""
         with self._lock:
             if self.expected is None:
-                return failed_report(member_id, part_kind, "the CRS is not expecting a part for inspection")
+                return not_inspected_report(
+                    member_id, part_kind, "the CRS is not expecting a part for inspection"
+                )
             if member_id != self.expected:
-                return failed_report(
+                return not_inspected_report(
                     member_id, part_kind, f"the CRS expects a part for '{self.expected}', not '{member_id}'"
                 )
             if self.pending is not None:
-                return failed_report(
+                return not_inspected_report(
                     member_id, part_kind, f"a part for '{self.pending.member_id}' is already being inspected"
                 )
             pending = PendingInspection(member_id, part_kind, camera)
@@ -122,7 +131,9 @@ class InspectionDesk:
                 self.pending = None
             if pending.report is not None:
                 return pending.report
-        return failed_report(member_id, part_kind, f"the CRS did not inspect the part within {timeout:g} s")
+        return not_inspected_report(
+            member_id, part_kind, f"the CRS did not inspect the part within {timeout:g} s"
+        )
 
 
 class WaitForPart(Action):
@@ -298,7 +309,7 @@ __all__ = [
     "PendingInspection",
     "UntilPartPasses",
     "WaitForPart",
-    "failed_report",
     "inspection_check",
+    "not_inspected_report",
     "serve_inspect_part",
 ]

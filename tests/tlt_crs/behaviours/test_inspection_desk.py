@@ -1,0 +1,54 @@
+"""The inspection desk between ``/crs/inspect_part`` calls and the tree: a presentation nobody
+inspected is answered at once (or when withdrawn, or out of time) with a report that is not passed
+and says ``not_inspected``, so the ARS keeps the part; only the tree's answer judges it."""
+
+from __future__ import annotations
+
+import threading
+
+from tlt_interfaces.msg import InspectionReport
+
+from tlt_crs.behaviours.inspection import InspectionDesk
+
+MEMBER = "bay1/vertical/x0_y1"
+
+
+def _serve_in_thread(desk, member=MEMBER, timeout=5.0):
+    answer = {}
+    thread = threading.Thread(
+        target=lambda: answer.setdefault("report", desk.serve(member, "vertical", "zed_1", timeout))
+    )
+    thread.start()
+    return thread, answer
+
+
+def test_a_part_nobody_expects_is_not_inspected_and_says_why():
+    desk = InspectionDesk()
+    report = desk.serve(MEMBER, "vertical", "zed_1", 5.0)
+    assert report.not_inspected and not report.passed
+    assert report.reasons == ["the CRS is not expecting a part for inspection"]
+    desk.expect("bay1/vertical/x1_y1")
+    report = desk.serve(MEMBER, "vertical", "zed_1", 5.0)
+    assert report.not_inspected and "expects a part for 'bay1/vertical/x1_y1'" in report.reasons[0]
+
+
+def test_the_trees_verdict_is_a_judgement_withdrawal_and_time_out_are_not():
+    desk = InspectionDesk()
+    desk.expect(MEMBER)
+    thread, answer = _serve_in_thread(desk)
+    while (pending := desk.take(MEMBER)) is None:
+        pass
+    desk.answer(pending, InspectionReport(target_id=MEMBER, passed=False, reasons=["end fitting b missing"]))
+    thread.join(5.0)
+    assert not answer["report"].not_inspected and answer["report"].reasons == ["end fitting b missing"]
+
+    thread, answer = _serve_in_thread(desk)
+    while desk.take(MEMBER) is None:
+        pass
+    desk.withdraw(MEMBER, "the CRS stopped following this request")
+    thread.join(5.0)
+    assert answer["report"].not_inspected and "withdrawn" in answer["report"].reasons[0]
+
+    desk.expect(MEMBER)
+    report = desk.serve(MEMBER, "vertical", "zed_1", 0.05)
+    assert report.not_inspected and report.reasons == ["the CRS did not inspect the part within 0.05 s"]
