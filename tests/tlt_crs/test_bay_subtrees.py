@@ -155,7 +155,8 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
     assert rig.recorder.requests[1:] == []  # nothing sent to the new server
     failed = [b for b in subtree.iterate() if b.status == Status.FAILURE and b.children == []]
     message = failed[0].feedback_message
-    assert "gone while running" in message and "does not know the goal" in message, message
+    # Found gone by the graph, or told by the new server that answered the result request.
+    assert "does not know the goal" in message and "ars_x" in message, message
     waiting = "Wait For Part" if phase == "waiting for the part" else "Wait For AddMember"
     assert failed[0].name.startswith(waiting), failed[0].name
 

@@ -188,7 +188,10 @@ class ArsRequest:
         result, status = response.result, response.status
         ok = status == GoalStatus.STATUS_SUCCEEDED and bool(getattr(result, "success", True))
         reason = str(getattr(result, "reason", "") or "")
-        if status != GoalStatus.STATUS_SUCCEEDED:
+        if status == GoalStatus.STATUS_UNKNOWN:
+            # What a restarted ARS's server answers a result request for its predecessor's goal.
+            reason = "the ARS does not know the goal (its server was replaced, say by a restart)"
+        elif status != GoalStatus.STATUS_SUCCEEDED:
             reason = f"goal ended with status {status}" + (f": {reason}" if reason else "")
         name = self.describe()
         with self.ctx.lock:
