@@ -218,6 +218,11 @@ class CommandProcessor:
             result = ctx.registry.check(str(params["key"]), params["value"])
             if not result.accepted:
                 return result.reason
+            if params["key"] == "clear_fault" and params["value"] is True and not ctx.fault:
+                # Taken now, it would stand until the next fault and clear that one unseen.
+                if ctx.link_fault:
+                    return "the lifter link fault clears itself when the link is back"
+                return "no fault to clear"
         elif name == "set_actuator_state":
             return self._check_actuator(params)
         return None
@@ -239,6 +244,20 @@ class CommandProcessor:
                 " by the tree; wait for a fault, the end of the build, or stop"
             )
         return None
+
+    # ----- holds the CRS itself decides -----
+    def hold_build(self, reason: str) -> None:
+        """Hold the build as Pause does (mission clock, the CRS's running motions, PAUSE to each
+        ARS), for ``reason`` rather than the operator; :meth:`release_build` ends it."""
+        self.ctx.clock.pause(reason)
+        self.hold()
+        self._forward(Command("pause", {}))
+
+    def release_build(self, reason: str) -> None:
+        """End the hold for ``reason``; the ARSs resume unless the operator has paused meanwhile."""
+        self.ctx.clock.resume(reason)
+        if not self.ctx.clock.held:
+            self._forward(Command("resume", {}))
 
     # ----- execution -----
     def process_next(self) -> bool:

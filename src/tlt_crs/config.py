@@ -29,6 +29,7 @@ class Timeouts:
     inspect_handoff_s: float = 60.0  # /crs/inspect_part holds the ARS's call at most this long
     forward_s: float = 2.0  # each ARS must answer a forwarded ground command
     sensor_max_age_s: float = 1.0  # older sensor messages count as no message
+    lifter_link_s: float = 1.0  # the lifter unreachable this long (ROS time) holds the build
 
 
 @dataclass(frozen=True)

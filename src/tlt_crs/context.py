@@ -45,13 +45,17 @@ class RunState(enum.IntEnum):
 
 
 class MissionClock:
-    """Seconds of ROS time minus the time spent paused."""
+    """Seconds of ROS time minus the time spent held: paused from the ground, or held by the CRS
+    itself while a device link is down. Each hold has a reason; the clock runs when none is left."""
+
+    GROUND = "ground"  # the operator's Pause
 
     def __init__(self, ros_seconds: Callable[[], float]) -> None:
         self._now = ros_seconds
         self._paused_at: float | None = None
         self._paused_total = 0.0
         self._tick_time: float | None = None
+        self._holds: set[str] = set()
 
     def __call__(self) -> float:
         if self._paused_at is not None:
@@ -72,14 +76,22 @@ class MissionClock:
 
     @property
     def paused(self) -> bool:
+        """Paused by the operator."""
+        return self.GROUND in self._holds
+
+    @property
+    def held(self) -> bool:
+        """Stopped for any reason (the build waits)."""
         return self._paused_at is not None
 
-    def pause(self) -> None:
+    def pause(self, reason: str = GROUND) -> None:
         if self._paused_at is None:
             self._paused_at = self._now() if self._tick_time is None else self._tick_time
+        self._holds.add(reason)
 
-    def resume(self) -> None:
-        if self._paused_at is not None:
+    def resume(self, reason: str = GROUND) -> None:
+        self._holds.discard(reason)
+        if self._paused_at is not None and not self._holds:
             self._paused_total += max(0.0, self._now() - self._paused_at)
             self._paused_at = None
 
@@ -127,6 +139,7 @@ class CrsContext:
 
         self.desk = InspectionDesk()
         self.stopped = False
+        self.link_fault = ""  # why the build is held for a device link (clears itself: LifterLinkWatch)
         # Held by the tick and by service callbacks that touch the blackboard or the model.
         self.lock = threading.RLock()
         self._event_pub = node.create_publisher(Event, ros_names.EVENTS, 50)
@@ -181,6 +194,19 @@ class CrsContext:
             return f"{', '.join(down[:3])} and {len(down) - 3} more not up"
         return f"{', '.join(down)} not up" if down else ""
 
+    def lifter_link_down(self) -> str:
+        """Why the lifter cannot be reached now ('' when it can): no state, a state older than
+        ``timeouts.sensor_max_age_s``, or the driver reporting its link down."""
+        topic = self._hardware_topics[ros_names.LIFTER][0]
+        age, entry = self.cache.age(topic), self.cache.latest(topic)
+        if age is None or entry is None:
+            return "no lifter state"
+        if age > self.config.timeouts.sensor_max_age_s:
+            return f"lifter state {age:.1f} s old"
+        if not entry[0].link_ok:
+            return f"lifter link down ({entry[0].fault or 'no reason'})"
+        return ""
+
     def hardware_not_ready(self) -> str:
         """Why the CRS's own mechanisms cannot be trusted to build now ('' when they can): a
         driver whose state is missing or older than ``timeouts.sensor_max_age_s``, or a lifter
@@ -220,6 +246,8 @@ class CrsContext:
         """Derived from the blackboard, the clock and the model, so it can never disagree with them."""
         if self.stopped:
             return RunState.STOPPED
+        if self.link_fault:
+            return RunState.FAULT
         if self.paused:
             return RunState.PAUSED
         if self.fault:

@@ -174,7 +174,7 @@ class CrsNode(Node):
         msg.current_step = self.current_step()
         msg.run_state = int(ctx.run_state)
         msg.started = ctx.started
-        msg.fault = ctx.fault
+        msg.fault = ctx.fault or ctx.link_fault
         return msg
 
     def publish_progress(self) -> None:

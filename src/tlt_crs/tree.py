@@ -8,6 +8,7 @@ Every subtree has its own builder and can be built and ticked alone (the tests d
       Process Ground Command              one queued command per tick
       Fault Check                         Fallback[No Fault?, Wait For Help]
       Started?                            false at start-up
+      Lifter Link Watch                   holds the build while the lifter link is down (always SUCCESS)
       Tower                               Fallback[Tower Built?, Hold While Paused[Build Tower], Raise Fault]
         Build Tower                       Sequence: Bay 1 .. Bay N, Add Foundation Rivets
           Bay n                           Fallback(memory)[Bay n Built?, Sequence(memory)[...]]
@@ -41,6 +42,7 @@ from tlt_crs.behaviours.actuators import Actuators
 from tlt_crs.behaviours.ars_requests import ArsRequest, AwaitArsResult, RequestScope, SendArsRequest
 from tlt_crs.behaviours.faults import NoFault, RaiseFault, WaitForHelp
 from tlt_crs.behaviours.inspection import inspection_check
+from tlt_crs.behaviours.link_watch import LifterLinkWatch
 from tlt_crs.behaviours.model import (
     BayBuilt,
     BayIndexed,
@@ -98,10 +100,11 @@ class InitialiseBlackboard(Action):
 
 
 class HoldWhilePaused(py_trees.decorators.Decorator):
-    """While the CRS is paused, answer RUNNING without ticking the child, so its running behaviours
-    (an ARS goal in flight, a sequence's place) stay as they are and Resume continues them.
+    """While the CRS is paused or held (a device link down), answer RUNNING without ticking the
+    child, so its running behaviours (an ARS goal in flight, a sequence's place) stay as they are
+    and Resume, or the link's return, continues them.
 
-    Reads: the context's pause state. RUNNING while paused; otherwise the child's status.
+    Reads: the mission clock's holds, ``ctx.link_fault``. RUNNING while held; else the child's status.
     """
 
     def __init__(self, ctx: CrsContext, child: py_trees.behaviour.Behaviour) -> None:
@@ -109,9 +112,9 @@ class HoldWhilePaused(py_trees.decorators.Decorator):
         self.ctx = ctx
 
     def tick(self) -> Any:
-        if self.ctx.paused:
+        if self.ctx.clock.held:
             self.status = Status.RUNNING
-            self.feedback_message = "paused"
+            self.feedback_message = f"held: {self.ctx.link_fault}" if self.ctx.link_fault else "paused"
             yield self
             return
         self.feedback_message = ""
@@ -376,6 +379,7 @@ def build_crs_tree(ctx: CrsContext, processor: CommandProcessor) -> py_trees.beh
             ProcessGroundCommand(processor),
             fault_check(ctx),
             BoardFlag(ctx, "Started?", "started"),
+            LifterLinkWatch(ctx, processor),
             tower,
         ],
     )

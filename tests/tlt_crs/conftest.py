@@ -133,7 +133,7 @@ class ArsStandIn:
             while time.monotonic() < deadline and not CLOSING.is_set() and not handle.is_cancel_requested:
                 time.sleep(0.01)
             passed = False
-            for _ in range(self.max_parts):
+            while discarded < self.max_parts:
                 if not handle.is_active or handle.is_cancel_requested or CLOSING.is_set():
                     break
                 camera = INSPECTION_CAMERA[self.ars]
@@ -144,6 +144,9 @@ class ArsStandIn:
                 if report is not None and report.report.passed:
                     passed = True
                     break
+                if report is None or report.report.not_inspected:
+                    time.sleep(0.1)  # not judged: the real ARS keeps the part and presents it again
+                    continue
                 discarded += 1
             if not passed:
                 result.success, result.reason = False, f"no part passed inspection ({discarded} discarded)"
@@ -281,6 +284,7 @@ class LifterStandIn:
         self.joints = list(joints)
         self.mode_calls: list[int] = []
         self.publishing = True
+        self.link_ok = True  # what the driver says of its link to the firmware
         self.pub = node.create_publisher(LifterState, ros_names.state_topic(ros_names.LIFTER), 10)
         node.create_service(SetLifterMode, ros_names.LIFTER_SET_MODE, self._mode, callback_group=group)
         self.trajectories = _Trajectories(
@@ -308,7 +312,8 @@ class LifterStandIn:
         msg.joint_names = self.joints
         msg.encoder_positions = [float(p) for p in self.positions]
         msg.encoder_counts = [int(p * 200000) for p in self.positions]
-        msg.link_ok = True
+        msg.link_ok = self.link_ok
+        msg.fault = "" if self.link_ok else "firmware does not answer"
         self.pub.publish(msg)
 
 

@@ -86,3 +86,18 @@ def test_mission_clock_stands_still_while_paused():
     assert clock() == 106.0  # one time per tick
     clock.end_tick()
     assert clock() == 205.0
+
+
+def test_mission_clock_runs_again_only_when_every_hold_is_released():
+    now = [100.0]
+    clock = MissionClock(lambda: now[0])
+    clock.pause("lifter link")
+    assert clock.held and not clock.paused  # held by the CRS, not paused by the operator
+    now[0] = 110.0
+    clock.pause()  # the operator pauses meanwhile
+    clock.resume("lifter link")
+    now[0] = 120.0
+    assert clock.held and clock.paused and clock() == 100.0
+    clock.resume()
+    now[0] = 121.0
+    assert not clock.held and clock() == 101.0

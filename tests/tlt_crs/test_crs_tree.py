@@ -113,6 +113,37 @@ def test_pause_holds_the_build_and_resume_continues_where_it_paused(rig, crs, cr
     assert len(ids) == len(set(ids)) == 8
 
 
+def test_a_lost_lifter_link_holds_the_build_as_a_fault_until_the_link_is_back(rig, crs, crs_node):
+    rig.ars["ars_x"].hold_s = 3.0  # the ARS is paused before its request is done
+    rig.lifter.trajectories.time_scale = 0.02
+    _submit(crs_node, crs, "start")
+    crs.wait_for(lambda: rig.recorder.requests != [], timeout=10.0, what="first ARS request")
+    first = rig.recorder.requests[0]
+    crs.wait_for(lambda: rig.vision.part_calls != [], timeout=10.0, what="its part inspected")
+    rig.lifter.link_ok = False
+    crs.wait_for(lambda: crs_node.ctx.run_state == RunState.FAULT, what="the link fault")
+    progress = crs_node.progress()
+    assert progress.fault.startswith("lifter link down (firmware does not answer)"), progress.fault
+    assert crs_node.ctx.fault == ""  # not a fault that waits for the operator: it clears itself
+    crs.wait_for(lambda: all(2 in a.commands for a in rig.ars.values()), what="PAUSE to the ARSs")
+    time.sleep(3.0)  # as long as the ARS request: held (paused), not pre-empted, nothing new sent
+    hold = next(b for b in crs_node.root.iterate() if b.name == "Hold While Paused")
+    assert hold.status == Status.RUNNING and hold.feedback_message.startswith("held: lifter link down")
+    assert first.outcome == "running" and len(rig.recorder.requests) == 1
+    assert _submit(crs_node, crs, "resume").rejected  # nothing the operator paused
+    refused = _submit(crs_node, crs, "set_blackboard_value", {"key": "clear_fault", "value": True})
+    assert refused.rejected and "clears itself" in refused.stages[0][1]
+    rig.ars["ars_x"].hold_s = 0.0  # the rest of the build at full speed
+
+    rig.lifter.link_ok = True
+    crs.wait_for(lambda: crs_node.ctx.run_state == RunState.RUNNING, what="the link back")
+    crs.wait_for(lambda: all(3 in a.commands for a in rig.ars.values()), what="RESUME to the ARSs")
+    crs.wait_for(lambda: crs_node.ctx.model.tower_built, timeout=30.0, what="tower built")
+    assert first.outcome == "succeeded"
+    ids = rig.recorder.members("add_member")
+    assert len(ids) == len(set(ids)) == 8
+
+
 def test_ars_failure_raises_a_fault_that_waits_for_help_until_cleared(rig, crs, crs_node):
     member = "bay1/vertical/x0_y0"
     rig.ars["ars_x"].fail[member] = "part slipped from the gripper"
@@ -160,6 +191,7 @@ def test_stop_cancels_work_puts_the_lifter_in_safe_and_ends_the_node(rig, crs, c
         ({"key": "no_such_key", "value": 1}, "unknown key 'no_such_key'"),
         ({"key": "started", "value": True}, "read-only"),
         ({"key": "tower_built", "value": True}, "read-only"),
+        ({"key": "clear_fault", "value": True}, "no fault to clear"),
         ({"key": "lifter_speed", "value": "fast"}, "expected float"),
         ({"key": "lifter_speed", "value": 0.5}, "above the maximum"),
         ({"key": "inspection_attempts", "value": True}, "expected int"),
