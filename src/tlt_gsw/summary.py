@@ -331,7 +331,10 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
                 clear(record, "replaced by another fault", by_command=False)
             raise_fault(record, text)
         elif code == "FAULT_CLEARED" and open_fault is not None:
-            clear(record, "operator clear_fault (FAULT_CLEARED event; the command is not in this archive)")
+            if text.startswith("operator"):
+                clear(record, "operator clear_fault (FAULT_CLEARED event; the command is not archived)")
+            else:  # a fault that clears itself, e.g. "lifter link back, the build goes on (was: ...)"
+                clear(record, text.split(" (was:")[0], by_command=False)
         elif code == "CRS_UP" and open_fault is not None:
             clear(record, "CRS restarted", by_command=False)  # a restarted CRS starts without it
     if pending_step is not None:
