@@ -243,6 +243,13 @@ class CommandProcessor:
                 f"refused while building (run state {run_state.name.lower()}): actuators are driven"
                 " by the tree; wait for a fault, the end of the build, or stop"
             )
+        if self.ctx.link_fault:
+            # The build is only held: it goes on by itself when the link is back, and an actuator
+            # moved meanwhile would be where the tree does not expect it.
+            return (
+                "refused while building (run state fault: the build is held until the lifter link"
+                " is back and then goes on): actuators are driven by the tree; stop first"
+            )
         return None
 
     # ----- holds the CRS itself decides -----

@@ -25,6 +25,7 @@ import logging
 from typing import Any
 
 from py_trees.common import Status
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from tlt_common import ros_names
 from tlt_common.bt.status_codec import encode
@@ -68,6 +69,9 @@ class GroundBridge:
             _log.warning("CRS_UP not sent to the ground: %s", exc)
         self._latest: dict[str, Any] = {}
         self._watch_devices()
+        # Telemetry has its own group: in the node's default one it waited behind the device
+        # subscriptions' callbacks, and on a loaded machine the tree status never went out.
+        telemetry = MutuallyExclusiveCallbackGroup()
         for kind, send in (
             ("tree_status", self.send_tree_status),
             ("hk_mission", self.send_progress),
@@ -79,11 +83,13 @@ class GroundBridge:
         ):
             rate = link.defs.packet(kind).rate_hz
             if rate:
-                node.create_timer(1.0 / rate, send)
+                node.create_timer(1.0 / rate, send, callback_group=telemetry)
         self._member_ids = {m.id for m in node.ctx.mission.members}
         self._last_step: tuple[Any, ...] | None = None
         self._last_progress: tuple[int, ...] | None = None
-        node.create_timer(1.0 / node.ctx.config.tick_rate_hz, self.send_step_if_changed)
+        node.create_timer(
+            1.0 / node.ctx.config.tick_rate_hz, self.send_step_if_changed, callback_group=telemetry
+        )
         self._report_bay_inspections()
 
     def send_housekeeping(self) -> None:

@@ -367,7 +367,10 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
 
         assert command("resume").stage is AckStage.COMPLETED
         mission(lambda f: f["run_state"] == "running", "running again")
-        assert any(p.kind == "tree_status" and p.fields["agent"] == "crs" for p in packets)
+        deadline = time.monotonic() + 10
+        while not any(p.kind == "tree_status" and p.fields["agent"] == "crs" for p in packets):
+            assert time.monotonic() < deadline, "no CRS tree_status reached the ground"
+            gsw.poll(0.2)
         _ars_tree_status_reaches_the_ground(gsw, packets)
         tower = next(p for p in reversed(packets) if p.kind == "hk_tower")
         assert tower.fields["member_count"] == 13 and len(tower.fields["member_states"]) == 4
