@@ -109,6 +109,7 @@ class ActiveGoal:
     stopping_since: float | None = None
     parts_discarded: int = 0
     successor: ActiveGoal | None = None  # the newer goal for the same request that took the job over
+    feedback: tuple[str, float] | None = None  # the step and progress last sent to the CRS
 
 
 class ArsNode(Node):
@@ -180,7 +181,6 @@ class ArsNode(Node):
         # A request starts on a tick at once, not at the next period (the CRS waits on it), and its
         # feedback goes out after the tick that changed it.
         self._kick = self.create_guard_condition(self._tick, callback_group=ticks)
-        self._ticked = threading.Condition()
 
     # ----- goals -----
     def _refusal(self, request: Request) -> str | None:
@@ -234,21 +234,11 @@ class ArsNode(Node):
         with self._lock:
             goal = self._goals.pop(bytes(handle.goal_id.uuid))
         result_type = ACTION_TYPES[kind].Result
-        feedback_type = ACTION_TYPES[kind].Feedback
-        last = None
-        # Bounded wait per iteration; the tree's own timeouts bound the request.
-        while not goal.done.is_set():
-            with self._ticked:
-                self._ticked.wait(0.1)
-            if goal.done.is_set():
-                break
+        # The tick sends the feedback; the tree's own timeouts bound the request.
+        while not goal.done.wait(0.1):
             if self.finished.is_set() or not rclpy.ok(context=self.context):
                 goal.outcome = ("aborted", "the ARS shut down")
                 break
-            step, progress = self.tree.step(), self.tree.progress()
-            if step and (step, progress) != last and goal.outcome is None:
-                handle.publish_feedback(feedback_type(step=step, progress=float(progress)))
-                last = (step, progress)
         state, reason = goal.outcome or ("aborted", "no outcome")
         result = result_type()
         result.success = state == "succeeded"
@@ -273,8 +263,6 @@ class ArsNode(Node):
             if self.active is goal:
                 self.active = None
         goal.done.set()
-        with self._ticked:
-            self._ticked.notify_all()
 
     def _cancel(self, handle: Any) -> CancelResponse:
         with self._lock:
@@ -368,8 +356,16 @@ class ArsNode(Node):
                 self.get_logger().error(f"tick failed: {exc!r}")
                 self.tree.interrupt()
                 self._end(goal, "aborted", f"internal error in the behaviour tree: {exc!r}")
-        with self._ticked:
-            self._ticked.notify_all()
+            self._send_feedback(self.active)
+
+    def _send_feedback(self, goal: ActiveGoal | None) -> None:
+        """The running step to the CRS, right after the tick that changed it (the first one
+        tells the CRS that the tree runs its request)."""
+        step, progress = self.tree.step(), float(self.tree.progress())
+        if goal is None or not step or goal.outcome is not None or goal.feedback == (step, progress):
+            return
+        goal.feedback = (step, progress)
+        goal.handle.publish_feedback(ACTION_TYPES[goal.kind].Feedback(step=step, progress=progress))
 
     def _end(self, goal: ActiveGoal | None, state: str, reason: str) -> None:
         if goal is None:
