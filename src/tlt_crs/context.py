@@ -195,34 +195,28 @@ class CrsContext:
         return f"{', '.join(down)} not up" if down else ""
 
     def lifter_link_down(self) -> str:
-        """Why the lifter cannot be reached now ('' when it can): no state, a state older than
-        ``timeouts.sensor_max_age_s``, or the driver reporting its link down."""
-        topic = self._hardware_topics[ros_names.LIFTER][0]
-        age, entry = self.cache.age(topic), self.cache.latest(topic)
-        if age is None or entry is None:
-            return "no lifter state"
-        if age > self.config.timeouts.sensor_max_age_s:
-            return f"lifter state {age:.1f} s old"
-        if not entry[0].link_ok:
-            return f"lifter link down ({entry[0].fault or 'no reason'})"
-        return ""
+        """Why the lifter cannot be reached now ('' when it can): see :meth:`device_trouble`."""
+        why = self.device_trouble(ros_names.LIFTER)
+        return f"lifter {why}" if why else ""
 
     def hardware_not_ready(self) -> str:
-        """Why the CRS's own mechanisms cannot be trusted to build now ('' when they can): a
-        driver whose state is missing or older than ``timeouts.sensor_max_age_s``, or a lifter
-        whose link is down."""
-        max_age = self.config.timeouts.sensor_max_age_s
-        missing = []
-        for name, (topic, _) in self._hardware_topics.items():
-            age = self.cache.age(topic)
-            entry = self.cache.latest(topic)
-            if age is None or entry is None:
-                missing.append(f"{name}: no state yet")
-            elif age > max_age:
-                missing.append(f"{name}: state {age:.1f} s old")
-            elif name == ros_names.LIFTER and not entry[0].link_ok:
-                missing.append(f"{name}: link down ({entry[0].fault or 'no reason'})")
-        return "; ".join(missing)
+        """Why the CRS's own mechanisms cannot be trusted to build now ('' when they can), each
+        driver's :meth:`device_trouble` named."""
+        troubles = ((name, self.device_trouble(name)) for name in self._hardware_topics)
+        return "; ".join(f"{name}: {why}" for name, why in troubles if why)
+
+    def device_trouble(self, name: str) -> str:
+        """Why driver ``name``'s state cannot be trusted now ('' when it can): none yet, one older
+        than ``timeouts.sensor_max_age_s``, or (the lifter) the driver reporting its link down."""
+        topic = self._hardware_topics[name][0]
+        age, entry = self.cache.age(topic), self.cache.latest(topic)
+        if age is None or entry is None:
+            return "has no state yet"
+        if age > self.config.timeouts.sensor_max_age_s:
+            return f"state {age:.1f} s old"
+        if name == ros_names.LIFTER and not entry[0].link_ok:
+            return f"link down ({entry[0].fault or 'no reason'})"
+        return ""
 
     # ----- blackboard -----
     @property
