@@ -30,6 +30,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import Packet
 from tlt_common.ccsds.definitions import Definitions, load_definitions
@@ -73,7 +75,7 @@ class SystemRun:
         self,
         run_dir: Path,
         *,
-        scenario: str | None = None,
+        scenario: Mapping[str, Any] | None = None,
         mission: str | None = None,
         rtf: float | None = None,
         env: Mapping[str, str] | None = None,
@@ -81,6 +83,10 @@ class SystemRun:
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.run_dir / "launch.log"
+        scenario_file = ""
+        if scenario is not None:  # a twin scenario (config/twin/scenarios/ has the format)
+            scenario_file = str(self.run_dir / "twin_scenario.yaml")
+            Path(scenario_file).write_text(yaml.safe_dump(dict(scenario)))
         self.crs_port = free_udp_port()
         self.gsw_port = free_udp_port()
         while self.gsw_port == self.crs_port:
@@ -92,7 +98,7 @@ class SystemRun:
             "TLT_UR_Y_HOST": UR_Y_HOST,
             "TLT_GROUND_CRS_PORT": str(self.crs_port),
             "TLT_GROUND_GSW_PORT": str(self.gsw_port),
-            "TLT_TWIN_SCENARIO": scenario or "",
+            "TLT_TWIN_SCENARIO": scenario_file,
             **({"TLT_MISSION": mission} if mission else {}),
             **({"TLT_TWIN_RTF": str(rtf)} if rtf is not None else {}),
             **(env or {}),

@@ -35,7 +35,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from tlt_common.ccsds.reasons import AckStage
 from tlt_common.mission.schema import load_mission
@@ -73,9 +72,7 @@ def _final_statuses(run: SystemRun, topic: str) -> dict[bytes, int]:
 
 
 def test_a_defective_vertical_is_replaced_through_a_crs_restart_and_placed_once(tmp_path):
-    scenario = tmp_path / "defective_vertical.yaml"
-    scenario.write_text(yaml.safe_dump(SCENARIO))
-    with SystemRun(tmp_path / "run", scenario=str(scenario)) as run:
+    with SystemRun(tmp_path / "run", scenario=SCENARIO) as run:
         run.start()
         run.wait_ready()
         assert run.start_build().stage is AckStage.COMPLETED

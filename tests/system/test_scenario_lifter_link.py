@@ -22,7 +22,6 @@ import importlib.util
 from pathlib import Path
 
 import pytest
-import yaml
 from action_msgs.msg import GoalStatus
 
 from tlt_common.ccsds.reasons import AckStage
@@ -49,9 +48,7 @@ def _event(code: str, text: str):
 
 
 def test_a_dropped_lifter_link_holds_the_build_which_goes_on_when_it_returns(tmp_path):
-    scenario = tmp_path / "lifter_link_drop.yaml"
-    scenario.write_text(yaml.safe_dump(SCENARIO))
-    with SystemRun(tmp_path / "run", scenario=str(scenario)) as run:
+    with SystemRun(tmp_path / "run", scenario=SCENARIO) as run:
         run.start()
         run.wait_ready()
         assert run.start_build().stage is AckStage.COMPLETED
