@@ -183,6 +183,12 @@ class Supervisor:
             assert self._profile is not None
             env = host_environment(self._profile, env)
             preexec = _in_host(namespace_name(self.run_name, spec.host))
+        elif proc.restarts:
+            # Fast DDS 2.14 can leave the shared-memory port of a process that died (SIGKILL) so
+            # that its restarted successor matches every topic and receives nothing on some
+            # (eProsima/Fast-DDS#5053, #2811): a restarted ARS X once never got /clock and never
+            # ticked. Over UDP it does.
+            env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")
         proc.restart_at = None
         proc.returncode = None
         proc.last_lines.clear()

@@ -132,8 +132,11 @@ def test_a_killed_process_with_a_restart_policy_comes_back(tmp_path, launcher):
     run.wait_for(r"\[launch\] restarting client \(1 of 5\)", after=0)
     second = run.pid_of("client", after=mark)
     assert second != first
-    # The new client talks to the same server again.
+    # The new client talks to the same server again, over UDP (a restarted process's DDS shuns
+    # the shared memory its predecessor may have left unusable).
     run.wait_for(r"^\[client\] result success=True", after=mark)
+    environ = Path(f"/proc/{second}/environ").read_bytes().split(b"\0")
+    assert b"FASTDDS_BUILTIN_TRANSPORTS=UDPv4" in environ
     run.proc.send_signal(signal.SIGTERM)
     assert run.finish() == 0
     assert not alive(second)
