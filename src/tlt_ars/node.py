@@ -67,6 +67,7 @@ from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.config_schema import ConfigError, load_yaml
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.mission.schema import load_mission
 
 ACTION_TYPES = {
@@ -410,6 +411,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, OSError) as exc:
         print(f"ars: {exc}", file=sys.stderr)
         return 2
+    share_the_interpreter_quickly()  # the planner works beside the tick and the executor's threads
     rclpy.init(args=["ars", *full])
     node = None
     try:

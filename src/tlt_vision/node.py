@@ -53,6 +53,7 @@ from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTa
 from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.stamps import set_stamp
 from tlt_vision import inspection
@@ -629,6 +630,7 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"tlt-vision: refused: {exc}", file=sys.stderr)
         return 2
+    share_the_interpreter_quickly()  # poses are computed beside the executor's busy threads
     rclpy.init(args=["tlt-vision", *ros_args])
     node = None
     try:

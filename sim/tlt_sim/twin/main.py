@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_drivers.gpio.config import run_dir as default_run_dir
 from tlt_sim.model.config import DEFAULT_EDU
 from tlt_sim.model.scene import ModelCompileError, Scene
@@ -145,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         ready.write_text(f"{os.getpid()}\n")
         log.info("links up in %s (rtf %s, scenario %s)", run_dir, settings.rtf or "max", scene.scenario.name)
         # Hand the interpreter lock to a device thread quickly when one has bytes to answer.
-        sys.setswitchinterval(0.0005)
+        share_the_interpreter_quickly()
         pacer = Pacer(settings.rtf, min_sleep_s=YIELD_S)
         pacer.rebase(scene.time)
         wall0 = time.monotonic()
