@@ -14,14 +14,17 @@ its topic has been heard); and every CRS event.
 
 A ``CRS_UP`` event goes to the ground when the bridge starts (a restarted CRS is seen as one).
 ``mission_step`` goes out whenever the tree's running leaf, the current bay or the run state
-changes (checked at the tick rate), with the CRS's ROS time: the ground's record of when each step
-of each member ran. Every bay inspection verdict is also reported as an event
+changes, with the CRS's ROS time: the ground's record of when each step of each member ran. The
+change is noted at the end of every tick and sent from the telemetry timer, so a step that runs
+for a single tick is still reported (sampled on a timer instead, a quick foundation rivet went
+unseen on a loaded machine). Every bay inspection verdict is also reported as an event
 (``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``), as Inspection Check reports each part's.
 """
 
 from __future__ import annotations
 
 import logging
+from collections import deque
 from typing import Any
 
 from py_trees.common import Status
@@ -87,9 +90,9 @@ class GroundBridge:
         self._member_ids = {m.id for m in node.ctx.mission.members}
         self._last_step: tuple[Any, ...] | None = None
         self._last_progress: tuple[int, ...] | None = None
-        node.create_timer(
-            1.0 / node.ctx.config.tick_rate_hz, self.send_step_if_changed, callback_group=telemetry
-        )
+        self._steps: deque[tuple[dict[str, Any], bool]] = deque()
+        node.tick_listeners.append(self.note_step)
+        node.create_timer(1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry)
         self._report_bay_inspections()
 
     def send_housekeeping(self) -> None:
@@ -309,42 +312,46 @@ class GroundBridge:
             node = parent
         return bay, member, tip.name
 
-    def send_step_if_changed(self) -> None:
+    def note_step(self) -> None:
+        """Queue a ``mission_step`` if the step or progress changed (the node calls this at the end
+        of each tick, holding the context's lock)."""
         ctx = self.node.ctx
-        with ctx.lock:
-            root = self.node.root
-            tip = root.tip() if root.status == Status.RUNNING else None
-            bay, member, step = self._step_of(tip)
-            if bay is None:
-                bay = int(ctx.board.get("current_bay", 0) or 0)
-            run_state = ctx.run_state
-            with ctx.model.lock:
-                bays_built = ctx.model.bays_built()
-                placed = sum(state >= PLACED for state in ctx.model.states.values())
-                riveted = sum(state >= RIVETED for state in ctx.model.states.values())
-                discarded = sum(ctx.model.discarded.values())
+        root = self.node.root
+        tip = root.tip() if root.status == Status.RUNNING else None
+        bay, member, step = self._step_of(tip)
+        if bay is None:
+            bay = int(ctx.board.get("current_bay", 0) or 0)
+        run_state = ctx.run_state
+        with ctx.model.lock:
+            bays_built = ctx.model.bays_built()
+            placed = sum(state >= PLACED for state in ctx.model.states.values())
+            riveted = sum(state >= RIVETED for state in ctx.model.states.values())
+            discarded = sum(ctx.model.discarded.values())
         key = (int(run_state), bay, member, step, bays_built, placed, discarded)
         if key == self._last_step:
             return
-        progressed = (
-            self._last_step is None
-            or (int(run_state), bays_built, placed, discarded, riveted) != self._last_progress
-        )
-        self._last_step = key
-        self._last_progress = (int(run_state), bays_built, placed, discarded, riveted)
-        self._send(
-            "mission_step",
-            {
-                "sim_time": ctx.ros_seconds(),
-                "run_state": int(run_state),
-                "bay": bay,
-                "member": member[:64],
-                "step": step[:80],
-                "bays_built": bays_built,
-                "members_placed": placed,
-                "parts_discarded": discarded,
-            },
-        )
+        progress = (int(run_state), bays_built, placed, discarded, riveted)
+        progressed = self._last_step is None or progress != self._last_progress
+        self._last_step, self._last_progress = key, progress
+        fields = {
+            "sim_time": ctx.ros_seconds(),
+            "run_state": int(run_state),
+            "bay": bay,
+            "member": member[:64],
+            "step": step[:80],
+            "bays_built": bays_built,
+            "members_placed": placed,
+            "parts_discarded": discarded,
+        }
+        self._steps.append((fields, progressed))
+
+    def send_steps(self) -> None:
+        """Send the queued ``mission_step`` packets, in order."""
+        progressed = False
+        while self._steps:
+            fields, changed = self._steps.popleft()
+            self._send("mission_step", fields)
+            progressed = progressed or changed
         if progressed:
             # The ground's view of the tower follows each change, not only the next periodic packet.
             self.send_progress()

@@ -26,6 +26,7 @@ import argparse
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -86,6 +87,8 @@ class CrsNode(Node):
         self._status_period = 1.0 / config.status_rate_hz
         self._status_due = 0.0
         self.finished = False
+        # Called at the end of each tick, under the context's lock (the ground bridge notes steps).
+        self.tick_listeners: list[Callable[[], None]] = []
         self._interrupt = False
         self._model_changed = False
         self.processor.hold = self._hold_motions
@@ -132,6 +135,11 @@ class CrsNode(Node):
                 self._interrupt = False
                 self.interrupt()
             self.processor.poll()
+            for listener in self.tick_listeners:
+                try:
+                    listener()
+                except Exception:  # a listener's bug must not stop the build
+                    _log.exception("tick listener failed")
             now = self.ctx.ros_seconds()
             if now >= self._status_due:
                 self._status_due = now + self._status_period
