@@ -173,10 +173,9 @@ def main() -> int:
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work (tubes as verticals).
-            frame_items = [(d, model_name(d.object_class, ""), np.eye(4)) for d in dets
-                           if d.object_class in POSED]
-            for name in {n for _, n, _ in frame_items}:
-                pipelines[name].observe([d for d, n, _ in frame_items if n == name], s.depth, intrinsics)
+            frame_items = [(d, model_name(d.object_class, "")) for d in dets if d.object_class in POSED]
+            for name in {n for _, n in frame_items}:
+                pipelines[name].observe([d for d, n in frame_items if n == name], s.depth, intrinsics)
             frame_s.append(time.perf_counter() - t0)
             seg_s.append(t1 - t0)
             parts.append(len(frame_items))

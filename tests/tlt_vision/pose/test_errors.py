@@ -1,5 +1,7 @@
 """Pose errors as the vision benchmark counts them, against hand-computed cases."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -7,10 +9,12 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.cad.models import models_for_mission
 from tlt_vision.pose.errors import add_s, rotation_error_deg
 
+ONE_BAY = Path(__file__).resolve().parents[3] / "missions" / "one_bay.yaml"
+
 
 @pytest.fixture(scope="module")
 def models():
-    return models_for_mission(load_mission("missions/one_bay.yaml"))
+    return models_for_mission(load_mission(ONE_BAY))
 
 
 def rot_x(deg):
