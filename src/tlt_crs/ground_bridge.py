@@ -347,18 +347,29 @@ class GroundBridge:
 
     def send_steps(self) -> None:
         """Send the queued ``mission_step`` packets, in order."""
+        if self._flush_steps():
+            # The ground's view of the tower follows each change, not only the next periodic packet.
+            self.send_progress()
+            self.send_tower()
+
+    def _flush_steps(self) -> bool:
+        """Send what is queued; True if any of it changed the progress."""
         progressed = False
         while self._steps:
             fields, changed = self._steps.popleft()
             self._send("mission_step", fields)
             progressed = progressed or changed
-        if progressed:
-            # The ground's view of the tower follows each change, not only the next periodic packet.
-            self.send_progress()
-            self.send_tower()
+        return progressed
 
     def send_progress(self) -> None:
-        msg: Any = self.node.progress()
+        """``hk_mission``, never ahead of ``mission_step``: the state it reports is noted as a step
+        and sent first. The model changes in an ARS result's callback, between ticks; a "done" in
+        ``hk_mission`` before the step saying so ended the ground's job with the foundation's
+        phase unfinished."""
+        with self.node.ctx.lock:
+            self.note_step()
+            msg: Any = self.node.progress()
+        progressed = self._flush_steps()
         members = list(msg.members)
         self.link.send_telemetry(
             "hk_mission",
@@ -375,3 +386,5 @@ class GroundBridge:
                 "fault": msg.fault[:120],
             },
         )
+        if progressed:
+            self.send_tower()
