@@ -43,6 +43,7 @@ from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.bt.status_codec import TreeShape
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
 from tlt_crs.behaviours.inspection import serve_inspect_part
@@ -263,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"tlt-crs: refused: {exc}", file=sys.stderr)
         return 2
+    share_the_interpreter_quickly()  # the tick, the executor's threads and the ground link share it
     rclpy.init(args=["tlt-crs", *ros_args])
     py_trees.blackboard.Blackboard.clear()
     try:

@@ -38,7 +38,6 @@ from tlt_ars.planning.targets import placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_vision.frames import FrameUnavailable, arm_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main, spin
 from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
@@ -134,8 +133,6 @@ def vision_config(**changes) -> dict:
 
 class Rig:
     def __init__(self, tmp: Path) -> None:
-        # As the vision and twin processes do; here the twin's thread shares this interpreter too.
-        share_the_interpreter_quickly()
         self.context = Context()
         rclpy.init(context=self.context)
         self.twin = TwinHost(self.context, tmp)

@@ -36,6 +36,7 @@ from tlt_interfaces.srv import SetLifterMode
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
 
@@ -310,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
             print("tlt-lifter: --link-timeout-s must be in (0, 10] s", file=sys.stderr)
             return 2
         config = dataclasses.replace(config, link_timeout_s=own.link_timeout_s)
+    share_the_interpreter_quickly()
     rclpy.init(args=["tlt-lifter", *args])
     node = LifterNode(config)
     try:

@@ -17,6 +17,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 
 HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "hardware"
 
@@ -57,6 +58,7 @@ def run_node(
             print(f"{name}: --latency-timer-ms applies to Dynamixel chains only", file=sys.stderr)
             return 2
         config["comm"]["latency_timer_ms"] = args.latency_timer_ms
+    share_the_interpreter_quickly()  # the serial reader and the executor share it
     rclpy.init(args=["prog", *argv])
     node = None
     try:

@@ -40,6 +40,7 @@ from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
+from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
@@ -197,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if own.host:
         config = replace(config, host=own.host)
+    share_the_interpreter_quickly()
     rclpy.init(args=["tlt-ur", *args])
     node = URNode(config)
     try:
