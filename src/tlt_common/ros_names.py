@@ -46,6 +46,11 @@ def trajectory_action(component: str) -> str:
     return f"/{component}/follow_joint_trajectory"
 
 
+def executed_trajectories_topic(component: str) -> str:
+    """tlt_interfaces/ExecutedTrajectory: each of a component's trajectory goals, once it ended."""
+    return f"/{component}/executed_trajectories"
+
+
 def position_command_topic(component: str) -> str:
     """std_msgs/Float64MultiArray for a component's group-position-controlled joints."""
     return f"/{component}/position_command"

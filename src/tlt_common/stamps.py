@@ -22,3 +22,8 @@ def split_seconds(t: float) -> tuple[int, int]:
 def set_stamp(stamp: Any, t: float) -> None:
     """Write ``t`` seconds into a Time or Duration message's ``sec`` and ``nanosec``."""
     stamp.sec, stamp.nanosec = split_seconds(t)
+
+
+def stamp_seconds(stamp: Any) -> float:
+    """A Time or Duration message as float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9

@@ -3,7 +3,8 @@
 * :class:`TrajectoryActionServer`: a ``tlt_interfaces/action/FollowJointTrajectory`` server over a
   :class:`~tlt_drivers.controllers.trajectory.JointTrajectoryController`. Every goal is accepted and
   handed to the controller; one that fails validation (or the motion gate) ends at once as ABORTED
-  with the controller's error code and reason in the result. The execute coroutine never blocks:
+  with the controller's error code and reason in the result; every goal, once ended, is recorded on
+  ``/<component>/executed_trajectories`` (:mod:`.executed_trajectories`). The execute coroutine never blocks:
   it awaits a future that :meth:`TrajectoryActionServer.tick`, called by the node's control loop
   after the controller's update, resolves when the goal ends. A new goal replaces the running one
   (the old ends ABORTED with "replaced by a new goal"); a cancel request stops where the joints are.
@@ -23,6 +24,8 @@ from std_msgs.msg import Float64MultiArray, String
 from tlt_interfaces.action import FollowJointTrajectory
 from trajectory_msgs.msg import JointTrajectoryPoint
 
+from tlt_common import ros_names
+from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.controllers.group_position import CommandRejected, JointGroupPositionController
 from tlt_drivers.controllers.trajectory import (
     ExecutingGoal,
@@ -54,12 +57,12 @@ def goal_from_msg(goal_msg) -> TrajectoryGoal:
 
 
 class TrajectoryActionServer:
-    """FollowJointTrajectory action ``name`` on ``node`` driving ``controller``."""
+    """``component``'s FollowJointTrajectory action on ``node``, driving ``controller``."""
 
     def __init__(
         self,
         node: Node,
-        name: str,
+        component: str,
         controller: JointTrajectoryController,
         actual: Callable[[], Mapping[str, float]],
         now: Callable[[], float],
@@ -73,16 +76,18 @@ class TrajectoryActionServer:
         self._feedback_every = max(1, feedback_every)
         self._ticks = 0
         self._pending: list[tuple[ExecutingGoal, object, Future]] = []
+        self.executed = executed_trajectories.ExecutedTrajectoryPublisher(node, component)
         self.server = ActionServer(
             node,
             FollowJointTrajectory,
-            name,
+            ros_names.trajectory_action(component),
             execute_callback=self._execute,
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=lambda _handle: CancelResponse.ACCEPT,
         )
 
     async def _execute(self, goal_handle) -> FollowJointTrajectory.Result:
+        started = self.executed.now()
         executing = self._controller.start(goal_from_msg(goal_handle.request), self._now(), self._actual())
         if not executing.done:
             done = Future()
@@ -93,10 +98,18 @@ class TrajectoryActionServer:
         result.error_string = executing.error_string
         if executing.status == GoalStatus.SUCCEEDED:
             goal_handle.succeed()
+            outcome = executed_trajectories.SUCCEEDED
         elif executing.status == GoalStatus.CANCELED and goal_handle.is_cancel_requested:
             goal_handle.canceled()
+            outcome = executed_trajectories.CANCELED
         else:
             goal_handle.abort()
+            outcome = executed_trajectories.ABORTED
+        trajectory = goal_handle.request.trajectory
+        self.executed.publish(
+            started, trajectory.joint_names, executed_trajectories.planned_seconds(trajectory), outcome,
+            result.error_code, result.error_string,
+        )  # fmt: skip
         return result
 
     def tick(self) -> None:

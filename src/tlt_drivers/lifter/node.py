@@ -3,7 +3,8 @@
 Publishes ``lifter/state`` (``tlt_interfaces/msg/LifterState``) every control cycle and
 ``lifter/hardware_status`` (``tlt_interfaces/msg/HardwareStatus``, component "lifter") at
 ``status_rate_hz``. Serves ``lifter/set_mode`` (``SetLifterMode``) and the action
-``lifter/follow_joint_trajectory`` (``tlt_interfaces/action/FollowJointTrajectory``).
+``lifter/follow_joint_trajectory`` (``tlt_interfaces/action/FollowJointTrajectory``), recording
+each goal once it ended on ``lifter/executed_trajectories``.
 
 One timer at ``command_rate_hz`` runs the control cycle: read telemetry, run the velocity
 trajectory controller, write the velocity command. Nothing blocks the executor except a mode
@@ -37,6 +38,7 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
 
@@ -56,6 +58,12 @@ MODE_SERVICE = ros_names.LIFTER_SET_MODE
 TRAJECTORY_ACTION = ros_names.trajectory_action(ros_names.LIFTER)
 
 Result = FollowJointTrajectory.Result
+# How a goal ended (the goal handle's method) -> its ExecutedTrajectory outcome.
+_OUTCOMES = {
+    "succeed": executed_trajectories.SUCCEEDED,
+    "abort": executed_trajectories.ABORTED,
+    "canceled": executed_trajectories.CANCELED,
+}
 
 
 @dataclass
@@ -87,6 +95,7 @@ class LifterNode(Node):
             goal_callback=lambda _goal: GoalResponse.ACCEPT,
             cancel_callback=lambda _goal: CancelResponse.ACCEPT,
         )
+        self._executed = executed_trajectories.ExecutedTrajectoryPublisher(self, ros_names.LIFTER)
         if self.hw.configure():
             self.hw.activate()
         else:
@@ -173,6 +182,18 @@ class LifterNode(Node):
 
     # --- action --------------------------------------------
     async def _execute(self, goal_handle) -> Result:
+        started = self._executed.now()
+        how, result = await self._run_goal(goal_handle)
+        getattr(goal_handle, how)()
+        traj = goal_handle.request.trajectory
+        self._executed.publish(
+            started, traj.joint_names, executed_trajectories.planned_seconds(traj), _OUTCOMES[how],
+            result.error_code, result.error_string,
+        )  # fmt: skip
+        return result
+
+    async def _run_goal(self, goal_handle) -> tuple[str, Result]:
+        """How the goal ended (``succeed``, ``abort`` or ``canceled``) and its result."""
         request = goal_handle.request
         traj = request.trajectory
         points = [
@@ -200,8 +221,7 @@ class LifterNode(Node):
                 problem = (code, str(exc))
         if problem is not None:
             self.get_logger().warning(f"trajectory goal rejected: {problem[1]}")
-            goal_handle.abort()
-            return Result(error_code=problem[0], error_string=problem[1])
+            return "abort", Result(error_code=problem[0], error_string=problem[1])
         # a new goal replaces the running one
         self._end_goal("abort", Result.INVALID_GOAL, "preempted by a newer goal")
         self.controller.start(
@@ -215,9 +235,7 @@ class LifterNode(Node):
         )
         goal = _Goal(goal_handle, Future())
         self._goal = goal
-        how, result = await goal.done
-        getattr(goal_handle, how)()
-        return result
+        return await goal.done
 
     # --- mode service --------------------------------------------
     def _on_set_mode(self, request: SetLifterMode.Request, response: SetLifterMode.Response):

@@ -76,7 +76,7 @@ class DriverLoop:
             )
             self.action = TrajectoryActionServer(
                 node,
-                ros_names.trajectory_action(component),
+                component,
                 self.trajectory,
                 self.actual,
                 self.now,

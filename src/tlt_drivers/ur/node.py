@@ -72,7 +72,7 @@ class URNode(Node):
         self._joint_pub = self.create_publisher(JointState, ros_names.joint_states_topic(c), 10)
         self._status_pub = self.create_publisher(HardwareStatus, ros_names.hardware_status_topic(c), 10)
         self.action = TrajectoryActionServer(
-            self, ros_names.trajectory_action(c), self.controller, lambda: self.hw.positions, self._ros_now
+            self, c, self.controller, lambda: self.hw.positions, self._ros_now
         )
         self.create_service(Trigger, ros_names.ur_unlock_service(c), self._on_unlock)
         self._reported: tuple[Lifecycle, str] | None = None

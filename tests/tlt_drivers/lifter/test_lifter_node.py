@@ -1,6 +1,7 @@
 """The ``lifter`` ROS node in-process, against the firmware emulator on a real pty: LifterState and
 HardwareStatus published, SetLifterMode, FollowJointTrajectory raising the lifter to tolerance,
-goals refused with the reason, and a link fault aborting a running goal."""
+goals refused with the reason, a link fault aborting a running goal, and every goal recorded once
+it ended."""
 
 from __future__ import annotations
 
@@ -15,12 +16,13 @@ from builtin_interfaces.msg import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import FollowJointTrajectory
-from tlt_interfaces.msg import HardwareStatus, LifterState
+from tlt_interfaces.msg import ExecutedTrajectory, HardwareStatus, LifterState
 from tlt_interfaces.srv import SetLifterMode
 from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware, PtyFirmwareServer
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.stamps import stamp_seconds
 from tlt_drivers.lifter.config import load_lifter_config
 from tlt_drivers.lifter.node import STATE_TOPIC, STATUS_TOPIC, LifterNode, main
 
@@ -51,6 +53,10 @@ class Harness:
         self.statuses: list[HardwareStatus] = []
         self.client.create_subscription(LifterState, STATE_TOPIC, self.states.append, 50)
         self.client.create_subscription(HardwareStatus, STATUS_TOPIC, self.statuses.append, 10)
+        self.executed: list[ExecutedTrajectory] = []
+        self.client.create_subscription(
+            ExecutedTrajectory, "lifter/executed_trajectories", self.executed.append, 50
+        )
         self.set_mode = self.client.create_client(SetLifterMode, "lifter/set_mode")
         self.action = SerialisedActionClient(
             self.client, FollowJointTrajectory, "lifter/follow_joint_trajectory"
@@ -223,6 +229,22 @@ def test_new_goal_replaces_the_running_one_and_cancel_stops(harness: Harness) ->
     h.wait_future(third.cancel_goal_async(), "cancel reply")
     h.wait_future(third_result, "cancelled goal")
     h.wait(lambda: h.firmware.velocities == [0, 0, 0, 0], "lifter stopped after cancel")
+    # Each goal's record: what it asked for, how long it ran, how it ended.
+    h.wait(lambda: len(h.executed) == 3, "three executed-trajectory records")
+    first, second, third = h.executed
+    record = ExecutedTrajectory
+    assert [r.outcome for r in h.executed] == [
+        record.OUTCOME_ABORTED, record.OUTCOME_SUCCEEDED, record.OUTCOME_CANCELED
+    ]
+    assert [r.planned_s for r in h.executed] == pytest.approx([10.0, 1.0, 10.0])
+    assert "preempted" in first.error_string and second.error_code == 0
+    assert list(second.joint_names) == [f"lifter_joint_{i}" for i in range(4)]
+
+    def took(r: ExecutedTrajectory) -> float:
+        return stamp_seconds(r.header.stamp) - stamp_seconds(r.started)
+
+    assert 1.0 <= took(second) < 5.0
+    assert took(first) < 10.0 and took(third) < 10.0  # both ended early
 
 
 def test_button_press_during_a_goal_aborts_it(harness: Harness) -> None:

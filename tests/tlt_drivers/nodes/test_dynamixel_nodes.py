@@ -17,13 +17,20 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from tlt_interfaces.action import FollowJointTrajectory
-from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, JointTolerance
+from tlt_interfaces.msg import (
+    EndEffectorState,
+    ExecutedTrajectory,
+    GripperState,
+    HardwareStatus,
+    JointTolerance,
+)
 from tlt_sim.emulators.dynamixel_chain import DynamixelChain
 from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD
 from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.stamps import stamp_seconds
 from tlt_drivers.dynamixel.config import load_chain, validate_chain
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.active_grippers import GripperGroupNode
@@ -187,6 +194,10 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
         harness.add(CameraMountsNode(config, context=harness.context))
         joint_states: list[JointState] = []
         harness.client.create_subscription(JointState, "/camera_mounts/joint_states", joint_states.append, 50)
+        executed: list[ExecutedTrajectory] = []
+        harness.client.create_subscription(
+            ExecutedTrajectory, "/camera_mounts/executed_trajectories", executed.append, 50
+        )
         action = SerialisedActionClient(
             harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory"
         )
@@ -205,6 +216,14 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
         assert replaced.status == 6 and replaced.result.error_string == "replaced by a new goal"  # ABORTED
         harness.wait(lambda: joint_states and abs(joint_states[-1].position[0] + 0.3) < 0.02, "joint states")
         assert list(joint_states[-1].name) == names
+        # Each goal is recorded as it ended: the replaced one first, aborted well before its 5 s.
+        harness.wait(lambda: len(executed) == 2, "two executed-trajectory records")
+        assert [(r.outcome, r.planned_s) for r in executed] == [
+            (ExecutedTrajectory.OUTCOME_ABORTED, 5.0), (ExecutedTrajectory.OUTCOME_SUCCEEDED, 0.5)
+        ]
+        assert executed[0].error_string == "replaced by a new goal" and list(executed[1].joint_names) == names
+        assert stamp_seconds(executed[0].header.stamp) - stamp_seconds(executed[0].started) < 4.0
+        assert stamp_seconds(executed[1].header.stamp) - stamp_seconds(executed[1].started) >= 0.5
     finally:
         harness.close()
         chain.stop()
