@@ -1,0 +1,203 @@
+"""Where a tower build's time goes: wall time of the build, and sim time per bay against the
+motions it ran.
+
+Two figures of the issue "whole system", read from one run of the main job:
+
+* **wall time** of the build (goal for a 2-bay tower: 10 minutes), from Start taken to
+  ``tower_built``, and of the whole job (start-up and shut-down included);
+* **sim time per bay against its physical lower bound**: every trajectory a driver ran is recorded
+  when it ends (``/<component>/executed_trajectories``, ``tlt_interfaces/ExecutedTrajectory``: its
+  own planned duration, when it started and ended, how it ended). A bay's bound is the sum of the
+  planned durations of the trajectories that started in the bay and succeeded: the ARSs' arm
+  motions are time-optimal along their checked paths (``tlt_ars.planning.time_parameterisation``),
+  the lifter's run at the mission's ``lifter_speed``, the grippers' and end effectors' take the time
+  their configuration gives them. The ratio of the bay's sim time to that bound is the time lost
+  to waiting, polling, inspecting and planning (goal <= 1.25). Also printed: the time anything
+  was moving (two arms moving at once count once), the bound by component, and the trajectories
+  that did not succeed, whose time is lost.
+
+The bay's span (first CRS step to the packet saying it is built) comes from the ground archive
+(``tlt_gsw.summary``), the records from the MCAP recording, both on the twin's sim clock.
+
+Usage:
+  python bench/build.py [--mission two_bay]   # run scripts/main.sh into a fresh run folder, report
+  python bench/build.py --run-dir DIR          # report on a finished run (archive and recording)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TOPIC_SUFFIX = "/executed_trajectories"
+WALL_GOAL_S = 600.0  # a 2-bay tower
+RATIO_GOAL = 1.25
+
+
+@dataclass(frozen=True)
+class Motion:
+    """One executed trajectory: ``component`` (``ur_x``, ``lifter``, ...), sim-time span, outcome."""
+
+    component: str
+    started: float
+    ended: float
+    planned_s: float
+    succeeded: bool
+
+
+@dataclass
+class PhaseMotion:
+    """The motions of one phase (a bay, or the foundation rivets) against its sim time."""
+
+    name: str
+    sim_s: float
+    wall_s: float
+    complete: bool
+    bound_s: float = 0.0  # sum of the succeeded motions' planned durations
+    moving_s: float = 0.0  # union of every motion's span
+    lost_s: float = 0.0  # planned time of motions that did not succeed
+    failed: int = 0
+    by_component: dict[str, float] = field(default_factory=dict)
+    motions: int = 0
+
+    @property
+    def ratio(self) -> float | None:
+        return self.sim_s / self.bound_s if self.bound_s > 0 else None
+
+
+def union_length(spans: Iterable[tuple[float, float]]) -> float:
+    """Total length covered by the spans (overlaps counted once)."""
+    total, end = 0.0, float("-inf")
+    for a, b in sorted(spans):
+        if b <= end:
+            continue
+        total += b - max(a, end)
+        end = b
+    return total
+
+
+def account(phases: Iterable, motions: Iterable[Motion]) -> list[PhaseMotion]:
+    """Each phase (``tlt_gsw.summary.PhaseTimes``) with the motions that started within its sim span."""
+    motions = sorted(motions, key=lambda m: m.started)
+    out = []
+    for phase in phases:
+        mine = [m for m in motions if phase.sim_start <= m.started < phase.sim_end]
+        pm = PhaseMotion(phase.name, phase.sim_s, phase.wall_s, phase.complete, motions=len(mine))
+        by_component: dict[str, float] = defaultdict(float)
+        for m in mine:
+            if m.succeeded:
+                pm.bound_s += m.planned_s
+                by_component[m.component] += m.planned_s
+            else:
+                pm.lost_s += m.planned_s
+                pm.failed += 1
+        pm.by_component = dict(sorted(by_component.items()))
+        pm.moving_s = union_length((m.started, min(m.ended, phase.sim_end)) for m in mine)
+        out.append(pm)
+    return out
+
+
+def read_motions(recording: Path) -> list[Motion]:
+    """Every ExecutedTrajectory in a recording."""
+    from tlt_interfaces.msg import ExecutedTrajectory
+
+    from tlt_common.recording.reading import read_messages
+    from tlt_common.stamps import stamp_seconds
+
+    motions = []
+    for _schema, channel, _message, msg in read_messages(recording):
+        if not channel.topic.endswith(TOPIC_SUFFIX):
+            continue
+        motions.append(Motion(
+            component=channel.topic[1:-len(TOPIC_SUFFIX)],
+            started=stamp_seconds(msg.started),
+            ended=stamp_seconds(msg.header.stamp),
+            planned_s=msg.planned_s,
+            succeeded=msg.outcome == ExecutedTrajectory.OUTCOME_SUCCEEDED,
+        ))  # fmt: skip
+    return motions
+
+
+def _ratio(value: float | None, goal: float) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value:.2f} (goal <= {goal:g}: {'met' if value <= goal else 'not met'})"
+
+
+def report(run_dir: Path, job_wall_s: float | None = None) -> int:
+    """Print the figures of a finished run; 0 when it had what they need, 1 otherwise."""
+    from tlt_gsw.summary import summarize_file
+
+    archive, recording = run_dir / "gsw_archive.sqlite", run_dir / "recording.mcap"
+    missing = [p.name for p in (archive, recording) if not p.is_file()]
+    if missing:
+        print(f"build bench: {run_dir} has no {' or '.join(missing)}", file=sys.stderr)
+        return 1
+    summary = summarize_file(archive)
+    motions = read_motions(recording)
+    phases = [p for p in summary.phases if p.sim_s > 0]
+    print(f"run {run_dir}: {summary.bays_built} of {summary.bays_total} bays, "
+          f"{'tower built' if summary.tower_built else 'tower NOT built'}, "
+          f"{len(motions)} executed trajectories recorded")  # fmt: skip
+    if phases:
+        build_wall = phases[-1].wall_end - phases[0].wall_start
+        build_sim = phases[-1].sim_end - phases[0].sim_start
+        print(f"build (first step to the last phase's end): {build_wall:.0f} s wall, {build_sim:.0f} s sim, "
+              f"sim/wall {build_sim / build_wall:.2f}")  # fmt: skip
+        if summary.bays_total == 2 and summary.tower_built:
+            print(f"2-bay build wall time: {build_wall / 60:.1f} min, ratio to the 10 min goal "
+                  f"{_ratio(build_wall / WALL_GOAL_S, 1.0)}")  # fmt: skip
+    if job_wall_s is not None:
+        print(f"whole job (start-up, build, shut-down): {job_wall_s:.0f} s wall")
+    print()
+    print(f"{'phase':<12}{'sim s':>8}{'wall s':>8}{'bound s':>9}{'ratio':>7}{'moving s':>10}"
+          f"{'motions':>9}{'failed':>8}{'lost s':>8}")  # fmt: skip
+    rows = account(phases, motions)
+    for r in rows:
+        ratio = f"{r.ratio:.2f}" if r.ratio is not None else "n/a"
+        mark = "" if r.complete else "  (not finished)"
+        print(f"{r.name:<12}{r.sim_s:>8.1f}{r.wall_s:>8.1f}{r.bound_s:>9.1f}{ratio:>7}{r.moving_s:>10.1f}"
+              f"{r.motions:>9}{r.failed:>8}{r.lost_s:>8.1f}{mark}")  # fmt: skip
+    print()
+    for r in rows:
+        parts = ", ".join(f"{c} {s:.1f}" for c, s in r.by_component.items())
+        print(f"{r.name}: bound by component (s): {parts or 'none'}")
+    bays = [r for r in rows if r.name.startswith("bay") and r.complete]
+    if bays:
+        worst = max((r.ratio for r in bays if r.ratio is not None), default=None)
+        print(f"\nsim time per bay / motion lower bound, worst bay: {_ratio(worst, RATIO_GOAL)}")
+    return 0 if rows else 1
+
+
+def run_job(mission: str, run_dir: Path) -> tuple[int, float]:
+    """Run the main job on ``mission`` into ``run_dir``, its output shown as it comes."""
+    env = dict(os.environ, TLT_RUN_DIR=str(run_dir))
+    started = time.monotonic()
+    status = subprocess.call(["bash", str(ROOT / "scripts" / "main.sh"), "--mission", mission], env=env)
+    return status, time.monotonic() - started
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--mission", default="two_bay", help="mission to build (missions/NAME.yaml)")
+    parser.add_argument("--run-dir", type=Path, help="report on this finished run instead of running one")
+    args = parser.parse_args(argv)
+    if args.run_dir is not None:
+        return report(args.run_dir)
+    run_dir = Path(tempfile.mkdtemp(prefix="tlt-bench-build."))
+    status, wall = run_job(args.mission, run_dir)
+    print(f"\nbuild bench: main job on {args.mission} exited {status} after {wall:.0f} s\n")
+    return report(run_dir, wall) or status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

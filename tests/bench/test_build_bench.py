@@ -1,0 +1,115 @@
+"""The build benchmark's accounting: a hand-made run (a real ground archive, a real MCAP recording
+of ExecutedTrajectory records) whose figures are computed by hand."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+from rclpy.serialization import serialize_message
+from tlt_interfaces.msg import ExecutedTrajectory
+
+from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
+from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.recording.mcap_writer import McapRecordingWriter
+from tlt_common.recording.message_definitions import MessageDefinitionSource
+from tlt_common.stamps import set_stamp
+from tlt_gsw.archive import Recorder
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFS = load_definitions()
+TYPE = "tlt_interfaces/msg/ExecutedTrajectory"
+OK, ABORTED = ExecutedTrajectory.OUTCOME_SUCCEEDED, ExecutedTrajectory.OUTCOME_ABORTED
+# component, started, ended (sim s), planned s, outcome
+MOTIONS = [
+    ("ur_x", 5.0, 8.0, 3.0, OK),  # before the first step: start-up, not a bay's
+    ("ur_x", 12.0, 20.0, 7.0, OK),
+    ("ur_y", 15.0, 22.0, 6.0, OK),  # overlaps ur_x's: both count in the bound, once in "moving"
+    ("ur_x", 25.0, 26.0, 3.0, ABORTED),  # lost: not in the bound
+    ("lifter", 40.0, 45.0, 5.0, OK),
+    ("ur_y", 52.0, 56.0, 4.0, OK),  # the foundation's
+]
+
+
+def load_bench():
+    spec = importlib.util.spec_from_file_location("build_bench", ROOT / "bench" / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def _archive(path: Path) -> None:
+    """Bay 1 from sim 10 s to 50 s (wall 1000-1020), the foundation rivets to 60 s (wall 1025)."""
+    rec = Recorder(path)
+    steps = [
+        (1000.0, 10.0, "running", "bay1/cross_frame", "Send AddCrossFrame bay1/cross_frame", 0),
+        (1010.0, 30.0, "running", "bay1/vertical/x0_y1", "Send AddMember bay1/vertical/x0_y1", 0),
+        (1020.0, 50.0, "running", "foundation/x0_y0", "Send FoundationRivet foundation/x0_y0", 1),
+        (1025.0, 60.0, "done", "", "", 1),
+    ]
+    for seq, (wall, sim, state, member, step, built) in enumerate(steps, 1):
+        raw = encode_telemetry(DEFS, "mission_step", {
+            "sim_time": sim, "run_state": state, "bay": 1, "member": member, "step": step,
+            "bays_built": built, "members_placed": 0, "parts_discarded": 0,
+        }, seq_count=seq, timestamp=wall)  # fmt: skip
+        rec.record("rx", raw, parse_datagram(raw, DEFS, expect="tm"), recorded_at=wall)
+    raw = encode_telemetry(DEFS, "hk_mission", {
+        "run_state": "done", "started": True, "bays_total": 1, "bays_built": 1, "current_bay": 1,
+        "members_total": 2, "members_placed": 2, "members_riveted": 2, "current_step": "", "fault": "",
+    }, seq_count=9, timestamp=1025.1)  # fmt: skip
+    rec.record("rx", raw, parse_datagram(raw, DEFS, expect="tm"), recorded_at=1025.1)
+    rec.close()
+
+
+def _recording(path: Path) -> None:
+    writer = McapRecordingWriter(path, compression="none")
+    definition = MessageDefinitionSource().full_text(TYPE)
+    channels: dict[str, int] = {}
+    for component, started, ended, planned, outcome in MOTIONS:
+        topic = f"/{component}/executed_trajectories"
+        if topic not in channels:
+            channels[topic] = writer.add_channel(topic, TYPE, definition, "")
+        msg = ExecutedTrajectory(planned_s=planned, outcome=outcome, joint_names=[f"{component}_joint"])
+        set_stamp(msg.started, started)
+        set_stamp(msg.header.stamp, ended)
+        writer.write(channels[topic], serialize_message(msg), int(ended * 1e9), int(ended * 1e9))
+    writer.close()
+
+
+@pytest.fixture
+def run_dir(tmp_path) -> Path:
+    _archive(tmp_path / "gsw_archive.sqlite")
+    _recording(tmp_path / "recording.mcap")
+    return tmp_path
+
+
+def test_overlapping_spans_are_counted_once():
+    bench = load_bench()
+    assert bench.union_length([(0.0, 2.0), (1.0, 3.0), (5.0, 6.0), (5.5, 5.7)]) == pytest.approx(4.0)
+    assert bench.union_length([]) == 0.0
+
+
+def test_each_bay_is_held_against_the_motions_that_started_in_it(run_dir, capsys):
+    bench = load_bench()
+    motions = bench.read_motions(run_dir / "recording.mcap")
+    assert [(m.component, m.planned_s, m.succeeded) for m in motions] == [
+        (c, p, o == OK) for c, _, _, p, o in MOTIONS
+    ]
+    assert bench.report(run_dir) == 0
+    lines = capsys.readouterr().out.splitlines()
+    # bay 1: 40 s of sim time; bound 7 + 6 + 5 = 18 s; moving 12-22, 25-26, 40-45 = 16 s; 3 s lost.
+    assert "bay 1           40.0    20.0     18.0   2.22      16.0        4       1     3.0" in lines, lines
+    assert "foundation      10.0     5.0      4.0   2.50       4.0        1       0     0.0" in lines, lines
+    assert "bay 1: bound by component (s): lifter 5.0, ur_x 7.0, ur_y 6.0" in lines
+    assert "sim time per bay / motion lower bound, worst bay: 2.22 (goal <= 1.25: not met)" in lines
+    build = "build (first step to the last phase's end): 25 s wall, 50 s sim"
+    assert any(line.startswith(build) for line in lines), lines
+
+
+def test_a_run_without_its_recording_is_refused_with_the_file_named(tmp_path, capsys):
+    _archive(tmp_path / "gsw_archive.sqlite")
+    assert load_bench().report(tmp_path) == 1
+    assert "recording.mcap" in capsys.readouterr().err
