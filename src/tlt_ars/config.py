@@ -10,6 +10,7 @@ positions as grasp joints, a width for every part kind.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,7 @@ SCHEMA = {
         "dict",
         schema={
             "dispensers": Field("map", item=Field("dict", schema=_POSE)),
+            "dispensers_mission": opt("str", "missions/one_bay.yaml"),
             "inspection": Field("dict", schema=_POSE),
             "inspection_cross_frame": opt("dict", None, schema=_POSE),
             "cross_frame_transit": opt("dict", None, schema=_POSE),
@@ -161,6 +163,16 @@ class ArsConfig:
     @property
     def mission_path(self) -> Path:
         return _resolve(self.raw["mission"])
+
+    @property
+    def dispensers_mission_path(self) -> Path:
+        """The mission whose dispenser tags the configured coarse poses view."""
+        return _resolve(self.raw["poses"]["dispensers_mission"])
+
+    def with_dispenser_joints(self, joints: dict[str, Any]) -> ArsConfig:
+        """The same configuration with these dispensers' coarse poses replaced by joint poses."""
+        moved = {name: PoseSpec(joints=tuple(float(v) for v in q)) for name, q in joints.items()}
+        return dataclasses.replace(self, dispenser_poses={**self.dispenser_poses, **moved})
 
     @property
     def scene_path(self) -> Path:

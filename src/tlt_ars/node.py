@@ -113,6 +113,20 @@ class ActiveGoal:
     feedback: tuple[str, float] | None = None  # the step and progress last sent to the CRS
 
 
+def _coarse_poses_for_mission(config: ArsConfig, scene: Any) -> ArsConfig:
+    """The configured coarse dispenser poses moved with their tags to this mission's racks
+    (:mod:`tlt_ars.planning.coarse_pose_transfer`); ConfigError naming the pose when one cannot."""
+    from tlt_ars.planning.coarse_pose_search import NoCoarsePose
+    from tlt_ars.planning.coarse_pose_transfer import follow_tags
+
+    joints = {n: p.joints for n, p in config.dispenser_poses.items() if p.joints is not None}
+    try:
+        moved = follow_tags(joints, config.ars, config.dispensers_mission_path, config.mission_path, scene)
+    except NoCoarsePose as exc:
+        raise ConfigError(config.source, "poses.dispensers", str(exc)) from exc
+    return config.with_dispenser_joints(moved)
+
+
 class ArsNode(Node):
     """One ARS; see the module docstring."""
 
@@ -125,6 +139,7 @@ class ArsNode(Node):
         from tlt_ars.planning.world import load_scene_config
 
         scene = load_scene_config(config.scene_path)
+        config = self.config = _coarse_poses_for_mission(config, scene)
         if config.raw["check_reach"] if check_reach is None else check_reach:
             # A member out of this arm's reach is found now, not mid-build (§V.D).
             from tlt_ars.planning.reachability import require_reachable
