@@ -30,7 +30,7 @@ from py_trees.common import Status
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCondition
-from tlt_common.stamps import set_stamp
+from tlt_common.stamps import set_stamp, stamp_seconds
 from tlt_crs.context import CrsContext
 
 Predicate = Callable[[Any], bool]
@@ -137,9 +137,24 @@ class PublishCommand(Action):
 
 
 class MotionGoal(ActionGoal):
-    """A trajectory goal of a CRS actuator; the node pre-empts it on Pause (see module docstring)."""
+    """A trajectory goal of a CRS actuator; the node pre-empts it on Pause (see module docstring).
+
+    Waits for the result as long as the trajectory itself takes plus ``margin``: a raise by a bay
+    (0.75 m at 0.01 m/s) takes 75 s, longer than any fixed bound for a gripper's motion (a two-bay
+    build once faulted there, "no result within 60 s", while the lifter was still raising).
+    """
 
     hold_on_pause = True
+
+    def __init__(self, name: str, node: Any, action_type: Any, action_name: str, goal: Callable[[], Any],
+                 *, margin: float, **kwargs: Any) -> None:  # fmt: skip
+        def build() -> Any:
+            built = goal()
+            points = built.trajectory.points
+            self.result_timeout = (stamp_seconds(points[-1].time_from_start) if points else 0.0) + margin
+            return built
+
+        super().__init__(name, node, action_type, action_name, build, result_timeout=margin, **kwargs)
 
 
 def trajectory_goal(joints: tuple[str, ...], positions: list[float], seconds: float) -> Any:
@@ -209,7 +224,7 @@ class Actuators:
             action,
             goal,
             server_timeout=self.ctx.config.timeouts.service_s,
-            result_timeout=self.ctx.config.timeouts.actuator_s,
+            margin=self.ctx.config.timeouts.actuator_s,
             result_ok=trajectory_ok,
             clock=self.ctx.clock,
         )

@@ -71,3 +71,16 @@ def test_missing_gripper_state_is_a_timeout_not_a_hang(ros, crs, tmp_path):
         assert "no message on '/top_grippers/state'" in subtree.children[1].children[1].feedback_message
     finally:
         rig.close()
+
+
+def test_a_raise_longer_than_the_actuator_bound_is_waited_for(rig, crs, tmp_path):
+    """A raise by a bay (0.75 m at the default 0.01 m/s) is a 75 s trajectory: its result is awaited
+    for that long plus ``actuator_s``, not ``actuator_s`` alone."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, actuator_s=0.5))
+    rig.lifter.state = 2
+    start = rig.lifter.positions[0]
+    rig.lifter.trajectories.time_scale = 0.02  # the stand-in takes 1.5 s: three times actuator_s
+    subtree = Actuators(ctx).lifter_move("Raise", start + 0.75)
+    crs.wait_for(lambda: ctx.cache.latest("/lifter/state") is not None, what="lifter state")
+    assert crs.tick_until(subtree) == Status.SUCCESS, subtree.tip().feedback_message
+    assert all(abs(p - (start + 0.75)) < 1e-9 for p in rig.lifter.positions)
