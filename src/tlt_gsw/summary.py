@@ -305,7 +305,7 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
                 clear(record, "fault no longer reported")
             continue
         if record.kind == "hk_tower":
-            states = _unpack_states(f["member_states"], int(f["member_count"]))
+            states = unpack_member_states(f["member_states"], int(f["member_count"]))
             summary.member_states = {
                 name: sum(s == i for s in states) for i, name in enumerate(STATE_NAMES)
             }
@@ -382,7 +382,7 @@ def _phase_order(phase: PhaseTimes) -> tuple[int, int]:
     return (0, int(match.group(1))) if match else (1, 0)
 
 
-def _unpack_states(data: bytes, count: int) -> list[int]:
+def unpack_member_states(data: bytes, count: int) -> list[int]:
     """hk_tower's 2-bit states, first member in the high bits of the first byte."""
     out = []
     for i in range(count):
@@ -465,4 +465,5 @@ __all__ = [
     "load_records",
     "summarize",
     "summarize_file",
+    "unpack_member_states",
 ]
