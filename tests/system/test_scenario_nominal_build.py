@@ -12,7 +12,9 @@ tests/system/system_run.py) with the test as the ground station. Checked:
 * the ground saw each member's step (``mission_step``), every part inspection and the bay
   inspection pass, and no part discarded;
 * in the twin (its ground truth in the run's MCAP recording) the cross frame, the four verticals
-  and the four diagonals stand where the mission puts them on the tower;
+  and the four diagonals stand where the mission puts them on the tower, each a part of its own,
+  within 3 cm (the near verticals stand 23 mm off, a known fault: the twin's UR controller reports
+  its path, not the arm a contact pushed aside; docs/system.md);
 * each request succeeded once at its ARS (the action servers' goal statuses in the recording):
   no member placed or riveted twice.
 
@@ -41,10 +43,10 @@ system_run = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(system_run)
 SystemRun = system_run.SystemRun
 
-pytestmark = [pytest.mark.system, pytest.mark.timeout(1800)]
+pytestmark = [pytest.mark.system, pytest.mark.timeout(2700)]
 
 MISSION = Path(__file__).resolve().parents[2] / "missions" / "one_bay.yaml"
-BUILD_TIMEOUT_S = 1500.0
+BUILD_TIMEOUT_S = 2400.0  # 13-25 min on 2 cores; CI machines vary
 PLACE_TOLERANCE = 0.03  # m, a part's body from its member's place on the tower
 SUCCEEDED = 4  # action_msgs/GoalStatus
 # The action each member kind is asked for, and the ARS action that rivets an affix joint.
@@ -99,14 +101,16 @@ def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
         t = msg.transform.translation
         last[msg.child_frame_id] = np.array([t.x, t.y, t.z])
     tower = last["tower"]
+    used: set[str] = set()
     for member in mission.members:
         if member.kind == "foundation_rivet":
             continue
-        place = tower + np.mean([p for _, p in member.joints], axis=0)
-        parts = {k: v for k, v in last.items() if k.startswith(f"part/{member.dispenser}/")}
-        nearest = min(parts, key=lambda k: np.linalg.norm(parts[k] - place))
-        off = float(np.linalg.norm(parts[nearest] - place))
+        # A part's body frame sits at one of its joints (a strut's end, a frame's corner).
+        joints = [tower + np.asarray(p) for _, p in member.joints]
+        parts = {k: v for k, v in last.items() if k.startswith(f"part/{member.dispenser}/") and k not in used}
+        off, nearest = min((min(float(np.linalg.norm(v - j)) for j in joints), k) for k, v in parts.items())
         assert off <= PLACE_TOLERANCE, f"{member.id}: the nearest part, {nearest}, is {1000 * off:.0f} mm off"
+        used.add(nearest)
 
     # Each request succeeded once at its ARS: nothing placed or riveted twice.
     wanted = Counter((m.add_ars, ACTIONS[m.kind]) for m in mission.members)
