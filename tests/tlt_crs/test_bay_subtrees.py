@@ -8,6 +8,7 @@ from py_trees.common import Status
 
 from tlt_common.mission.tower_model import INSPECTED, NOT_PLACED, PLACED, RIVETED
 from tlt_crs.behaviours.actuators import Actuators
+from tlt_crs.behaviours.ars_requests import SendArsRequest
 from tlt_crs.tree import (
     add_cross_frame,
     add_diagonal,
@@ -130,12 +131,15 @@ def test_ars_gone_mid_request_fails_instead_of_waiting_forever(rig, crs, tmp_pat
     assert "gone while running" in subtree.children[1].children[-1].feedback_message
 
 
-def _restart_ars_x(rig, crs):
-    """ARS X's servers go away and a new process's come up at once (a launcher restart)."""
-    import rclpy
-
+def _stop_ars_x(rig):
     for server in rig.ars["ars_x"].servers:
         server.destroy()
+
+
+def _start_ars_x(rig, crs):
+    """A new ARS X process's servers come up (a launcher restart)."""
+    import rclpy
+
     node = rclpy.create_node("ars_x_restarted")
     rig.add(node)
     rig.ars["ars_x"] = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
@@ -143,14 +147,33 @@ def _restart_ars_x(rig, crs):
 
 @pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
 def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_had(rig, crs, tmp_path, phase):
+    import rclpy
+    from action_msgs.msg import GoalStatusArray
+
     ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
     rig.ars["ars_x"].hold_s = 30.0
-    if phase == "waiting for the part":
-        rig.ars["ars_x"].present_after_s = 30.0
+    # An earlier ARS X that died is still listed for its lease, as DDS keeps a lost participant's
+    # endpoints: its server's status publisher.
+    lingering = rclpy.create_node("ars_x_lingering")
+    rig.add(lingering)
+    lingering.create_publisher(GoalStatusArray, "/ars_x/add_member/_action/status", 1)
+    crs.wait_for(lambda: "ars_x_lingering" in {
+        i.node_name for i in ctx.node.get_publishers_info_by_topic("/ars_x/add_member/_action/status")})
     subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
-    crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and (
-        rig.vision.part_calls != [] or phase == "waiting for the part"))
-    _restart_ars_x(rig, crs)
+    if phase == "waiting for the part":
+        # The CRS learns the goal was accepted only after the ARS that took it died: its request
+        # for the result reaches no server, and the server it finds next is the restarted one.
+        rig.ars["ars_x"].present_after_s = 30.0
+        send = next(b for b in subtree.iterate() if isinstance(b, SendArsRequest))
+        crs.tick_until(subtree, until=lambda: send.req.send_future is not None)
+        crs.wait_for(lambda: len(rig.recorder.requests) == 1, what="the ARS runs the goal")
+        crs.wait_for(send.req.send_future.done, what="the acceptance reaches the CRS")
+        _stop_ars_x(rig)
+        crs.tick_until(subtree, until=lambda: send.status == Status.SUCCESS)
+    else:
+        crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and rig.vision.part_calls != [])
+        _stop_ars_x(rig)
+    _start_ars_x(rig, crs)
     assert crs.tick_until(subtree, timeout=10.0) == Status.FAILURE
     assert rig.recorder.requests[1:] == []  # nothing sent to the new server
     failed = [b for b in subtree.iterate() if b.status == Status.FAILURE and b.children == []]

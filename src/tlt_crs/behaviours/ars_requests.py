@@ -101,8 +101,10 @@ class ArsRequest:
         self.result_future: Any = None
         self.feedback: Any = None
         self.accepted_at = 0.0
-        self._serving: frozenset[bytes] = frozenset()  # endpoints of the server that took the goal
-        self._serving_seen = (-float("inf"), True)  # (monotonic time, any of them in the graph)
+        self._sent_to: frozenset[bytes] = frozenset()  # status endpoints listed when the goal was sent
+        self._serving: frozenset[bytes] = frozenset()  # ... of which one took the goal
+        self._known: frozenset[bytes] = frozenset()  # every one listed around the acceptance
+        self._serving_seen = (-float("inf"), True)  # (monotonic time, still served)
         self._lost_since: float | None = None
 
     @property
@@ -113,38 +115,51 @@ class ArsRequest:
         topic = f"{ros_names.ars_action(self.ars_name, self.request)}/_action/status"
         return frozenset(bytes(i.endpoint_gid) for i in self.ctx.node.get_publishers_info_by_topic(topic))
 
+    def send(self, ars: str, goal: Any) -> None:
+        """Send ``goal`` to ``ars``, noting which servers were there to take it."""
+        self.ars_name = ars
+        self._sent_to = self._status_publishers()
+        self.send_future = self.client(ars).send_goal_async(goal, feedback_callback=self._on_feedback)
+
     def accepted(self, handle: Any, now: float) -> None:
-        """Follow the goal ``handle`` accepted at mission time ``now``, and note which server took it."""
+        """Follow the goal ``handle`` accepted at mission time ``now``, and note which servers may
+        hold it: those listed both when it was sent and now (the graph can list a dead process's
+        server for its lease, and a restarted one's only after the acceptance came back)."""
         self.handle = handle
         self.accepted_at = now
         self.result_future = handle.get_result_async()
-        self._serving = self._status_publishers()
+        listed = self._status_publishers()
+        self._serving = (self._sent_to & listed) or listed or self._sent_to
+        self._known = self._sent_to | listed
         self._serving_seen = (time.monotonic(), True)
         self._lost_since = None
 
-    def _serving_present(self, fresh: bool) -> bool:
+    def _still_served(self, fresh: bool) -> bool:
+        """Whether a server that may hold the goal is listed, and none came up since it was taken
+        (one ARS runs one server per action: a newcomer replaced it, say a launcher restart)."""
         # Asked of the graph at most every READINESS_PERIOD_S of wall time, as server readiness is.
         if not self._serving:
-            return True  # not known (the graph did not list it yet at acceptance): readiness decides
-        at, present = self._serving_seen
+            return True  # not known (the graph listed none around the acceptance): readiness decides
+        at, served = self._serving_seen
         now = time.monotonic()
         if fresh or now - at >= READINESS_PERIOD_S:
-            present = bool(self._serving & self._status_publishers())
-            self._serving_seen = (now, present)
-        return present
+            listed = self._status_publishers()
+            served = bool(self._serving & listed) and listed <= self._known
+            self._serving_seen = (now, served)
+        return served
 
     def server_gone(self, now: float) -> str:
         """Why the goal in flight can no longer finish ('' while it can): the server that took it
         has been undiscoverable, or replaced by another, for ``timeouts.ars_server_s`` of mission
         time up to ``now`` (decided on a fresh look at the graph). The goal is then canceled."""
         readiness = self.server(self.ars_name).readiness
-        if readiness.ready() and self._serving_present(fresh=False):
+        if readiness.ready() and self._still_served(fresh=False):
             self._lost_since = None
             return ""
         self._lost_since = now if self._lost_since is None else self._lost_since
         if now - self._lost_since <= self.ctx.config.timeouts.ars_server_s:
             return ""
-        up, present = readiness.ready_now(), self._serving_present(fresh=True)
+        up, present = readiness.ready_now(), self._still_served(fresh=True)
         if up and present:  # back (or the cached answer was old): not gone
             self._lost_since = None
             return ""
@@ -247,15 +262,13 @@ class SendArsRequest(Action):
                     )
                 self.feedback_message = server.waiting_text
                 return Status.RUNNING
-            client = server.client
             try:
                 goal = req.make_goal(ars)
             except Exception as exc:
                 return self.fail(f"cannot build the {req.title} goal for '{req.member.id}': {exc}")
             if req.inspected:
                 self.ctx.desk.expect(req.member.id)
-            req.ars_name = ars
-            req.send_future = client.send_goal_async(goal, feedback_callback=req._on_feedback)
+            req.send(ars, goal)
             self._started = now
             self.feedback_message = f"sent to {ars}"
             return Status.RUNNING
