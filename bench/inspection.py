@@ -1,0 +1,241 @@
+"""Part inspection on freshly rendered held struts: defective parts caught, good parts rejected
+(issue 8: goals >= 99 % caught, <= 2 % rejected).
+
+A twin of the mission is built with a scenario that makes half its struts defective, the kinds
+the twin produces in turn between good ones: end fitting a missing, end fitting b missing, a bent
+tube (bends cycled through ``--bends``). Every strut is then presented ``--rounds`` times, as the
+ARS presents it for InspectPart: an arm at its ``poses.inspection`` (ARS X and ARS Y in turn) with
+its joints jittered, the strut seated in its grasp, slid along the grasp line and rolled about its
+own axis by chance, before the lifter ZED facing that arm at the twin's run size. The frame is
+segmented as the launch set's vision does (the twin's labels; ``--segmentation mask_rcnn`` for
+the shipped model) and decided by the vision node's :class:`tlt_vision.part_inspection.PartInspector`.
+
+Prints, per kind of part: presented, failed, rate; the wrong decisions with their reasons; and the
+figures against the goals.
+
+    .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
+        [--bends 3 5 8 12] [--segmentation twin|mask_rcnn] [--threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tlt_common.config_schema import load_yaml
+from tlt_common.mission.schema import load_mission
+from tlt_vision.node_config import load_config
+from tlt_vision.part_inspection import PartInspector
+from tlt_vision.segmentation_source import CameraFrame, TwinLabels
+
+ROOT = Path(__file__).resolve().parents[1]
+CAUGHT_GOAL = 0.99
+REJECTED_GOAL = 0.02
+# The lifter ZED that faces each arm's inspection pose (zed_1 looks away from ARS X at every angle).
+CAMERAS = {"ars_x": "zed_2", "ars_y": "zed_1"}
+ARMS = tuple(CAMERAS)
+
+@dataclass(frozen=True)
+class Jitter:
+    """How far a presentation strays from the nominal one: each arm joint (normal, standard
+    deviation in rad), the strut along the grasp line (uniform, +- m), its roll about its axis."""
+
+    joint_rad: float = 0.005
+    slide_m: float = 0.01
+    roll: bool = True
+
+
+@dataclass(frozen=True)
+class Presented:
+    """One strut presented once: its kind of defect ('good' for none) and the decision."""
+
+    part: str
+    arm: str
+    defect: str
+    passed: bool
+    reasons: tuple[str, ...]
+
+
+def defect_label(defect) -> str:
+    if defect is None:
+        return "good"
+    if defect.kind == "bent_tube":
+        return f"bent_tube {defect.bend_deg:g} deg"
+    return f"{defect.kind} {defect.end}"
+
+
+def struts(mission) -> list[tuple[str, str]]:
+    """(part name, kind) of every strut of the mission's dispensers."""
+    return [
+        (f"{name}/{index}", d.part_kind)
+        for name, d in mission.dispensers.items()
+        if d.part_kind in ("vertical", "diagonal")
+        for index in range(d.count)
+    ]
+
+
+def scenario(mission, bends: list[float]):
+    """The mission's struts in turn: good, end fitting a missing, good, b missing, good, bent
+    (half of them good, the bends cycled through ``bends``)."""
+    from tlt_sim.model.scenario import Defect, Scenario
+
+    defects = {}
+    for n, (name, _) in enumerate(struts(mission)):
+        turn = n % 6
+        if turn in (1, 3):
+            defects[name] = Defect("missing_end_fitting", "a" if turn == 1 else "b")
+        elif turn == 5:
+            defects[name] = Defect("bent_tube", bend_deg=bends[(n // 6) % len(bends)])
+    return Scenario(name="inspection bench", description="struts defective in turn", defects=defects)
+
+
+def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    return a, np.cross(u, a)
+
+
+def inspection_joints() -> dict[str, np.ndarray]:
+    """Each arm's ``poses.inspection`` joints (config/ars/<arm>.yaml)."""
+    poses = {arm: load_yaml(ROOT / "config" / "ars" / f"{arm}.yaml")["poses"] for arm in ARMS}
+    return {arm: np.asarray(p["inspection"]["joints"], dtype=float) for arm, p in poses.items()}
+
+
+def present(scene, names, part, arm: str, joints: np.ndarray, rng: np.random.Generator, jitter: Jitter):
+    """Seat ``part`` in ``arm``'s grasp at ``joints`` jittered, slid and rolled; render the ZED."""
+    import mujoco
+
+    jittered = joints + rng.normal(0.0, jitter.joint_rad, joints.size)
+    for j, v in zip(names.arm_joints(arm), jittered, strict=True):
+        scene.set_joint_state(j, float(v))
+    mujoco.mj_forward(scene.model, scene.data)
+    centre, axis = scene.assembly.grasp_line(arm)
+    middle = (part.ends["a"] + part.ends["b"]) / 2
+    along = (part.ends["b"] - part.ends["a"]) / np.linalg.norm(part.ends["b"] - part.ends["a"])
+    roll = rng.uniform(0.0, 2 * np.pi) if jitter.roll else 0.0
+    p, q = _perpendiculars(axis)
+    p, q = np.cos(roll) * p + np.sin(roll) * q, -np.sin(roll) * p + np.cos(roll) * q
+    seated = np.column_stack([axis, p, q]) @ np.column_stack([along, *_perpendiculars(along)]).T
+    slide = rng.uniform(-jitter.slide_m, jitter.slide_m) * axis
+    scene.place_part(part.name, centre + slide - seated @ middle, seated)
+    return scene.render(CAMERAS[arm], *RUN_SIZE)
+
+
+def detector(kind: str):
+    """Detections of a rendered frame: the twin's labels, or the configured Mask R-CNN."""
+    if kind == "twin":
+        return TwinLabels.detect_render
+    from tlt_vision.segmentation_source import MaskRcnnSegmenter
+
+    seg = load_config().raw["segmentation"]
+    segmenter = MaskRcnnSegmenter(seg["weights"], seg["min_score"])
+
+    def detect(frame, camera: str):
+        k = frame.intrinsics
+        images = {"rgb": frame.rgb}
+        return segmenter.detect(CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images))
+
+    return detect
+
+
+RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
+RUN_SIZE = (RUN["cameras"]["zed"]["width"], RUN["cameras"]["zed"]["height"])
+
+
+def run(args: argparse.Namespace) -> list[Presented]:
+    from tlt_sim.model import names
+    from tlt_sim.model.scene import Scene
+
+    mission = load_mission(ROOT / "missions" / f"{args.mission}.yaml")
+    scen = scenario(mission, args.bends)
+    inspector = PartInspector(load_config(), mission)
+    detect = detector(args.segmentation)
+    rng = np.random.default_rng(args.seed)
+    jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
+    arms = inspection_joints()
+    results: list[Presented] = []
+    with Scene(mission=mission, scenario=scen) as scene:
+        for i in range(2):
+            scene.set_joint_state(names.camera_mount(i), 0.0)  # outward, as the CRS holds them
+        presented = struts(mission)
+        total, done = len(presented) * args.rounds, 0
+        started = time.monotonic()
+        for round_ in range(args.rounds):
+            for i, (name, kind) in enumerate(presented):
+                arm = ARMS[(i + round_) % 2]  # each strut by the other arm next round
+                part = scene.part(name)
+                home = scene.body_pose(part.body)
+                frame = present(scene, names, part, arm, arms[arm], rng, jitter)
+                scene.place_part(name, *home)  # back in its rack, out of the next view
+                camera = CAMERAS[arm]
+                report, _ = inspector.inspect(
+                    f"bench/{kind}", kind, detect(frame, camera), frame.depth, frame.intrinsics, frame.rgb
+                )
+                defect = defect_label(scen.defects.get(name))
+                results.append(Presented(name, arm, defect, report.passed, tuple(report.reasons)))
+                done += 1
+                each = (time.monotonic() - started) / done
+                print(
+                    f"\r{done}/{total} presented ({each:.1f} s each, {(total - done) * each:.0f} s left)",
+                    end="",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        print(file=sys.stderr)
+    return results
+
+
+def report(results: list[Presented]) -> dict[str, float]:
+    by_defect: dict[str, list[Presented]] = defaultdict(list)
+    for r in results:
+        by_defect[r.defect].append(r)
+    print(f"{'part':28s} {'presented':>9s} {'failed':>7s} {'rate':>7s}")
+    for defect in sorted(by_defect, key=lambda d: (d != "good", d)):
+        rs = by_defect[defect]
+        failed = sum(not r.passed for r in rs)
+        print(f"{defect:28s} {len(rs):9d} {failed:7d} {failed / len(rs):7.1%}")
+    wrong = [r for r in results if r.passed != (r.defect == "good")]
+    if wrong:
+        print("\nwrong decisions:")
+        for r in wrong:
+            verdict = "passed" if r.passed else "failed: " + "; ".join(r.reasons)
+            print(f"  {r.part} ({r.defect}) by {r.arm}: {verdict}")
+    good = by_defect.get("good", [])
+    bad = [r for r in results if r.defect != "good"]
+    rejected = sum(not r.passed for r in good) / max(1, len(good))
+    caught = sum(not r.passed for r in bad) / max(1, len(bad))
+    print(f"\ndefective parts caught: {caught:.1%} of {len(bad)} (goal >= {CAUGHT_GOAL:.0%})")
+    print(f"good parts rejected:    {rejected:.1%} of {len(good)} (goal <= {REJECTED_GOAL:.0%})")
+    return {"caught": caught, "rejected": rejected}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--mission", default="two_bay", help="missions/NAME.yaml: its struts are presented")
+    parser.add_argument("--rounds", type=int, default=2, help="times each strut is presented")
+    parser.add_argument("--seed", type=int, default=1100)
+    parser.add_argument(
+        "--bends", type=float, nargs="+", default=[3.0, 5.0, 8.0, 12.0], help="bends of the bent tubes, deg"
+    )
+    nominal = Jitter()
+    parser.add_argument(
+        "--joint-jitter-deg", type=float, default=np.degrees(nominal.joint_rad), help="per joint, std dev"
+    )
+    parser.add_argument("--slide-mm", type=float, default=nominal.slide_m * 1000, help="along the grasp, +-")
+    parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    report(run(args))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

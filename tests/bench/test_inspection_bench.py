@@ -1,0 +1,82 @@
+"""The inspection benchmark: its scenario makes every defect kind, its jittered presentation is a
+fair view (a good strut passes, one missing a fitting fails), and its figures are counted right."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tlt_common.mission.schema import load_mission
+from tlt_vision.node_config import load_config
+from tlt_vision.part_inspection import PartInspector
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
+
+
+def load_bench():
+    spec = importlib.util.spec_from_file_location("inspection_bench", ROOT / "bench" / "inspection.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return load_bench()
+
+
+def test_half_the_struts_are_defective_with_every_kind_and_bend(bench):
+    pytest.importorskip("tlt_sim.model.scenario")
+    struts = bench.struts(MISSION)
+    assert len(struts) == 16  # 5 + 3 verticals, 4 + 4 diagonals
+    scen = bench.scenario(MISSION, [3.0, 9.0])
+    labels = [bench.defect_label(scen.defects.get(name)) for name, _ in struts]
+    assert labels.count("good") == 8
+    missing_a, missing_b = "missing_end_fitting a", "missing_end_fitting b"
+    assert {missing_a, missing_b, "bent_tube 3 deg", "bent_tube 9 deg"} <= set(labels)
+    assert labels[:6] == ["good", missing_a, "good", missing_b, "good", "bent_tube 3 deg"]
+
+
+def test_jittered_presentations_of_a_good_and_a_defective_strut_are_decided_right(bench):
+    scene_mod = pytest.importorskip("tlt_sim.model.scene")
+    from tlt_sim.model import names
+
+    scen = bench.scenario(MISSION, [8.0])
+    inspector = PartInspector(load_config(), MISSION)
+    rng = np.random.default_rng(5)
+    decided, joints = {}, bench.inspection_joints()
+    with scene_mod.Scene(mission=MISSION, scenario=scen) as scene:
+        for arm, name in (("ars_x", "vertical_dispenser_x/0"), ("ars_y", "vertical_dispenser_x/1")):
+            frame = bench.present(scene, names, scene.part(name), arm, joints[arm], rng, bench.Jitter())
+            detections = bench.detector("twin")(frame, bench.CAMERAS[arm])
+            decided[name], _ = inspector.inspect(
+                "bench/vertical", "vertical", detections, frame.depth, frame.intrinsics, frame.rgb
+            )
+    good, missing = decided["vertical_dispenser_x/0"], decided["vertical_dispenser_x/1"]
+    assert good.passed, good.reasons
+    assert not missing.passed, missing.reasons
+    assert any(r.startswith("missing end fitting") for r in missing.reasons), missing.reasons
+
+
+def test_figures_and_wrong_decisions(bench, capsys):
+    P = bench.Presented
+    results = [
+        *(P(f"v/{i}", "ars_x", "good", True, ()) for i in range(49)),
+        P("v/49", "ars_y", "good", False, ("missing end fitting: 1 of 2 found",)),  # rejected
+        P("d/0", "ars_x", "missing_end_fitting a", False, ("missing end fitting",)),
+        P("d/1", "ars_x", "bent_tube 3 deg", True, ()),  # missed
+        P("d/2", "ars_y", "bent_tube 8 deg", False, ("bent tube",)),
+        P("d/3", "ars_y", "missing_end_fitting b", False, ("missing end fitting",)),
+    ]
+    figures = bench.report(results)
+    assert figures == {"caught": 0.75, "rejected": 0.02}
+    out = capsys.readouterr().out
+    wrong = out.split("wrong decisions:")[1].split("\n\n")[0].strip().splitlines()
+    assert [line.split()[0] for line in wrong] == ["v/49", "d/1"]
+    assert "bent_tube 3 deg" in out and "defective parts caught: 75.0% of 4" in out
