@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
+import pytest
 from py_trees.common import Status
 
 from tlt_common.bt import status_codec as sc
@@ -13,22 +13,18 @@ from tlt_common.mission.schema import load_mission
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def load_bench():
-    spec = importlib.util.spec_from_file_location("bt_status_bench", ROOT / "bench" / "bt_status.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def bench(load_bench):
+    return load_bench("bt_status")
 
 
-def test_bench_runs_on_one_bay(capsys):
-    bench = load_bench()
+def test_bench_runs_on_one_bay(bench, capsys):
     assert bench.main(["--mission", str(ROOT / "missions" / "one_bay.yaml"), "--repeat", "20"]) == 0
     out = capsys.readouterr().out
     assert "byte/node" in out and "ratio" in out
 
 
-def test_identically_shaped_trees_and_mid_mission_state():
-    bench = load_bench()
+def test_identically_shaped_trees_and_mid_mission_state(bench):
     mission = load_mission(ROOT / "missions" / "two_bay.yaml")
     truth, running = bench.mid_mission_state(mission)
     ours = bench.crs_tree(mission, bench.make_leaves(True, truth, running))

@@ -3,8 +3,6 @@ of ExecutedTrajectory records) whose figures are computed by hand."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
@@ -18,7 +16,6 @@ from tlt_common.recording.message_definitions import MessageDefinitionSource
 from tlt_common.stamps import set_stamp
 from tlt_gsw.archive import Recorder
 
-ROOT = Path(__file__).resolve().parents[2]
 DEFS = load_definitions()
 TYPE = "tlt_interfaces/msg/ExecutedTrajectory"
 OK, ABORTED = ExecutedTrajectory.OUTCOME_SUCCEEDED, ExecutedTrajectory.OUTCOME_ABORTED
@@ -33,12 +30,9 @@ MOTIONS = [
 ]
 
 
-def load_bench():
-    spec = importlib.util.spec_from_file_location("build_bench", ROOT / "bench" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def bench(load_bench):
+    return load_bench("build")
 
 
 def _archive(path: Path) -> None:
@@ -86,14 +80,12 @@ def run_dir(tmp_path) -> Path:
     return tmp_path
 
 
-def test_overlapping_spans_are_counted_once():
-    bench = load_bench()
+def test_overlapping_spans_are_counted_once(bench):
     assert bench.union_length([(0.0, 2.0), (1.0, 3.0), (5.0, 6.0), (5.5, 5.7)]) == pytest.approx(4.0)
     assert bench.union_length([]) == 0.0
 
 
-def test_each_bay_is_held_against_the_motions_that_started_in_it(run_dir, capsys):
-    bench = load_bench()
+def test_each_bay_is_held_against_the_motions_that_started_in_it(bench, run_dir, capsys):
     motions = bench.read_motions(run_dir / "recording.mcap")
     assert [(m.component, m.planned_s, m.succeeded) for m in motions] == [
         (c, p, o == OK) for c, _, _, p, o in MOTIONS
@@ -109,7 +101,7 @@ def test_each_bay_is_held_against_the_motions_that_started_in_it(run_dir, capsys
     assert any(line.startswith(build) for line in lines), lines
 
 
-def test_a_run_without_its_recording_is_refused_with_the_file_named(tmp_path, capsys):
+def test_a_run_without_its_recording_is_refused_with_the_file_named(bench, tmp_path, capsys):
     _archive(tmp_path / "gsw_archive.sqlite")
-    assert load_bench().report(tmp_path) == 1
+    assert bench.report(tmp_path) == 1
     assert "recording.mcap" in capsys.readouterr().err

@@ -2,23 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
+import pytest
 
 
-def load_bench():
-    spec = importlib.util.spec_from_file_location(
-        "dynamixel_cycle_bench", ROOT / "bench" / "dynamixel_cycle.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def bench(load_bench):
+    return load_bench("dynamixel_cycle")
 
 
-def test_bench_prints_its_figures(capsys):
-    bench = load_bench()
+def test_bench_prints_its_figures(bench, capsys):
     assert bench.main(["--seconds", "0.3", "--servos", "2"]) == 0
     out = capsys.readouterr().out
     for figure in ("achieved rate", "cycle time p50", "cycle time p99", "overruns", "retries"):
@@ -26,7 +18,6 @@ def test_bench_prints_its_figures(capsys):
     assert "30 cycles" in out
 
 
-def test_percentile():
-    bench = load_bench()
+def test_percentile(bench):
     values = [float(v) for v in range(1, 101)]
     assert bench.percentile(values, 0.99) == 99.0 and bench.percentile(values, 0.5) == 50.0

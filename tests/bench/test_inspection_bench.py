@@ -3,8 +3,6 @@ fair view (a good strut passes, one missing a fitting fails), and its figures ar
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,17 +16,9 @@ ROOT = Path(__file__).resolve().parents[2]
 MISSION = load_mission(ROOT / "missions" / "one_bay.yaml")
 
 
-def load_bench():
-    spec = importlib.util.spec_from_file_location("inspection_bench", ROOT / "bench" / "inspection.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def bench():
-    return load_bench()
+def bench(load_bench):
+    return load_bench("inspection")
 
 
 def test_half_the_struts_are_defective_with_every_kind_and_bend(bench):

@@ -2,23 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def load_bench():
-    spec = importlib.util.spec_from_file_location("planning_bench", ROOT / "bench" / "planning.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def bench(load_bench):
+    return load_bench("planning")
 
 
-def test_bench_runs_a_few_queries_of_a_one_bay_mission(capsys):
-    bench = load_bench()
+def test_bench_runs_a_few_queries_of_a_one_bay_mission(bench, capsys):
     args = ["--mission", str(ROOT / "missions" / "one_bay.yaml"), "--limit", "8", "--no-collision-compare"]
     assert bench.main(args) == 0
     out = capsys.readouterr().out
@@ -39,8 +35,7 @@ def expected_queries(mission) -> int:
     return n
 
 
-def test_query_set_covers_every_member_and_a_three_bay_mission_has_at_least_100():
-    bench = load_bench()
+def test_query_set_covers_every_member_and_a_three_bay_mission_has_at_least_100(bench):
     from tlt_ars.planning.world import load_scene_config
     from tlt_common.mission import generate
     from tlt_common.mission.schema import load_mission, parse_mission
