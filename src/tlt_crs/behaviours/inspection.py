@@ -10,13 +10,11 @@ and that call is the "forwarding" channel: its response *is* the result the CRS 
   whose ARS will present a part, it *expects* that member. A call for the expected member waits
   (in the service's own thread, at most ``timeouts.inspect_handoff_s``) until the tree answers it;
   any other call is answered at once with a report saying why (no inspection expected, a
-  different member expected). A second call for the expected member takes over from the first
-  (its ARS gave that one up), and the tree's verdict reaches the ARS whichever call it made
-  last (:class:`InspectionDesk`). A call the tree did not answer in time, or that
-  the tree withdrew (request finished, Stop), is answered with a report that says so. Those
-  reports are not passed and have ``not_inspected`` set: nothing judged the part, so the ARS keeps
-  it and may present it again (a restarted CRS not yet expecting it, say). The ARS never waits
-  unboundedly and never gets a report for another member.
+  different member expected, one already being inspected). A call the tree did not answer in time,
+  or that the tree withdrew (request finished, fault, Stop), is answered with a report that says
+  so. Those reports are not passed and have ``not_inspected`` set: nothing judged the part, so the
+  ARS keeps it and may present it again (a restarted CRS not yet expecting it, say). The ARS never
+  waits unboundedly and never gets a report for another member.
 * In the tree, Inspection Check is a Sequence with memory: :class:`WaitForPart` (the ARS's call
   arrived), ``Inspect Part`` (a ``ServiceCall`` to ``/vision/inspect_part``), and
   :class:`ForwardResult` (answers the waiting call with vision's report, passed or not).
@@ -66,28 +64,18 @@ class PendingInspection:
 
 
 class InspectionDesk:
-    """Thread-safe meeting point of ``/crs/inspect_part`` calls and the tree's Inspection Check.
-
-    An ARS paused mid-call (by the operator, or by a CRS fault that holds the build) gives its call
-    up and presents the same part again on resuming, and a call can run out of time while the CRS
-    is held; neither may lose the tree's verdict. So the verdict on a member's part goes to the
-    call for that member waiting when it comes, not necessarily the one the tree took; a verdict
-    no call waits for answers the next call for the member; and a pass also answers every later
-    call for it at once (the request goes on to placing that part, and the call the pass went to
-    may have been given up). A new request for the member, or its withdrawal, drops what is kept.
-    """
+    """Thread-safe meeting point of ``/crs/inspect_part`` calls and the tree's Inspection Check."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.expected: str | None = None
         self.pending: PendingInspection | None = None
-        self._kept: tuple[str, Any] | None = None  # (member, verdict) for its next call
+        self.served = 0  # reports forwarded to an ARS
 
     # ----- tree side -----
     def expect(self, member_id: str) -> None:
         with self._lock:
             self.expected = member_id
-            self._kept = None
 
     def take(self, member_id: str) -> PendingInspection | None:
         """The unanswered call for ``member_id``, if the ARS made one."""
@@ -98,29 +86,18 @@ class InspectionDesk:
             return None
 
     def answer(self, pending: PendingInspection, report: Any) -> None:
-        """Give the verdict ``report`` on the part of ``pending`` to the call waiting for it (see
-        the class)."""
         with self._lock:
-            target: PendingInspection | None = pending
-            if pending.answered.is_set():  # its caller is gone: answered by a time-out or a new call
-                current = self.pending
-                same = current is not None and current.member_id == pending.member_id
-                target = current if same and not current.answered.is_set() else None
-            if target is None or report.passed:
-                self._kept = (pending.member_id, report)
-            if target is not None:
-                target.report = report
-                target.answered.set()
-                if self.pending is target:
-                    self.pending = None
+            pending.report = report
+            pending.answered.set()
+            if self.pending is pending:
+                self.pending = None
+            self.served += 1
 
     def withdraw(self, member_id: str, why: str) -> None:
         """Stop expecting ``member_id``; a call still waiting gets a failed report saying ``why``."""
         with self._lock:
             if self.expected == member_id:
                 self.expected = None
-            if self._kept is not None and self._kept[0] == member_id:
-                self._kept = None
             pending = self.pending
             if pending is not None and pending.member_id == member_id:
                 pending.report = not_inspected_report(
@@ -141,33 +118,22 @@ class InspectionDesk:
                 return not_inspected_report(
                     member_id, part_kind, f"the CRS expects a part for '{self.expected}', not '{member_id}'"
                 )
-            if self._kept is not None and self._kept[0] == member_id:
-                report = self._kept[1]
-                if not report.passed:  # a failed part is discarded: the next one is a new part
-                    self._kept = None
-                return report
-            earlier = self.pending
-            if earlier is not None:
-                # One ARS presents one member's part: it gave the earlier call up (paused mid-call,
-                # say). That call's thread is released; the tree's verdict comes to this one.
-                earlier.report = not_inspected_report(
-                    member_id, part_kind, "presented again: a newer call for this part took over"
+            if self.pending is not None:
+                return not_inspected_report(
+                    member_id, part_kind, f"a part for '{self.pending.member_id}' is already being inspected"
                 )
-                earlier.answered.set()
             pending = PendingInspection(member_id, part_kind, camera)
             self.pending = pending
         if pending.answered.wait(timeout):
             return pending.report
         with self._lock:
-            if not pending.answered.is_set():  # else answered as the time ran out
-                # Marked answered, so a verdict that comes later is kept for the next call.
-                pending.report = not_inspected_report(
-                    member_id, part_kind, f"the CRS did not inspect the part within {timeout:g} s"
-                )
-                pending.answered.set()
             if self.pending is pending:
                 self.pending = None
-            return pending.report
+            if pending.report is not None:
+                return pending.report
+        return not_inspected_report(
+            member_id, part_kind, f"the CRS did not inspect the part within {timeout:g} s"
+        )
 
 
 class WaitForPart(Action):
