@@ -14,7 +14,8 @@ Prints, per kind of part: presented, failed, rate; the wrong decisions with thei
 figures against the goals.
 
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
-        [--bends 3 5 8 12] [--segmentation twin|mask_rcnn] [--threads 2]
+        [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
+        [--segmentation twin|mask_rcnn] [--threads 2]
 """
 
 from __future__ import annotations
@@ -41,15 +42,18 @@ REJECTED_GOAL = 0.02
 # The lifter ZED that faces each arm's inspection pose (zed_1 looks away from ARS X at every angle).
 CAMERAS = {"ars_x": "zed_2", "ars_y": "zed_1"}
 ARMS = tuple(CAMERAS)
+RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
+RUN_SIZE = (RUN["cameras"]["zed"]["width"], RUN["cameras"]["zed"]["height"])
+
 
 @dataclass(frozen=True)
 class Jitter:
     """How far a presentation strays from the nominal one: each arm joint (normal, standard
-    deviation in rad), the strut along the grasp line (uniform, +- m), its roll about its axis."""
+    deviation in rad) and the strut along the grasp line (uniform, +- m); its roll about its axis
+    is drawn over the whole turn."""
 
     joint_rad: float = 0.005
     slide_m: float = 0.01
-    roll: bool = True
 
 
 @dataclass(frozen=True)
@@ -119,7 +123,7 @@ def present(scene, names, part, arm: str, joints: np.ndarray, rng: np.random.Gen
     centre, axis = scene.assembly.grasp_line(arm)
     middle = (part.ends["a"] + part.ends["b"]) / 2
     along = (part.ends["b"] - part.ends["a"]) / np.linalg.norm(part.ends["b"] - part.ends["a"])
-    roll = rng.uniform(0.0, 2 * np.pi) if jitter.roll else 0.0
+    roll = rng.uniform(0.0, 2 * np.pi)
     p, q = _perpendiculars(axis)
     p, q = np.cos(roll) * p + np.sin(roll) * q, -np.sin(roll) * p + np.cos(roll) * q
     seated = np.column_stack([axis, p, q]) @ np.column_stack([along, *_perpendiculars(along)]).T
@@ -143,10 +147,6 @@ def detector(kind: str):
         return segmenter.detect(CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images))
 
     return detect
-
-
-RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
-RUN_SIZE = (RUN["cameras"]["zed"]["width"], RUN["cameras"]["zed"]["height"])
 
 
 def run(args: argparse.Namespace) -> list[Presented]:
