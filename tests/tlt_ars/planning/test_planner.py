@@ -21,9 +21,9 @@ ACC = [4.0, 4.0, 6.0, 6.0, 6.0, 6.0]
 EE = [("bar", pose_matrix([0.0, 0.0, 0.06]), (0.7, 0.06, 0.04))]
 
 
-def make_scene(obstacle: bool = True) -> CollisionScene:
+def make_scene(obstacle: bool = True, padding: float = 0.01) -> CollisionScene:
     kin = Ur10eKinematics(base=pose_matrix([0.0, 0.0, 0.5]), tool=pose_matrix([0.0, 0.0, 0.16]))
-    scene = CollisionScene(kin, ee_boxes=EE, padding=0.01, name="arm")
+    scene = CollisionScene(kin, ee_boxes=EE, padding=padding, name="arm")
     scene.set_group("environment", [box_at("floor", (0, 0, -0.05), (10, 10, 0.1))])
     if obstacle:
         # A block where the forearm passes half way through the base's turn.
@@ -39,6 +39,9 @@ def dense_free(scene: CollisionScene, path: list[np.ndarray], resolution: float)
 
 def test_plan_around_an_obstacle_is_collision_free_when_densely_rechecked():
     scene = make_scene()
+    # The padding is the margin that absorbs checking at a finite resolution: between two samples
+    # checked free, the arm may graze the padding (about 1 % of plans do), never the shapes.
+    unpadded = make_scene(padding=0.0)
     # No detours: the OMPL search itself is under test.
     planner = Planner(
         scene, check_resolution=0.02, dense_check_resolution=0.005, planning_time_s=5.0, detours=False
@@ -49,14 +52,14 @@ def test_plan_around_an_obstacle_is_collision_free_when_densely_rechecked():
         assert not plan.straight_line and plan.notes == ["rrt"]
         assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], GOAL)
         # Re-checked four times finer than the planner's own dense check.
-        assert dense_free(scene, plan.path, 0.00125)
+        assert dense_free(unpadded, plan.path, 0.00125)
 
         traj = time_parameterise(plan.path, VEL, ACC)
         for p in traj.points(0.01):
             assert np.all(p.q >= scene.kin.lower) and np.all(p.q <= scene.kin.upper)
             assert np.all(np.abs(p.qd) <= np.asarray(VEL) * (1 + 1e-9))
             assert np.all(np.abs(p.qdd) <= np.asarray(ACC) * (1 + 1e-9))
-            assert not scene.in_collision(p.q)
+            assert not unpadded.in_collision(p.q)
 
 
 def test_detour_is_tried_before_sampling():
@@ -68,9 +71,8 @@ def test_detour_is_tried_before_sampling():
     assert dense_free(scene, plan.path, 0.00125)
 
 
-def test_coarse_search_is_repaired_by_the_dense_recheck():
-    scene = make_scene(obstacle=False)
-    # A thin bar across the forearm's sweep: a 0.3 rad search step can jump over it.
+def add_thin_bar(scene: CollisionScene) -> CollisionScene:
+    """A thin bar across the forearm's sweep: a 0.3 rad search step can jump over it."""
     mid = HOME + np.array([0.6, 0, 0, 0, 0, 0])
     p0, p1 = arm_link_segments(scene.kin, mid)[2]
     c = (p0 + p1) / 2
@@ -78,10 +80,16 @@ def test_coarse_search_is_repaired_by_the_dense_recheck():
         "tower",
         [Capsule("thin", tuple(c - np.array([0, 0, 0.25])), tuple(c + np.array([0, 0, 0.25])), 0.005)],
     )
+    return scene
+
+
+def test_coarse_search_is_repaired_by_the_dense_recheck():
+    scene = add_thin_bar(make_scene(obstacle=False))
+    unpadded = add_thin_bar(make_scene(obstacle=False, padding=0.0))
     planner = Planner(scene, check_resolution=0.3, dense_check_resolution=0.005, planning_time_s=5.0)
     for _ in range(3):
         plan = planner.plan_to_joints(HOME, GOAL)
-        assert dense_free(scene, plan.path, 0.001)
+        assert dense_free(unpadded, plan.path, 0.001)
 
 
 def test_via_configuration_leads_past_an_obstacle_the_detours_cannot_pass():
@@ -123,7 +131,7 @@ def test_cartesian_goal_reaches_the_pose_around_the_obstacle():
     dp, dr = pose_error(scene.kin.forward(plan.goal), pose)
     assert dp < 1e-6 and dr < 1e-6
     assert plan.ik_solutions >= 1
-    assert dense_free(scene, plan.path, 0.00125)
+    assert dense_free(make_scene(padding=0.0), plan.path, 0.00125)
 
 
 def test_ik_failure_names_the_pose():

@@ -30,11 +30,24 @@ class FakeSeconds:
         return self.now
 
 
+def _steadily(client, listed: bool) -> bool:
+    """The client's server is listed (or not) on six looks 50 ms apart (the graph can flicker)."""
+    for _ in range(6):
+        if client.server_is_ready() != listed:
+            return False
+        time.sleep(0.05)
+    return True
+
+
 def _waiting_send(rig, crs, tmp_path):
     ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=LIMIT))
     seconds = FakeSeconds()
     ctx.clock = MissionClock(seconds)
     request = add_member_request(ctx, ctx.mission.member(MEMBER))
+    # The ARS processes of earlier tests are gone, but the graph may list their servers a while
+    # longer (a killed participant, until its DDS lease ends): these tests start with none listed.
+    client = request.client("ars_x")
+    crs.wait_for(lambda: _steadily(client, listed=False), 30.0, "earlier tests' ARS X servers forgotten")
     send = SendArsRequest(request)
     send.tick_once()
     assert send.status is Status.RUNNING
@@ -87,15 +100,7 @@ def test_server_that_came_up_behind_the_cache_gets_the_goal_instead_of_a_fault(r
             # Discovered for good: just after an earlier test's servers went away, the graph can
             # still show theirs for a moment (ready, then not) before this one's are matched.
             client = send.req.client("ars_x")
-
-            def steadily_ready() -> bool:
-                for _ in range(6):
-                    if not client.server_is_ready():
-                        return False
-                    time.sleep(0.05)
-                return True
-
-            crs.wait_for(steadily_ready, 10.0, "the late server discovered")
+            crs.wait_for(lambda: _steadily(client, listed=True), 10.0, "the late server discovered")
             send.tick_once()
             assert send.status is Status.RUNNING and send.feedback_message.startswith("waiting for")
             seconds.now += LIMIT + 0.01
