@@ -460,7 +460,12 @@ class Rig:
             self._thread.join(timeout=5.0)
             # Destroyed explicitly: a node left to the garbage collector keeps its DDS participant
             # alive after rclpy.shutdown, and later tests' cross-process actions then went unanswered.
+            # So does an action server or client: destroy_node leaves them (the stand-in ARS X
+            # servers of one test were still listed in the next, which found ARS X there).
             for node in [*self.nodes, self.node]:
+                for waitable in list(node.waitables):
+                    if hasattr(waitable, "destroy"):
+                        waitable.destroy()
                 node.destroy_node()
         finally:
             CLOSING.clear()
