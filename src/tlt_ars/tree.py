@@ -35,6 +35,7 @@ from tlt_ars.mission_state import Request
 from tlt_ars.motion import MotionPlanner
 from tlt_ars.subtrees import SubtreeBuilder
 from tlt_common.bt.nodes import Action, Condition
+from tlt_common.bt.ros import ServiceCall
 
 
 @dataclass
@@ -228,13 +229,18 @@ class ArsTree:
 
     def hold(self) -> None:
         """Pause: stop the running motion (its goal is canceled and the arm holds). A motion is
-        stopped as a whole, so Resume plans it again from where the arm stands."""
+        stopped as a whole, so Resume plans it again from where the arm stands. A service call in
+        flight (a part presented to the CRS, a question to vision) moves nothing and is left to
+        finish: its answer is read on Resume. Given up, the answer could be lost (the CRS held by
+        a fault pauses the ARS while it inspects the part)."""
         tip = self.root.tip()
         if tip is None or tip.status != Status.RUNNING or tip is self.root:
             return
         node = tip
         while node is not None and not getattr(node, "replan_on_resume", False):
             node = node.parent
+        if node is None and isinstance(tip, ServiceCall):
+            return
         (node or tip).stop(Status.INVALID)
 
     def step(self) -> str:

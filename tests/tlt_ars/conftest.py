@@ -28,6 +28,7 @@ import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
@@ -290,12 +291,17 @@ class Stack:
         self.scene, self.mission = self.ars.ctx.scene, self.ars.ctx.mission
         self.world = World(self)
         self.inspection_verdicts: list[bool | None] = []  # next verdicts (None: not inspected); none: pass
+        self.inspection_gate: threading.Event | None = None  # set: the CRS stand-in answers
         self.inspections: list[str] = []
         self.handles: list = []
         self.client = Node("ars_test_crs", context=self.context)
         self.ee_states: list[EndEffectorState] = []
         self.client.create_subscription(EndEffectorState, "/ee_x/state", self._ee_state, 10)
-        self.client.create_service(InspectPart, ros_names.CRS_INSPECT_PART, self._crs_inspect)
+        # Reentrant: a call held at the gate must not hold up the stand-ins' other callbacks.
+        gated = ReentrantCallbackGroup()
+        self.client.create_service(
+            InspectPart, ros_names.CRS_INSPECT_PART, self._crs_inspect, callback_group=gated
+        )
         self.client.create_service(InspectPart, ros_names.VISION_INSPECT_PART, self._vision_inspect)
         self.client.create_service(LocateTag, ros_names.VISION_LOCATE_TAG, self._locate_tag)
         self.client.create_service(CheckAlignment, ros_names.VISION_CHECK_ALIGNMENT, self._check_alignment)
@@ -327,6 +333,8 @@ class Stack:
     # ----- stand-ins -----
     def _crs_inspect(self, request, response):
         self.inspections.append(request.member_id)
+        if self.inspection_gate is not None:
+            self.inspection_gate.wait(WAIT_S)
         passed = self.inspection_verdicts.pop(0) if self.inspection_verdicts else True
         response.report.target_id, response.report.target_kind = request.member_id, request.part_kind
         if passed is None:  # the CRS did not inspect it (say, restarted and not expecting it yet)

@@ -4,6 +4,7 @@ stand-ins. The tests share one stack and run in file order (the mission state ca
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -197,6 +198,30 @@ def test_concurrent_goal_rejected_pause_holds_resume_continues_cancel_stops(stac
     assert not stack.ars.ctx.state.is_placed("bay1/vertical/x1_y0")
     assert stack.ars.active is None
     assert not any(stack.gpio.outputs.values())  # no rivet gun left firing
+
+
+def test_a_part_presented_when_paused_is_judged_once_by_the_answer_to_its_call(stack):
+    """The CRS answers while the ARS is paused (a CRS fault holds the build and pauses the ARS
+    mid-inspection): the call is kept, so its verdict is read on Resume; a call given up and made
+    again would have its verdict sent to the call given up."""
+    member = "bay1/vertical/x1_y0"
+    stack.inspection_gate = threading.Event()
+    try:
+        handle = add_member(stack, member, VERTICAL)
+        stack.wait(lambda: stack.inspections[-1:] == [member], "the part presented", timeout=60)
+        presented = len(stack.inspections)
+        assert stack.ground_command(GroundCommand.Request.PAUSE).accepted
+        time.sleep(0.5)
+        stack.inspection_gate.set()  # the verdict (passed) comes while the ARS is paused
+        time.sleep(0.5)
+        assert stack.ground_command(GroundCommand.Request.RESUME).accepted
+        result = stack.result(handle)
+    finally:
+        stack.inspection_gate.set()
+        stack.inspection_gate = None
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    assert len(stack.inspections) == presented  # judged by the answer to its one call
+    assert stack.ars.ctx.state.is_placed(member)
 
 
 def test_affix_member_loads_and_places_a_rivet(stack):
