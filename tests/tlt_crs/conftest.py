@@ -81,6 +81,7 @@ class ArsStandIn:
         self.present_after_s = 0.0  # how long the ARS works before it presents the part
         self.fail: dict[str, str] = {}  # member id -> reason to fail with
         self.present_parts = True
+        self.call_timeout_s = 5.0  # an inspection call unanswered this long is given up, the part shown again
         self.max_parts = 3
         self.paused = threading.Event()
         self.commands: list[int] = []
@@ -140,7 +141,7 @@ class ArsStandIn:
                 call = InspectPart.Request(member_id=member, part_kind="part", camera=camera)
                 if not self.inspect.wait_for_service(timeout_sec=2.0):
                     break
-                report = self.inspect.call(call, timeout_sec=5.0)
+                report = self.inspect.call(call, timeout_sec=self.call_timeout_s)
                 if report is not None and report.report.passed:
                     passed = True
                     break
@@ -192,6 +193,7 @@ class VisionStandIn:
         self.bay_passes = True
         self.part_calls: list[str] = []
         self.part_cameras: list[str] = []
+        self.part_delay_s = 0.0  # how long a part inspection takes
         self.bay_calls: list[int] = []
         self.cameras: CameraStandIn | None = None  # the mounts, read when the bay is inspected
         self.mounts_at_bay_calls: list[tuple[list[float], list[float]]] = []
@@ -219,6 +221,7 @@ class VisionStandIn:
         self.part_cameras.append(request.camera)
         verdicts = self.part_verdicts.get(request.member_id, [])
         passed = verdicts.pop(0) if verdicts else True
+        time.sleep(self.part_delay_s)
         response.report.target_id = request.member_id
         response.report.passed = passed
         response.report.reasons = [] if passed else ["strut_tube chamfer 0.02 m above threshold"]

@@ -77,6 +77,21 @@ def test_failed_parts_are_discarded_and_counted(rig, crs, tmp_path):
     assert ctx.model.discarded["diagonal_dispenser_x"] == 1
 
 
+def test_a_verdict_reaches_the_ars_that_gave_its_call_up_and_presented_the_part_again(rig, crs, tmp_path):
+    """Vision takes longer than the ARS waits for an answer (as when a fault holds the CRS mid-
+    inspection): the ARS presents the part again, and the verdict goes to that call, not the one
+    given up. The ARS would otherwise present its part for ever."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    rig.vision.part_verdicts[member.id] = [False]  # the first part fails, its replacement passes
+    rig.vision.part_delay_s = 1.5
+    rig.ars["ars_x"].call_timeout_s = 0.5
+    assert crs.tick_until(add_diagonal(ctx, member), timeout=60.0) == Status.SUCCESS
+    assert rig.vision.part_calls == [member.id, member.id]  # each part judged once
+    assert ctx.model.discarded["diagonal_dispenser_x"] == 1
+    assert ctx.model.states[member.id] == RIVETED
+
+
 def test_too_many_failed_parts_fail_the_request_and_cancel_the_ars_goal(rig, crs, tmp_path):
     ctx = crs.make_context(rig, crs.fast_config(tmp_path))
     ctx.board.set("inspection_attempts", 2)

@@ -10,11 +10,17 @@ and that call is the "forwarding" channel: its response *is* the result the CRS 
   whose ARS will present a part, it *expects* that member. A call for the expected member waits
   (in the service's own thread, at most ``timeouts.inspect_handoff_s``) until the tree answers it;
   any other call is answered at once with a report saying why (no inspection expected, a
-  different member expected, one already being inspected). A call the tree did not answer in time,
-  or that the tree withdrew (request finished, fault, Stop), is answered with a report that says
-  so. Those reports are not passed and have ``not_inspected`` set: nothing judged the part, so the
-  ARS keeps it and may present it again (a restarted CRS not yet expecting it, say). The ARS never
-  waits unboundedly and never gets a report for another member.
+  different member expected). A call the tree did not answer in time, or that the tree withdrew
+  (request finished, fault, Stop), is answered with a report that says so. Those reports are not
+  passed and have ``not_inspected`` set: nothing judged the part, so the ARS keeps it and may
+  present it again (a restarted CRS not yet expecting it, say). The ARS never waits unboundedly
+  and never gets a report for another member.
+* One ARS presents a member's part, so a second call for the member means its ARS gave the first
+  up (it ran out of time while the CRS was held by a fault, say): the second takes over, and the
+  verdict goes to the member's call waiting when it is ready, which need not be the one the tree
+  took. With none waiting, :class:`ForwardResult` waits for the part to be presented again: a
+  verdict answering a call nobody waits for would be lost, and the ARS would present its part
+  until it gave up.
 * In the tree, Inspection Check is a Sequence with memory: :class:`WaitForPart` (the ARS's call
   arrived), ``Inspect Part`` (a ``ServiceCall`` to ``/vision/inspect_part``), and
   :class:`ForwardResult` (answers the waiting call with vision's report, passed or not).
@@ -85,13 +91,16 @@ class InspectionDesk:
                 return pending
             return None
 
-    def answer(self, pending: PendingInspection, report: Any) -> None:
+    def answer(self, member_id: str, report: Any) -> bool:
+        """Give ``report`` to the call for ``member_id`` waiting now; False when none waits."""
         with self._lock:
+            pending = self.pending
+            if pending is None or pending.member_id != member_id or pending.answered.is_set():
+                return False
             pending.report = report
             pending.answered.set()
-            if self.pending is pending:
-                self.pending = None
-            self.served += 1
+            self.pending = None
+            return True
 
     def withdraw(self, member_id: str, why: str) -> None:
         """Stop expecting ``member_id``; a call still waiting gets a failed report saying ``why``."""
@@ -118,10 +127,13 @@ class InspectionDesk:
                 return not_inspected_report(
                     member_id, part_kind, f"the CRS expects a part for '{self.expected}', not '{member_id}'"
                 )
-            if self.pending is not None:
-                return not_inspected_report(
-                    member_id, part_kind, f"a part for '{self.pending.member_id}' is already being inspected"
+            earlier = self.pending
+            if earlier is not None:
+                # The expected member's earlier call, given up by its ARS: release its thread.
+                earlier.report = not_inspected_report(
+                    earlier.member_id, earlier.part_kind, f"a newer call for '{member_id}' took over"
                 )
+                earlier.answered.set()
             pending = PendingInspection(member_id, part_kind, camera)
             self.pending = pending
         if pending.answered.wait(timeout):
@@ -164,48 +176,68 @@ class WaitForPart(Action):
             self.pending = pending
             self.feedback_message = f"part presented ({pending.part_kind})"
             return Status.SUCCESS
-        if self.req.finished:
-            # The result is recorded (parts discarded, or a placement) before failing with it.
-            ok, reason = self.req.conclude()
-            if ok:
-                reason += " without presenting a part for inspection"
-            return self.fail(reason)
-        gone = self.req.server_gone(self.ctx.clock()) if self.req.handle is not None else ""
-        if gone:
-            return self.fail(gone)
-        limit = self.ctx.config.timeouts.part_presented_s
-        if self.ctx.clock() - self._started > limit:
-            return self.fail(f"no part presented for '{self.req.member.id}' within {limit:g} s")
-        return Status.RUNNING
+        why = presentation_lost(self.req, self._started)
+        return self.fail(why) if why else Status.RUNNING
+
+
+def presentation_lost(request: ArsRequest, since: float) -> str:
+    """Why waiting since ``since`` for ``request``'s ARS to present its part is over ('' while it
+    is not): the ARS finished the request (its result is recorded in the tower model first), the
+    server that took the goal is gone (``ArsRequest.server_gone``), or no call came within
+    ``timeouts.part_presented_s``."""
+    ctx = request.ctx
+    if request.finished:
+        ok, reason = request.conclude()
+        return reason + " without presenting a part for inspection" if ok else reason
+    gone = request.server_gone(ctx.clock()) if request.handle is not None else ""
+    if gone:
+        return gone
+    limit = ctx.config.timeouts.part_presented_s
+    if ctx.clock() - since > limit:
+        return f"no part presented for '{request.member.id}' within {limit:g} s"
+    return ""
 
 
 class ForwardResult(Action):
     """Answer the ARS's waiting call with vision's report (the forwarded result).
 
-    Reads: the report of ``inspect`` and the call found by ``wait``. Writes: ``passed``, ``reasons``;
-    an event ``INSPECTION_PASSED`` (info) or ``INSPECTION_FAILED`` (warning) whose text starts with
+    Reads: the report of ``inspect``; the inspection desk. Writes: ``passed``, ``reasons``; an
+    event ``INSPECTION_PASSED`` (info) or ``INSPECTION_FAILED`` (warning) whose text starts with
     the member id, so the ground can count inspections per member.
-    SUCCESS when forwarded, whether the part passed or not; FAILURE if there is nothing to forward.
+    SUCCESS when forwarded to a call waiting for it, whether the part passed or not.
+    RUNNING while no call for the member waits (the ARS gave its call up and has not presented the
+    part again yet). FAILURE if there is nothing to forward, or, while waiting for a call, as
+    :class:`WaitForPart` fails (the request ended, its server is gone, no call in time).
     """
 
     def __init__(self, request: ArsRequest, wait: WaitForPart, inspect: ServiceCall) -> None:
         super().__init__(f"Forward Result {request.member.id}")
+        self.req = request
         self.ctx = request.ctx
         self.wait = wait
         self.inspect = inspect
         self.passed = False
         self.reasons: list[str] = []
+        self._started = 0.0
+
+    def initialise(self) -> None:
+        self._started = self.ctx.clock()
 
     def update(self) -> Status:
-        pending, response = self.wait.pending, self.inspect.last_response
-        if pending is None or response is None:
+        response = self.inspect.last_response
+        if response is None:
             return self.fail("no inspection report to forward")
         report = response.report
         self.passed = bool(report.passed)
         self.reasons = list(report.reasons)
-        self.ctx.desk.answer(pending, report)
+        member = self.req.member.id
+        if not self.ctx.desk.answer(member, report):
+            why = presentation_lost(self.req, self._started)
+            if why:
+                return self.fail(why)
+            self.feedback_message = "the ARS gave its call up: waiting for it to present the part again"
+            return Status.RUNNING
         self.feedback_message = "passed" if self.passed else "failed: " + "; ".join(self.reasons)
-        member = self.wait.req.member.id
         if self.passed:
             self.ctx.event(1, "INSPECTION_PASSED", f"{member}: part passed inspection")
         else:

@@ -36,9 +36,10 @@ def test_the_trees_verdict_is_a_judgement_withdrawal_and_time_out_are_not():
     desk = InspectionDesk()
     desk.expect(MEMBER)
     thread, answer = _serve_in_thread(desk)
-    while (pending := desk.take(MEMBER)) is None:
+    while desk.take(MEMBER) is None:
         pass
-    desk.answer(pending, InspectionReport(target_id=MEMBER, passed=False, reasons=["end fitting b missing"]))
+    verdict = InspectionReport(target_id=MEMBER, passed=False, reasons=["end fitting b missing"])
+    assert desk.answer(MEMBER, verdict)
     thread.join(5.0)
     assert not answer["report"].not_inspected and answer["report"].reasons == ["end fitting b missing"]
 
@@ -52,3 +53,39 @@ def test_the_trees_verdict_is_a_judgement_withdrawal_and_time_out_are_not():
     desk.expect(MEMBER)
     report = desk.serve(MEMBER, "vertical", "zed_1", 0.05)
     assert report.not_inspected and report.reasons == ["the CRS did not inspect the part within 0.05 s"]
+
+
+def test_a_call_made_again_takes_over_and_gets_the_verdict():
+    """Its ARS gave the first call up (out of time while the CRS was held): the first call's thread
+    is released, and the verdict the tree reached on the part goes to the call waiting now."""
+    desk = InspectionDesk()
+    desk.expect(MEMBER)
+    first, first_answer = _serve_in_thread(desk)
+    while desk.take(MEMBER) is None:
+        pass
+    taken = desk.take(MEMBER)
+    second, second_answer = _serve_in_thread(desk)
+    first.join(5.0)
+    assert first_answer["report"].not_inspected
+    assert first_answer["report"].reasons == [f"a newer call for '{MEMBER}' took over"]
+    while desk.take(MEMBER) is taken:
+        pass
+    assert desk.answer(MEMBER, InspectionReport(target_id=MEMBER, passed=True))
+    second.join(5.0)
+    assert second_answer["report"].passed and not second_answer["report"].not_inspected
+
+
+def test_a_verdict_with_no_call_waiting_is_not_given_away():
+    """The call ran out of time: answer says so, and the tree waits for the part to be presented
+    again instead of sending the verdict to nobody."""
+    desk = InspectionDesk()
+    desk.expect(MEMBER)
+    report = desk.serve(MEMBER, "vertical", "zed_1", 0.05)
+    assert report.not_inspected
+    assert not desk.answer(MEMBER, InspectionReport(target_id=MEMBER, passed=True))
+    thread, answer = _serve_in_thread(desk)
+    while desk.take(MEMBER) is None:
+        pass
+    assert desk.answer(MEMBER, InspectionReport(target_id=MEMBER, passed=True))
+    thread.join(5.0)
+    assert answer["report"].passed
