@@ -11,11 +11,12 @@ twin's renders directly.
 Which instances are the part (:func:`select_part`), among those in the working depth range: with a
 ``gap``, the instances are joined into parts, two instances being of one part when a chain of
 instances links them with 3-D gaps of at most ``gap`` (a cross frame's sides meet at its corner
-joints); the part presented is the one with the most pixels of its main class (a cross frame's
-sides), kept to ``reach`` of its biggest main instance. Other parts in view, however close in the
-image (the lifter's top cross frame below a held one, the rest of a dispenser's stack behind it),
-stay out of it as long as they do not touch it. Without a ``gap`` (struts) the biggest main
-instance (a tube) is the anchor and every instance within ``reach`` of its centre is taken.
+joints, a strut's fittings sit on its tube's ends); the part presented is the one with the most
+pixels of its main class (a cross frame's sides, a strut's tube), kept to ``reach`` of its biggest
+main instance. Other parts in view, however close in the image (the lifter's top cross frame below
+a held one, the rest of a dispenser's stack behind it, a few pixels of a fitting in a rack beside a
+held strut), stay out of it as long as they do not touch it. Without a ``gap`` the biggest main
+instance is the anchor and every instance within ``reach`` of its centre is taken.
 """
 
 from __future__ import annotations
@@ -238,6 +239,9 @@ class PartInspector:
             ("strut_tube", "end_fitting"),
             "strut_tube",
             length / 2 + 0.1,
+            # Not only within reach: 5 pixels of a racked strut's fitting near a held one's tube
+            # were taken for a third fitting, which could not be measured, and failed good struts.
+            gap=raw["part_gap"],
             **common,
         )
 

@@ -59,3 +59,31 @@ def test_no_anchor_in_the_depth_range_means_the_part_is_not_in_view():
     dets, depth = _scene()
     assert select_part(dets, depth, K, ("cross_frame",), "cross_frame", 2.0, (0.15, 0.5), 50, gap=0.03) == []
     assert select_part(dets, None, K, ("cross_frame",), "cross_frame", 2.0, (0.15, 2.0), 50, gap=0.03) == []
+
+
+def test_a_strut_is_its_tube_and_the_fittings_on_it_not_a_racked_fitting_within_reach():
+    """A few pixels of a racked strut's fitting, 10 cm behind a held strut and well within its
+    reach, once counted as a third fitting of the held one (it could not be measured, and good
+    struts failed inspection)."""
+    from pathlib import Path
+
+    from tlt_common.mission.schema import load_mission
+    from tlt_vision.node_config import load_config
+    from tlt_vision.part_inspection import PartInspector
+
+    mission = load_mission(Path(__file__).resolve().parents[2] / "missions" / "two_bay.yaml")
+    inspector = PartInspector(load_config(), mission)
+    depth = np.zeros((100, 100), dtype=np.float32)
+    tube = _mask(slice(48, 52), slice(20, 80))
+    fitting_a, fitting_b = _mask(slice(47, 53), slice(14, 20)), _mask(slice(47, 53), slice(80, 86))
+    racked = _mask(slice(60, 62), slice(50, 53))  # 6 pixels
+    for m, z in ((tube, 0.6), (fitting_a, 0.6), (fitting_b, 0.6), (racked, 0.7)):
+        depth[m] = z
+    dets = [
+        Detection("strut_tube", tube, object_id="held/tube"),
+        Detection("end_fitting", fitting_a, object_id="held/fitting_a"),
+        Detection("end_fitting", fitting_b, object_id="held/fitting_b"),
+        Detection("end_fitting", racked, object_id="racked/fitting_b"),
+    ]
+    picked = inspector.select("vertical", dets, depth, K)
+    assert _ids(picked) == ["held/fitting_a", "held/fitting_b", "held/tube"]
