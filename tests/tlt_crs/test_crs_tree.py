@@ -287,7 +287,9 @@ def test_start_twice_is_refused(rig, crs, crs_node):
 
 def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
     rig.vision.withdraw()
-    crs.wait_for(lambda: "vision" in crs_node.ctx.not_ready(), what="vision gone from the graph")
+    # Both services gone from the graph: the graph learns of each on its own.
+    gone = (ros_names.VISION_INSPECT_PART, ros_names.VISION_INSPECT_BAY)
+    crs.wait_for(lambda: all(s in crs_node.ctx.not_ready() for s in gone), what="vision gone from the graph")
     refused = _submit(crs_node, crs, "start")
     assert refused.rejected
     assert refused.stages[0][1] == f"not ready: vision: {ros_names.VISION_INSPECT_PART}, " \
