@@ -159,6 +159,7 @@ class ArsNode(Node):
         self.started = bool(config.raw["started_on_launch"])
         self.paused = False
         self._held = False
+        self._paused_since: float | None = None  # mission time of the Pause not yet resumed
         self.stop_requested = False
         self.finished = threading.Event()
         self._stop_since: float | None = None
@@ -365,7 +366,12 @@ class ArsNode(Node):
                 if not self._held:
                     self.tree.hold()
                     self._held = True
+                    if self._paused_since is None:
+                        self._paused_since = now
                 return
+            if self._paused_since is not None:
+                self.tree.resume(now - self._paused_since)
+                self._paused_since = None
             try:
                 self.tree.tick()
             except Exception as exc:  # a behaviour bug fails the request; the ARS keeps serving

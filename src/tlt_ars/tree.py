@@ -243,6 +243,13 @@ class ArsTree:
             return
         (node or tip).stop(Status.INVALID)
 
+    def resume(self, paused_s: float) -> None:
+        """Resume after ``paused_s`` s of Pause: a behaviour left running through it (a service
+        call) does not count that time toward its limits (``postpone``)."""
+        for behaviour in self.root.iterate():
+            if behaviour.status == Status.RUNNING and hasattr(behaviour, "postpone"):
+                behaviour.postpone(paused_s)
+
     def step(self) -> str:
         return running_step(self.branch) if self.job is not None else ""
 

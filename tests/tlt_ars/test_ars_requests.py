@@ -224,6 +224,36 @@ def test_a_part_presented_when_paused_is_judged_once_by_the_answer_to_its_call(s
     assert stack.ars.ctx.state.is_placed(member)
 
 
+def test_time_paused_does_not_count_toward_presenting_a_part(stack):
+    """An operator's Pause while the part is presented, longer than ``present_part_s``: the CRS
+    answers meanwhile that it did not inspect the part, and after Resume the ARS presents it again
+    (the request does not fail for the time it stood paused)."""
+    member = "bay1/vertical/x0_y1"
+    timeouts = stack.ars.ctx.config.timeouts
+    limit = timeouts["present_part_s"]
+    timeouts["present_part_s"] = 3.0
+    stack.inspection_gate = threading.Event()
+    stack.inspection_verdicts = [None]  # not inspected, then passed
+    try:
+        handle = add_member(stack, member, VERTICAL)
+        stack.wait(lambda: stack.inspections[-1:] == [member], "the part presented", timeout=60)
+        presented = len(stack.inspections)
+        assert stack.ground_command(GroundCommand.Request.PAUSE).accepted
+        time.sleep(0.5)
+        stack.inspection_gate.set()
+        time.sleep(4.0)
+        assert stack.ground_command(GroundCommand.Request.RESUME).accepted
+        result = stack.result(handle)
+    finally:
+        stack.inspection_gate.set()
+        stack.inspection_gate = None
+        stack.inspection_verdicts = []
+        timeouts["present_part_s"] = limit
+    assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
+    assert len(stack.inspections) == presented + 1  # presented again once, and judged
+    assert stack.ars.ctx.state.is_placed(member)
+
+
 def test_affix_member_loads_and_places_a_rivet(stack):
     fired = len(stack.gpio.fired)
     fields = strut("bay1/vertical/x0_y0")

@@ -75,8 +75,8 @@ class PresentPart(ServiceCall):
     nothing (``not_inspected``: the CRS was not expecting the part, say restarted and not started
     again, or it withdrew it), presenting again after ``PRESENT_AGAIN_S``.
     SUCCESS: a report judged the part, passed or not (:class:`PartPassed` tells which).
-    FAILURE: no judgement within ``timeouts.present_part_s``; the part is kept (never discarded
-    for a failure of the hand-off, only for a judgement).
+    FAILURE: no judgement within ``timeouts.present_part_s`` (time paused not counted); the part
+    is kept (never discarded for a failure of the hand-off, only for a judgement).
     """
 
     def __init__(self, name: str, ctx: ArsContext) -> None:
@@ -102,6 +102,13 @@ class PresentPart(ServiceCall):
         self.report = None
         self._deadline = self.clock() + self.ctx.config.timeouts["present_part_s"]
         self._again_at = None
+
+    def postpone(self, seconds: float) -> None:
+        """A Pause does not count toward ``present_part_s`` (nor the call's own limit)."""
+        super().postpone(seconds)
+        self._deadline += seconds
+        if self._again_at is not None:
+            self._again_at += seconds
 
     def _make(self) -> Any:
         ctx = self.ctx

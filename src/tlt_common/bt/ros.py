@@ -396,6 +396,10 @@ class ServiceCall(Action):
         self.feedback_message = f"'{self.srv_name}' answered"
         return Status.SUCCESS
 
+    def postpone(self, seconds: float) -> None:
+        """Leave ``seconds`` (a pause it was left running through) out of its time limits."""
+        self._started += seconds
+
     def _drop(self) -> None:
         if self._future is not None:
             self.client.remove_pending_request(self._future)

@@ -210,11 +210,10 @@ class ForwardResult(Action):
     :class:`WaitForPart` fails (the request ended, its server is gone, no call in time).
     """
 
-    def __init__(self, request: ArsRequest, wait: WaitForPart, inspect: ServiceCall) -> None:
+    def __init__(self, request: ArsRequest, inspect: ServiceCall) -> None:
         super().__init__(f"Forward Result {request.member.id}")
         self.req = request
         self.ctx = request.ctx
-        self.wait = wait
         self.inspect = inspect
         self.passed = False
         self.reasons: list[str] = []
@@ -328,7 +327,7 @@ def inspection_check(ctx: CrsContext, request: ArsRequest) -> py_trees.behaviour
         response_ok=lambda response: (True, ""),  # pass or fail, the report is forwarded
         clock=ctx.clock,
     )
-    forward = ForwardResult(request, wait, inspect)
+    forward = ForwardResult(request, inspect)
     check = py_trees.composites.Sequence(
         f"Inspection Check {member.id}", memory=True, children=[wait, inspect, forward]
     )
