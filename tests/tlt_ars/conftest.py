@@ -450,6 +450,11 @@ class Stack:
         self.ee.close()
         self.ur.shutdown()
         for node in (self.ars, self.ee, self.ur, self.client):
+            # destroy_node leaves action servers and clients, which keep the DDS participant (and
+            # ARS X's servers in the graph) alive after the context is shut down.
+            for waitable in list(node.waitables):
+                if hasattr(waitable, "destroy"):
+                    waitable.destroy()
             node.destroy_node()
         rclpy.try_shutdown(context=self.context)
         self.chain.stop()

@@ -200,11 +200,10 @@ def test_concurrent_goal_rejected_pause_holds_resume_continues_cancel_stops(stac
     assert not any(stack.gpio.outputs.values())  # no rivet gun left firing
 
 
-def test_a_part_presented_when_paused_is_judged_once_by_the_answer_to_its_call(stack):
-    """The CRS answers while the ARS is paused (a CRS fault holds the build and pauses the ARS
-    mid-inspection): the call is kept, so its verdict is read on Resume; a call given up and made
-    again would have its verdict sent to the call given up."""
-    member = "bay1/vertical/x1_y0"
+def _paused_while_presenting(stack, member: str, paused_s: float) -> tuple[int, object]:
+    """Add ``member``; while its part is presented (the CRS stand-in holding the call), Pause, let
+    the stand-in answer 0.5 s later, Resume after ``paused_s``. Returns how many presentations
+    there had been when paused, and the request's result."""
     stack.inspection_gate = threading.Event()
     try:
         handle = add_member(stack, member, VERTICAL)
@@ -212,13 +211,21 @@ def test_a_part_presented_when_paused_is_judged_once_by_the_answer_to_its_call(s
         presented = len(stack.inspections)
         assert stack.ground_command(GroundCommand.Request.PAUSE).accepted
         time.sleep(0.5)
-        stack.inspection_gate.set()  # the verdict (passed) comes while the ARS is paused
-        time.sleep(0.5)
+        stack.inspection_gate.set()  # the answer comes while the ARS is paused
+        time.sleep(paused_s - 0.5)
         assert stack.ground_command(GroundCommand.Request.RESUME).accepted
-        result = stack.result(handle)
+        return presented, stack.result(handle)
     finally:
         stack.inspection_gate.set()
         stack.inspection_gate = None
+
+
+def test_a_part_presented_when_paused_is_judged_once_by_the_answer_to_its_call(stack):
+    """The CRS answers while the ARS is paused (a CRS fault holds the build and pauses the ARS
+    mid-inspection): the call is kept, so its verdict is read on Resume; a call given up and made
+    again would have its verdict sent to the call given up."""
+    member = "bay1/vertical/x1_y0"
+    presented, result = _paused_while_presenting(stack, member, 1.0)
     assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
     assert len(stack.inspections) == presented  # judged by the answer to its one call
     assert stack.ars.ctx.state.is_placed(member)
@@ -232,21 +239,10 @@ def test_time_paused_does_not_count_toward_presenting_a_part(stack):
     timeouts = stack.ars.ctx.config.timeouts
     limit = timeouts["present_part_s"]
     timeouts["present_part_s"] = 3.0
-    stack.inspection_gate = threading.Event()
     stack.inspection_verdicts = [None]  # not inspected, then passed
     try:
-        handle = add_member(stack, member, VERTICAL)
-        stack.wait(lambda: stack.inspections[-1:] == [member], "the part presented", timeout=60)
-        presented = len(stack.inspections)
-        assert stack.ground_command(GroundCommand.Request.PAUSE).accepted
-        time.sleep(0.5)
-        stack.inspection_gate.set()
-        time.sleep(4.0)
-        assert stack.ground_command(GroundCommand.Request.RESUME).accepted
-        result = stack.result(handle)
+        presented, result = _paused_while_presenting(stack, member, 4.5)
     finally:
-        stack.inspection_gate.set()
-        stack.inspection_gate = None
         stack.inspection_verdicts = []
         timeouts["present_part_s"] = limit
     assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
