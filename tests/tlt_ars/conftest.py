@@ -28,7 +28,7 @@ import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
@@ -297,8 +297,9 @@ class Stack:
         self.client = Node("ars_test_crs", context=self.context)
         self.ee_states: list[EndEffectorState] = []
         self.client.create_subscription(EndEffectorState, "/ee_x/state", self._ee_state, 10)
-        # Reentrant: a call held at the gate must not hold up the stand-ins' other callbacks.
-        gated = ReentrantCallbackGroup()
+        # Its own group: a call held at the gate must not hold up the stand-ins' other callbacks,
+        # and two calls are still answered one after the other, in order.
+        gated = MutuallyExclusiveCallbackGroup()
         self.client.create_service(
             InspectPart, ros_names.CRS_INSPECT_PART, self._crs_inspect, callback_group=gated
         )
