@@ -84,6 +84,8 @@ class TwinDevices:
         self.chains: dict[str, DynamixelChain | MightyZapChain] = {}
         #: each serial link's driver control period (sim seconds), from its hardware map
         self.driver_periods: dict[str, float] = {}
+        #: the links whose device stops on its own when commands stop coming (sim seconds)
+        self.driver_watchdogs: dict[str, float] = {}
         self._links: dict[str, str] = {}
         self._build_lifter()
         for component in DYNAMIXEL_CHAINS:
@@ -107,6 +109,7 @@ class TwinDevices:
         self.lifter_server = PtyFirmwareServer(self.firmware, self_stepping=False)
         self.lifter = LifterBinding(self.firmware, joints, cpm)
         self.driver_periods["lifter"] = lifter.command_period_s
+        self.driver_watchdogs["lifter"] = self.firmware.config.watchdog_timeout_s
         self.bindings.append(self.lifter)
 
     def _build_dynamixel(self, component: str) -> None:

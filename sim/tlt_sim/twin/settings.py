@@ -32,6 +32,8 @@ SCHEMA = {
     "sync_period_s": Field("float", minimum=0.001, maximum=0.05, doc="sim seconds per emulator exchange"),
     "rtf": opt("float", 1.0, minimum=0.0, maximum=1000.0, doc="real-time factor; 0 = as fast as possible"),
     "driver_wait_s": opt("float", 0.5, minimum=0.0, maximum=5.0, doc="wall s to wait for a late driver"),
+    "driver_lead_s": opt("float", 0.05, minimum=0.0, maximum=1.0,
+                         doc="sim s a serial driver may lag before the twin waits for it"),
     "ur_hosts": Field(
         "dict",
         schema={"ur_x": Field("str", check=_loopback), "ur_y": Field("str", check=_loopback)},
@@ -64,6 +66,7 @@ class TwinSettings:
     sync_period_s: float = 0.01
     rtf: float = 1.0
     driver_wait_s: float = 0.5
+    driver_lead_s: float = 0.05
     ur_hosts: dict[str, str] = dataclasses.field(
         default_factory=lambda: {"ur_x": "127.0.0.2", "ur_y": "127.0.0.3"}
     )
@@ -90,6 +93,7 @@ def load_settings(path: str | Path = DEFAULT_SETTINGS) -> TwinSettings:
         sync_period_s=doc["sync_period_s"],
         rtf=doc["rtf"],
         driver_wait_s=doc["driver_wait_s"],
+        driver_lead_s=doc["driver_lead_s"],
         ur_hosts=dict(doc["ur_hosts"]),
         camera_rate_hz=cams["rate_hz"],
         zed_size=(cams["zed"]["width"], cams["zed"]["height"]),

@@ -18,7 +18,8 @@ the motors after 40 ms of sim time without a command; the servo drivers write go
 50 ms and their trajectory controllers check path tolerances against sim time. When the simulation
 runs faster than a driver can turn its cycle around (``--rtf 0``, or a loaded machine), sim time
 would run away from the driver through no fault of its own. :meth:`hold_for_drivers` therefore
-keeps sim time at most 1.5 driver periods ahead of the last bytes each serial link received:
+keeps sim time at most a lead (:func:`lead_s`: ``driver_lead_s``, at least 1.5 driver periods,
+below the lifter's watchdog) ahead of the last bytes each serial link received:
 before a period that would pass that point it waits for the late links' next bytes, for at most
 ``driver_wait_s`` of wall time. A link whose driver stopped talking (dead, in ERROR between
 reconnect attempts) is waited for once, then ignored until it talks again, so a driver that really
@@ -52,7 +53,10 @@ class Twin:
         self.devices = TwinDevices(scene, settings, self.run_dir)
         self.faults = FaultSchedule(scene.scenario.device_faults, self.devices)
         self.holds = 0  # times sim time waited for a driver
-        self._links = {name: _Link(name, period) for name, period in self.devices.driver_periods.items()}
+        self._links = {
+            name: _Link(name, lead_s(period, settings.driver_lead_s, self.devices.driver_watchdogs.get(name)))
+            for name, period in self.devices.driver_periods.items()
+        }
         self._closed = False
 
     def start(self) -> None:
@@ -117,7 +121,7 @@ class Twin:
         late = [
             link for link in self._links.values()
             if link.count > 0 and link.given_up_on != link.count
-            and t_next > link.since + LEAD_PERIODS * link.period_s + 1e-9
+            and t_next > link.since + link.lead_s + 1e-9
         ]
         if not late:
             return False
@@ -139,17 +143,30 @@ class Twin:
         return True
 
 
-# A link may fall this many of its driver's periods behind sim time before the twin waits for it.
+# A link may always fall this many of its driver's periods behind sim time before the twin waits.
 LEAD_PERIODS = 1.5
+# A link with a watchdog never falls further behind than this fraction of its timeout.
+WATCHDOG_MARGIN = 0.75
+
+
+def lead_s(period_s: float, driver_lead_s: float, watchdog_s: float | None) -> float:
+    """How far sim time may run ahead of a link's last bytes before the twin waits for its driver.
+
+    ``driver_lead_s`` (run.yaml) or 1.5 driver periods, whichever is longer; for a device with a
+    watchdog (the lifter firmware's, two command periods), at most 3/4 of its timeout, so a driver
+    that is only late never trips it.
+    """
+    lead = max(LEAD_PERIODS * period_s, driver_lead_s)
+    return lead if watchdog_s is None else min(lead, WATCHDOG_MARGIN * watchdog_s)
 
 
 @dataclass
 class _Link:
     name: str
-    period_s: float
+    lead_s: float
     count: int = 0
     since: float = 0.0  # sim time its traffic last changed
     given_up_on: int | None = None
 
 
-__all__ = ["LEAD_PERIODS", "Twin"]
+__all__ = ["LEAD_PERIODS", "WATCHDOG_MARGIN", "Twin", "lead_s"]

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import threading
 
+import pytest
 from tlt_sim.emulators import dynamixel_protocol as proto
+from tlt_sim.twin.simulation import lead_s
 
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
 
@@ -72,7 +74,7 @@ def test_a_driver_that_stopped_still_trips_the_watchdog(make_twin):
 
 
 def test_servo_links_are_kept_pace_with_and_silent_links_ignored(make_twin):
-    twin = make_twin(driver_wait_s=0.1)
+    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.0)
     chain = twin.devices.chains["active_grippers"]  # its driver runs at 100 Hz: 15 ms of lead
     wall = FakeWall()
     assert not twin.hold_for_drivers(clock=wall.clock, sleep=wall.sleep), "no driver has talked yet"
@@ -94,3 +96,20 @@ def test_servo_links_are_kept_pace_with_and_silent_links_ignored(make_twin):
     assert wall.now - start >= 0.1
     twin.tick()
     assert not twin.hold_for_drivers(clock=wall.clock, sleep=wall.sleep), "given up until it talks again"
+
+
+def test_the_lead_is_driver_lead_s_or_longer_and_below_a_watchdog():
+    assert lead_s(0.01, 0.05, None) == pytest.approx(0.05), "a 100 Hz servo chain: 5 periods"
+    assert lead_s(0.05, 0.05, None) == pytest.approx(0.075), "a 20 Hz chain: never under 1.5 periods"
+    assert lead_s(0.02, 0.05, 0.04) == pytest.approx(0.03), "the lifter: 3/4 of its 40 ms watchdog"
+
+
+def test_a_servo_link_may_lag_driver_lead_s_before_sim_time_waits(make_twin):
+    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.05)
+    chain = twin.devices.chains["active_grippers"]  # 100 Hz, no watchdog: 50 ms of lead
+    wall = FakeWall()
+    chain.handle(proto.build_packet(1, proto.PING))
+    for _ in range(5):  # up to 50 ms after its last packet
+        assert not twin.hold_for_drivers(clock=wall.clock, sleep=wall.sleep)
+        twin.tick()
+    assert twin.hold_for_drivers(clock=wall.clock, sleep=wall.sleep), "the next period would pass 50 ms"
