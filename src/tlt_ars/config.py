@@ -42,6 +42,7 @@ SCHEMA = {
     "check_reach": opt("bool", True),
     "started_on_launch": opt("bool", True),
     "tick_rate_hz": opt("float", 20.0, minimum=1.0, maximum=200.0),
+    "status_rate_hz": opt("float", 5.0, minimum=0.1, maximum=200.0),
     "arm": Field(
         "dict",
         schema={

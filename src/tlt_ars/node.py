@@ -167,7 +167,7 @@ class ArsNode(Node):
         self._goals: dict[bytes, ActiveGoal] = {}
         self.tree = ArsTree(self.ctx, self.planner, lambda: self.started)
         self.status = TreeStatusPublisher(self, self.ars, topic=ros_names.tree_status_topic(self.ars))
-        self.status.attach(self.tree.tree)
+        self.status.attach(self.tree.tree, period_s=1.0 / config.raw["status_rate_hz"])
         self.tree.on_change.append(self.status.refresh)
 
         goals = ReentrantCallbackGroup()

@@ -589,10 +589,23 @@ class TreeStatusPublisher:
         if self._root is not None:
             self.shape = TreeShape.of(self._root)
 
-    def attach(self, tree: py_trees.trees.BehaviourTree) -> None:
+    def attach(self, tree: py_trees.trees.BehaviourTree, period_s: float = 0.0) -> None:
+        """Publish after every tick of ``tree``, or with ``period_s``, after the first tick at least
+        that long (on the node's clock) after the last publication."""
         self._root = tree.root
         self.refresh()
-        tree.add_post_tick_handler(lambda t: self.publish(self.shape, t.count + 1))
+        seconds = node_clock(self.node)
+        due: list[float] = [float("-inf")]
+
+        def after_tick(t: py_trees.trees.BehaviourTree) -> None:
+            now = seconds()
+            # A clock that went back (sim time restarted) starts the period again.
+            if now < due[0] and due[0] - now <= period_s:
+                return
+            due[0] = now + period_s
+            self.publish(self.shape, t.count + 1)
+
+        tree.add_post_tick_handler(after_tick)
 
 
 __all__ = [

@@ -490,3 +490,27 @@ def test_tree_status_published_in_parts_and_decoded(ros):
     assert status.agent == "ars_x" and status.tick_count >= 1
     assert [s for _, s in status.nodes] == publisher.shape.statuses()
     assert status.as_dict()["ARS/busy"] is Status.RUNNING
+
+
+def test_tree_status_with_a_period_is_published_after_the_first_tick_that_is_due(ros):
+    from rclpy.parameter import Parameter
+    from rclpy.time import Time
+
+    from tlt_common.bt.ros import TreeStatusPublisher
+
+    _server_node, node = ros
+    node.set_parameters([Parameter("use_sim_time", value=True)])
+    clock = node.get_clock()
+    tree = py_trees.trees.BehaviourTree(py_trees.behaviours.Running("busy"))
+    publisher = TreeStatusPublisher(node, "ars_x", topic="ars_x/period_status")
+    sent: list[int] = []
+    publisher.publish = lambda shape, tick_count: sent.append(tick_count) or 1
+    publisher.attach(tree, period_s=0.15)
+    for step in range(10):  # ticks at 0.1 s of sim time
+        clock.set_ros_time_override(Time(seconds=100.0 + 0.1 * step))
+        tree.tick()
+    assert sent == [1, 3, 5, 7, 9], "the first tick, then the first tick 0.15 s after the last one sent"
+    clock.set_ros_time_override(Time(seconds=5.0))  # sim time restarted
+    tree.tick()
+    assert sent[-1] == 11
+    node.set_parameters([Parameter("use_sim_time", value=False)])
