@@ -38,7 +38,6 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.spin import spin_events
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
@@ -334,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init(args=["tlt-lifter", *args])
     node = LifterNode(config)
     try:
-        spin_events(node)
+        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -18,7 +18,6 @@ from rclpy.node import Node
 
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.spin import spin_events
 
 HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "hardware"
 
@@ -64,7 +63,7 @@ def run_node(
     node = None
     try:
         node = build(config)
-        spin_events(node)
+        rclpy.spin(node)
     except ConfigError as exc:  # a file the node opens while building (e.g. the EE's GPIO map)
         print(f"{name}: {exc}", file=sys.stderr)
         return 2

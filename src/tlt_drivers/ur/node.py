@@ -41,7 +41,6 @@ from tlt_interfaces.msg import HardwareStatus
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.spin import spin_events
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
@@ -203,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init(args=["tlt-ur", *args])
     node = URNode(config)
     try:
-        spin_events(node)
+        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
