@@ -18,7 +18,7 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from tlt_interfaces.msg import EndEffectorState
+from tlt_interfaces.msg import EndEffectorState, HardwareStatus
 
 from tlt_ars.config import ArsConfig
 from tlt_ars.mission_state import MissionState, Request
@@ -68,7 +68,9 @@ class ArsContext:
             ros_names.joint_states_topic(ros_names.ur(self.other_ars)) if self.other_ars else None
         )
         self.ee_topic = ros_names.state_topic(ros_names.ee(self.ars))
+        self.arm_status_topic = ros_names.hardware_status_topic(ros_names.ur(self.ars))
         self.cache.watch(self.joint_topic, JointState)
+        self.cache.watch(self.arm_status_topic, HardwareStatus)
         if self.other_joint_topic:
             self.cache.watch(self.other_joint_topic, JointState)
         self.cache.watch(self.ee_topic, EndEffectorState)
@@ -97,6 +99,14 @@ class ArsContext:
             return np.array([by_name[n] for n in self.config.arm["joint_names"]], dtype=float)
         except KeyError:
             return None
+
+    def arm_down(self) -> str | None:
+        """Why the UR driver's last HardwareStatus says the arm is not active (link lost, in
+        ERROR while it reconnects), or None when active or not heard of yet."""
+        entry = self.cache.latest(self.arm_status_topic)
+        if entry is None or entry[0].lifecycle_state == HardwareStatus.LIFECYCLE_ACTIVE:
+            return None
+        return entry[0].fault or f"lifecycle state {entry[0].lifecycle_state}"
 
     def other_arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
         """The other arm's configuration (for the collision scene), or None when not known."""

@@ -376,12 +376,17 @@ class ExecuteTrajectory(ActionGoal):
     def update(self) -> Status:
         # The goal's start is checked against the arm's state when it is built; a gap in the joint
         # states while planning kept the executor busy is waited out, as PlanMotion does, up to
-        # timeouts.planning_s, after which building the goal fails with the reason.
+        # timeouts.planning_s, after which building the goal fails with the reason. So is a UR
+        # driver reconnecting after a lost link (about a second): sent at once, the goal of the next
+        # attempt was aborted too, and a Retreat after the part was riveted failed its request.
         waited = self.ctx.clock() - self._waiting_since
-        if (self._send_future is None and self.ctx.arm_q() is None
-                and waited <= self.ctx.config.timeouts["planning_s"]):
-            self.feedback_message = "waiting for a fresh joint state to start from"
-            return Status.RUNNING
+        if self._send_future is None and waited <= self.ctx.config.timeouts["planning_s"]:
+            if self.ctx.arm_q() is None:
+                self.feedback_message = "waiting for a fresh joint state to start from"
+                return Status.RUNNING
+            if (down := self.ctx.arm_down()) is not None:
+                self.feedback_message = f"waiting for the arm to be active again ({down})"
+                return Status.RUNNING
         return super().update()
 
 

@@ -20,6 +20,7 @@ class Arm:
 
     def __init__(self) -> None:
         self.now, self.q = 0.0, np.zeros(6)
+        self.down: str | None = None  # the UR driver's fault while it is not active
         self.joint_topic = "/ur_x/joint_states"
         self.config = SimpleNamespace(arm={"stopped_velocity": 0.01}, timeouts={"planning_s": 15.0})
         self.data = SimpleNamespace(member=None, holding=None, targets={})
@@ -31,6 +32,9 @@ class Arm:
 
     def arm_q(self):
         return self.q
+
+    def arm_down(self):
+        return self.down
 
     def arm_velocity(self):
         return None if self.q is None else np.zeros(6)
@@ -163,3 +167,17 @@ def test_execute_without_a_fresh_joint_state_within_planning_s_fails_naming_the_
     _tick_until(b, lambda: b.status == Status.FAILURE)
     assert "no fresh joint state on '/ur_x/joint_states' to start from" in b.feedback_message
     assert driver.goals == []
+
+
+def test_execute_waits_for_the_arm_to_be_active_again_before_it_sends_the_goal(driver):
+    arm = Arm()
+    b = _execute(driver, arm)
+    arm.down = "read failed: no data from the controller at 127.0.0.2 for 0.61 s"
+    for _ in range(20):
+        b.tick_once()
+        time.sleep(0.01)
+    assert b.status == Status.RUNNING and driver.goals == []
+    assert b.feedback_message == f"waiting for the arm to be active again ({arm.down})"
+    arm.now, arm.down = 1.2, None  # the driver reconnected
+    _tick_until(b, lambda: b.status == Status.SUCCESS)
+    assert len(driver.goals) == 1
