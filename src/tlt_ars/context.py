@@ -6,6 +6,13 @@ UR driver's JointState, ``ee_state`` from the EE driver's EndEffectorState, the 
 configuration for the collision scene) and keep the request's working data in :class:`RequestData`
 (which part is held, the target chosen for an approach, the dispenser pose found on its tag, the
 parts discarded), which the tree resets for each request.
+
+A request can end in failure after its member was set (placed, affixed, riveted) while the arm
+still stands at the tower: a Retreat that a lost link or a protective stop failed. Its data is kept
+as the context's ``unfinished`` request; the CRS, which has not recorded the member, sends the same
+request again once the fault is cleared, and :meth:`ArsContext.check_request` lets that one through
+(the mission state alone would refuse it as already placed) so that the ARS can finish it: retreat
+from where the arm stands and report success.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ class RequestData:
     dispenser: str | None = None  # the dispenser the held part came from
     parts_discarded: int = 0
     targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
+    recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
 
@@ -81,6 +89,7 @@ class ArsContext:
         # Planning is CPU work of up to a second: it runs here, never in the tick.
         self.planning_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.ars}-planner")
         self.data = RequestData()
+        self.unfinished: RequestData | None = None
 
     # ----- sensors -----
     def arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
@@ -145,8 +154,33 @@ class ArsContext:
         return float(entry[0].position[names.index(joint)]) if joint in names else None
 
     # ----- request -----
-    def begin(self, request: Request) -> None:
-        self.data = RequestData(request=request, member=self.state.member(request.member_id))
+    def finishes(self, request: Request) -> bool:
+        """Whether ``request`` repeats the unfinished request (same request and member)."""
+        left = self.unfinished.request if self.unfinished is not None else None
+        return left is not None and (left.request, left.member_id) == (request.request, request.member_id)
+
+    def check_request(self, request: Request) -> str | None:
+        """``None`` when ``request`` may run (it may finish the unfinished one), else why not."""
+        if self.finishes(request):
+            return None
+        return self.state.check_request(request)
+
+    def begin(self, request: Request) -> bool:
+        """Start the working data of ``request``; True when it finishes the unfinished request,
+        whose data (the targets its approaches chose) it carries on with."""
+        finishing = self.finishes(request)
+        if finishing:
+            self.data = self.unfinished
+            self.data.request, self.data.parts_discarded = request, 0  # reported with the failure
+        else:
+            self.data = RequestData(request=request, member=self.state.member(request.member_id))
+        self.unfinished = None
+        return finishing
+
+    def end(self, request: Request, ok: bool) -> None:
+        """``request`` ended: keep it as unfinished when it failed after setting its member."""
+        if not ok and self.data.recorded and self.data.request == request:
+            self.unfinished = self.data
 
     def close(self) -> None:
         self.planning_pool.shutdown(wait=False, cancel_futures=True)

@@ -5,7 +5,7 @@ Serves, for the CRS:
 * one action server per request on ``ros_names.ars_action(ars, request)``: ``AddCrossFrame``,
   ``AddMember``, ``AffixMember``, ``FoundationRivet``. A goal is **accepted** (the
   acknowledgement of Fig. 21) and then checked: when the ARS is idle, started, not paused, and
-  the request makes sense against the mission (:meth:`MissionState.check_request`), its branch is
+  the request makes sense against the mission (:meth:`ArsContext.check_request`), its branch is
   installed in the tree and run. Otherwise the goal is **aborted at once with the reason in
   ``result.reason``**: rclpy's goal callback can only accept or reject, and a rejection cannot
   carry a reason, so "rejected with a reason" is an accepted goal aborted before any motion
@@ -17,7 +17,10 @@ Serves, for the CRS:
   link: either way the member is placed once and the result reaches the CRS that asks now.
   Feedback is the running leaf's path in the tree (``Add Member/Load Rivet/Approach Rivet
   Dispenser/Execute Approach Rivet Dispenser``) and the fraction of the branch's leaves done.
-  The result is success, or failure with the failing step and its reason. Cancel pre-empts the
+  The result is success, or failure with the failing step and its reason. A request that failed after
+  its member was set (riveted or released, then a Retreat failed: the arm still stands at the
+  tower) is finished by the same request sent again: the ARS retreats from where the arm stands
+  and reports success, instead of refusing the member as already placed. Cancel pre-empts the
   branch (the arm's trajectory goal is canceled, the driver holds the arm), waits until the
   JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal CANCELED.
 * ``GroundCommand`` on ``ros_names.ground_command_service(ars)``: Start (lets requests run; the
@@ -210,11 +213,11 @@ class ArsNode(Node):
         if self.active is not None:
             a = self.active.request
             return f"busy: {self.ars} is running {a.request} for '{a.member_id}'"
-        return self.ctx.state.check_request(request)
+        return self.ctx.check_request(request)
 
     def _accepted(self, kind: str, handle: Any) -> None:
         request = request_of(kind, handle.request)
-        if self.ctx.state.check_request(request) is not None:
+        if self.ctx.check_request(request) is not None:
             # The CRS sends a request right after the model change that allows it (an affix after
             # the placement), and the MissionProgress carrying that change travels on its own
             # topic: the mission check is made on a progress message newer than the goal.
@@ -275,6 +278,7 @@ class ArsNode(Node):
         while goal.successor is not None:  # the job was taken over by a newer goal
             goal = goal.successor
         goal.parts_discarded = self.ctx.data.parts_discarded
+        self.ctx.end(goal.request, ok)
         goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
         with self._lock:
             if self.active is goal:
@@ -393,6 +397,7 @@ class ArsNode(Node):
         if goal is None:
             return
         goal.parts_discarded = self.ctx.data.parts_discarded
+        self.ctx.end(goal.request, state == "succeeded")
         goal.outcome = (state, reason)
         if self.active is goal:
             self.active = None

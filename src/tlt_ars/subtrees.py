@@ -18,7 +18,7 @@ Member                                 Open Grasp, Approach Dispenser, Settle, L
 Inspect Cross Frame /       30 / 35    Move To Inspection, Settle, Inspection (Inspection Passed, or
 Inspect Member                         Discard Part: Move To Discard, Release, Count Discard)
 Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Verify
-                                       Placement, Placed?, Retreat, Record Placed
+                                       Placement, Placed?, Record Placed, Retreat
 Add Member                  32         Load Rivet, Get Inspected Member, Place Member, Rivet Member
 Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Settle, Locate Dispenser Tag,
                                        Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
@@ -26,11 +26,17 @@ Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, S
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
 Rivet Member                37         Fire Rivet Gun, Release, Record Placed, Retreat (Retract Width
                                        for a diagonal)
-Foundation Rivet            38         Load Rivet, Place Rivet, Record Riveted
-Affix Member                39         Load Rivet, Place Rivet, Record Affixed
+Foundation Rivet            38         Load Rivet, Place Rivet (recording the rivet set)
+Affix Member                39         Load Rivet, Place Rivet (recording the member affixed)
 Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
-                                       Member (Fire Rivet Gun, Retreat)
+                                       Member (Fire Rivet Gun, Record Riveted / Affixed, Retreat)
+Finish <request>            -          Retreat (Retract Width for a diagonal): the tail of a request
+                                       that failed after its member was set, sent again
 ==========================  =========  ================================================================
+
+A member is recorded the moment it is set (the rivet fired, the cross frame released where it
+belongs), before the Retreat: a Retreat that fails leaves it set all the same, and the request is
+then finished, not run again (:class:`tlt_ars.context.ArsContext`).
 """
 
 from __future__ import annotations
@@ -108,7 +114,8 @@ def chosen(ctx: ArsContext, key: str, use: str = "pose", contact: bool = False) 
 
 class RecordMember(Action):
     """Record in the ARS's mission state that the request's member is ``what`` (placed, affixed,
-    riveted). Writes the mission state. SUCCESS at once; FAILURE without a member."""
+    riveted). Writes the mission state and ``RequestData.recorded``. SUCCESS at once; FAILURE
+    without a member."""
 
     def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
         super().__init__(name)
@@ -120,6 +127,7 @@ class RecordMember(Action):
             return self.fail("no member in this request")
         {"placed": self.ctx.state.mark_placed, "affixed": self.ctx.state.mark_affixed,
          "riveted": self.ctx.state.mark_riveted}[self.what](member.id)  # fmt: skip
+        self.ctx.data.recorded = self.what
         self.feedback_message = f"{member.id} {self.what}"
         return Status.SUCCESS
 
@@ -270,8 +278,8 @@ class SubtreeBuilder:
                 # grasp; from the pre-pose 0.7 m back they look at the floor in front of it.
                 self.measure_alignment("Verify Placement"),
                 PartAligned("Placed?", ctx),
-                self._move("Retreat", lambda: back_out(ctx, "place")),
                 RecordMember("Record Placed", ctx, "placed"),
+                self._move("Retreat", lambda: back_out(ctx, "place")),
             ],
         )
 
@@ -303,21 +311,28 @@ class SubtreeBuilder:
             ],
         )
 
-    def rivet_member(self, kind: str, *, holding: bool) -> Sequence:
-        """Fig. 37: fire the gun; with the member held, let go of it and record it placed; retreat;
-        for a diagonal, retract the width afterwards."""
+    def rivet_member(self, kind: str, *, record: str = "placed") -> Sequence:
+        """Fig. 37: fire the gun; with the member held (``record`` placed), let go of it; record
+        the member ``record``; retreat; for a diagonal, retract the width afterwards."""
         ctx = self.ctx
-        key = "place" if holding else "joint"
+        holding = record == "placed"
         children: list[py_trees.behaviour.Behaviour] = [FireRivetGun("Fire Rivet Gun", ctx)]
         if holding:
-            children += [release(ctx), RecordMember("Record Placed", ctx, "placed")]
-        children.append(self._move("Retreat", lambda: back_out(ctx, key)))
-        if kind == "diagonal":
-            children.append(SetWidth("Retract Width", ctx, "vertical"))
+            children.append(release(ctx))
+        children.append(RecordMember(f"Record {record.capitalize()}", ctx, record))
+        children += self._retreat(kind, "place" if holding else "joint")
         return _seq("Rivet Member", children)
 
-    def place_rivet(self, member: Member, joint: str) -> Sequence:
-        """Fig. 40: coarse approach to the target member's joint, then the rivet as in Fig. 37."""
+    def _retreat(self, kind: str, key: str) -> list[py_trees.behaviour.Behaviour]:
+        ctx = self.ctx
+        children = [self._move("Retreat", lambda: back_out(ctx, key))]
+        if kind == "diagonal":
+            children.append(SetWidth("Retract Width", ctx, "vertical"))
+        return children
+
+    def place_rivet(self, member: Member, joint: str, record: str) -> Sequence:
+        """Fig. 40: coarse approach to the target member's joint, then the rivet as in Fig. 37,
+        recording the member ``record`` (affixed, riveted)."""
         ctx = self.ctx
         return _seq(
             "Place Rivet",
@@ -334,7 +349,7 @@ class SubtreeBuilder:
                 # Nothing held to align first, so the gun would fire the moment the controller's
                 # path ends; a near vertical's affix rivet in a whole run missed its strut end.
                 Settle("Settle", ctx),
-                self.rivet_member("rivet", holding=False),
+                self.rivet_member("rivet", record=record),
             ],
         )
 
@@ -366,7 +381,7 @@ class SubtreeBuilder:
                     "Get Inspected Member", "Grab Member", "Inspect Member", member.dispenser, member.kind
                 ),
                 self.place_member(member),
-                self.rivet_member(member.kind, holding=True),
+                self.rivet_member(member.kind),
             ],
         )
 
@@ -377,8 +392,7 @@ class SubtreeBuilder:
             "Affix Member",
             [
                 self.load_rivet(rivet.dispenser),
-                self.place_rivet(member, rivet.joint),
-                RecordMember("Record Affixed", self.ctx, "affixed"),
+                self.place_rivet(member, rivet.joint, "affixed"),
             ],
         )
 
@@ -389,8 +403,7 @@ class SubtreeBuilder:
             "Foundation Rivet",
             [
                 self.load_rivet(member.dispenser),
-                self.place_rivet(member, joint),
-                RecordMember("Record Riveted", self.ctx, "riveted"),
+                self.place_rivet(member, joint, "riveted"),
             ],
         )
 
@@ -403,6 +416,15 @@ class SubtreeBuilder:
             "foundation_rivet": self.foundation_rivet,
         }
         return builders[request](member)
+
+    def finish(self, request: str, member: Member) -> Sequence:
+        """What is left of ``request`` for ``member`` after the member was set: the retreat from
+        the tower along the approach its fine move took (and, after a diagonal, the width
+        retracted). A Retreat that got part of the way starts from where the arm stands."""
+        title = " ".join(w.capitalize() for w in request.split("_"))
+        key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
+        kind = member.kind if request == "add_member" else ""
+        return _seq(f"Finish {title}", self._retreat(kind, key))
 
 
 def _rivet(member: Member, step: str):

@@ -204,11 +204,12 @@ class ArsTree:
         return job
 
     def install(self, job: Job) -> None:
-        self.ctx.begin(job.request)
+        finishing = self.ctx.begin(job.request)
         member = self.ctx.data.member
         if member is None:
             raise ValueError(f"unknown member '{job.request.member_id}'")
-        branch = self.builder.branch(job.request.request, member)
+        build = self.builder.finish if finishing else self.builder.branch
+        branch = build(job.request.request, member)
         for child in list(self.slot.children):
             self.slot.remove_child(child)
         self.slot.add_child(branch)

@@ -21,7 +21,7 @@ import dataclasses
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -398,12 +398,14 @@ class Stack:
             time.sleep(0.02)
         raise AssertionError(f"timed out waiting for {what}")
 
-    def send(self, request: str, feedback: list | None = None, **fields):
+    def send(self, request: str, feedback: list | Callable | None = None, **fields):
+        """Send a goal; its feedback goes into the list ``feedback``, or to the callable."""
         goal = ACTIONS[request].Goal(**fields)
         client = self.actions[request]
         self.wait(client.server_is_ready, f"{request} server")
+        on_feedback = feedback if callable(feedback) else getattr(feedback, "append", None)
         future = client.send_goal_async(
-            goal, feedback_callback=(lambda m: feedback.append(m.feedback)) if feedback is not None else None
+            goal, feedback_callback=(lambda m: on_feedback(m.feedback)) if on_feedback else None
         )
         handle = self.wait(future.done, "goal response") and future.result()
         self.handles.append(handle)

@@ -120,6 +120,51 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     assert np.linalg.norm(middle - origin - (joints[0] + joints[1]) / 2) < 0.005
 
 
+def test_a_request_failed_after_its_rivet_is_finished_by_the_same_request_sent_again(stack):
+    """A protective stop during the Retreat after the rivet fails the request with the diagonal
+    riveted and the arm at the tower. The CRS's retry of the same request (after its fault is
+    cleared) is not refused as already placed: the ARS retreats, retracts the width and reports
+    success, without another rivet or part."""
+    state, ctx = stack.ars.ctx.state, stack.ars.ctx
+    member = "bay1/diagonal/face_y0"
+    planning_s = ctx.config.timeouts["planning_s"]
+    ctx.config.timeouts["planning_s"] = 3.0  # how long each Retreat attempt waits for the arm
+    stopped = []
+
+    def stop_in_retreat(feedback) -> None:
+        if not stopped and "/Rivet Member/Retreat/" in feedback.step and "Execute" in feedback.step:
+            stopped.append(feedback.step)
+            stack.emulator.call("protective_stop", "the test's protective stop during the Retreat")
+
+    try:
+        first = stack.result(add_member(stack, member, DIAGONAL, stop_in_retreat), timeout=180)
+    finally:
+        ctx.config.timeouts["planning_s"] = planning_s
+    assert stopped, "the request never reached its Retreat"
+    assert first.status == GoalStatus.STATUS_ABORTED
+    assert "Rivet Member/Retreat" in first.result.reason, first.result.reason
+    assert state.is_placed(member)
+    fired, parts = len(stack.gpio.fired), state.remaining["diagonal_dispenser_x"]
+    rivets = state.remaining["rivet_dispenser_x"]
+
+    stack.emulator.call("unlock_protective_stop")
+    feedback = []
+    again = stack.result(add_member(stack, member, DIAGONAL, feedback))
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
+    assert again.result.parts_discarded == 0
+    steps = {f.step.split("/")[0] for f in feedback}
+    assert steps == {"Finish Add Member"}
+    assert len(stack.gpio.fired) == fired  # no second rivet
+    assert state.remaining["diagonal_dispenser_x"] == parts and state.remaining["rivet_dispenser_x"] == rivets
+    assert stack.width() == pytest.approx(0.0, abs=0.002)  # retracted after the retreat
+    tool = stack.world.tool()
+    retreat = stack.ars.ctx.data.targets["place"].pre_pose
+    assert pose_error(tool, retreat)[0] < 0.01  # at the pre-pose of its placement
+    # Finished: the request is now an ordinary repeat.
+    third = stack.result(add_member(stack, member, DIAGONAL), 10)
+    assert "already placed" in third.result.reason
+
+
 def test_empty_dispenser_fails_the_request_with_that_reason(stack):
     state = stack.ars.ctx.state
     state.remaining["vertical_dispenser_x"] = 1  # one part left, and it fails inspection
