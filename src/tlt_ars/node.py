@@ -169,8 +169,13 @@ class ArsNode(Node):
         self.active: ActiveGoal | None = None
         self._goals: dict[bytes, ActiveGoal] = {}
         self.tree = ArsTree(self.ctx, self.planner, lambda: self.started)
-        self.status = TreeStatusPublisher(self, self.ars, topic=ros_names.tree_status_topic(self.ars))
-        self.status.attach(self.tree.tree, period_s=1.0 / config.raw["status_rate_hz"])
+        self.status = TreeStatusPublisher(
+            self,
+            self.ars,
+            topic=ros_names.tree_status_topic(self.ars),
+            period_s=1.0 / config.raw["status_rate_hz"],
+        )
+        self.status.attach(self.tree.tree)
         self.tree.on_change.append(self.status.refresh)
 
         goals = ReentrantCallbackGroup()

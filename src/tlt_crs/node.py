@@ -84,9 +84,9 @@ class CrsNode(Node):
         # for its visitors (about 10 ms for a 10-bay tree), which the guards are there to avoid.
         self.tick_count = 0
         self.shape = TreeShape.of(self.root)
-        self.status_publisher = TreeStatusPublisher(self, "crs", topic=ros_names.tree_status_topic("crs"))
-        self._status_period = 1.0 / config.status_rate_hz
-        self._status_due = 0.0
+        self.status_publisher = TreeStatusPublisher(
+            self, "crs", topic=ros_names.tree_status_topic("crs"), period_s=1.0 / config.status_rate_hz
+        )
         self.finished = False
         # Called at the end of each tick, under the context's lock (the ground bridge notes steps).
         self.tick_listeners: list[Callable[[], None]] = []
@@ -141,10 +141,7 @@ class CrsNode(Node):
                     listener()
                 except Exception:  # a listener's bug must not stop the build
                     _log.exception("tick listener failed")
-            now = self.ctx.ros_seconds()
-            if now >= self._status_due:
-                self._status_due = now + self._status_period
-                self.status_publisher.publish(self.shape, self.tick_count)
+            self.status_publisher.publish_due(self.shape, self.tick_count)
         if self._model_changed:
             self._model_changed = False
             self.publish_progress()

@@ -552,9 +552,13 @@ class TopicData(Action):
 class TreeStatusPublisher:
     """Publishes a tree's encoded status as ``tlt_interfaces/TreeStatus`` messages (one per part).
 
-    ``attach(tree)`` publishes after every tick of a ``py_trees.trees.BehaviourTree``, with tick
-    count ``tree.count + 1`` (the first tick is 1). Call ``refresh()`` after changing the tree's
-    structure so the shape hash and node list follow it.
+    With ``period_s`` a status goes out at most once per period, after the first tick due (on the
+    node's clock): the tree ticks faster than anyone watches it, and each status costs an encoding
+    here and a message at every subscriber. ``publish_due(shape, tick_count)`` is that, for a tree
+    ticked by hand; ``attach(tree)`` calls it after every tick of a
+    ``py_trees.trees.BehaviourTree``, with tick count ``tree.count + 1`` (the first tick is 1).
+    Call ``refresh()`` after changing the attached tree's structure so the shape hash and node list
+    follow it.
     """
 
     def __init__(
@@ -563,6 +567,7 @@ class TreeStatusPublisher:
         agent: str,
         *,
         topic: str = "tree_status",
+        period_s: float = 0.0,
         max_status_bytes: int = DEFAULT_MAX_STATUS_BYTES,
         qos: QoSProfile | int = 10,
     ) -> None:
@@ -570,10 +575,13 @@ class TreeStatusPublisher:
 
         self.node = node
         self.agent = agent
+        self.period_s = period_s
         self.max_status_bytes = max_status_bytes
         self.publisher = node.create_publisher(TreeStatus, topic, qos)
         self.shape: TreeShape | None = None
         self._root: py_trees.behaviour.Behaviour | None = None
+        self._seconds = node_clock(node)
+        self._due = float("-inf")
 
     def publish(self, shape: TreeShape, tick_count: int) -> int:
         """Publish every part of ``shape``'s current status; return how many were sent."""
@@ -585,27 +593,24 @@ class TreeStatusPublisher:
             self.publisher.publish(msg)
         return len(parts)
 
+    def publish_due(self, shape: TreeShape, tick_count: int) -> int:
+        """:meth:`publish` when a period has passed since the last one, else nothing (0)."""
+        now = self._seconds()
+        # A clock that went back (sim time restarted) starts the period again.
+        if now < self._due and self._due - now <= self.period_s:
+            return 0
+        self._due = now + self.period_s
+        return self.publish(shape, tick_count)
+
     def refresh(self) -> None:
         if self._root is not None:
             self.shape = TreeShape.of(self._root)
 
-    def attach(self, tree: py_trees.trees.BehaviourTree, period_s: float = 0.0) -> None:
-        """Publish after every tick of ``tree``, or with ``period_s``, after the first tick at least
-        that long (on the node's clock) after the last publication."""
+    def attach(self, tree: py_trees.trees.BehaviourTree) -> None:
+        """Publish (when due) after every tick of ``tree``."""
         self._root = tree.root
         self.refresh()
-        seconds = node_clock(self.node)
-        due: list[float] = [float("-inf")]
-
-        def after_tick(t: py_trees.trees.BehaviourTree) -> None:
-            now = seconds()
-            # A clock that went back (sim time restarted) starts the period again.
-            if now < due[0] and due[0] - now <= period_s:
-                return
-            due[0] = now + period_s
-            self.publish(self.shape, t.count + 1)
-
-        tree.add_post_tick_handler(after_tick)
+        tree.add_post_tick_handler(lambda t: self.publish_due(self.shape, t.count + 1))
 
 
 __all__ = [

@@ -502,10 +502,10 @@ def test_tree_status_with_a_period_is_published_after_the_first_tick_that_is_due
     node.set_parameters([Parameter("use_sim_time", value=True)])
     clock = node.get_clock()
     tree = py_trees.trees.BehaviourTree(py_trees.behaviours.Running("busy"))
-    publisher = TreeStatusPublisher(node, "ars_x", topic="ars_x/period_status")
+    publisher = TreeStatusPublisher(node, "ars_x", topic="ars_x/period_status", period_s=0.15)
     sent: list[int] = []
     publisher.publish = lambda shape, tick_count: sent.append(tick_count) or 1
-    publisher.attach(tree, period_s=0.15)
+    publisher.attach(tree)
     for step in range(10):  # ticks at 0.1 s of sim time
         clock.set_ros_time_override(Time(seconds=100.0 + 0.1 * step))
         tree.tick()
