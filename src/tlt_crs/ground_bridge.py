@@ -70,7 +70,8 @@ class GroundBridge:
             link.send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
         except Exception as exc:
             _log.warning("CRS_UP not sent to the ground: %s", exc)
-        self._latest: dict[str, Any] = {}
+        self._own: dict[str, Any] = {}  # topic -> latest message, of the topics subscribed here
+        self._cached: set[str] = set()  # topics read from the CRS's topic cache
         self._watch_devices()
         # Telemetry has its own group: in the node's default one it waited behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status never went out.
@@ -120,32 +121,41 @@ class GroundBridge:
         self.node.commands.submit(command.name, command.params, on_ack)
 
     def _watch_devices(self) -> None:
-        """Keep the latest state of every mechanism the housekeeping packets report."""
+        """Keep the latest state of every mechanism the housekeeping packets report. The lifter's
+        and the grippers' states come from the CRS's topic cache, which the tree reads too: one
+        subscription per topic in the process (each message wakes the CRS's executor)."""
         from sensor_msgs.msg import JointState
-        from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, LifterState
+        from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, LifterState, TreeStatus
 
-        topics = [
+        cache = self.node.ctx.cache
+        for msg_type, topic in (
             (LifterState, ros_names.state_topic(ros_names.LIFTER)),
             (GripperState, ros_names.state_topic(ros_names.TOP_GRIPPERS)),
             (GripperState, ros_names.state_topic(ros_names.ACTIVE_GRIPPERS)),
-        ]
+        ):
+            cache.watch(topic, msg_type)
+            self._cached.add(topic)
         for ars in ros_names.ARS_AGENTS:
-            topics += [
+            for msg_type, topic in (
                 (EndEffectorState, ros_names.state_topic(ros_names.ee(ars))),
                 (JointState, ros_names.joint_states_topic(ros_names.ur(ars))),
                 (HardwareStatus, ros_names.hardware_status_topic(ros_names.ur(ars))),
-            ]
+            ):
+                self.node.create_subscription(
+                    msg_type, topic, lambda m, t=topic: self._own.__setitem__(t, m), 10
+                )
         # The ARSs' encoded tree statuses go to the ground as they come, part by part.
-        from tlt_interfaces.msg import TreeStatus
-
         for ars in ros_names.ARS_AGENTS:
             self.node.create_subscription(
                 TreeStatus, ros_names.tree_status_topic(ars), self.forward_tree_status, 10
             )
-        for msg_type, topic in topics:
-            self.node.create_subscription(
-                msg_type, topic, lambda m, t=topic: self._latest.__setitem__(t, m), 10
-            )
+
+    def _latest(self, topic: str) -> Any:
+        """The newest message on a device topic, or None before the first."""
+        if topic in self._cached:
+            entry = self.node.ctx.cache.latest(topic)
+            return None if entry is None else entry[0]
+        return self._own.get(topic)
 
     def _send(self, kind: str, values: dict[str, Any]) -> None:
         try:
@@ -154,7 +164,7 @@ class GroundBridge:
             _log.warning("%s not sent: %s", kind, exc)
 
     def send_lifter(self) -> None:
-        msg = self._latest.get(ros_names.state_topic(ros_names.LIFTER))
+        msg = self._latest(ros_names.state_topic(ros_names.LIFTER))
         if msg is None:
             return
         switches = sum(1 << i for i, pressed in enumerate(msg.limit_switches) if pressed)
@@ -172,9 +182,9 @@ class GroundBridge:
         )
 
     def send_grippers(self) -> None:
-        top = self._latest.get(ros_names.state_topic(ros_names.TOP_GRIPPERS))
-        active = self._latest.get(ros_names.state_topic(ros_names.ACTIVE_GRIPPERS))
-        lifter = self._latest.get(ros_names.state_topic(ros_names.LIFTER))
+        top = self._latest(ros_names.state_topic(ros_names.TOP_GRIPPERS))
+        active = self._latest(ros_names.state_topic(ros_names.ACTIVE_GRIPPERS))
+        lifter = self._latest(ros_names.state_topic(ros_names.LIFTER))
         if top is None and active is None:
             return
 
@@ -196,7 +206,7 @@ class GroundBridge:
 
     def send_end_effectors(self) -> None:
         for ars in ros_names.ARS_AGENTS:
-            msg = self._latest.get(ros_names.state_topic(ros_names.ee(ars)))
+            msg = self._latest(ros_names.state_topic(ros_names.ee(ars)))
             if msg is None or len(msg.position) < 3:
                 continue
             self._send(
@@ -216,10 +226,10 @@ class GroundBridge:
 
     def send_arm_joints(self) -> None:
         for ars in ros_names.ARS_AGENTS:
-            joints = self._latest.get(ros_names.joint_states_topic(ros_names.ur(ars)))
+            joints = self._latest(ros_names.joint_states_topic(ros_names.ur(ars)))
             if joints is None or len(joints.position) != 6:
                 continue
-            status = self._latest.get(ros_names.hardware_status_topic(ros_names.ur(ars)))
+            status = self._latest(ros_names.hardware_status_topic(ros_names.ur(ars)))
             self._send(
                 "hk_arm_joints",
                 {
