@@ -30,6 +30,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from tlt_common.ccsds.auth import KeyRing
@@ -434,6 +435,16 @@ class SystemRun:
             self.link.poll(0.2)
 
     # -- the run's recording ------------------------------------------------------------------
+    def last_ground_truth(self) -> dict[str, np.ndarray]:
+        """Where the twin last had each object (``tower``, ``part/<dispenser>/<i>``, ...), world
+        position, from the recording's ``/twin/ground_truth``."""
+        last: dict[str, np.ndarray] = {}
+        for msg in self.recorded("/twin/ground_truth"):
+            for tf in msg.transforms:
+                t = tf.transform.translation
+                last[tf.child_frame_id] = np.array([t.x, t.y, t.z])
+        return last
+
     def recorded(self, topic: str) -> list[Any]:
         """The decoded messages of ``topic`` in the run's MCAP recording (complete once the
         launcher has stopped: the recorder closes the file on its way out)."""

@@ -120,10 +120,7 @@ def test_a_defective_vertical_is_replaced_through_a_crs_restart_and_placed_once(
 
     # Scenario 4 in the twin: the replacement stands at the vertical's place, the defective part
     # lies elsewhere.
-    last = {}
-    for msg in run.recorded("/twin/ground_truth"):
-        t = msg.transform.translation
-        last[msg.child_frame_id] = np.array([t.x, t.y, t.z])
+    last = run.last_ground_truth()
     tower = last["tower"]
     ends = [tower + np.asarray(p) for _, p in mission.member(MEMBER).joints]
     place = np.array([*ends, (ends[0] + ends[1]) / 2])

@@ -96,10 +96,7 @@ def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
         assert run.stop() == 0
 
     # In the twin: every strut and the cross frame at its place on the tower.
-    last: dict[str, np.ndarray] = {}
-    for msg in run.recorded("/twin/ground_truth"):
-        t = msg.transform.translation
-        last[msg.child_frame_id] = np.array([t.x, t.y, t.z])
+    last = run.last_ground_truth()
     tower = last["tower"]
     used: set[str] = set()
     for member in mission.members:

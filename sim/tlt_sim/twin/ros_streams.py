@@ -11,10 +11,12 @@ Topics (names in :mod:`tlt_sim.twin.topics`):
   ``rate_hz`` frames per simulated second, and only the images someone subscribes to;
 * ``/cameras/segmentation_labels`` (``std_msgs/String``, transient local): JSON
   ``{"instances": [...], "classes": [...]}``, instance id -> geom instance name and its class;
-* ``/twin/ground_truth`` (``geometry_msgs/TransformStamped``, one message per object, while
-  subscribed, ``ground_truth_rate_hz`` per simulated second): ``header.frame_id`` ``world``,
-  ``child_frame_id`` the payload (``tower``), every part body (``part/<dispenser>/<index>``), each
-  EE (``ars_x/ee``) and each camera's optical frame (``<camera>_optical``).
+* ``/twin/ground_truth`` (``tlt_interfaces/TransformArray``, while subscribed,
+  ``ground_truth_rate_hz`` per simulated second): one ``TransformStamped`` per object, all of one
+  instant, ``header.frame_id`` ``world``, ``child_frame_id`` the payload (``tower``), every part
+  body (``part/<dispenser>/<index>``), each EE (``ars_x/ee``) and each camera's optical frame
+  (``<camera>_optical``). One message per publication: one per object (270 a simulated second)
+  cost the twin and every subscriber (the recorder) a callback each.
 
 All stamps are sim time. Everything here runs on the simulation thread (the Scene is not
 thread-safe).
@@ -32,6 +34,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
+from tlt_interfaces.msg import TransformArray
 
 from tlt_common.stamps import set_stamp
 from tlt_sim.model import names
@@ -145,7 +148,7 @@ class GroundTruth:
     def __init__(self, node: Node, scene: Scene, rate_hz: float) -> None:
         self.scene = scene
         self.period = 1.0 / rate_hz
-        self._pub = node.create_publisher(TransformStamped, topics.GROUND_TRUTH, 100)
+        self._pub = node.create_publisher(TransformArray, topics.GROUND_TRUTH, 10)
         self._next = 0.0
 
     def poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -164,6 +167,7 @@ class GroundTruth:
         if self._pub.get_subscription_count() == 0 or t + 1e-9 < self._next:
             return
         self._next = _next_due(self._next, self.period, t)
+        out = TransformArray()
         for name, (pos, rot) in self.poses().items():
             msg = TransformStamped()
             set_stamp(msg.header.stamp, t)
@@ -174,7 +178,8 @@ class GroundTruth:
             w, x, y, z = (float(v) for v in mat_to_quat(rot))
             q = msg.transform.rotation
             q.w, q.x, q.y, q.z = w, x, y, z
-            self._pub.publish(msg)
+            out.transforms.append(msg)
+        self._pub.publish(out)
 
 
 __all__ = ["IMAGE_STREAMS", "CameraStreams", "ClockPublisher", "GroundTruth"]

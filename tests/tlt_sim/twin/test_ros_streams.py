@@ -16,6 +16,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
+from tlt_interfaces.msg import TransformArray
 from tlt_sim.twin import topics
 from tlt_sim.twin.ros_streams import CameraStreams, GroundTruth
 
@@ -87,8 +88,13 @@ def test_ground_truth_poses_match_the_model(make_twin, ros):
     twin = make_twin()
     truth = GroundTruth(twin_node, twin.scene, 10.0)
     poses: dict[str, TransformStamped] = {}
-    probe.create_subscription(TransformStamped, topics.GROUND_TRUTH,
-                              lambda m: poses.__setitem__(m.child_frame_id, m), 200)
+    messages: list[TransformArray] = []
+
+    def take(msg: TransformArray) -> None:
+        messages.append(msg)
+        poses.update((tf.child_frame_id, tf) for tf in msg.transforms)
+
+    probe.create_subscription(TransformArray, topics.GROUND_TRUTH, take, 10)
     body = next(iter(twin.scene.info.parts.values())).body
     _run(twin, [truth], executor, lambda: body in poses and "ars_y/d405_b_optical" in poses)
     expected = truth.poses()
@@ -97,3 +103,6 @@ def test_ground_truth_poses_match_the_model(make_twin, ros):
     got = poses[body].transform.translation
     assert [got.x, got.y, got.z] == pytest.approx(list(pos), abs=1e-6)
     assert poses["tower"].header.frame_id == "world"
+    # All objects of one instant in one message.
+    assert len(messages[0].transforms) == len(expected)
+    assert len({tf.header.stamp.nanosec for tf in messages[0].transforms}) == 1
