@@ -11,7 +11,11 @@ Two figures of the issue "whole system", read from one run of the main job:
   planned durations of the trajectories that started in the bay and succeeded: the ARSs' arm
   motions are time-optimal along their checked paths (``tlt_ars.planning.time_parameterisation``),
   the lifter's run at the mission's ``lifter_speed``, the grippers' and end effectors' take the time
-  their configuration gives them. The ratio of the bay's sim time to that bound is the time lost
+  their configuration gives them. A joint commanded by position over ``/<component>/position_command``
+  (an end effector's width: 16 s for a diagonal's 0.25 m at 15 mm/s) has no trajectory record: each
+  change of its command counts as a move at the joint's ``max_velocity`` in
+  ``config/hardware/<component>.yaml`` from the previous command (from 0, where calibration leaves
+  it, for the first). The ratio of the bay's sim time to that bound is the time lost
   to waiting, polling, inspecting and planning (goal <= 1.25). Also printed: the time anything
   was moving (two arms moving at once count once), the bound by component, and the trajectories
   that did not succeed, whose time is lost.
@@ -27,6 +31,7 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import subprocess
 import sys
@@ -39,6 +44,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 TOPIC_SUFFIX = "/executed_trajectories"
+COMMAND_SUFFIX = "/position_command"
 WALL_GOAL_S = 600.0  # a 2-bay tower
 RATIO_GOAL = 1.25
 
@@ -106,16 +112,48 @@ def account(phases: Iterable, motions: Iterable[Motion]) -> list[PhaseMotion]:
     return out
 
 
+@functools.cache
+def group_speeds(component: str) -> list[float] | None:
+    """The ``max_velocity`` of each joint of ``component``'s group position command, in command
+    order, from its hardware file; None when the file gives none."""
+    import yaml
+
+    path = ROOT / "config" / "hardware" / f"{component}.yaml"
+    if not path.is_file():
+        return None
+    joints = yaml.safe_load(path.read_text()).get("joints", [])
+    joints = [j for j in joints if j.get("controller") == "group_position"]
+    if not joints or any("max_velocity" not in j for j in joints):
+        return None
+    return [float(j["max_velocity"]) for j in joints]
+
+
 def read_motions(recording: Path) -> list[Motion]:
-    """Every ExecutedTrajectory in a recording."""
+    """Every ExecutedTrajectory in a recording, and every change of a group position command whose
+    joints' speeds the hardware files give (component ``<component> position``)."""
+    from mcap.reader import make_reader
     from tlt_interfaces.msg import ExecutedTrajectory
 
     from tlt_common.recording.reading import read_messages
     from tlt_common.stamps import stamp_seconds
 
+    with open(recording, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    topics = [c.topic for c in summary.channels.values() if c.topic.endswith((TOPIC_SUFFIX, COMMAND_SUFFIX))]
     motions = []
-    for _schema, channel, _message, msg in read_messages(recording):
-        if not channel.topic.endswith(TOPIC_SUFFIX):
+    commanded: dict[str, list[float]] = {}
+    for _schema, channel, message, msg in read_messages(recording, topics=topics):
+        if channel.topic.endswith(COMMAND_SUFFIX):
+            component = channel.topic[1:-len(COMMAND_SUFFIX)]
+            speeds = group_speeds(component)
+            if speeds is None or len(msg.data) != len(speeds):
+                continue
+            before = commanded.get(component, [0.0] * len(speeds))
+            commanded[component] = list(msg.data)
+            planned = max(abs(b - a) / v for a, b, v in zip(before, msg.data, speeds, strict=True))
+            if planned > 0.0:  # the same command again (a repeat) moves nothing
+                started = message.log_time * 1e-9
+                motions.append(Motion(f"{component} position", started, started + planned, planned, True))
             continue
         motions.append(Motion(
             component=channel.topic[1:-len(TOPIC_SUFFIX)],

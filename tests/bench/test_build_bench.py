@@ -101,6 +101,30 @@ def test_each_bay_is_held_against_the_motions_that_started_in_it(bench, run_dir,
     assert any(line.startswith(build) for line in lines), lines
 
 
+def test_a_changed_width_command_counts_as_a_move_at_the_joints_configured_speed(bench, tmp_path):
+    """ee_x's width (config/hardware/ee_x.yaml: max_velocity 0.015 m/s) is commanded by position,
+    with no trajectory record: 0 -> 0.25 m is 16.7 s, a repeated command nothing, back 16.7 s."""
+    from std_msgs.msg import Float64MultiArray
+
+    writer = McapRecordingWriter(tmp_path / "recording.mcap", compression="none")
+    kind = "std_msgs/msg/Float64MultiArray"
+    definition = MessageDefinitionSource().full_text(kind)
+    channel = writer.add_channel("/ee_x/position_command", kind, definition, "")
+    unknown = writer.add_channel("/nothing/position_command", kind, definition, "")  # no hardware file
+    for t, width in ((14.0, 0.25), (15.0, 0.25), (35.0, 0.0)):
+        stamp = int(t * 1e9)
+        writer.write(channel, serialize_message(Float64MultiArray(data=[width])), stamp, stamp)
+        writer.write(unknown, serialize_message(Float64MultiArray(data=[width])), stamp, stamp)
+    writer.close()
+    motions = bench.read_motions(tmp_path / "recording.mcap")
+    move = 0.25 / 0.015
+    assert [(m.component, m.started, m.planned_s) for m in motions] == [
+        ("ee_x position", 14.0, pytest.approx(move)),
+        ("ee_x position", 35.0, pytest.approx(move)),
+    ]
+    assert all(m.succeeded and m.ended == pytest.approx(m.started + move) for m in motions)
+
+
 def test_a_run_without_its_recording_is_refused_with_the_file_named(bench, tmp_path, capsys):
     _archive(tmp_path / "gsw_archive.sqlite")
     assert bench.report(tmp_path) == 1
