@@ -51,7 +51,6 @@ import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.node import Node
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
 from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand
@@ -71,6 +70,7 @@ from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
 
 ACTION_TYPES = {
@@ -130,7 +130,7 @@ def _coarse_poses_for_mission(config: ArsConfig, scene: Any) -> ArsConfig:
     return config.with_dispenser_joints(moved)
 
 
-class ArsNode(Node):
+class ArsNode(LeanNode):
     """One ARS; see the module docstring."""
 
     def __init__(self, config: ArsConfig, *, context: Any = None, check_reach: bool | None = None) -> None:

@@ -36,7 +36,6 @@ from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.node import Node
 
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
@@ -44,6 +43,7 @@ from tlt_common.bt.status_codec import TreeShape
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
 from tlt_crs.behaviours.inspection import serve_inspect_part
@@ -58,7 +58,7 @@ LINK_CONFIG = Path(__file__).resolve().parents[2] / "config" / "ccsds" / "link.y
 _log = logging.getLogger("tlt_crs")
 
 
-class CrsNode(Node):
+class CrsNode(LeanNode):
     """The CRS node around one context and tree (built from ``config`` and ``mission``)."""
 
     def __init__(

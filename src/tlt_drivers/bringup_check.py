@@ -20,7 +20,6 @@ from typing import Any
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -31,6 +30,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.lean_node import LeanNode
 from tlt_common.stamps import set_stamp
 
 COMPONENTS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
@@ -49,7 +49,7 @@ class Result:
     seconds: float
 
 
-class BringupCheck(Node):
+class BringupCheck(LeanNode):
     """Runs the checks; ROS callbacks are served by an executor thread."""
 
     def __init__(self, timeout_s: float) -> None:

@@ -45,7 +45,6 @@ from geometry_msgs.msg import Pose
 from rclpy._rclpy_pybind11 import InvalidHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
 from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
@@ -54,6 +53,7 @@ from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.stamps import set_stamp
 from tlt_vision import inspection
@@ -95,7 +95,7 @@ def _in_world(e: PoseEstimate, camera_pose: np.ndarray) -> PoseEstimate:
     )
 
 
-class VisionNode(Node):
+class VisionNode(LeanNode):
     """The vision services (see the module docstring). ``close()`` before ``destroy_node()``."""
 
     def __init__(

@@ -127,11 +127,10 @@ def main(argv: list[str] | None = None) -> int:
     stop: list[int] = []
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, _frame: stop.append(signum))
-    from rclpy.node import Node
-
+    from tlt_common.lean_node import LeanNode
     from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
 
-    node = Node("twin")
+    node = LeanNode("twin")
     ready = Path(run_dir) / READY_FILE
     try:
         clock = ClockPublisher(node)

@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidHandle
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
+from tlt_common.lean_node import LeanNode
 from tlt_common.recording.header_stamp import header_stamp_ns
 from tlt_common.recording.mcap_writer import McapRecordingWriter
 from tlt_common.recording.message_definitions import (
@@ -69,7 +69,7 @@ class RecorderStats:
     skipped: dict[str, str] = field(default_factory=dict)
 
 
-class TopicRecorder(Node):
+class TopicRecorder(LeanNode):
     """Subscribes to every accepted topic and writes its messages through ``writer``."""
 
     def __init__(

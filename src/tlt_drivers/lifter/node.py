@@ -29,7 +29,6 @@ from pathlib import Path
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.task import Future
 from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import HardwareStatus, LifterState
@@ -38,6 +37,7 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
@@ -72,7 +72,7 @@ class _Goal:
     done: Future
 
 
-class LifterNode(Node):
+class LifterNode(LeanNode):
     """The driver node. ``hw`` is the hardware interface, ``controller`` the trajectory controller."""
 
     def __init__(self, config: LifterConfig, *, node_name: str = "lifter", **node_kwargs) -> None:

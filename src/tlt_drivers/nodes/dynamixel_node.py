@@ -10,13 +10,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from rclpy.node import Node
-
+from tlt_common.lean_node import LeanNode
 from tlt_drivers.dynamixel.chain_interface import DynamixelChainInterface
 from tlt_drivers.nodes.driver_loop import DriverLoop
 
 
-class DynamixelDriverNode(Node):
+class DynamixelDriverNode(LeanNode):
     """A node owning one Dynamixel chain described by a validated chain config."""
 
     def __init__(

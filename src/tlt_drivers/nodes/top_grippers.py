@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from rclpy.node import Node
 from tlt_interfaces.msg import GripperState
 
 from tlt_common import ros_names
+from tlt_common.lean_node import LeanNode
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
 from tlt_drivers.mightyzap.config import load_mightyzap
@@ -21,7 +21,7 @@ from tlt_drivers.nodes.driver_loop import DriverLoop
 from tlt_drivers.nodes.node_main import run_node
 
 
-class TopGrippersNode(Node):
+class TopGrippersNode(LeanNode):
     def __init__(self, config: dict[str, Any], *, start: bool = True, context=None) -> None:
         super().__init__(config["component"], context=context)
         self.config = config

@@ -33,7 +33,6 @@ from pathlib import Path
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from tlt_interfaces.msg import HardwareStatus
@@ -41,6 +40,7 @@ from tlt_interfaces.msg import HardwareStatus
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
@@ -51,7 +51,7 @@ from .hardware import URHardware
 from .rtde_link import LinkDown
 
 
-class URNode(Node):
+class URNode(LeanNode):
     """The driver node of one arm; ``hw`` is its :class:`URHardware`."""
 
     def __init__(self, config: URConfig, *, hardware: URHardware | None = None, **node_kwargs) -> None:
