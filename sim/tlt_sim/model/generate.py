@@ -792,7 +792,16 @@ class _Builder:
     def _end_effector(self, arm: str, ee: ET.Element) -> None:
         e = self.edu["end_effector"]
         s, depth, g = e["grip_spacing"], e["grasp_depth"], e["rivet_gun_offset"]
-        _sub(ee, "geom", class_="arm", type="cylinder", size=(0.045, 0.02), pos=(0, 0, 0.02), mass=0.4)
+        _sub(
+            ee,
+            "geom",
+            name=f"{arm}/ee/hub",
+            class_="arm",
+            type="cylinder",
+            size=(0.045, 0.02),
+            pos=(0, 0, 0.02),
+            mass=0.4,
+        )
         _sub(
             ee,
             "geom",
@@ -829,6 +838,7 @@ class _Builder:
         _sub(
             body,
             "geom",
+            name=f"{arm}/gripper_{side}/body",
             class_="arm",
             type="box",
             size=(0.025, 0.03, (depth - 0.08) / 2),
@@ -840,6 +850,7 @@ class _Builder:
         _sub(
             body,
             "geom",
+            name=f"{arm}/gripper_{side}/finger",
             class_="arm",
             type="box",
             size=(0.012, 0.006, 0.03),
@@ -890,6 +901,7 @@ class _Builder:
         _sub(
             body,
             "geom",
+            name=f"{arm}/rivet_gun_{side}/bracket",
             class_="arm",
             type="box",
             size=(abs(gx) / 2 + 0.02, 0.01, 0.01),
@@ -916,6 +928,7 @@ class _Builder:
         _sub(
             body,
             "geom",
+            name=f"{arm}/d405_{side}/housing",
             class_="arm",
             type="box",
             size=(0.021, 0.021, 0.0115),

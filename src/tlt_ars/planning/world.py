@@ -80,6 +80,15 @@ _UPRIGHTS = {
     "above_top_slot": Field("float", minimum=0.0),
 }
 _RACK = {"size": _positive_vec(2), "top": Field("float"), "uprights": opt("dict", None, schema=_UPRIGHTS)}
+# The post that holds a dispenser's AprilTag: a square post of side `section` on the dispenser's
+# -x axis, `beyond_part` out from the stowed parts' end (a feeder's: its tray's side), rising
+# `above_top_slot` over the top slot of a full rack, or `feeder_height` for a rivet feeder.
+_TAG_POST = {
+    "beyond_part": Field("float", minimum=0.0),
+    "section": Field("float", minimum=0.001),
+    "above_top_slot": Field("float", minimum=0.0),
+    "feeder_height": Field("float", minimum=0.001),
+}
 
 SCHEMA = {
     "format": Field("int", choices=(1,)),
@@ -113,6 +122,7 @@ SCHEMA = {
             "vertical": Field("dict", schema=_RACK),
             "diagonal": Field("dict", schema=_RACK),
             "rivet": Field("dict", schema=_RACK),
+            "tag_post": Field("dict", schema=_TAG_POST),
             "first_slot_height": Field("float"),
             "slot_pitch": Field("float", minimum=0.0),
         },
@@ -307,7 +317,28 @@ def dispenser_shapes(cfg: SceneConfig, mission: Any) -> list[Shape]:
         pose[2, 3] = floor_z + height / 2
         out.append(Box(f"dispenser/{name}", pose, (rack["size"][0], rack["size"][1], height)))
         out += _upright_shapes(cfg, mission, name, disp, frame)
+    for name, disp in mission.dispensers.items():
+        out.append(tag_post_shape(cfg, mission, name, disp))
     return out
+
+
+def tag_post_shape(cfg: SceneConfig, mission: Any, name: str, dispenser: Any) -> Box:
+    """The post that holds ``dispenser``'s AprilTag (full dispenser), from the dispenser's origin
+    up. It stands where the D405 looks to locate the dispenser: a joint-space path to a coarse pose
+    that did not know of it ran an end effector's gun bracket into it and overloaded the width
+    servo in a whole-system run."""
+    racks = cfg.raw["dispensers"]
+    spec = racks["tag_post"]
+    kind = dispenser.part_kind
+    if kind == "rivet":
+        extent, height = racks["rivet"]["size"][0], spec["feeder_height"]
+    else:
+        extent = mission.bay_width if kind == "cross_frame" else mission.strut_lengths[kind]
+        top = racks["first_slot_height"] + max(dispenser.count - 1, 0) * racks["slot_pitch"]
+        height = top + spec["above_top_slot"]
+    x = -(extent / 2 + spec["beyond_part"])
+    pose = dispenser_frame(cfg, dispenser) @ pose_matrix((x, 0.0, height / 2))
+    return Box(f"dispenser/{name}/tag_post", pose, (spec["section"], spec["section"], height))
 
 
 def rack_upright_positions(cfg: SceneConfig, mission: Any, dispenser: Any) -> list[np.ndarray]:

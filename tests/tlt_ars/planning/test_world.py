@@ -78,8 +78,10 @@ def test_static_world(cfg, mission):
     groups = static_shapes(cfg, mission)
     posts = [s for s in groups["lifter"] if s.name.startswith("lifter/post")]
     assert len(posts) == 4 and all(isinstance(p, Capsule) for p in posts)
-    bodies = {s.name for s in groups["dispensers"] if "/upright_" not in s.name}
+    bodies = {s.name for s in groups["dispensers"] if "/upright_" not in s.name and "/tag_post" not in s.name}
     assert bodies == {f"dispenser/{n}" for n in mission.dispensers}
+    posts = {s.name for s in groups["dispensers"] if s.name.endswith("/tag_post")}
+    assert posts == {f"dispenser/{n}/tag_post" for n in mission.dispensers}
     assert all(isinstance(s, Box) for s in groups["dispensers"])
     # Part racks (not rivet feeders) have four uprights, rising above the top part of the stack.
     for name, disp in mission.dispensers.items():

@@ -5,6 +5,9 @@ it, or lets a planned path run the end effector into something."""
 
 from __future__ import annotations
 
+import itertools
+
+import mujoco
 import numpy as np
 import pytest
 from tlt_sim.model import names
@@ -72,22 +75,51 @@ def test_rivet_feeders_agree(scene):
         assert d.geom_xpos[tray.id][2] + tray.size[2] == pytest.approx(box_top, abs=1e-6), name
 
 
+# Twin geom (after "<arm>/") -> the planner's box that must hold it. The jaws and the fixed fingers
+# are left out on both sides: they close on the part. So, for now, are the D405 housings
+# (`<arm>/d405_<side>/housing`): at every candidate pose for placing a near vertical the planner's
+# kinematics put housing a inside the lifter post beside it (config/planning/scene.yaml says so);
+# in the twin the contact pushes the arm, a likely cause of the near verticals standing 23 mm off.
+EE_BOXES = {
+    "ee/hub": "hub",
+    "ee/bar": "bar",
+    **{f"gripper_{s}/body": f"gripper_{s}" for s in "ab"},
+    **{f"rivet_gun_{s}/body": f"rivet_gun_{s}" for s in "ab"},
+    **{f"rivet_gun_{s}/bracket": f"gun_bracket_{s}" for s in "ab"},
+}
+
+
 @pytest.mark.parametrize("width", [0.0, 0.25])
-def test_end_effector_grippers_and_guns_agree_at_any_width(scene, width):
-    """The planner's gripper and gun boxes stand where the twin's are, on the width slide too (a
-    diagonal is carried at 0.25 m, gun 1 passing a lifter post by centimetres)."""
+def test_every_part_of_the_end_effector_lies_in_its_planner_box_at_any_width(scene, width):
+    """The planner's end-effector boxes hold the twin's geoms, on the width slide too (a diagonal
+    is carried at 0.25 m, gun 1 passing a lifter post by centimetres). A gun bracket the planner
+    did not know of ran into a dispenser's tag post and overloaded the width servo."""
     planning = load_scene_config()
-    boxes = {name: pose[:3, 3] for name, pose, _ in planning.ee_boxes(width)}
+    boxes = {name: (pose, np.asarray(size)) for name, pose, size in planning.ee_boxes(width)}
     m, d = scene.model, scene.data
     for arm in names.ARMS:
         scene.set_joint_state(names.width_joint(arm), width)
         flange_pos, flange_rot = scene.body_pose(names.ee_body(arm))
-        for side in ("a", "b"):
-            for twin_geom, planned in ((f"{arm}/rivet_gun_{side}/body", f"rivet_gun_{side}"),
-                                       (f"{arm}/grip_{side}", f"gripper_{side}")):  # fmt: skip
-                if twin_geom.endswith("body"):
-                    world = d.geom_xpos[m.geom(twin_geom).id]
-                else:
-                    world = scene.site_position(twin_geom)
-                local = flange_rot.T @ (world - flange_pos)
-                assert local[:2] == pytest.approx(boxes[planned][:2], abs=1e-3), (arm, twin_geom)
+        for twin_name, planned in EE_BOXES.items():
+            geom = m.geom(f"{arm}/{twin_name}")
+            half = np.asarray(m.geom_size[geom.id])
+            if m.geom_type[geom.id] == mujoco.mjtGeom.mjGEOM_CYLINDER:  # radius, half length
+                half = np.array([half[0], half[0], half[1]])
+            rot = flange_rot.T @ d.geom_xmat[geom.id].reshape(3, 3)
+            centre = flange_rot.T @ (d.geom_xpos[geom.id] - flange_pos)
+            corners = [centre + rot @ (half * np.array(c)) for c in itertools.product((-1, 1), repeat=3)]
+            pose, size = boxes[planned]
+            inside = [np.abs(pose[:3, :3].T @ (c - pose[:3, 3])) <= size / 2 + 1e-3 for c in corners]
+            assert np.all(inside), (arm, twin_name, planned, centre, half)
+
+
+def test_every_dispensers_tag_post_is_in_the_planners_scene(scene):
+    """The planner keeps the arm off each dispenser's AprilTag post, where the twin builds it: a
+    path that did not know of it ran an end effector into the vertical rack's post."""
+    shapes = {s.name: s for s in dispenser_shapes(load_scene_config(), scene.mission)}
+    m, d = scene.model, scene.data
+    for name in scene.mission.dispensers:
+        geom = m.geom(f"dispenser/{name}/tag_post")
+        box = shapes[f"dispenser/{name}/tag_post"]
+        assert box.pose[:3, 3] == pytest.approx(d.geom_xpos[geom.id], abs=1e-3), name
+        assert np.asarray(box.size) == pytest.approx(2 * m.geom_size[geom.id], abs=1e-3), name
