@@ -145,9 +145,10 @@ class ArsContext:
         return entry
 
     def ee_width(self, max_age: float = 1.0) -> float | None:
-        """Where the EE width joint stands (m), or None without a fresh EndEffectorState."""
+        """Where the EE width joint stands (m), or None without a fresh EndEffectorState that says
+        the joint is calibrated (after a reboot its multi-turn servo reads a wrong width)."""
         entry = self.ee_state(max_age)
-        if entry is None:
+        if entry is None or not entry[0].calibrated:
             return None
         names = list(entry[0].joint_names)
         joint = self.config.ee["width_joint"]

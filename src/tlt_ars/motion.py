@@ -183,13 +183,14 @@ class TrajectorySlot:
 class PlanMotion(Action):
     """Plan one motion in the planning thread.
 
-    Reads: the arm's JointState (start), the mission state (tower), the held part, the other arm.
-    Writes: the slot's trajectory; ``RequestData.targets[goal.key]`` when a candidate is chosen.
-    RUNNING while the arm still moves (an aborted motion decelerating: a plan from a moving start
-    would not match where the arm is when it is sent), while its joint state is stale (a gap of a
-    second under load is no fault) and while planning, together at most ``timeouts.planning_s``.
-    SUCCESS with a checked trajectory. FAILURE when no fresh arm state comes in that time, when the
-    goal cannot be built, or with the planner's reason.
+    Reads: the arm's JointState (start), the EE's width (calibrated), the mission state (tower),
+    the held part, the other arm. Writes: the slot's trajectory; ``RequestData.targets[goal.key]``
+    when a candidate is chosen. RUNNING while the arm still moves (an aborted motion decelerating:
+    a plan from a moving start would not match where the arm is when it is sent), while its joint
+    state is stale (a gap of a second under load is no fault), while the EE's width is not known
+    (no fresh state, or not calibrated since a fault) and while planning, together at most
+    ``timeouts.planning_s``. SUCCESS with a checked trajectory. FAILURE when no fresh arm state or
+    calibrated width comes in that time, when the goal cannot be built, or with the planner's reason.
     """
 
     def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
@@ -207,16 +208,23 @@ class PlanMotion(Action):
 
     def update(self) -> Status:
         if self._future is None:
-            start = self.ctx.arm_q()
-            if start is None or not self._arm_stopped():
+            start, width = self.ctx.arm_q(), self.ctx.ee_width()
+            waiting = None
+            if start is None:
+                stale = f"no fresh joint state on '{self.ctx.joint_topic}'"
+                waiting = ("waiting for a fresh joint state", stale)
+            elif not self._arm_stopped():
+                waiting = ("waiting for the arm to stop", "the arm did not stop")
+            elif width is None:
+                # Gripper b and its gun ride the width slide: where they are is part of the plan. A
+                # servo rebooted after a fault reads a wrong width until the EE recalibrates it.
+                waiting = ("waiting for a calibrated end-effector width",
+                           f"no calibrated end-effector width on '{self.ctx.ee_topic}'")  # fmt: skip
+            if waiting is not None:
                 limit = self.ctx.config.timeouts["planning_s"]
                 if self.ctx.clock() - self._started > limit:
-                    stale = f"no fresh joint state on '{self.ctx.joint_topic}'"
-                    why = stale if start is None else "the arm did not stop"
-                    return self.fail(f"{why} within {limit:g} s")
-                self.feedback_message = (
-                    "waiting for a fresh joint state" if start is None else "waiting for the arm to stop"
-                )
+                    return self.fail(f"{waiting[1]} within {limit:g} s")
+                self.feedback_message = waiting[0]
                 return Status.RUNNING
             try:
                 self._goal = self.goal()
@@ -232,7 +240,7 @@ class PlanMotion(Action):
                 bay=bay,
                 carrying=data.holding,
                 other_q=self.ctx.other_arm_q(),
-                width=self.ctx.ee_width() or 0.0,
+                width=width,
             )
             self.feedback_message = "planning"
             return Status.RUNNING

@@ -21,7 +21,8 @@ class Arm:
     def __init__(self) -> None:
         self.now, self.q = 0.0, np.zeros(6)
         self.down: str | None = None  # the UR driver's fault while it is not active
-        self.joint_topic = "/ur_x/joint_states"
+        self.width: float | None = 0.0  # None: no calibrated EE width
+        self.joint_topic, self.ee_topic = "/ur_x/joint_states", "/ee_x/state"
         self.config = SimpleNamespace(arm={"stopped_velocity": 0.01}, timeouts={"planning_s": 15.0})
         self.data = SimpleNamespace(member=None, holding=None, targets={})
         self.state = SimpleNamespace(placed=lambda: [])
@@ -43,15 +44,17 @@ class Arm:
         return None
 
     def ee_width(self):
-        return 0.0
+        return self.width
 
 
 class Planner:
     def __init__(self) -> None:
         self.starts: list[np.ndarray] = []
+        self.widths: list[float] = []
 
-    def plan(self, start, goal, **_):
+    def plan(self, start, goal, *, width, **_):
         self.starts.append(start)
+        self.widths.append(width)
         return SimpleNamespace(duration=1.0, target=None)
 
 
@@ -73,6 +76,24 @@ def test_a_gap_in_the_joint_states_is_waited_out_and_the_plan_starts_from_the_fr
     arm.q = np.full(6, 0.3)
     assert _run(b, arm, 2.0) == Status.SUCCESS
     assert np.allclose(planner.starts[0], 0.3) and slot.motion is not None
+
+
+def test_planning_waits_for_a_calibrated_width_and_plans_with_it():
+    """A width servo rebooted after a fault reads a wrong width until the EE recalibrates it: the
+    plan waits for the calibrated width (gripper b and its gun ride the slide), or fails naming it."""
+    arm, planner, slot = Arm(), Planner(), TrajectorySlot()
+    widths = planner.widths
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), slot)
+    arm.width = None
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert b.feedback_message == "waiting for a calibrated end-effector width" and widths == []
+    arm.width = 0.25
+    assert _run(b, arm, 2.0) == Status.SUCCESS and widths == [0.25]
+    arm.width = None
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), TrajectorySlot())
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert _run(b, arm, 16.0) == Status.FAILURE
+    assert "no calibrated end-effector width on '/ee_x/state' within 15 s" in b.feedback_message
 
 
 def test_without_a_fresh_joint_state_within_planning_s_it_fails_naming_the_topic():
