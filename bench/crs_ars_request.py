@@ -57,7 +57,7 @@ def serve_bare() -> int:
 def ars_config(tmp: Path) -> Path:
     raw = yaml.safe_load((ROOT / "config/ars/ars_x.yaml").read_text())
     raw["check_reach"] = False
-    raw["timeouts"].update(server_s=0.2, service_s=0.2, stop_s=0.2, sensor_s=0.2)
+    raw["timeouts"].update(server_s=0.2, service_s=0.2, stop_s=0.2, sensor_s=0.2, planning_s=0.2)
     raw["mission"] = str(ROOT / raw["mission"])
     raw["scene"] = str(ROOT / raw["scene"])
     path = tmp / "ars_x.yaml"

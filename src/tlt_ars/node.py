@@ -175,6 +175,8 @@ class ArsNode(LeanNode):
             topic=ros_names.tree_status_topic(self.ars),
             period_s=1.0 / config.raw["status_rate_hz"],
         )
+        # The request's feedback goes out before the tree's status: the CRS waits on the first one.
+        self.tree.tree.add_post_tick_handler(lambda _tree: self._send_feedback(self.active))
         self.status.attach(self.tree.tree)
         self.tree.on_change.append(self.status.refresh)
 
@@ -387,10 +389,9 @@ class ArsNode(LeanNode):
                 self.get_logger().error(f"tick failed: {exc!r}")
                 self.tree.interrupt()
                 self._end(goal, "aborted", f"internal error in the behaviour tree: {exc!r}")
-            self._send_feedback(self.active)
 
     def _send_feedback(self, goal: ActiveGoal | None) -> None:
-        """The running step to the CRS, right after the tick that changed it (the first one
+        """The running step to the CRS, at the end of the tick that changed it (the first one
         tells the CRS that the tree runs its request)."""
         step, progress = self.tree.step(), float(self.tree.progress())
         if goal is None or not step or goal.outcome is not None or goal.feedback == (step, progress):

@@ -578,7 +578,8 @@ class TreeStatusPublisher:
         self.period_s = period_s
         self.max_status_bytes = max_status_bytes
         self.publisher = node.create_publisher(TreeStatus, topic, qos)
-        self.shape: TreeShape | None = None
+        self._shape: TreeShape | None = None
+        self._stale = False
         self._root: py_trees.behaviour.Behaviour | None = None
         self._seconds = node_clock(node)
         self._due = float("-inf")
@@ -595,22 +596,34 @@ class TreeStatusPublisher:
 
     def publish_due(self, shape: TreeShape, tick_count: int) -> int:
         """:meth:`publish` when a period has passed since the last one, else nothing (0)."""
+        return self.publish(shape, tick_count) if self._take_due() else 0
+
+    def _take_due(self) -> bool:
         now = self._seconds()
         # A clock that went back (sim time restarted) starts the period again.
         if now < self._due and self._due - now <= self.period_s:
-            return 0
+            return False
         self._due = now + self.period_s
-        return self.publish(shape, tick_count)
+        return True
+
+    @property
+    def shape(self) -> TreeShape | None:
+        """The attached tree's shape (None before ``attach``)."""
+        if self._stale and self._root is not None:
+            self._shape = TreeShape.of(self._root)
+            self._stale = False
+        return self._shape
 
     def refresh(self) -> None:
-        if self._root is not None:
-            self.shape = TreeShape.of(self._root)
+        # Worked out when next asked for, not here: the ARS installs a request's branch on the
+        # tick that answers the CRS, and walking a hundred behaviours is a millisecond of it.
+        self._stale = True
 
     def attach(self, tree: py_trees.trees.BehaviourTree) -> None:
         """Publish (when due) after every tick of ``tree``."""
         self._root = tree.root
         self.refresh()
-        tree.add_post_tick_handler(lambda t: self.publish_due(self.shape, t.count + 1))
+        tree.add_post_tick_handler(lambda t: self.publish(self.shape, t.count + 1) if self._take_due() else 0)
 
 
 __all__ = [

@@ -514,3 +514,24 @@ def test_tree_status_with_a_period_is_published_after_the_first_tick_that_is_due
     tree.tick()
     assert sent[-1] == 11
     node.set_parameters([Parameter("use_sim_time", value=False)])
+
+
+def test_tree_status_follows_the_tree_after_a_refresh(ros):
+    """A branch installed in the attached tree (an ARS request) is in the next status sent."""
+    from tlt_common.bt.ros import TreeStatusPublisher
+
+    _server_node, node = ros
+    root = py_trees.composites.Sequence("ARS", memory=False, children=[py_trees.behaviours.Success("idle")])
+    tree = py_trees.trees.BehaviourTree(root)
+    publisher = TreeStatusPublisher(node, "ars_x", topic="ars_x/refresh_status")
+    sent = []
+    publisher.publish = lambda shape, tick_count: sent.append(shape) or 1
+    publisher.attach(tree)
+    tree.tick()
+    root.add_child(py_trees.behaviours.Running("request"))
+    tree.tick()
+    assert sent[-1] is sent[0], "no refresh: the shape is kept"
+    publisher.refresh()
+    tree.tick()
+    assert [n.path for n in sent[-1].nodes] == ["ARS", "ARS/idle", "ARS/request"]
+    assert sent[-1].hash != sent[0].hash
