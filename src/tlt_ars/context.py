@@ -29,10 +29,13 @@ from tlt_interfaces.msg import EndEffectorState, HardwareStatus
 
 from tlt_ars.config import ArsConfig
 from tlt_ars.mission_state import MissionState, Request
-from tlt_ars.planning.world import SceneConfig
+from tlt_ars.planning.world import SceneConfig, Width
 from tlt_common import ros_names
 from tlt_common.bt.ros import Clock, TopicCache, node_clock
 from tlt_common.mission.schema import Member, Mission
+
+# Above this the width slide is taken to be moving (the servo's 15 mm/s drive, not its jitter).
+WIDTH_MOVING_M_S = 0.002
 
 
 @dataclass
@@ -86,6 +89,9 @@ class ArsContext:
         self.width_publisher = node.create_publisher(
             Float64MultiArray, ros_names.position_command_topic(ros_names.ee(self.ars)), 10
         )
+        # The width last commanded (Set Width): a motion planned before the slide stands there is
+        # checked over the rest of the slide's move (planning_width).
+        self.width_target: float | None = None
         # Planning is CPU work of up to a second: it runs here, never in the tick.
         self.planning_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.ars}-planner")
         self.data = RequestData()
@@ -144,15 +150,42 @@ class ArsContext:
             return None
         return entry
 
-    def ee_width(self, max_age: float = 1.0) -> float | None:
-        """Where the EE width joint stands (m), or None without a fresh EndEffectorState that says
-        the joint is calibrated (after a reboot its multi-turn servo reads a wrong width)."""
+    def _width_joint(self, max_age: float) -> tuple[float, float] | None:
+        """(position m, velocity m/s) of the EE width joint, or None without a fresh
+        EndEffectorState that says it is calibrated."""
         entry = self.ee_state(max_age)
         if entry is None or not entry[0].calibrated:
             return None
         names = list(entry[0].joint_names)
         joint = self.config.ee["width_joint"]
-        return float(entry[0].position[names.index(joint)]) if joint in names else None
+        if joint not in names:
+            return None
+        i = names.index(joint)
+        velocity = entry[0].velocity[i] if i < len(entry[0].velocity) else 0.0
+        return float(entry[0].position[i]), float(velocity)
+
+    def ee_width(self, max_age: float = 1.0) -> float | None:
+        """Where the EE width joint stands (m), or None without a fresh EndEffectorState that says
+        the joint is calibrated (after a reboot its multi-turn servo reads a wrong width)."""
+        joint = self._width_joint(max_age)
+        return None if joint is None else joint[0]
+
+    def planning_width(self, max_age: float = 1.0) -> Width | None:
+        """Where the width slide stands for a motion plan: its width, or (width, commanded width)
+        while it moves; None without a calibrated width (:meth:`ee_width`)."""
+        joint = self._width_joint(max_age)
+        if joint is None:
+            return None
+        width, velocity = joint
+        target = self.width_target
+        if target is None and abs(velocity) > WIDTH_MOVING_M_S:
+            # An ARS restarted while the slide moves (a Retract Width is not waited for) does not
+            # know the command: the slide may go as far as the widest or narrowest it is sent to.
+            widths = self.config.ee["width"].values()
+            target = float(max(widths) if velocity > 0 else min(widths))
+        if target is None or abs(target - width) <= self.config.ee["width_tolerance"]:
+            return width
+        return (width, target)
 
     # ----- request -----
     def finishes(self, request: Request) -> bool:

@@ -36,7 +36,7 @@ from tlt_ars.planning.planner import Planner, PlanningFailed
 from tlt_ars.planning.reachability import TargetUnreachable, reach_target
 from tlt_ars.planning.targets import Target
 from tlt_ars.planning.time_parameterisation import time_parameterise
-from tlt_ars.planning.world import SceneConfig, build_scene
+from tlt_ars.planning.world import SceneConfig, Width, build_scene
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal
@@ -104,10 +104,10 @@ class MotionPlanner:
         bay: int,
         carrying: str | None,
         other_q: np.ndarray | None,
-        width: float = 0.0,
+        width: Width = 0.0,
     ) -> PlannedMotion:
         """A checked, time-parameterised trajectory from ``start`` to ``goal`` with the EE ``width``
-        wide; PlanningFailed if none."""
+        wide (or moving between a ``(from, to)`` pair); PlanningFailed if none."""
         kwargs = dict(placed=placed, bay=bay, other_arm_q=other_q, carrying=carrying, width=width)
         scene = build_scene(self.scene, self.arm, self.mission, contact=goal.contact, **kwargs)
         planner = Planner.from_config(scene, self.scene.planning, home=self.scene.home(self.arm))
@@ -183,14 +183,17 @@ class TrajectorySlot:
 class PlanMotion(Action):
     """Plan one motion in the planning thread.
 
-    Reads: the arm's JointState (start), the EE's width (calibrated), the mission state (tower),
-    the held part, the other arm. Writes: the slot's trajectory; ``RequestData.targets[goal.key]``
-    when a candidate is chosen. RUNNING while the arm still moves (an aborted motion decelerating:
-    a plan from a moving start would not match where the arm is when it is sent), while its joint
-    state is stale (a gap of a second under load is no fault), while the EE's width is not known
-    (no fresh state, or not calibrated since a fault) and while planning, together at most
-    ``timeouts.planning_s``. SUCCESS with a checked trajectory. FAILURE when no fresh arm state or
-    calibrated width comes in that time, when the goal cannot be built, or with the planner's reason.
+    Reads: the arm's JointState (start), the EE's width (calibrated) and the width last
+    commanded, the mission state (tower), the held part, the other arm. Writes: the slot's
+    trajectory; ``RequestData.targets[goal.key]`` when a candidate is chosen. RUNNING while the arm
+    still moves (an aborted motion decelerating: a plan from a moving start would not match where
+    the arm is when it is sent), while its joint state is stale (a gap of a second under load is no
+    fault), while the EE's width is not known (no fresh state, or not calibrated since a fault) and
+    while planning, together at most ``timeouts.planning_s``. While the width slide moves (Extend
+    Width beside the approach) the motion is checked over the rest of the slide's move; when no
+    path clears that, RUNNING until the slide stands (at most ``timeouts.width_s`` more), then it
+    is planned again. SUCCESS with a checked trajectory. FAILURE when no fresh arm state or
+    calibrated width comes in time, when the goal cannot be built, or with the planner's reason.
     """
 
     def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
@@ -200,15 +203,19 @@ class PlanMotion(Action):
         self._future = None
         self._started = 0.0
         self._goal: MotionGoal | None = None
+        self._width: Width | None = None
+        self._sweep_blocked = False
 
     def initialise(self) -> None:
         self.slot.motion = None
         self._future = None
         self._started = self.ctx.clock()
+        self._sweep_blocked = False
 
     def update(self) -> Status:
         if self._future is None:
-            start, width = self.ctx.arm_q(), self.ctx.ee_width()
+            start, width = self.ctx.arm_q(), self.ctx.planning_width()
+            limit = self.ctx.config.timeouts["planning_s"]
             waiting = None
             if start is None:
                 stale = f"no fresh joint state on '{self.ctx.joint_topic}'"
@@ -220,8 +227,11 @@ class PlanMotion(Action):
                 # servo rebooted after a fault reads a wrong width until the EE recalibrates it.
                 waiting = ("waiting for a calibrated end-effector width",
                            f"no calibrated end-effector width on '{self.ctx.ee_topic}'")  # fmt: skip
+            elif self._sweep_blocked and not np.isscalar(width):
+                waiting = ("waiting for the end-effector width to stand",
+                           f"the end-effector width did not reach {width[1]:.4f} m")  # fmt: skip
+                limit += self.ctx.config.timeouts["width_s"]
             if waiting is not None:
-                limit = self.ctx.config.timeouts["planning_s"]
                 if self.ctx.clock() - self._started > limit:
                     return self.fail(f"{waiting[1]} within {limit:g} s")
                 self.feedback_message = waiting[0]
@@ -242,6 +252,7 @@ class PlanMotion(Action):
                 other_q=self.ctx.other_arm_q(),
                 width=width,
             )
+            self._width = width
             self.feedback_message = "planning"
             return Status.RUNNING
         if not self._future.done():
@@ -254,6 +265,12 @@ class PlanMotion(Action):
         try:
             motion = future.result()
         except PlanningFailed as exc:
+            if not np.isscalar(self._width):
+                # Nothing clears the slide's whole move: where it stands, something may.
+                self._sweep_blocked = True
+                self._started = self.ctx.clock()
+                self.feedback_message = f"no path clears the moving width ({exc.reason}): waiting for it"
+                return Status.RUNNING
             return self.fail(f"planning failed ({exc.kind}): {exc.reason}")
         except Exception as exc:  # a planner bug must fail the request, not kill the tick
             return self.fail(f"planning failed: {exc!r}")

@@ -12,9 +12,10 @@ subtree                     figure     children
 ==========================  =========  ================================================================
 Add Cross Frame             28         Get Inspected Cross Frame (Get Cross Frame, Inspect Cross Frame,
                                        replaced after a discard), Place Cross Frame
-Get Cross Frame / Grab      29 / 34    Dispenser Has Parts?, Set Width (Extend Width for a diagonal),
-Member                                 Open Grasp, Approach Dispenser, Settle, Locate Dispenser Tag, Fine
-                                       Approach, Grasp (Close Grasp, Verify Grasp), Take Part, Lift Part
+Get Cross Frame / Grab      29 / 34    Dispenser Has Parts?, Set Width (Extend Width for a diagonal)
+Member                                 beside Approach (Open Grasp, Approach Dispenser, Settle, Locate
+                                       Dispenser Tag), Fine Approach, Grasp (Close Grasp, Verify Grasp),
+                                       Take Part, Lift Part
 Inspect Cross Frame /       30 / 35    Move To Inspection, Settle, Inspection (Inspection Passed, or
 Inspect Member                         Discard Part: Move To Discard, Release, Count Discard)
 Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alignment, Release, Verify
@@ -25,7 +26,7 @@ Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, S
                                        Loaded
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
 Rivet Member                37         Fire Rivet Gun, Release, Record Placed, Retreat (Retract Width
-                                       for a diagonal)
+                                       for a diagonal, commanded and not waited for)
 Foundation Rivet            38         Load Rivet, Place Rivet (recording the rivet set)
 Affix Member                39         Load Rivet, Place Rivet (recording the member affixed)
 Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
@@ -45,7 +46,7 @@ import numpy as np
 import py_trees
 from py_trees.common import Status
 
-from tlt_ars.behaviours.end_effector import FireRivetGun, MoveGrasp, SetWidth, grasp, release
+from tlt_ars.behaviours.end_effector import CommandWidth, FireRivetGun, MoveGrasp, SetWidth, grasp, release
 from tlt_ars.behaviours.parts import (
     CountDiscard,
     DispenserHasParts,
@@ -147,15 +148,29 @@ class SubtreeBuilder:
         """Fig. 29 (cross frame) / Fig. 34 (member): take the top part of ``dispenser``."""
         ctx = self.ctx
         width_name = "Extend Width" if kind == "diagonal" else "Set Width"
-        return _seq(
-            name,
+        # The width slide moves while the arm approaches (a diagonal's 0.25 m take 16.7 s, longer
+        # than the approach): the approach is planned over the slide's move (Plan), and the grasp
+        # waits for both. Camera and gun a sit on the fixed side of the bar.
+        approach = _seq(
+            "Approach",
             [
-                DispenserHasParts("Dispenser Has Parts?", ctx, dispenser),
-                SetWidth(width_name, ctx, kind),
                 MoveGrasp("Open Grasp", ctx, close=False),
                 self._move("Approach Dispenser", lambda: pose_goal(self._dispenser_pose(dispenser))),
                 Settle("Settle", ctx),
                 LocateDispenser("Locate Dispenser Tag", ctx, dispenser),
+            ],
+        )
+        # The approach last: a Parallel's tip is its last child's, which Pause stops (ArsTree.hold).
+        beside = py_trees.composites.Parallel(
+            f"{width_name} Beside Approach",
+            policy=py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=True),
+            children=[SetWidth(width_name, ctx, kind), approach],
+        )
+        return _seq(
+            name,
+            [
+                DispenserHasParts("Dispenser Has Parts?", ctx, dispenser),
+                beside,
                 self._move(
                     "Fine Approach",
                     lambda: MotionGoal(
@@ -327,7 +342,8 @@ class SubtreeBuilder:
         ctx = self.ctx
         children = [self._move("Retreat", lambda: back_out(ctx, key))]
         if kind == "diagonal":
-            children.append(SetWidth("Retract Width", ctx, "vertical"))
+            # Not waited for: 16.7 s that the CRS and the other ARS can use (CommandWidth).
+            children.append(CommandWidth("Retract Width", ctx, "vertical"))
         return children
 
     def place_rivet(self, member: Member, joint: str, record: str) -> Sequence:

@@ -80,9 +80,14 @@ def running_step(branch: py_trees.behaviour.Behaviour | None) -> str:
     """``Branch/Subtree/.../Leaf`` of the leaf running under ``branch`` ("" when none runs)."""
     if branch is None or branch.status != Status.RUNNING:
         return ""
-    tip = branch.tip()
-    if tip is None:
-        return ""
+    tip = branch
+    # Down the running children, not py_trees' tip(): a Parallel's tip is its last child's, which
+    # may have succeeded while another child still runs.
+    while tip.children:
+        running = [c for c in tip.children if c.status == Status.RUNNING]
+        if not running:
+            break
+        tip = running[-1]
     return f"{branch.name}/{_path(tip, branch)}" if tip is not branch else branch.name
 
 

@@ -56,6 +56,8 @@ def display_copy(
     below = None if depth is None else depth - 1
     if kind == "fallback":
         copy: py_trees.behaviour.Behaviour = py_trees.composites.Selector(node.name, memory=True)
+    elif kind == "parallel":
+        copy = py_trees.composites.Parallel(node.name, policy=py_trees.common.ParallelPolicy.SuccessOnAll())
     elif kind == "decorator":
         return _ShownDecorator(name=node.name, child=display_copy(node.children[0], below))
     else:

@@ -79,7 +79,7 @@ def test_add_member_vertical_loads_rivet_grabs_inspects_places_and_rivets(stack)
               ("Load Rivet", "Get Inspected Member", "Place Member", "Rivet Member")]  # fmt: skip
     assert firsts == sorted(firsts)
     assert any(s.startswith("Add Member/Load Rivet/Approach Rivet Dispenser/") for s in steps)
-    assert any("/Grab Member/Approach Dispenser/" in s for s in steps)
+    assert any("/Grab Member/Set Width Beside Approach/Approach/Approach Dispenser/" in s for s in steps)
     assert any("/Inspect Member/Move To Inspection/" in s for s in steps)
     progress = [f.progress for f in feedback]
     assert progress == sorted(progress) and 0 < progress[-1] < 1
@@ -102,8 +102,14 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     seen = stack.client.create_subscription(
         type(stack.ee_states[-1]), "/ee_x/state", lambda m: widths.append(m.position[2]), 10
     )
+    steps = []  # (step, the width when its first feedback came)
+
+    def feedback(f) -> None:
+        if not steps or steps[-1][0] != f.step:
+            steps.append((f.step, widths[-1] if widths else None))
+
     try:
-        handle = add_member(stack, "bay1/diagonal/face_x0", DIAGONAL)
+        handle = add_member(stack, "bay1/diagonal/face_x0", DIAGONAL, feedback)
         result = stack.result(handle, timeout=180)  # two parts fetched and inspected, one discarded
     finally:
         stack.client.destroy_subscription(seen)
@@ -113,11 +119,40 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     assert state.discarded["diagonal_dispenser_x"] == 1
     assert stack.inspections[-2:] == ["bay1/diagonal/face_x0"] * 2
     assert max(widths) == pytest.approx(0.02, abs=0.002)  # extended before the grasp
-    assert stack.width() == pytest.approx(0.0, abs=0.002)  # retracted after the rivet
+    # ... while the jaws open and the arm approaches the dispenser: the EE was still narrow then.
+    beside = [w for step, w in steps if "/Grab Member/Extend Width Beside Approach/Approach/" in step]
+    assert beside and beside[0] is not None and beside[0] < 0.01, steps
+    # Retracted after the rivet: commanded as the request's last step, and not waited for.
+    stack.wait(lambda: abs(stack.width()) <= 0.002, "the width retracted after the request")
     middle = (stack.world.part_pose @ part_in_tool(stack.mission, "diagonal"))[:3, 3]
     joints = [np.asarray(p) for _, p in stack.mission.member("bay1/diagonal/face_x0").joints]
     origin = tower_origin(stack.scene, stack.mission, 1)
     assert np.linalg.norm(middle - origin - (joints[0] + joints[1]) / 2) < 0.005
+
+
+def test_a_slide_moving_on_a_command_the_ars_never_sent_is_planned_over_its_whole_travel(stack):
+    """An ARS restarted while its width slide moves (a Retract Width is not waited for) does not
+    know where the slide goes: a motion is planned as if it went to the end it moves towards."""
+    from std_msgs.msg import Float64MultiArray
+
+    ctx = stack.ars.ctx
+    assert ctx.planning_width() == pytest.approx(0.0, abs=0.002)
+    target, ctx.width_target = ctx.width_target, None  # as after a restart
+    try:
+        ctx.width_publisher.publish(Float64MultiArray(data=[0.02]))  # sent by the ARS that died
+        seen = []
+
+        def planned(moving: bool) -> bool:
+            seen.append(ctx.planning_width())
+            return isinstance(seen[-1], tuple) == moving and seen[-1] is not None
+
+        stack.wait(lambda: planned(True), "a width planned over the slide's move")
+        assert 0.0 <= seen[-1][0] < 0.02 and seen[-1][1] == 0.02  # the widest the config sends it to
+        stack.wait(lambda: planned(False) and abs(seen[-1] - 0.02) < 0.002, "the slide standing at 0.02 m")
+    finally:
+        ctx.width_publisher.publish(Float64MultiArray(data=[0.0]))
+        stack.wait(lambda: abs(stack.width()) <= 0.002, "the slide back at 0")
+        ctx.width_target = target
 
 
 def test_a_request_failed_after_its_rivet_is_finished_by_the_same_request_sent_again(stack):
@@ -156,7 +191,7 @@ def test_a_request_failed_after_its_rivet_is_finished_by_the_same_request_sent_a
     assert steps == {"Finish Add Member"}
     assert len(stack.gpio.fired) == fired  # no second rivet
     assert state.remaining["diagonal_dispenser_x"] == parts and state.remaining["rivet_dispenser_x"] == rivets
-    assert stack.width() == pytest.approx(0.0, abs=0.002)  # retracted after the retreat
+    stack.wait(lambda: abs(stack.width()) <= 0.002, "the width retracted after the retreat")
     tool = stack.world.tool()
     retreat = stack.ars.ctx.data.targets["place"].pre_pose
     assert pose_error(tool, retreat)[0] < 0.01  # at the pre-pose of its placement

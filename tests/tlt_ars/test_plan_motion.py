@@ -13,6 +13,7 @@ from py_trees.common import Status
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tlt_ars.motion import ExecuteTrajectory, MotionGoal, PlanMotion, TrajectorySlot
+from tlt_ars.planning.planner import PlanningFailed
 
 
 class Arm:
@@ -21,9 +22,11 @@ class Arm:
     def __init__(self) -> None:
         self.now, self.q = 0.0, np.zeros(6)
         self.down: str | None = None  # the UR driver's fault while it is not active
-        self.width: float | None = 0.0  # None: no calibrated EE width
+        self.width: float | tuple[float, float] | None = 0.0  # None: uncalibrated; a pair: moving
         self.joint_topic, self.ee_topic = "/ur_x/joint_states", "/ee_x/state"
-        self.config = SimpleNamespace(arm={"stopped_velocity": 0.01}, timeouts={"planning_s": 15.0})
+        self.config = SimpleNamespace(
+            arm={"stopped_velocity": 0.01}, timeouts={"planning_s": 15.0, "width_s": 120.0}
+        )
         self.data = SimpleNamespace(member=None, holding=None, targets={})
         self.state = SimpleNamespace(placed=lambda: [])
         self.planning_pool = ThreadPoolExecutor(max_workers=1)
@@ -43,18 +46,21 @@ class Arm:
     def other_arm_q(self):
         return None
 
-    def ee_width(self):
+    def planning_width(self):
         return self.width
 
 
 class Planner:
-    def __init__(self) -> None:
+    def __init__(self, blocked_while_moving: bool = False) -> None:
         self.starts: list[np.ndarray] = []
-        self.widths: list[float] = []
+        self.widths: list = []
+        self.blocked_while_moving = blocked_while_moving
 
     def plan(self, start, goal, *, width, **_):
         self.starts.append(start)
         self.widths.append(width)
+        if self.blocked_while_moving and isinstance(width, tuple):
+            raise PlanningFailed("collision", "gun b's bracket would sweep through the tag post")
         return SimpleNamespace(duration=1.0, target=None)
 
 
@@ -62,7 +68,7 @@ def _run(b: PlanMotion, arm: Arm, t: float) -> Status:
     arm.now = t
     b.tick_once()
     if b.status == Status.RUNNING and b._future is not None:
-        b._future.result()  # the plan itself is instant here
+        b._future.exception()  # waits: the plan itself is instant here
         b.tick_once()
     return b.status
 
@@ -94,6 +100,32 @@ def test_planning_waits_for_a_calibrated_width_and_plans_with_it():
     assert _run(b, arm, 0.0) == Status.RUNNING
     assert _run(b, arm, 16.0) == Status.FAILURE
     assert "no calibrated end-effector width on '/ee_x/state' within 15 s" in b.feedback_message
+
+
+def test_a_motion_planned_while_the_width_moves_is_checked_over_the_move_or_waits_for_it():
+    """Extend Width runs beside the approach: the approach is checked with the slide anywhere on
+    the rest of its move; when nothing clears that, the plan waits for the slide to stand."""
+    arm, slot = Arm(), TrajectorySlot()
+    planner = Planner()
+    arm.width = (0.05, 0.25)
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), slot)
+    assert _run(b, arm, 0.0) == Status.SUCCESS and planner.widths == [(0.05, 0.25)]
+
+    planner = Planner(blocked_while_moving=True)
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), slot)
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert "no path clears the moving width" in b.feedback_message
+    assert _run(b, arm, 14.0) == Status.RUNNING and len(planner.widths) == 1
+    assert b.feedback_message == "waiting for the end-effector width to stand"
+    arm.width = 0.25
+    assert _run(b, arm, 16.0) == Status.SUCCESS and planner.widths == [(0.05, 0.25), 0.25]
+
+    arm.width = (0.05, 0.25)  # a slide that never gets there
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), TrajectorySlot())
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert _run(b, arm, 130.0) == Status.RUNNING
+    assert _run(b, arm, 136.0) == Status.FAILURE
+    assert "the end-effector width did not reach 0.2500 m within 135 s" in b.feedback_message
 
 
 def test_without_a_fresh_joint_state_within_planning_s_it_fails_naming_the_topic():

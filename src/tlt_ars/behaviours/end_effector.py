@@ -163,7 +163,8 @@ class DropHeld(Action):
 class SetWidth(Action):
     """Drive the EE width joint to the width for ``part_kind`` and wait until the servo is there.
 
-    Reads: EndEffectorState (the width joint's position). Writes: a position command.
+    Reads: EndEffectorState (the width joint's position). Writes: a position command, and the
+    target as ``ArsContext.width_target`` (motions planned meanwhile are checked over the move).
     RUNNING until a state newer than the command shows the width within ``width_tolerance`` (the
     command is repeated each second, since a command topic may not be matched yet). SUCCESS
     then. FAILURE after ``timeouts.width_s``, or on an EE fault, naming where the joint stood.
@@ -183,6 +184,7 @@ class SetWidth(Action):
         self._target = float(self.ctx.config.ee["width"][kind])
         self._started = self.ctx.clock()
         self._sent = -1e9
+        self.ctx.width_target = self._target
 
     def update(self) -> Status:
         now = self.ctx.clock()
@@ -207,6 +209,29 @@ class SetWidth(Action):
             )
         self.feedback_message = f"width to {self._target:.4f} m"
         return Status.RUNNING
+
+
+class CommandWidth(Action):
+    """Command the EE width joint to the width for ``part_kind`` and go on without waiting.
+
+    Reads: nothing. Writes: a position command, and the target as ``ArsContext.width_target``.
+    SUCCESS on the tick it is sent. For a width nothing after it in the request needs (Retract
+    Width, the last step of a diagonal's request): the slide moves while the CRS goes on, every
+    motion planned meanwhile is checked over the rest of its move (PlanMotion), and the next Set
+    Width waits for it and judges where it stands.
+    """
+
+    def __init__(self, name: str, ctx: ArsContext, part_kind: str) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+        self.part_kind = part_kind
+
+    def update(self) -> Status:
+        target = float(self.ctx.config.ee["width"][self.part_kind])
+        self.ctx.width_publisher.publish(Float64MultiArray(data=[target]))
+        self.ctx.width_target = target
+        self.feedback_message = f"width to {target:.4f} m"
+        return Status.SUCCESS
 
 
 class FireRivetGun(Action):
@@ -298,6 +323,7 @@ class FireRivetGun(Action):
 
 __all__ = [
     "AwaitEeState",
+    "CommandWidth",
     "DropHeld",
     "FireRivetGun",
     "MoveGrasp",

@@ -65,6 +65,8 @@ _ARM = {
 }
 _POSE = {"position": _vec(3), "rpy": _vec(3)}
 # A box on the width slide (gripper b, gun b) moves out along flange x with the EE width joint.
+# Where the slide stands: a width (m), or the (from, to) of a move under way.
+Width = float | tuple[float, float]
 _BOX = {
     "name": Field("str"),
     "position": _vec(3),
@@ -217,13 +219,17 @@ class SceneConfig:
         lower, upper = self.joint_limits(arm)
         return Ur10eKinematics(base=self.base(arm), tool=self.tool(), lower=lower, upper=upper)
 
-    def ee_boxes(self, width: float = 0.0) -> list[tuple[str, np.ndarray, Sequence[float]]]:
-        """The end effector's boxes (flange frame) with the width joint at ``width`` (m)."""
+    def ee_boxes(self, width: Width = 0.0) -> list[tuple[str, np.ndarray, Sequence[float]]]:
+        """The end effector's boxes (flange frame) with the width joint at ``width`` (m), or, for a
+        ``(from, to)`` pair, each box on the slide stretched over its whole sweep between them."""
+        lo, hi = (width, width) if np.isscalar(width) else sorted(width)
         out = []
         for b in self.raw["end_effector"]["boxes"]:
             x, y, z = b["position"]
-            slide = width if b["on_width_slide"] else 0.0
-            out.append((b["name"], pose_matrix((x + slide, y, z)), b["size"]))
+            sx, sy, sz = b["size"]
+            if b["on_width_slide"]:
+                x, sx = x + (lo + hi) / 2, sx + (hi - lo)
+            out.append((b["name"], pose_matrix((x, y, z)), (sx, sy, sz)))
         return out
 
 
@@ -466,13 +472,14 @@ def build_scene(
     other_arm_q: Sequence[float] | None = None,
     carrying: str | None = None,
     contact: bool = False,
-    width: float = 0.0,
+    width: Width = 0.0,
 ) -> CollisionScene:
     """A collision scene for ``arm``: the static world, the tower as built while bay ``bay`` is
     under construction (members in ``placed``), the other arm at ``other_arm_q`` (its home when
     omitted) and, when ``carrying`` names a part kind, that part in the tool. With ``contact`` the
     end effector and the part may touch the tower (the final move onto a joint). ``width`` is
-    where the EE width joint stands (gripper b and gun b move with it)."""
+    where the EE width joint stands (gripper b and gun b move with it), or the ``(from, to)`` of
+    its move while the arm moves."""
     kin = cfg.kinematics(arm)
     scene = CollisionScene(
         kin,
@@ -502,6 +509,7 @@ __all__ = [
     "GUN_OFFSET",
     "SCHEMA",
     "SceneConfig",
+    "Width",
     "build_scene",
     "carried_capsules",
     "dispenser_frame",

@@ -136,3 +136,21 @@ def test_base_joint_range_narrows_the_base_limits(cfg):
     with pytest.raises(ConfigError) as err:
         scene_config_from_dict(raw, "scene.yaml")
     assert err.value.key == "arms.ars_x.base_joint_range"
+
+
+def test_a_moving_width_stretches_each_box_on_the_slide_over_its_sweep(cfg):
+    """Planned while the width slide moves, the end effector's boxes on the slide cover every
+    width between the two ends, and the boxes off the slide stay where they are."""
+    at = {w: {n: (p, np.asarray(s)) for n, p, s in cfg.ee_boxes(w)} for w in (0.05, 0.25)}
+    swept = {n: (p, np.asarray(s)) for n, p, s in cfg.ee_boxes((0.25, 0.05))}
+    on_slide = {b["name"] for b in cfg.raw["end_effector"]["boxes"] if b["on_width_slide"]}
+    assert on_slide and set(swept) - on_slide
+    for name, (pose, size) in swept.items():
+        lo, hi = (pose[:3, 3] - size / 2, pose[:3, 3] + size / 2)
+        for w in (0.05, 0.25):
+            p, s = at[w][name]
+            assert np.all(lo <= p[:3, 3] - s / 2 + 1e-12) and np.all(p[:3, 3] + s / 2 <= hi + 1e-12)
+        if name in on_slide:
+            assert size[0] == pytest.approx(at[0.05][name][1][0] + 0.2)
+        else:
+            assert np.allclose(size, at[0.05][name][1]) and np.allclose(pose, at[0.05][name][0])
