@@ -80,15 +80,20 @@ def running_step(branch: py_trees.behaviour.Behaviour | None) -> str:
     """``Branch/Subtree/.../Leaf`` of the leaf running under ``branch`` ("" when none runs)."""
     if branch is None or branch.status != Status.RUNNING:
         return ""
-    tip = branch
     # Down the running children, not py_trees' tip(): a Parallel's tip is its last child's, which
     # may have succeeded while another child still runs.
-    while tip.children:
-        running = [c for c in tip.children if c.status == Status.RUNNING]
-        if not running:
-            break
-        tip = running[-1]
+    tip = _last_leaf_with(branch, Status.RUNNING)
     return f"{branch.name}/{_path(tip, branch)}" if tip is not branch else branch.name
+
+
+def _last_leaf_with(node: py_trees.behaviour.Behaviour, status: Status) -> py_trees.behaviour.Behaviour:
+    """Down from ``node`` through the last child with ``status``, as far as one has it."""
+    while node.children:
+        children = [c for c in node.children if c.status == status]
+        if not children:
+            break
+        node = children[-1]
+    return node
 
 
 def progress(branch: py_trees.behaviour.Behaviour | None) -> float:
@@ -103,11 +108,7 @@ def progress(branch: py_trees.behaviour.Behaviour | None) -> float:
 def failure_reason(node: py_trees.behaviour.Behaviour) -> str:
     """``path: reason`` of the leaf whose failure failed ``node``."""
     top = node
-    while node.children:
-        failed = [c for c in node.children if c.status == Status.FAILURE]
-        if not failed:
-            break
-        node = failed[-1]
+    node = _last_leaf_with(top, Status.FAILURE)
     reason = node.feedback_message or "failed"
     path = _path(node, top)
     return f"{top.name}/{path}: {reason}" if path else f"{top.name}: {reason}"
