@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from tlt_common.config_schema import ConfigError, Field, load_validated, opt
@@ -50,6 +50,9 @@ UR_SCHEMA = {
     "host": Field("str", doc="controller address (the emulator's loopback address in simulation)"),
     "rtde_frequency_hz": opt("float", 500.0, minimum=1.0, maximum=500.0),
     "control_rate_hz": opt("float", 125.0, minimum=1.0, maximum=500.0),
+    "joint_state_rate_hz": opt(
+        "float", 50.0, minimum=1.0, maximum=500.0, doc="JointState publications per second of ROS time"
+    ),
     "status_rate_hz": opt("float", 2.0, minimum=0.1, maximum=100.0),
     "link_timeout_s": opt(
         "float", 0.5, minimum=0.01, doc="no new controller data for this long is a link fault"
@@ -92,6 +95,7 @@ class URConfig:
     joints: tuple[URJoint, ...]
     rtde_frequency_hz: float = 500.0
     control_rate_hz: float = 125.0
+    joint_state_rate_hz: float = 50.0
     status_rate_hz: float = 2.0
     link_timeout_s: float = 0.5
     probe_timeout_s: float = 0.5
@@ -122,8 +126,26 @@ def load_ur_config(path: str | Path = DEFAULT_CONFIG) -> URConfig:
     doc = load_validated(path, UR_SCHEMA)
     if doc["link_timeout_s"] <= 1.0 / doc["rtde_frequency_hz"]:
         raise ConfigError(path, "link_timeout_s", "must be longer than one RTDE period")
+    if doc["joint_state_rate_hz"] > doc["control_rate_hz"]:
+        raise ConfigError(path, "joint_state_rate_hz", "joint states go out from the control cycle: "
+                          f"at most control_rate_hz ({doc['control_rate_hz']:g})")
     joints = tuple(URJoint(**j) for j in doc.pop("joints"))
     return URConfig(joints=joints, **doc)
 
 
-__all__ = ["CONFIG_DIR", "DEFAULT_CONFIG", "UR_SCHEMA", "URConfig", "URJoint", "load_ur_config"]
+def with_rtde_frequency(config: URConfig, hz: float, path: str | Path) -> URConfig:
+    """``config`` asking the controller for ``hz`` (a launch set's override of the file at
+    ``path``); ``ConfigError`` under the file's key when the rate is out of range or the link
+    timeout is not longer than one period."""
+    if not 1.0 <= hz <= 500.0:
+        raise ConfigError(path, "rtde_frequency_hz", f"{hz:g} given: must be 1 to 500")
+    if config.link_timeout_s <= 1.0 / hz:
+        why = f"{hz:g} given: link_timeout_s must be longer than one RTDE period"
+        raise ConfigError(path, "rtde_frequency_hz", why)
+    return replace(config, rtde_frequency_hz=hz)
+
+
+__all__ = [
+    "CONFIG_DIR", "DEFAULT_CONFIG", "UR_SCHEMA", "URConfig", "URJoint",
+    "load_ur_config", "with_rtde_frequency",
+]

@@ -46,7 +46,7 @@ from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
 
-from .config import DEFAULT_CONFIG, URConfig, load_ur_config
+from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_rtde_frequency
 from .hardware import URHardware
 from .rtde_link import LinkDown
 
@@ -77,6 +77,7 @@ class URNode(LeanNode):
         self.create_service(Trigger, ros_names.ur_unlock_service(c), self._on_unlock)
         self._reported: tuple[Lifecycle, str] | None = None
         self._settling = False
+        self._joints_due = -1e9  # ROS time the next JointState is due
         self._last_recovery = time.monotonic()
         if not (self.hw.configure() and self.hw.activate()):
             self.get_logger().error(
@@ -123,7 +124,7 @@ class URNode(LeanNode):
                     self.get_logger().info(f"{self.config.component}: arm active again")
         self.action.tick()
         if hw.link_ok and hw.reading is not None and hw.state != Lifecycle.ERROR:
-            self._publish_joints()
+            self._publish_joints_when_due()
         if (hw.state, hw.fault) != self._reported:
             self._publish_status()
 
@@ -153,9 +154,19 @@ class URNode(LeanNode):
         return response
 
     # --- publication -----------------------------------------------------------------------------
-    def _publish_joints(self) -> None:
+    def _publish_joints_when_due(self) -> None:
+        # Every subscriber (both ARSs, vision, the CRS, the recorder) wakes for each message: the
+        # arm's state goes out at joint_state_rate_hz, not at the servo stream's control rate.
+        stamp = self.get_clock().now()
+        now = stamp.nanoseconds * 1e-9
+        period = 1.0 / self.config.joint_state_rate_hz
+        # Half a control period early counts as due (cycles fire on ROS time as /clock steps it);
+        # a due time more than a period ahead means ROS time went back (a restarted twin).
+        if now + 0.5 / self.config.control_rate_hz < self._joints_due <= now + period:
+            return
+        self._joints_due = self._joints_due + period if self._joints_due + period > now else now + period
         msg = JointState()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = stamp.to_msg()
         msg.name = list(self.config.joint_names)
         msg.position = list(self.hw.reading.q)
         msg.velocity = list(self.hw.reading.qd)
@@ -190,9 +201,15 @@ def main(argv: list[str] | None = None) -> int:
         "--config", type=Path, default=DEFAULT_CONFIG, help="arm YAML (config/hardware/ur_x.yaml)"
     )
     parser.add_argument("--host", help="controller address, overriding the configured host")
+    parser.add_argument(
+        "--rtde-frequency-hz", type=float,
+        help="RTDE output rate asked of the controller, overriding rtde_frequency_hz (1-500)",
+    )
     own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-ur", *args])[1:])
     try:
         config = load_ur_config(own.config)
+        if own.rtde_frequency_hz is not None:
+            config = with_rtde_frequency(config, own.rtde_frequency_hz, own.config)
     except ConfigError as exc:
         print(f"tlt-ur: {exc}", file=sys.stderr)
         return 2

@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from tlt_common.config_schema import ConfigError
-from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
+from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config, with_rtde_frequency
 
 
 @pytest.mark.parametrize("arm,host", [("x", "127.0.0.2"), ("y", "127.0.0.3")])
@@ -39,6 +39,7 @@ def _write(tmp_path, change) -> str:
             "link_timeout_s",
             "one RTDE period",
         ),
+        (lambda d: d.update(joint_state_rate_hz=200.0), "joint_state_rate_hz", "at most control_rate_hz"),
         (lambda d: d.update(colour="red"), "colour", "unknown key"),
     ],
 )
@@ -57,3 +58,21 @@ def test_node_main_refuses_a_bad_config_with_exit_status_2(tmp_path, capsys) -> 
     path = _write(tmp_path, lambda d: d.pop("joints"))
     assert main(["--config", str(path)]) == 2
     assert "joints" in capsys.readouterr().err
+
+
+def test_a_launch_set_may_ask_another_rtde_rate_within_the_file_s_limits() -> None:
+    path = CONFIG_DIR / "ur_x.yaml"
+    config = load_ur_config(path)
+    assert with_rtde_frequency(config, 125.0, path).rtde_frequency_hz == 125.0
+    with pytest.raises(ConfigError, match="must be 1 to 500") as err:
+        with_rtde_frequency(config, 1000.0, path)
+    assert err.value.key == "rtde_frequency_hz"
+    with pytest.raises(ConfigError, match="one RTDE period"):
+        with_rtde_frequency(config, 1.5, path)  # the 0.5 s link timeout is shorter than a period
+
+
+def test_node_main_refuses_an_rtde_rate_out_of_range_with_exit_status_2(capsys) -> None:
+    from tlt_drivers.ur.node import main
+
+    assert main(["--config", str(CONFIG_DIR / "ur_x.yaml"), "--rtde-frequency-hz", "0"]) == 2
+    assert "rtde_frequency_hz" in capsys.readouterr().err

@@ -6,6 +6,7 @@ unlock service bringing the arm back."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import threading
 import time
 from collections.abc import Iterator
@@ -124,6 +125,19 @@ def test_joint_states_and_status_are_published(harness: Harness) -> None:
     status = h.wait(lambda: h.statuses and h.statuses[-1], "HardwareStatus")
     assert status.component == "ur_x"
     assert status.lifecycle_state == HardwareStatus.LIFECYCLE_ACTIVE and status.link_ok and status.fault == ""
+
+
+def test_joint_states_go_out_at_their_own_rate_not_the_control_rate(harness: Harness) -> None:
+    h = harness
+    start = len(h.joints)
+    h.wait(lambda: len(h.joints) >= start + 10, "ten joint states")
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in h.joints[start:]]
+    gaps = [b - a for a, b in itertools.pairwise(stamps)]
+    # On average one state period apart (the control cycle runs 2.5 times as often), each gap a
+    # whole number of control cycles: never closer than a period less one cycle.
+    period, cycle = 1.0 / h.config.joint_state_rate_hz, 1.0 / h.config.control_rate_hz
+    assert (stamps[-1] - stamps[0]) / len(gaps) >= 0.95 * period, gaps
+    assert min(gaps) >= period - cycle - 1e-3, gaps
 
 
 def test_trajectory_is_streamed_and_succeeds(harness: Harness) -> None:
