@@ -42,6 +42,8 @@ then finished, not run again (:class:`tlt_ars.context.ArsContext`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import py_trees
 from py_trees.common import Status
@@ -69,6 +71,7 @@ from tlt_ars.context import ArsContext
 from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
+from tlt_common.bt.deferred import DeferredSequence
 from tlt_common.bt.nodes import Action
 from tlt_common.mission.schema import Member
 
@@ -215,13 +218,16 @@ class SubtreeBuilder:
             ],
         )
 
-    def get_inspected_part(self, name: str, get_name: str, inspect_name: str, dispenser: str, kind: str):
+    def get_inspected_part(
+        self, name: str, get_name: str, inspect_name: str, dispenser: str, kind: str, *, defer: bool = False
+    ) -> ReplaceDiscarded:
         """Get and inspect a part; after a discard, a replacement from the same dispenser."""
-        attempt = _seq(
-            f"{name} Attempt",
-            [self.get_part(get_name, dispenser, kind), self.inspect_part(inspect_name, kind)],
-        )
-        return ReplaceDiscarded(name, attempt, self.ctx)
+
+        def attempt() -> Sequence:
+            return _seq(f"{name} Attempt", [self.get_part(get_name, dispenser, kind),
+                                            self.inspect_part(inspect_name, kind)])
+
+        return ReplaceDiscarded(name, _phase(defer)(f"{name} Attempt", attempt), self.ctx)
 
     # ----- placing (Figs. 31, 36) -----
     def _approach_placement(self, member: Member) -> list[py_trees.behaviour.Behaviour]:
@@ -370,8 +376,11 @@ class SubtreeBuilder:
         )
 
     # ----- request branches (Figs. 28, 32, 38, 39) -----
-    def add_cross_frame(self, member: Member) -> Sequence:
+    # With ``defer`` a branch's first phase is built at once and each later one is a
+    # DeferredSequence built on the tree's next tick: the CRS waits on the request's first tick.
+    def add_cross_frame(self, member: Member, *, defer: bool = False) -> Sequence:
         """Fig. 28."""
+        later = _phase(defer)
         return _seq(
             "Add Cross Frame",
             [
@@ -382,56 +391,59 @@ class SubtreeBuilder:
                     member.dispenser,
                     "cross_frame",
                 ),
-                self.place_cross_frame(member),
+                later("Place Cross Frame", lambda: self.place_cross_frame(member)),
             ],
         )
 
-    def add_member(self, member: Member) -> Sequence:
+    def add_member(self, member: Member, *, defer: bool = False) -> Sequence:
         """Fig. 32: load a rivet, grab, inspect, place and rivet the member."""
         rivet = _rivet(member, "add")
+        later = _phase(defer)
         return _seq(
             "Add Member",
             [
                 self.load_rivet(rivet.dispenser),
                 self.get_inspected_part(
-                    "Get Inspected Member", "Grab Member", "Inspect Member", member.dispenser, member.kind
+                    "Get Inspected Member", "Grab Member", "Inspect Member", member.dispenser, member.kind,
+                    defer=defer,
                 ),
-                self.place_member(member),
-                self.rivet_member(member.kind),
+                later("Place Member", lambda: self.place_member(member)),
+                later("Rivet Member", lambda: self.rivet_member(member.kind)),
             ],
         )
 
-    def affix_member(self, member: Member) -> Sequence:
+    def affix_member(self, member: Member, *, defer: bool = False) -> Sequence:
         """Fig. 39: load a rivet and place it in the member's affix joint."""
         rivet = _rivet(member, "affix")
         return _seq(
             "Affix Member",
             [
                 self.load_rivet(rivet.dispenser),
-                self.place_rivet(member, rivet.joint, "affixed"),
+                _phase(defer)("Place Rivet", lambda: self.place_rivet(member, rivet.joint, "affixed")),
             ],
         )
 
-    def foundation_rivet(self, member: Member) -> Sequence:
+    def foundation_rivet(self, member: Member, *, defer: bool = False) -> Sequence:
         """Fig. 38: like Affix Member, into the foundation joint."""
         joint = member.joints[0][0]
         return _seq(
             "Foundation Rivet",
             [
                 self.load_rivet(member.dispenser),
-                self.place_rivet(member, joint, "riveted"),
+                _phase(defer)("Place Rivet", lambda: self.place_rivet(member, joint, "riveted")),
             ],
         )
 
-    def branch(self, request: str, member: Member) -> Sequence:
-        """The branch for a CRS request (one of ``ros_names.ARS_ACTIONS``)."""
+    def branch(self, request: str, member: Member, *, defer: bool = False) -> Sequence:
+        """The branch for a CRS request (one of ``ros_names.ARS_ACTIONS``); with ``defer`` its
+        phases after the first are built later (:func:`tlt_common.bt.deferred.build_deferred`)."""
         builders = {
             "add_cross_frame": self.add_cross_frame,
             "add_member": self.add_member,
             "affix_member": self.affix_member,
             "foundation_rivet": self.foundation_rivet,
         }
-        return builders[request](member)
+        return builders[request](member, defer=defer)
 
     def finish(self, request: str, member: Member) -> Sequence:
         """What is left of ``request`` for ``member`` after the member was set: the retreat from
@@ -441,6 +453,11 @@ class SubtreeBuilder:
         key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
         kind = member.kind if request == "add_member" else ""
         return _seq(f"Finish {title}", self._retreat(kind, key))
+
+
+def _phase(defer: bool) -> Callable[[str, Callable[[], Sequence]], Sequence]:
+    """How a request's later phase is made: a DeferredSequence named as the phase, or at once."""
+    return DeferredSequence if defer else (lambda _name, make: make())
 
 
 def _rivet(member: Member, step: str):

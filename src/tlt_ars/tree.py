@@ -34,6 +34,7 @@ from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
 from tlt_ars.motion import MotionPlanner
 from tlt_ars.subtrees import SubtreeBuilder
+from tlt_common.bt.deferred import DeferredSequence, build_deferred
 from tlt_common.bt.nodes import Action, Condition
 from tlt_common.bt.ros import ServiceCall
 
@@ -97,10 +98,13 @@ def _last_leaf_with(node: py_trees.behaviour.Behaviour, status: Status) -> py_tr
 
 
 def progress(branch: py_trees.behaviour.Behaviour | None) -> float:
-    """Fraction of ``branch``'s leaves that have succeeded in this run."""
+    """Fraction of ``branch``'s leaves that have succeeded in this run (0 while a phase is still to
+    be built: the whole is not known yet, and the figure must not fall when it is)."""
     if branch is None:
         return 0.0
     leaves = _leaves(branch)
+    if any(isinstance(leaf, DeferredSequence) and not leaf.built for leaf in leaves):
+        return 0.0
     done = sum(1 for leaf in leaves if leaf.status == Status.SUCCESS)
     return done / len(leaves) if leaves else 0.0
 
@@ -183,6 +187,7 @@ class ArsTree:
         self.job: Job | None = None
         self._pending: Job | None = None
         self.branch: py_trees.behaviour.Behaviour | None = None
+        self._deferred = False  # the installed branch has phases still to build
         self.on_change: list[Callable[[], None]] = []
         self.slot = py_trees.composites.Sequence("Request", memory=True)
         carry = py_trees.composites.Selector("Carry Out Request", memory=True)
@@ -214,16 +219,26 @@ class ArsTree:
         member = self.ctx.data.member
         if member is None:
             raise ValueError(f"unknown member '{job.request.member_id}'")
-        build = self.builder.finish if finishing else self.builder.branch
-        branch = build(job.request.request, member)
+        if finishing:
+            branch = self.builder.finish(job.request.request, member)
+        else:
+            branch = self.builder.branch(job.request.request, member, defer=True)
         for child in list(self.slot.children):
             self.slot.remove_child(child)
         self.slot.add_child(branch)
         self.branch = branch
+        self._deferred = not finishing
         for callback in self.on_change:
             callback()
 
     def tick(self) -> None:
+        # The phases a request reaches later are built on the tick after the one that installed
+        # its branch (its first feedback is out by then), before anything can reach them.
+        if self._deferred and self.branch is not None:
+            self._deferred = False
+            if build_deferred(self.branch):
+                for callback in self.on_change:
+                    callback()
         self.tree.tick()
 
     def interrupt(self) -> Job | None:
@@ -232,6 +247,7 @@ class ArsTree:
         self.root.stop(Status.INVALID)
         job, self.job = self.job, None
         self._pending = None
+        self._deferred = False  # the branch will not run again: nothing of it is worth building
         return job
 
     def hold(self) -> None:

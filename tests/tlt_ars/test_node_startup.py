@@ -10,6 +10,7 @@ import pytest
 import rclpy
 import yaml
 from action_msgs.msg import GoalStatus
+from py_trees.common import Status
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember, AffixMember
@@ -210,3 +211,39 @@ def test_a_goal_for_the_running_request_takes_the_job_over(idle_ars):
     assert result.status == GoalStatus.STATUS_ABORTED
     assert "no fresh joint state on '/ur_x/joint_states'" in result.result.reason, result.result.reason
     assert ars.active is None
+
+
+def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_starts_it():
+    """The CRS waits for a request's first tick: on it only the first phase of an Add Member is
+    built; the rest are built on the next tick, the same branch as one built whole."""
+    from tlt_ars.node import request_of
+    from tlt_ars.tree import Job, progress
+    from tlt_common.bt.status_codec import TreeShape
+
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(started_on_launch=True, check_reach=False)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ars = ArsNode(ars_config_from_dict(raw), context=context)  # not spun: the test ticks the tree
+    try:
+        changes: list[int] = []
+        ars.tree.on_change.append(lambda: changes.append(1))
+        goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
+        ars.tree.submit(Job(request_of("add_member", goal), lambda ok, why: None))
+        ars.tree.tick()
+        branch = ars.tree.branch
+        assert [c.name for c in branch.children] == [
+            "Load Rivet", "Get Inspected Member", "Place Member", "Rivet Member"
+        ]
+        assert branch.children[0].status == Status.RUNNING
+        assert not branch.children[2].children and not branch.children[3].children
+        assert progress(branch) == 0.0  # not a fraction of a whole not known yet
+        assert changes == [1]
+        ars.tree.tick()
+        whole = ars.tree.builder.branch("add_member", ars.ctx.data.member)
+        assert [n.path for n in TreeShape.of(branch).nodes] == [n.path for n in TreeShape.of(whole).nodes]
+        assert len(TreeShape.of(branch).nodes) > 100 and changes == [1, 1]
+    finally:
+        ars.close()
+        ars.destroy_node()
+        rclpy.try_shutdown(context=context)
