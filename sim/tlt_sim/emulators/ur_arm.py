@@ -95,6 +95,9 @@ class UR10eArm:
         self._speed_target = np.zeros(6)
         self._speed_acc = 1.0
         self._stop_dec = np.full(6, 10.0)
+        # The last TCP pose and the joints and tool it is for: every RTDE data package carries
+        # the pose, and most of them are of an arm at rest.
+        self._tcp_pose: tuple[bytes, tuple[float, ...], list[float]] | None = None
 
     # --- state for the controller and the twin ------------------------------------------
     def positions(self) -> list[float]:
@@ -113,7 +116,10 @@ class UR10eArm:
 
     def tcp_pose(self) -> list[float]:
         with self._lock:
-            return kin.forward(self.q, self.tcp)
+            q, tcp = self.q.tobytes(), tuple(self.tcp)
+            if self._tcp_pose is None or self._tcp_pose[:2] != (q, tcp):
+                self._tcp_pose = (q, tcp, kin.forward(self.q, self.tcp))
+            return list(self._tcp_pose[2])
 
     def set_tcp(self, tcp: Sequence[float]) -> None:
         with self._lock:

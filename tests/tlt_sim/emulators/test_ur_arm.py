@@ -113,3 +113,18 @@ def test_twin_can_overwrite_the_measured_state() -> None:
     arm = UR10eArm(HOME)
     arm.set_state([0.1] * 6, [0.2] * 6)
     assert arm.positions() == [0.1] * 6 and arm.velocities() == [0.2] * 6
+
+
+def test_the_tcp_pose_follows_the_joints_and_the_tool_whatever_changes_them() -> None:
+    arm = UR10eArm(HOME)
+    at_home = arm.tcp_pose()
+    assert at_home == pytest.approx(kin.forward(np.array(HOME), [0.0] * 6))
+    at_home.append(99.0)  # a caller's copy: the arm's pose is not changed through it
+    assert len(arm.tcp_pose()) == 6
+    arm.move_joints([h + 0.3 for h in HOME], 1.0, 1.0)
+    run(arm, 0.2)
+    assert arm.tcp_pose() == pytest.approx(kin.forward(np.array(arm.positions()), [0.0] * 6))
+    arm.set_state([0.1] * 6)
+    assert arm.tcp_pose() == pytest.approx(kin.forward(np.array([0.1] * 6), [0.0] * 6))
+    arm.set_tcp([0.0, 0.0, 0.2, 0.0, 0.0, 0.0])
+    assert arm.tcp_pose() == pytest.approx(kin.forward(np.array([0.1] * 6), [0.0, 0.0, 0.2, 0.0, 0.0, 0.0]))
