@@ -421,15 +421,18 @@ def test_topic_data_waits_then_fails(ros):
 
 def test_goals_on_one_server_share_a_client_and_keep_their_results(ros, action_server):
     _, node = ros
-    first = ActionGoal("first", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x0_y0"))
-    second = ActionGoal("second", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x1_y1"))
+    # Discovery of the fixture's server took over the default 5 s in a loaded CI run.
+    first = ActionGoal("first", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x0_y0"),
+                       server_timeout=30.0)
+    second = ActionGoal("second", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x1_y1"),
+                        server_timeout=30.0)
     assert first.client is second.client
     both = py_trees.composites.Parallel(
         "both",
         policy=py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=False),
         children=[first, second],
     )
-    run_to_end(both)
+    run_to_end(both, timeout=40.0)
     assert both.status is Status.SUCCESS
     assert first.last_result.success and second.last_result.success
     assert {"bay4/vertical/x0_y0", "bay4/vertical/x1_y1"} <= set(action_server.received)
@@ -441,8 +444,9 @@ def test_result_recording_error_fails_cleanly(ros, action_server):
     def record(result, ok, reason):
         raise OSError("disk full")
 
-    behaviour = ActionGoal("add", node, AddMember, "ars_x/add_member", goal(), on_result=record)
-    run_to_end(behaviour)
+    behaviour = ActionGoal("add", node, AddMember, "ars_x/add_member", goal(), on_result=record,
+                           server_timeout=30.0)
+    run_to_end(behaviour, timeout=40.0)
     assert behaviour.status is Status.FAILURE
     assert "could not be recorded: disk full" in behaviour.feedback_message
 
