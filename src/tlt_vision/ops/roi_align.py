@@ -66,8 +66,8 @@ def roi_align(
     bin_w, bin_h = rw / pw, rh / ph
     s = sampling_ratio
     # Sample positions along each axis, in units of bins: (p + (i + 0.5) / s) for p bins, i samples.
-    gy = (torch.arange(ph * s, dtype=features.dtype) + 0.5) / s
-    gx = (torch.arange(pw * s, dtype=features.dtype) + 0.5) / s
+    gy = (torch.arange(ph * s, dtype=features.dtype, device=features.device) + 0.5) / s
+    gx = (torch.arange(pw * s, dtype=features.dtype, device=features.device) + 0.5) / s
     ys = y1[:, None] + gy[None, :] * bin_h[:, None]  # (R, PH*s)
     xs = x1[:, None] + gx[None, :] * bin_w[:, None]  # (R, PW*s)
     yy = ys[:, :, None].expand(r, ph * s, pw * s).reshape(r, -1)

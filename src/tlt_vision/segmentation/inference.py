@@ -63,12 +63,13 @@ def rgb_to_tensor(rgb: np.ndarray) -> torch.Tensor:
 @torch.no_grad()
 def detect_rgb(model: MaskRCNN, rgb: np.ndarray, max_size: int | None) -> dict[str, torch.Tensor]:
     """Detections of one uint8 RGB image (H, W, 3): ``boxes``, ``labels``, ``scores`` and
-    ``masks`` (D, H, W) at the image's own size, however small the model saw it."""
+    ``masks`` (D, H, W) at the image's own size, however small the model saw it; on the CPU
+    whatever device the model is on."""
     model.eval()
-    image = rgb_to_tensor(rgb)
+    image = rgb_to_tensor(rgb).to(next(model.parameters()).device)
     h, w = image.shape[-2:]
     size = scaled_size(h, w, max_size)
-    out = model(resize_image(image, size))[0]
+    out = {k: v.cpu() for k, v in model(resize_image(image, size))[0].items()}
     if size != (h, w):
         sy, sx = h / size[0], w / size[1]
         out["boxes"] = out["boxes"] * torch.tensor([sx, sy, sx, sy])

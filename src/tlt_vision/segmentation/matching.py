@@ -20,7 +20,7 @@ def match(
     the boxes it overlaps best, so a small object is never left without a positive anchor.
     """
     if gt_boxes.numel() == 0:
-        return torch.full((boxes.shape[0],), BACKGROUND, dtype=torch.long)
+        return torch.full((boxes.shape[0],), BACKGROUND, dtype=torch.long, device=boxes.device)
     iou = box_iou(gt_boxes, boxes)  # (G, N)
     best, idx = iou.max(dim=0)
     out = idx.clone()
@@ -41,8 +41,9 @@ def sample(
     neg = torch.nonzero(matches == BACKGROUND).flatten()
     n_pos = min(pos.numel(), int(batch * positive_fraction))
     n_neg = min(neg.numel(), batch - n_pos)
-    pos = pos[torch.randperm(pos.numel(), generator=generator)[:n_pos]]
-    neg = neg[torch.randperm(neg.numel(), generator=generator)[:n_neg]]
+    # The draw is made on the CPU (a generator's device must match) and moved to the indices'.
+    pos = pos[torch.randperm(pos.numel(), generator=generator)[:n_pos].to(pos.device)]
+    neg = neg[torch.randperm(neg.numel(), generator=generator)[:n_neg].to(neg.device)]
     return pos, neg
 
 

@@ -29,7 +29,7 @@ def multilevel_roi_align(
     feats: list[torch.Tensor], boxes: list[torch.Tensor], strides: tuple[int, ...], size: int
 ) -> torch.Tensor:
     """RoIAlign of every image's boxes, each from its own level; (R, C, size, size) in box order."""
-    rois = torch.cat([torch.cat([torch.full((len(b), 1), float(i)), b], dim=1) for i, b in enumerate(boxes)])
+    rois = torch.cat([torch.cat([b.new_full((len(b), 1), float(i)), b], dim=1) for i, b in enumerate(boxes)])
     out = feats[0].new_zeros((rois.shape[0], feats[0].shape[1], size, size))
     if rois.shape[0] == 0:
         return out
@@ -80,8 +80,8 @@ def paste_masks(probs: torch.Tensor, boxes: torch.Tensor, image_size: tuple[int,
     h, w = image_size
     if probs.shape[0] == 0:
         return probs.new_zeros((0, h, w))
-    ys = torch.arange(h, dtype=probs.dtype) + 0.5
-    xs = torch.arange(w, dtype=probs.dtype) + 0.5
+    ys = torch.arange(h, dtype=probs.dtype, device=probs.device) + 0.5
+    xs = torch.arange(w, dtype=probs.dtype, device=probs.device) + 0.5
     bw = (boxes[:, 2] - boxes[:, 0]).clamp(min=1e-3)
     bh = (boxes[:, 3] - boxes[:, 1]).clamp(min=1e-3)
     gx = (xs[None, :] - boxes[:, 0:1]) / bw[:, None] * 2 - 1  # (D, W)
@@ -116,11 +116,11 @@ class RoIHeads(nn.Module):
             m = match(tgt["boxes"], props, cfg.roi_fg_iou, cfg.roi_fg_iou, allow_low_quality=False)
             pos, neg = sample(m, cfg.roi_batch_per_image, cfg.roi_positive_fraction)
             idx = torch.cat([pos, neg])
-            lab = torch.zeros(len(idx), dtype=torch.long)
+            lab = idx.new_zeros(len(idx))
             lab[: len(pos)] = tgt["labels"][m[pos]]
-            gt_idx = torch.full((len(idx),), BACKGROUND, dtype=torch.long)
+            gt_idx = idx.new_full((len(idx),), BACKGROUND)
             gt_idx[: len(pos)] = m[pos]
-            reg = torch.zeros(len(idx), 4)
+            reg = props.new_zeros((len(idx), 4))
             if len(pos):
                 reg[: len(pos)] = self.coder.encode(tgt["boxes"][m[pos]], props[pos])
             boxes.append(props[idx])
@@ -144,13 +144,14 @@ class RoIHeads(nn.Module):
             mask_labels.append(b_lab[pos])
             if len(pos):
                 gt_masks = tgt["masks"][b_gt[pos]].to(torch.float32)[:, None]  # (P, 1, H, W)
-                rois = torch.cat([torch.arange(len(pos), dtype=torch.float32)[:, None], b_boxes[pos]], dim=1)
+                rois = torch.cat([torch.arange(len(pos), dtype=b_boxes.dtype, device=b_boxes.device)[:, None],
+                                  b_boxes[pos]], dim=1)
                 m = cfg.mask_pool * 2
                 mask_targets.append(roi_align(gt_masks, rois, (m, m), 1.0, 2, aligned=True)[:, 0] >= 0.5)
         mlab = torch.cat(mask_labels)
         if mlab.numel():
             mx = multilevel_roi_align(feats, mask_boxes, cfg.strides, cfg.mask_pool)
-            logits = self.mask_head(mx)[torch.arange(mlab.numel()), mlab]
+            logits = self.mask_head(mx)[torch.arange(mlab.numel(), device=mlab.device), mlab]
             loss_mask = F.binary_cross_entropy_with_logits(logits, torch.cat(mask_targets).to(logits.dtype))
         else:
             loss_mask = cls_logits.sum() * 0.0
@@ -175,12 +176,12 @@ class RoIHeads(nn.Module):
             ref = props[:, None, :].expand(-1, nc - 1, -1).reshape(-1, 4)
             boxes = clip_boxes(self.coder.decode(d.reshape(-1, 4), ref), *image_size)
             scores = p.reshape(-1)
-            labels = torch.arange(1, nc).repeat(n)
+            labels = torch.arange(1, nc, device=props.device).repeat(n)
             keep = scores > cfg.score_threshold
             wh = boxes[:, 2:] - boxes[:, :2]
             keep &= (wh >= cfg.min_box_size).all(dim=1)
             boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
-            k = batched_nms(boxes, scores, labels, cfg.detection_nms)[: cfg.detections_per_image]
+            k = batched_nms(boxes, scores, labels, cfg.detection_nms, max_keep=cfg.detections_per_image)
             results.append({"boxes": boxes[k], "scores": scores[k], "labels": labels[k]})
         mx = multilevel_roi_align(feats, [r["boxes"] for r in results], cfg.strides, cfg.mask_pool)
         side = cfg.mask_pool * 2
@@ -190,7 +191,8 @@ class RoIHeads(nn.Module):
             n = len(r["boxes"])
             lg = mask_logits[start : start + n]
             start += n
-            small = torch.sigmoid(lg[torch.arange(n), r["labels"]]) if n else lg.new_zeros((0, side, side))
+            rows = torch.arange(n, device=lg.device)
+            small = torch.sigmoid(lg[rows, r["labels"]]) if n else lg.new_zeros((0, side, side))
             r["masks"] = paste_masks(small, r["boxes"], image_size) >= 0.5
         return results
 

@@ -44,7 +44,7 @@ class RPN(nn.Module):
     def anchors(self, feats: list[torch.Tensor]) -> list[torch.Tensor]:
         cfg = self.cfg
         return [
-            grid_anchors(tuple(f.shape[-2:]), s, size, cfg.anchor_ratios)
+            grid_anchors(tuple(f.shape[-2:]), s, size, cfg.anchor_ratios).to(f.device)
             for f, s, size in zip(feats, cfg.strides, cfg.anchor_sizes, strict=True)
         ]
 
@@ -60,7 +60,8 @@ class RPN(nn.Module):
         logits = torch.cat([o[0] for o in outs], dim=1)
         deltas = torch.cat([o[1] for o in outs], dim=1)
         all_anchors = torch.cat(anchors)
-        levels = torch.cat([torch.full((len(a),), i, dtype=torch.long) for i, a in enumerate(anchors)])
+        levels = torch.cat([torch.full((len(a),), i, dtype=torch.long, device=a.device)
+                            for i, a in enumerate(anchors)])
         post = cfg.rpn_post_nms_top_n_train if self.training else cfg.rpn_post_nms_top_n_test
         proposals = []
         with torch.no_grad():
@@ -77,7 +78,7 @@ class RPN(nn.Module):
                 wh = bx[:, 2:] - bx[:, :2]
                 ok = (wh >= cfg.min_box_size).all(dim=1)
                 bx, sc, lv = bx[ok], sc[ok], lv[ok]
-                keep = batched_nms(bx, sc, lv, cfg.rpn_nms_threshold)
+                keep = batched_nms(bx, sc, lv, cfg.rpn_nms_threshold, max_keep=post)
                 keep = keep[sc[keep].argsort(descending=True)][:post]
                 proposals.append(bx[keep])
         losses: dict[str, torch.Tensor] = {}
@@ -94,7 +95,7 @@ class RPN(nn.Module):
             m = match(gt, anchors, cfg.rpn_fg_iou, cfg.rpn_bg_iou, allow_low_quality=True)
             pos, neg = sample(m, cfg.rpn_batch_per_image, cfg.rpn_positive_fraction)
             idx = torch.cat([pos, neg])
-            target = torch.cat([torch.ones(len(pos)), torch.zeros(len(neg))])
+            target = torch.cat([logits.new_ones(len(pos)), logits.new_zeros(len(neg))])
             obj_terms.append(F.binary_cross_entropy_with_logits(logits[b, idx], target, reduction="sum"))
             if len(pos):
                 reg = self.coder.encode(gt[m[pos]], anchors[pos])

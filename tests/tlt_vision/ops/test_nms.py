@@ -30,3 +30,21 @@ def test_batched_nms_keeps_labels_apart():
     scores = torch.tensor([0.9, 0.8, 0.7])
     labels = torch.tensor([0, 1, 0])
     assert sorted(batched_nms(boxes, scores, labels, 0.5).tolist()) == [0, 1]
+
+
+def test_nms_stops_at_max_keep_and_matches_the_walk_over_the_whole_iou_matrix():
+    from tlt_vision.ops.boxes import box_iou
+
+    gen = torch.Generator().manual_seed(0)
+    xy = torch.rand(500, 2, generator=gen) * 80
+    boxes = torch.cat([xy, xy + torch.rand(500, 2, generator=gen) * 40 + 1], dim=1)
+    scores = torch.rand(500, generator=gen)
+    order = torch.sort(scores, descending=True, stable=True).indices
+    over = box_iou(boxes[order], boxes[order]) > 0.5
+    suppressed, walk = torch.zeros(500, dtype=torch.bool), []
+    for i in range(500):
+        if not suppressed[i]:
+            walk.append(int(order[i]))
+            suppressed |= over[i]
+    assert nms(boxes, scores, 0.5).tolist() == walk
+    assert nms(boxes, scores, 0.5, max_keep=7).tolist() == walk[:7]
