@@ -109,8 +109,12 @@ class ImageSet:
     def __len__(self) -> int:
         return len(self.files)
 
+    def path(self, i: int) -> Path:
+        """The file of image ``i``."""
+        return self.root / self.files[i]
+
     def __getitem__(self, i: int) -> Sample:
-        path = self.root / self.files[i]
+        path = self.path(i)
         try:
             with np.load(path, allow_pickle=False) as data:
                 stored = [key for key in ARRAYS if key != "masks"] + ["masks_packed"]
@@ -127,4 +131,38 @@ class ImageSet:
             raise DatasetError(f"{path}: cannot read: {exc}") from exc
 
 
-__all__ = ["DatasetError", "ImageSet", "Sample", "read_index", "write_index", "write_sample"]
+class ImageSets:
+    """Several image sets of one class list read as one (sets rendered in parallel with their own
+    seeds): ``len(s)``, ``s[i] -> Sample``, ``s.path(i)``, ``s.classes``, ``s.roots``."""
+
+    def __init__(self, sets: list[ImageSet]) -> None:
+        if not sets:
+            raise DatasetError("no image sets given")
+        for other in sets[1:]:
+            if other.classes != sets[0].classes:
+                raise DatasetError(f"{other.root / 'index.json'}: classes {other.classes} differ from "
+                                   f"{sets[0].root / 'index.json'}'s {sets[0].classes}")
+        self.sets = sets
+        self.classes = sets[0].classes
+        self.roots = [s.root for s in sets]
+        self._starts = np.cumsum([0] + [len(s) for s in sets])
+
+    def _locate(self, i: int) -> tuple[ImageSet, int]:
+        if not 0 <= i < len(self):
+            raise IndexError(f"image {i} of {len(self)}")
+        k = int(np.searchsorted(self._starts, i, side="right")) - 1
+        return self.sets[k], i - int(self._starts[k])
+
+    def __len__(self) -> int:
+        return int(self._starts[-1])
+
+    def path(self, i: int) -> Path:
+        images, j = self._locate(i)
+        return images.path(j)
+
+    def __getitem__(self, i: int) -> Sample:
+        images, j = self._locate(i)
+        return images[j]
+
+
+__all__ = ["DatasetError", "ImageSet", "ImageSets", "Sample", "read_index", "write_index", "write_sample"]

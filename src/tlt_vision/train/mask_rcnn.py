@@ -1,10 +1,11 @@
 """Train the plain-torch Mask R-CNN on rendered image sets, and evaluate its mask AP50.
 
-Train (``--train`` and optionally ``--val`` are sets in the format of :mod:`tlt_vision.train.dataset`)::
+Train (``--train`` one or more sets, read as one, and optionally ``--val``, in the format of
+:mod:`tlt_vision.train.dataset`)::
 
-    python -m tlt_vision.train.mask_rcnn --train DIR [--val DIR] --out build/vision/mask_rcnn.pt \\
+    python -m tlt_vision.train.mask_rcnn --train DIR [DIR ...] [--val DIR] --out build/vision/mask_rcnn.pt \\
         [--epochs 20] [--batch 4] [--lr 1e-3] [--seed 0] [--threads 2] [--max-size 320] \\
-        [--config key=value ...] [--resume CKPT]
+        [--device cpu|cuda] [--workers N] [--config key=value ...] [--resume CKPT]
 
 Every ``--log-every`` steps it prints the epoch, step, images per second, the five losses and the
 time left; after each epoch the validation mask AP50 per class and mean. It keeps the weights of
@@ -55,7 +56,7 @@ from tlt_vision.segmentation.inference import (
     weights_settings,
 )
 from tlt_vision.segmentation.model import MaskRCNN, train_step
-from tlt_vision.train.dataset import DatasetError, ImageSet
+from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets
 from tlt_vision.weights import WeightsError, save_weights
 
 VERSION = "1"
@@ -95,6 +96,11 @@ def open_set(root: str | Path, classes: Sequence[str]) -> ImageSet:
     return images
 
 
+def open_sets(roots: Sequence[str | Path], classes: Sequence[str]) -> ImageSets:
+    """The sets at ``roots`` (each checked as :func:`open_set`) read as one."""
+    return ImageSets([open_set(root, classes) for root in roots])
+
+
 def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
     """Tight (x1, y1, x2, y2) pixel-edge boxes (N, 4) of non-empty masks (N, H, W)."""
     if masks.shape[0] == 0:
@@ -110,12 +116,12 @@ def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
 
 
 def load_sample(
-    images: ImageSet, i: int, max_size: int | None, min_area: int
+    images: ImageSet | ImageSets, i: int, max_size: int | None, min_area: int
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Image ``i`` as the model trains on it: float (3, h, w) at the model's size, and its target
     (masks resized with it, instances under ``min_area`` pixels dropped, boxes from the masks)."""
     s = images[i]
-    path = images.root / images.files[i]
+    path = images.path(i)
     if s.rgb.dtype != np.uint8 or s.rgb.ndim != 3 or s.rgb.shape[2] != 3:
         raise InputError(f"{path}: rgb is {s.rgb.dtype} {s.rgb.shape}, expected uint8 (H, W, 3)")
     h, w = s.rgb.shape[:2]
@@ -147,6 +153,45 @@ def augment(
     b = rng.uniform(-aug.brightness, aug.brightness)
     mean = image.mean()
     return ((image - mean) * c + mean + b).clamp(0.0, 1.0), target
+
+
+class TrainingImages(torch.utils.data.Dataset):
+    """The training set as the model sees it: image ``i`` loaded and augmented by a generator
+    seeded by (seed, epoch, i), so an epoch's images are the same whatever the number of loader
+    workers, and a resumed run sees what it would have."""
+
+    def __init__(self, images: ImageSet | ImageSets, max_size: int | None, min_area: int, aug: Augment,
+                 seed: int) -> None:
+        self.images, self.max_size, self.min_area, self.aug, self.seed = images, max_size, min_area, aug, seed
+        self.epoch = 0  # set before each epoch's loader is made (workers copy it then)
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        rng = np.random.default_rng([self.seed, self.epoch, i])
+        return augment(*load_sample(self.images, i, self.max_size, self.min_area), self.aug, rng)
+
+
+def _as_list(batch: list[Any]) -> list[Any]:
+    return batch
+
+
+def _one_thread(_worker: int) -> None:
+    torch.set_num_threads(1)  # the workers share the machine with the training process
+
+
+def resolve_device(name: str) -> torch.device:
+    """``--device`` as a torch device; InputError when torch cannot use it here."""
+    try:
+        device = torch.device(name)
+    except RuntimeError as exc:
+        raise InputError(f"--device {name}: {exc}") from exc
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise InputError(f"--device {name}: this torch ({torch.__version__}) sees no CUDA device")
+    if device.type not in ("cpu", "cuda"):
+        raise InputError(f"--device {name}: only cpu and cuda are supported")
+    return device
 
 
 # ---------------------------------------------------------------------------------- evaluation
@@ -236,7 +281,7 @@ def plot_curves(path: Path, step_losses: Sequence[dict[str, float]], history: Se
     plt.close(fig)
 
 
-def plot_samples(path: Path, model: MaskRCNN, images: ImageSet, max_size: int | None,
+def plot_samples(path: Path, model: MaskRCNN, images: ImageSet | ImageSets, max_size: int | None,
                  count: int = 4, min_score: float = 0.5) -> None:
     """The first ``count`` images of the set with the detections scoring ``min_score`` or more."""
     import matplotlib
@@ -268,7 +313,7 @@ def plot_samples(path: Path, model: MaskRCNN, images: ImageSet, max_size: int | 
             ax.text(x1, y1, f"{images.classes[int(label) - 1]} {float(score):.2f}", color="white",
                     fontsize=7, va="bottom", bbox={"facecolor": colour, "alpha": 0.7, "pad": 1, "lw": 0})
         ax.imshow(shown)
-        ax.set_title(f"{images.files[k]}: {int(keep.sum())} detections, {len(s.labels)} true", fontsize=9)
+        ax.set_title(f"{images.path(k).name}: {int(keep.sum())} detections, {len(s.labels)} true", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -314,6 +359,14 @@ def learning_rate(step: int, total: int, base: float) -> float:
     return base * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t)))
 
 
+def epochs_within(budget_s: float, elapsed_s: float, epochs_run: int, epochs_done: int, epochs: int) -> int:
+    """How many epochs (at most ``epochs``, at least those done) a run may have so it ends within
+    ``budget_s``, at the mean duration of the ``epochs_run`` this run has trained and evaluated."""
+    per_epoch = elapsed_s / max(epochs_run, 1)
+    more = math.floor(max(budget_s - elapsed_s, 0.0) / per_epoch) if per_epoch > 0 else epochs
+    return max(epochs_done, min(epochs, epochs_done + more))
+
+
 def _duration(seconds: float) -> str:
     seconds = round(seconds)
     h, rem = divmod(seconds, 3600)
@@ -351,7 +404,8 @@ def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str
 def train(args: argparse.Namespace) -> int:
     cfg = build_config(parse_overrides(args.config))
     settings = weights_settings(cfg, args.max_size)
-    train_set = open_set(args.train, cfg.classes)
+    train_set = open_sets(args.train, cfg.classes)
+    device = resolve_device(args.device)
     val_set = open_set(args.val, cfg.classes) if args.val else None
     out = Path(args.out)
     if out.suffix != ".pt":
@@ -360,11 +414,12 @@ def train(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    model = MaskRCNN(cfg)
+    model = MaskRCNN(cfg).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment()
     steps_per_epoch = math.ceil(len(train_set) / args.batch)
-    total_steps = args.epochs * steps_per_epoch
+    epochs = args.epochs  # lowered by --time-budget-min once an epoch's duration is known
+    total_steps = epochs * steps_per_epoch
     history: list[dict[str, Any]] = []
     step_losses: list[dict[str, float]] = []
     best_map, start_epoch, seconds_before = -1.0, 0, 0.0
@@ -376,32 +431,39 @@ def train(args: argparse.Namespace) -> int:
         history, step_losses = ckpt["history"], ckpt["step_losses"]
         best_map, start_epoch, seconds_before = ckpt["best_map"], ckpt["epoch"], ckpt["seconds"]
         print(f"resuming {args.resume} after epoch {start_epoch}", flush=True)
-        if start_epoch >= args.epochs:
-            print(f"nothing to do: the checkpoint has {start_epoch} epochs, --epochs is {args.epochs}")
-    print(f"train {train_set.root} ({len(train_set)} images)"
+        if start_epoch >= epochs:
+            print(f"nothing to do: the checkpoint has {start_epoch} epochs, --epochs is {epochs}")
+    print(f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
           + (f", val {val_set.root} ({len(val_set)} images)" if val_set else ", no validation set")
           + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
-          f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads",
-          flush=True)
+          f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
+          f"device {device}; {args.workers} loader workers", flush=True)
+    data = TrainingImages(train_set, args.max_size, args.min_area, aug, args.seed)
     t_start = time.perf_counter()
     steps_done = 0
-    for epoch in range(start_epoch, args.epochs):
-        # Order and augmentation depend only on (seed, epoch): a resumed run sees what it would have.
-        rng = np.random.default_rng([args.seed, epoch])
-        order = rng.permutation(len(train_set))
+    epoch = start_epoch
+    while epoch < epochs:
+        # The order depends only on (seed, epoch), the augmentation on (seed, epoch, image).
+        order = np.random.default_rng([args.seed, epoch]).permutation(len(train_set)).tolist()
+        data.epoch = epoch
+        loader = torch.utils.data.DataLoader(
+            data, batch_sampler=[order[k:k + args.batch] for k in range(0, len(order), args.batch)],
+            num_workers=args.workers, collate_fn=_as_list, worker_init_fn=_one_thread,
+            prefetch_factor=4 if args.workers else None)
         t_epoch = t_window = time.perf_counter()
         window_images = 0
         epoch_losses: list[dict[str, float]] = []
-        for step in range(steps_per_epoch):
-            batch = [augment(*load_sample(train_set, int(i), args.max_size, args.min_area), aug, rng)
-                     for i in order[step * args.batch:(step + 1) * args.batch]]
+        for step, batch in enumerate(loader):
             sizes = {tuple(b[0].shape[-2:]) for b in batch}
             if len(sizes) > 1:
-                raise InputError(f"{train_set.root}: images of different sizes {sorted(sizes)} in one set")
+                raise InputError(f"{', '.join(map(str, train_set.roots))}: images of different sizes "
+                                 f"{sorted(sizes)} in the training sets")
             global_step = epoch * steps_per_epoch + step
             for group in optimizer.param_groups:
                 group["lr"] = learning_rate(global_step, total_steps, args.lr)
-            losses = train_step(model, optimizer, torch.stack([b[0] for b in batch]), [b[1] for b in batch])
+            images = torch.stack([b[0] for b in batch]).to(device)
+            targets = [{k: v.to(device) for k, v in b[1].items()} for b in batch]
+            losses = train_step(model, optimizer, images, targets)
             if not math.isfinite(losses["total"]):
                 print(f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
                       "try a lower --lr", file=sys.stderr)
@@ -415,7 +477,7 @@ def train(args: argparse.Namespace) -> int:
                 rate = window_images / max(now - t_window, 1e-9)
                 left = (now - t_start) / steps_done * (total_steps - global_step - 1)
                 terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in LOSSES)
-                print(f"epoch {epoch + 1}/{args.epochs} step {step + 1}/{steps_per_epoch} | "
+                print(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
                       f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
                       f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
                 t_window, window_images = now, 0
@@ -432,7 +494,7 @@ def train(args: argparse.Namespace) -> int:
             record.update(val_map=result["map"], val_ap50=result["per_class"],
                           val_seconds_per_image=result["seconds_per_image"])
             improved = result["map"] > best_map
-            print(f"epoch {epoch + 1}/{args.epochs} val {format_ap(result, cfg.classes)} | "
+            print(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
                   f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
                   f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
                   flush=True)
@@ -445,13 +507,14 @@ def train(args: argparse.Namespace) -> int:
                 "best_epoch": epoch + 1,
                 "images": len(train_set),
                 "val_images": len(val_set) if val_set else 0,
-                "train": str(train_set.root),
+                "train": [str(root) for root in train_set.roots],
                 "val": str(val_set.root) if val_set else None,
                 "final_losses": record["train_losses"],
                 "val_map": record["val_map"],
                 "val_ap50": record["val_ap50"],
                 "seconds": round(seconds, 1),
                 "batch": args.batch, "lr": args.lr, "seed": args.seed, "min_area": args.min_area,
+                "device": str(device),
                 "augment": asdict(aug),
                 "history": history,
             }
@@ -464,6 +527,14 @@ def train(args: argparse.Namespace) -> int:
             "best_map": best_map, "seconds": seconds,
         })
         plot_curves(paths["curves"], step_losses, history, cfg.classes)
+        epoch += 1
+        if args.time_budget_min is not None:
+            fit = epochs_within(args.time_budget_min * 60.0, time.perf_counter() - t_start,
+                                epoch - start_epoch, epoch, epochs)
+            if fit < epochs:
+                print(f"time budget {args.time_budget_min:g} min: {fit} epochs fit, not {epochs}; "
+                      "the learning rate decays over those", flush=True)
+                epochs, total_steps = fit, fit * steps_per_epoch
     if not out.is_file():
         raise InputError(f"{out}: no weights written (no epoch was trained)")
     best, _ = load_mask_rcnn(out, cfg.classes)  # the saved file, checked as the node will load it
@@ -476,15 +547,17 @@ def train(args: argparse.Namespace) -> int:
 
 def evaluate_command(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.threads)
+    device = resolve_device(args.device)
     try:
         model, manifest = load_mask_rcnn(args.evaluate)
     except WeightsError as exc:
         raise InputError(str(exc)) from exc
+    model.to(device)
     max_size = manifest["settings"].get("max_size")
     images = open_set(args.val, model.cfg.classes)
     result = evaluate(model, images, max_size, args.val_limit)
     print(f"{args.evaluate} on {images.root} ({result['images']} images, max size {max_size or 'full'}, "
-          f"{args.threads} threads)")
+          f"{args.threads} threads, {device})")
     for c in model.cfg.classes:
         ap = result["per_class"].get(c)
         print(f"  {c:<14} AP50 {ap:.3f}" if ap is not None else f"  {c:<14} AP50 -  (no instances)")
@@ -496,7 +569,8 @@ def evaluate_command(args: argparse.Namespace) -> int:
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m tlt_vision.train.mask_rcnn",
                                 description=__doc__.split("\n")[0])
-    p.add_argument("--train", help="training image set (directory with index.json)")
+    p.add_argument("--train", nargs="+",
+                   help="training image sets (directories with index.json), read as one")
     p.add_argument("--val", help="validation image set: AP50 after each epoch, best epoch kept")
     p.add_argument("--out", default="build/vision/mask_rcnn.pt",
                    help="weights file (.pt); manifest beside it")
@@ -505,6 +579,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--lr", type=float, default=1e-3, help="AdamW peak learning rate")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--device", default="cpu",
+                   help="torch device to train and evaluate on (cpu, cuda, cuda:1)")
+    p.add_argument("--workers", type=int, default=0,
+                   help="processes loading and augmenting training images (0: the training process)")
     p.add_argument("--max-size", type=int, default=None,
                    help="downscale images so the longest side is at most this (pixels); recorded in the "
                         "manifest so inference uses the same size (default: full size)")
@@ -512,6 +590,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="drop training instances with fewer pixels than this at the model's size")
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
                    help="MaskRCNNConfig field (JSON value), e.g. fpn_channels=32; repeatable")
+    p.add_argument("--time-budget-min", type=float, default=None,
+                   help="train only the epochs that fit in this many minutes, judged from the epochs run "
+                        "(the learning rate's decay is fitted to them)")
     p.add_argument("--log-every", type=int, default=10, help="steps between progress lines")
     p.add_argument("--val-limit", type=int, default=None, help="evaluate on the first N validation images")
     p.add_argument("--resume", help="checkpoint (<out stem>_checkpoint.pt) to continue from")
@@ -521,6 +602,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     for name in ("epochs", "batch", "threads", "log_every"):
         if getattr(args, name) < 1:
             p.error(f"--{name.replace('_', '-')} must be at least 1")
+    if args.workers < 0:
+        p.error("--workers must be at least 0")
+    if args.time_budget_min is not None and args.time_budget_min <= 0:
+        p.error("--time-budget-min must be positive")
     if args.max_size is not None and args.max_size < 32:
         p.error("--max-size must be at least 32 pixels")
     if args.evaluate and not args.val:

@@ -19,6 +19,7 @@ from tlt_vision.train.mask_rcnn import (
     augment,
     boxes_from_masks,
     build_config,
+    epochs_within,
     evaluate,
     main,
     open_set,
@@ -201,3 +202,45 @@ def test_flip_keeps_boxes_on_their_masks_and_full_size_detections_from_a_downsca
     det = detect_rgb(model, (np.random.default_rng(1).random((60, 90, 3)) * 255).astype(np.uint8), 45)
     assert det["masks"].shape[1:] == (60, 90) and len(det["boxes"]) > 0
     assert (det["boxes"][:, 2] <= 90 + 1e-3).all() and (det["boxes"][:, 3] <= 60 + 1e-3).all()
+
+
+def test_several_training_sets_train_as_one_and_loader_workers_see_the_same_images(tmp_path, capsys):
+    # One set split in two (as sets rendered in parallel are) and loaded by two worker processes
+    # trains exactly as the whole set loaded in the training process: the order depends on the seed
+    # and epoch, each image's augmentation on the seed, epoch and image.
+    whole = write_set(tmp_path / "whole", 16, seed=1)
+    halves = []
+    for k, name in enumerate(("a", "b")):
+        half = tmp_path / name
+        half.mkdir()
+        files = [f"{i:05d}.npz" for i in range(8)]
+        for i, file in enumerate(files):
+            shutil.copy(whole / f"{8 * k + i:05d}.npz", half / file)
+        write_index(half, list(CLASSES), SIZE, SIZE, files, {"half": name})
+        halves.append(half)
+    common = ["--epochs", "1", "--batch", "4", "--seed", "3", "--threads", "1", *CONFIG_ARGS]
+    runs = {}
+    for name, sets, workers in (("one", [whole], "0"), ("two", halves, "2")):
+        out = tmp_path / name / "w.pt"
+        assert main(["--train", *map(str, sets), "--out", str(out), "--workers", workers, *common]) == 0
+        runs[name] = read_manifest(out)["extra"]["figures"]
+    assert "(16 images)" in capsys.readouterr().out
+    assert runs["two"]["train"] == [str(p) for p in halves] and runs["two"]["images"] == 16
+    one, two = (runs[n]["history"][0]["train_losses"] for n in ("one", "two"))
+    assert one == pytest.approx(two, rel=1e-5)
+    assert main(["--train", str(whole), "--out", str(tmp_path / "w.pt"), "--device", "nope"]) == 2
+    assert "--device nope" in capsys.readouterr().err
+
+
+def test_a_time_budget_trains_the_epochs_that_fit(tmp_path, capsys):
+    assert epochs_within(600.0, 100.0, 1, 1, 20) == 6  # 100 s an epoch: five more fit
+    assert epochs_within(600.0, 100.0, 1, 1, 4) == 4  # never more than asked
+    assert epochs_within(60.0, 100.0, 1, 1, 20) == 1  # over budget already: stop after this one
+    assert epochs_within(600.0, 100.0, 2, 3, 20) == 3 + 10  # resumed: 50 s an epoch of this run
+    images = write_set(tmp_path / "set", 4, seed=1)
+    out = tmp_path / "w.pt"
+    args = ["--train", str(images), "--out", str(out), "--epochs", "5", "--time-budget-min", "1e-6",
+            "--threads", "1", *CONFIG_ARGS]
+    assert main(args) == 0
+    assert "time budget 1e-06 min: 1 epochs fit, not 5" in capsys.readouterr().out
+    assert torch.load(out.parent / "w_checkpoint.pt", weights_only=True)["epoch"] == 1

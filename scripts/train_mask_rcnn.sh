@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# Render a Mask R-CNN training set from the twin in parallel shards, then train on one device.
+#
+#   scripts/train_mask_rcnn.sh OUT_DIR
+#
+# Settings (environment): COUNT training images (6000), SHARDS render processes (nproc - 1), VAL
+# validation images (80, seed 1: the validation set of models/vision/README.md), DEVICE (cuda),
+# WORKERS loader processes (8), BUDGET_MIN minutes of training (the epochs that fit; 8), EPOCHS at
+# most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
+# have is used (240), and MODEL: the --config options of the model (full-size images, 56x56 masks,
+# anchors scaled with the image, see docs/vision.md). PYTHON (python3) must import the project
+# (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
+#
+# Shard k renders with seed 1000 + k, so shards never repeat each other, the validation set or the
+# benchmark's seeds (900, 901). A shard stopped at RENDER_LIMIT_S keeps its last whole index.
+# Everything lands in OUT_DIR: mask_rcnn.pt + .json, curves, samples, train.log, render logs.
+set -euo pipefail
+out=${1:?usage: scripts/train_mask_rcnn.sh OUT_DIR}
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+PYTHON=${PYTHON:-python3}
+COUNT=${COUNT:-6000}
+SHARDS=${SHARDS:-$(( $(nproc) > 1 ? $(nproc) - 1 : 1 ))}
+VAL=${VAL:-80}
+DEVICE=${DEVICE:-cuda}
+WORKERS=${WORKERS:-8}
+BUDGET_MIN=${BUDGET_MIN:-8}
+EPOCHS=${EPOCHS:-40}
+BATCH=${BATCH:-8}
+LR=${LR:-2e-3}
+RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
+MODEL=${MODEL:---config mask_pool=28 --config anchor_sizes=[32,64,128,256]}
+data=${DATA_DIR:-/tmp/tlt-vision-data}
+mkdir -p "$out" "$data"
+log() { echo "[train_mask_rcnn $(date -u +%H:%M:%S)] $*"; }
+
+# 1. Fail fast: two rendered images and one training step on the device.
+log "smoke test: render 2 images, train one step on $DEVICE"
+"$PYTHON" -m tlt_vision.train.render_dataset --out "$data/smoke" --count 2 --seed 999 --progress-every 2
+# shellcheck disable=SC2086
+"$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" --out "$data/smoke_out/w.pt" \
+    --epochs 1 --batch 2 --device "$DEVICE" $MODEL > "$out/smoke.log"
+log "smoke test passed"
+
+# 2. The shards and the validation set, in parallel.
+per=$(( (COUNT + SHARDS - 1) / SHARDS ))
+log "rendering $COUNT images in $SHARDS shards of $per, and $VAL validation images"
+pids=()
+for k in $(seq 0 $(( SHARDS - 1 ))); do
+    timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/train_$k" \
+        --count "$per" --seed $(( 1000 + k )) --progress-every 50 > "$data/render_$k.log" 2>&1 &
+    pids+=($!)
+done
+timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/val" --count "$VAL" \
+    --seed 1 --progress-every 20 > "$data/render_val.log" 2>&1 &
+pids+=($!)
+for pid in "${pids[@]}"; do wait "$pid" || true; done
+shards=()
+for k in $(seq 0 $(( SHARDS - 1 ))); do
+    [ -f "$data/train_$k/index.json" ] && shards+=("$data/train_$k")
+done
+[ ${#shards[@]} -gt 0 ] || { log "no shard rendered an image set"; exit 1; }
+rendered=$("$PYTHON" -c "import sys; from tlt_vision.train.dataset import ImageSet
+print(sum(len(ImageSet(p)) for p in sys.argv[1:]))" "${shards[@]}")
+log "rendered $rendered training images in ${#shards[@]} shards"
+tail -n 2 "$data"/render_*.log > "$out/render.log" 2>/dev/null || true
+
+# 3. Train within the budget, validating each epoch; the best epoch's weights are kept.
+log "training on $DEVICE for at most $BUDGET_MIN min"
+# shellcheck disable=SC2086
+"$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
+    --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
+    --workers "$WORKERS" --threads 4 --time-budget-min "$BUDGET_MIN" --log-every 50 $MODEL \
+    2>&1 | tee "$out/train.log"
+rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships
+log "done: $out"
