@@ -7,8 +7,8 @@
 # validation images (80, seed 1: the validation set of models/vision/README.md), DEVICE (cuda),
 # WORKERS loader processes (8), BUDGET_MIN minutes of training (the epochs that fit; 8), EPOCHS at
 # most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
-# have is used (240), and MODEL: the --config options of the model (full-size images, 56x56 masks,
-# anchors scaled with the image, see docs/vision.md). PYTHON (python3) must import the project
+# have is used (240), and MODEL: the trainer's options for the model (default full-size images,
+# 56x56 masks, anchors scaled with the image: models/vision/README.md, GPU runs). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
 #
 # Shard k renders with seed 1000 + k, so shards never repeat each other, the validation set or the

@@ -1,0 +1,46 @@
+"""scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards and the validation set,
+trains within its budget and leaves the weights, figures and logs; a device it cannot use stops it
+at the smoke test, before anything is rendered at scale."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "scripts" / "train_mask_rcnn.sh"
+TOY = {
+    "COUNT": "4", "SHARDS": "2", "VAL": "2", "DEVICE": "cpu", "WORKERS": "1", "BUDGET_MIN": "1",
+    "EPOCHS": "1", "BATCH": "2", "PYTHON": sys.executable,
+    "MODEL": "--max-size 96 --config fpn_channels=16 --config backbone_channels=[8,8,16,16]",
+}  # fmt: skip
+
+
+def _run(tmp_path: Path, **settings: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"), **settings}
+    return subprocess.run(["bash", str(SCRIPT), str(tmp_path / "out")], capture_output=True, text=True,
+                          timeout=300, env=env)
+
+
+def test_renders_shards_and_trains_within_the_budget(tmp_path):
+    result = _run(tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+    out = tmp_path / "out"
+    assert "rendered 4 training images in 2 shards" in result.stdout
+    assert sorted(p.name for p in out.iterdir()) == [
+        "mask_rcnn.json", "mask_rcnn.pt", "mask_rcnn_curves.png", "mask_rcnn_samples.png", "render.log",
+        "smoke.log", "train.log"]  # fmt: skip
+    figures = json.loads((out / "mask_rcnn.json").read_text())["extra"]["figures"]
+    assert figures["train"] == [str(tmp_path / "data" / f"train_{k}") for k in range(2)]
+    assert figures["images"] == 4 and figures["val_images"] == 2 and figures["device"] == "cpu"
+    assert "epoch 1/1 val mask AP50" in (out / "train.log").read_text()
+
+
+def test_a_device_it_cannot_use_stops_it_at_the_smoke_test(tmp_path):
+    result = _run(tmp_path, DEVICE="nope")
+    assert result.returncode != 0
+    assert "--device nope" in result.stderr and "smoke test passed" not in result.stdout
+    assert not (tmp_path / "data" / "train_0").exists()
