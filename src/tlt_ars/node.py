@@ -51,6 +51,7 @@ import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
 from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand
@@ -72,6 +73,7 @@ from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
+from tlt_common.stop_signals import stop_on_signals
 
 ACTION_TYPES = {
     "add_cross_frame": AddCrossFrame,
@@ -444,7 +446,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ars: {exc}", file=sys.stderr)
         return 2
     share_the_interpreter_quickly()  # the planner works beside the tick and the executor's threads
-    rclpy.init(args=["ars", *full])
+    stop = stop_on_signals()
+    rclpy.init(args=["ars", *full], signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = ArsNode(config, check_reach=False if args.no_reach_check else None)
@@ -455,12 +458,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     try:
-        while rclpy.ok() and not node.finished.is_set():
+        while not stop and rclpy.ok() and not node.finished.is_set():
             executor.spin_once(timeout_sec=0.1)
-        # After a ground Stop, let the last goal results go out before the process ends (after a
-        # signal rclpy has already shut the context down).
+        # After a ground Stop, let the last goal results go out before the process ends.
         for _ in range(10):
-            if not rclpy.ok():
+            if stop or not rclpy.ok():
                 break
             executor.spin_once(timeout_sec=0.05)
     except (KeyboardInterrupt, ExternalShutdownException):

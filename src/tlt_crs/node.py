@@ -36,6 +36,7 @@ from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
@@ -46,6 +47,7 @@ from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
+from tlt_common.stop_signals import stop_on_signals
 from tlt_crs.behaviours.inspection import serve_inspect_part
 from tlt_crs.commands import CommandProcessor, CommandQueue
 from tlt_crs.config import REPO_CONFIG, CrsConfig, load_config
@@ -262,7 +264,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tlt-crs: refused: {exc}", file=sys.stderr)
         return 2
     share_the_interpreter_quickly()  # the tick, the executor's threads and the ground link share it
-    rclpy.init(args=["tlt-crs", *ros_args])
+    stop = stop_on_signals()
+    rclpy.init(args=["tlt-crs", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     py_trees.blackboard.Blackboard.clear()
     try:
         try:
@@ -291,13 +294,13 @@ def main(argv: list[str] | None = None) -> int:
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
         try:
-            while rclpy.ok() and not node.finished:
+            while not stop and rclpy.ok() and not node.finished:
                 executor.spin_once(timeout_sec=0.1)
             if node.finished and bridge is not None:
                 # After a ground Stop: the devices' states that followed it (the lifter in Safe,
                 # the arms standing) reach the ground before the process ends.
                 deadline = time.monotonic() + FINAL_STATES_S
-                while rclpy.ok() and time.monotonic() < deadline:
+                while not stop and rclpy.ok() and time.monotonic() < deadline:
                     executor.spin_once(timeout_sec=0.05)
                 bridge.send_housekeeping()
         except (KeyboardInterrupt, ExternalShutdownException):
@@ -306,8 +309,8 @@ def main(argv: list[str] | None = None) -> int:
             node.interrupt()
             if link is not None:
                 link.close()
-            # Callbacks still running when the node is destroyed use freed handles (a segfault
-            # was seen on SIGINT): give them time to return first.
+            # Callbacks still running when the node is destroyed use freed handles: give them
+            # time to return first (the context is still valid: tlt_common.stop_signals).
             executor.shutdown(timeout_sec=5.0)
             node.destroy_node()
         return 0

@@ -3,6 +3,7 @@ refusals that happen before anything moves."""
 
 from __future__ import annotations
 
+import signal
 import threading
 import time
 
@@ -123,7 +124,8 @@ def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars
     assert request().result.reason == "rejected: stopped by ground command"
 
 
-def test_process_exits_cleanly_on_ground_stop():
+@pytest.mark.parametrize("stop", ["ground", signal.SIGINT, signal.SIGTERM])
+def test_process_exits_cleanly_on_ground_stop_and_on_a_signal(stop):
     import subprocess
     import sys
 
@@ -145,10 +147,13 @@ def test_process_exits_cleanly_on_ground_stop():
             assert proc.poll() is None, proc.stderr.read()
             assert time.monotonic() < deadline, "the ARS process never served its ground commands"
             executor.spin_once(timeout_sec=0.1)
-        future = ground.call_async(GroundCommand.Request(command=GroundCommand.Request.STOP))
-        executor.spin_until_future_complete(future, timeout_sec=10)
-        assert future.result().accepted
-        assert proc.wait(timeout=20) == 0
+        if stop == "ground":
+            future = ground.call_async(GroundCommand.Request(command=GroundCommand.Request.STOP))
+            executor.spin_until_future_complete(future, timeout_sec=10)
+            assert future.result().accepted
+        else:  # as a launcher stops it: rclpy's context stays valid until the node is destroyed
+            proc.send_signal(stop)
+        assert proc.wait(timeout=20) == 0, proc.stderr.read()
     finally:
         if proc.poll() is None:
             proc.kill()

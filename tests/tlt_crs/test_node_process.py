@@ -120,9 +120,9 @@ def _wait(crs, proc, predicate, timeout, what):
         raise AssertionError(f"{what} not reached in {timeout} s; CRS output:\n{out[-4000:]}") from None
 
 
-def _stop(proc):
+def _stop(proc, sig=signal.SIGINT):
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         try:
             return proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
@@ -203,7 +203,8 @@ def test_ticks_follow_ros_time_when_use_sim_time_is_set(rig_process, crs, tmp_pa
         assert started and first["wall"] >= started[0]["wall"]
         assert first["sec"] >= 1000
     finally:
-        _stop(proc)
+        code = _stop(proc, signal.SIGTERM)  # as a launcher stops it
+    assert code == 0, proc.stdout.read()
 
 
 @pytest.mark.parametrize(

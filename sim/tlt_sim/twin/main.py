@@ -23,13 +23,13 @@ import argparse
 import contextlib
 import logging
 import os
-import signal
 import sys
 import time
 from pathlib import Path
 
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.stop_signals import stop_on_signals
 from tlt_drivers.gpio.config import run_dir as default_run_dir
 from tlt_sim.model.config import DEFAULT_EDU
 from tlt_sim.model.scene import ModelCompileError, Scene
@@ -122,11 +122,9 @@ def main(argv: list[str] | None = None) -> int:
             return 2
 
     # rclpy's own handler would invalidate the context under a publish in the loop: the loop stops
-    # on a flag instead (a list append: a signal handler must not take locks, see lifter_main).
+    # on a flag instead.
+    stop = stop_on_signals()
     rclpy.init(args=["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, _frame: stop.append(signum))
     from tlt_common.lean_node import LeanNode
     from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from rclpy.signals import SignalHandlerOptions
 from tlt_common.recording.mcap_writer import McapRecordingWriter, available_compressions
 from tlt_common.recording.recorder import RecorderTiming, TopicRecorder
 from tlt_common.recording.topic_filter import IMAGE_PATTERN, TopicFilter
+from tlt_common.stop_signals import stop_on_signals
 
 SIGNAL_CHECK_S = 0.1  # longest wait for traffic before the loop looks at the stop flag again
 
@@ -110,9 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tlt-record: kept the previous {out.name} as {moved}", file=sys.stderr)
 
     # From here on a signal only asks to stop, and the file is finished however early it comes.
-    stop: list[int] = []  # a list append: a signal handler must not take locks
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, _frame: stop.append(signum))
+    stop = stop_on_signals()
     node = None
     status = 0
     try:
