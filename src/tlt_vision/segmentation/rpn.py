@@ -79,7 +79,6 @@ class RPN(nn.Module):
                 ok = (wh >= cfg.min_box_size).all(dim=1)
                 bx, sc, lv = bx[ok], sc[ok], lv[ok]
                 keep = batched_nms(bx, sc, lv, cfg.rpn_nms_threshold, max_keep=post)
-                keep = keep[sc[keep].argsort(descending=True)][:post]
                 proposals.append(bx[keep])
         losses: dict[str, torch.Tensor] = {}
         if gt_boxes is not None:
