@@ -465,7 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if stop or not rclpy.ok():
                 break
             executor.spin_once(timeout_sec=0.05)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:  # the context shut down by someone else
         pass
     finally:
         node.close()

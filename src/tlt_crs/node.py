@@ -303,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
                 while not stop and rclpy.ok() and time.monotonic() < deadline:
                     executor.spin_once(timeout_sec=0.05)
                 bridge.send_housekeeping()
-        except (KeyboardInterrupt, ExternalShutdownException):
+        except ExternalShutdownException:  # the context shut down by someone else
             pass
         finally:
             node.interrupt()
