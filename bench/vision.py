@@ -45,7 +45,7 @@ from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.errors import add_s, rotation_error_deg
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
-from tlt_vision.train.dataset import ImageSet
+from tlt_vision.train.dataset import ImageSet, instance_model
 from tlt_vision.train.render_dataset import RenderSettings, render_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,14 +66,6 @@ class PoseTally:
 
     def total(self, table: dict[str, int]) -> int:
         return sum(table.values())
-
-
-def tube_model(name: str) -> str:
-    return "strut_tube/diagonal" if "/diagonal" in name else "strut_tube/vertical"
-
-
-def model_name(object_class: str, instance: str) -> str:
-    return tube_model(instance) if object_class == "strut_tube" else object_class
 
 
 def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally) -> None:
@@ -173,7 +165,7 @@ def main() -> int:
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work (tubes as verticals).
-            frame_items = [(d, model_name(d.object_class, "")) for d in dets if d.object_class in POSED]
+            frame_items = [(d, instance_model(d.object_class, "")) for d in dets if d.object_class in POSED]
             for name in {n for _, n in frame_items}:
                 pipelines[name].observe([d for d, n in frame_items if n == name], s.depth, intrinsics)
             frame_s.append(time.perf_counter() - t0)
@@ -189,7 +181,7 @@ def main() -> int:
                 cls = classes[int(label) - 1]
                 if cls not in POSED:
                     continue
-                item_name = model_name(cls, str(name))
+                item_name = instance_model(cls, str(name))
                 truth.append((Detection(cls, s.masks[j]), item_name, pose))
                 if iou is None:
                     continue

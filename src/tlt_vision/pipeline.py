@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from tlt_vision.inspection import Observation
-from tlt_vision.pointcloud import MIN_POINTS, PinholeIntrinsics, masked_point_cloud
+from tlt_vision.pointcloud import MIN_POINTS, MaskedCloud, PinholeIntrinsics, masked_point_cloud
 from tlt_vision.pose.estimator import PoseEstimator
 
 BORDER_DEPTH_MARGIN = 0.01  # m
@@ -128,6 +128,26 @@ class PartPipeline:
         self.merge = tuple(merge)
         self.rng = np.random.default_rng(seed)
 
+    def cloud(
+        self,
+        detection: Detection,
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None = None,
+    ) -> MaskedCloud:
+        """The point cloud C-3PO is given for one detection (its reason when there is none)."""
+        small = int(detection.mask.sum()) < self.keep_border_below
+        return masked_point_cloud(
+            border_kept(detection.mask, depth) if small else detection.mask,
+            depth,
+            intrinsics,
+            rgb,
+            self.min_points,
+            max_points=self.max_points,
+            rng=self.rng,
+            erode=0 if small else 1,
+        )
+
     def observe(
         self,
         detections: Sequence[Detection],
@@ -143,17 +163,7 @@ class PartPipeline:
         out: list[Observation | None] = [None] * len(dets)
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
         for i, d in enumerate(dets):
-            small = int(d.mask.sum()) < self.keep_border_below
-            cloud = masked_point_cloud(
-                border_kept(d.mask, depth) if small else d.mask,
-                depth,
-                intrinsics,
-                rgb,
-                self.min_points,
-                max_points=self.max_points,
-                rng=self.rng,
-                erode=0 if small else 1,
-            )
+            cloud = self.cloud(d, depth, intrinsics, rgb)
             if not cloud.ok:
                 out[i] = Observation(d.object_class, None, cloud.reason, d.object_id)
             elif d.object_class not in self.estimators:

@@ -132,18 +132,16 @@ def train_supervised(
 
 
 def save_detector(
-    det: KeypointDetector, model: CadModel, path: str | Path, cfg: SupervisedConfig, history: list[dict]
+    det: KeypointDetector, model: CadModel, path: str | Path, training: dict, history: list[dict]
 ) -> Path:
+    """Write ``det`` and its manifest (``training``: how it was trained; ``history``: per epoch)."""
     settings = {
         "model": model.name,
         "num_keypoints": det.num_keypoints,
         "scale": float(det.scale),
         "width": det.width,
     }
-    extra = {
-        "training": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()},
-        "history": history,
-    }
+    extra = {"training": training, "history": history}
     return save_weights(det, path, KIND, VERSION, [model.object_class], settings, extra)
 
 
@@ -200,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     det, history = train_supervised(
         model, thresholds[model.object_class], cfg, lambda s: print(s, flush=True)
     )
-    manifest = save_detector(det, model, args.out, cfg, history)
+    training = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    manifest = save_detector(det, model, args.out, {"stage": "supervised", **training}, history)
     print(f"wrote {args.out} and {manifest}")
     return 0
 

@@ -165,4 +165,28 @@ class ImageSets:
         return images[j]
 
 
-__all__ = ["DatasetError", "ImageSet", "ImageSets", "Sample", "read_index", "write_index", "write_sample"]
+def instance_model(object_class: str, name: str) -> str:
+    """The CAD model of a rendered instance of ``object_class``: a strut tube's kind (vertical or
+    diagonal) is read from the twin's instance name (``.../diagonal_dispenser_x/0/tube``)."""
+    if object_class == "strut_tube":
+        return "strut_tube/diagonal" if "/diagonal" in name else "strut_tube/vertical"
+    return object_class
+
+
+def instance_part(object_class: str, name: str) -> str:
+    """The part a rendered instance belongs to: the twin draws each side of a cross frame as an
+    instance of its own (``payload/side_2``), every other part as one."""
+    return name.rsplit("/", 1)[0] if object_class == "cross_frame" else name
+
+
+__all__ = [
+    "DatasetError",
+    "ImageSet",
+    "ImageSets",
+    "Sample",
+    "instance_model",
+    "instance_part",
+    "read_index",
+    "write_index",
+    "write_sample",
+]
