@@ -24,7 +24,9 @@ The bay's span (first CRS step to the packet saying it is built) comes from the 
 (``tlt_gsw.summary``), the records from the MCAP recording, both on the twin's sim clock.
 
 Usage:
-  python bench/build.py [--mission two_bay]   # run scripts/main.sh into a fresh run folder, report
+  python bench/build.py [--mission two_bay] [--rtf R]   # run scripts/main.sh into a fresh run
+                                                      # folder (the twin at real-time factor R: 0 no
+                                                      # limit; the main job's 1 if not given), report
   python bench/build.py --run-dir DIR          # report on a finished run (archive and recording)
 """
 
@@ -216,9 +218,11 @@ def report(run_dir: Path, job_wall_s: float | None = None) -> int:
     return 0 if rows else 1
 
 
-def run_job(mission: str, run_dir: Path) -> tuple[int, float]:
+def run_job(mission: str, run_dir: Path, rtf: float | None = None) -> tuple[int, float]:
     """Run the main job on ``mission`` into ``run_dir``, its output shown as it comes."""
     env = dict(os.environ, TLT_RUN_DIR=str(run_dir))
+    if rtf is not None:
+        env["TLT_TWIN_RTF"] = f"{rtf:g}"
     started = time.monotonic()
     status = subprocess.call(["bash", str(ROOT / "scripts" / "main.sh"), "--mission", mission], env=env)
     return status, time.monotonic() - started
@@ -228,12 +232,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--mission", default="two_bay", help="mission to build (missions/NAME.yaml)")
     parser.add_argument("--run-dir", type=Path, help="report on this finished run instead of running one")
+    parser.add_argument("--rtf", type=float, help="the twin's real-time factor (0: as fast as it can)")
     args = parser.parse_args(argv)
     if args.run_dir is not None:
         return report(args.run_dir)
     run_dir = Path(tempfile.mkdtemp(prefix="tlt-bench-build."))
-    status, wall = run_job(args.mission, run_dir)
-    print(f"\nbuild bench: main job on {args.mission} exited {status} after {wall:.0f} s\n")
+    status, wall = run_job(args.mission, run_dir, args.rtf)
+    rtf = "" if args.rtf is None else f" (twin real-time factor {args.rtf:g})"
+    print(f"\nbuild bench: main job on {args.mission}{rtf} exited {status} after {wall:.0f} s\n")
     return report(run_dir, wall) or status
 
 

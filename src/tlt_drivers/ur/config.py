@@ -145,7 +145,17 @@ def with_rtde_frequency(config: URConfig, hz: float, path: str | Path) -> URConf
     return replace(config, rtde_frequency_hz=hz)
 
 
+def with_link_timeout(config: URConfig, seconds: float, path: str | Path) -> URConfig:
+    """``config`` declaring the link down after ``seconds`` without new controller data (a launch
+    set's override of the file at ``path``); ``ConfigError`` when it is not longer than one RTDE
+    period."""
+    if seconds <= 1.0 / config.rtde_frequency_hz:
+        why = f"{seconds:g} given: must be longer than one RTDE period ({1.0 / config.rtde_frequency_hz:g} s)"
+        raise ConfigError(path, "link_timeout_s", why)
+    return replace(config, link_timeout_s=seconds)
+
+
 __all__ = [
     "CONFIG_DIR", "DEFAULT_CONFIG", "UR_SCHEMA", "URConfig", "URJoint",
-    "load_ur_config", "with_rtde_frequency",
+    "load_ur_config", "with_link_timeout", "with_rtde_frequency",
 ]

@@ -46,7 +46,7 @@ from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
 
-from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_rtde_frequency
+from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_link_timeout, with_rtde_frequency
 from .hardware import URHardware
 from .rtde_link import LinkDown
 
@@ -205,9 +205,16 @@ def main(argv: list[str] | None = None) -> int:
         "--rtde-frequency-hz", type=float,
         help="RTDE output rate asked of the controller, overriding rtde_frequency_hz (1-500)",
     )
+    parser.add_argument(
+        "--link-timeout-s", type=float,
+        help="seconds of the loop's clock without new controller data before the link counts as down, "
+             "overriding link_timeout_s",
+    )
     own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-ur", *args])[1:])
     try:
         config = load_ur_config(own.config)
+        if own.link_timeout_s is not None:
+            config = with_link_timeout(config, own.link_timeout_s, own.config)
         if own.rtde_frequency_hz is not None:
             config = with_rtde_frequency(config, own.rtde_frequency_hz, own.config)
     except ConfigError as exc:

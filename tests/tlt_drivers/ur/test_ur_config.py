@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from tlt_common.config_schema import ConfigError
-from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config, with_rtde_frequency
+from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config, with_link_timeout, with_rtde_frequency
 
 
 @pytest.mark.parametrize("arm,host", [("x", "127.0.0.2"), ("y", "127.0.0.3")])
@@ -71,8 +71,27 @@ def test_a_launch_set_may_ask_another_rtde_rate_within_the_file_s_limits() -> No
         with_rtde_frequency(config, 1.5, path)  # the 0.5 s link timeout is shorter than a period
 
 
+def test_a_launch_set_may_give_the_link_longer_to_go_quiet() -> None:
+    path = CONFIG_DIR / "ur_x.yaml"
+    config = load_ur_config(path)
+    assert with_link_timeout(config, 1.5, path).link_timeout_s == 1.5
+    with pytest.raises(ConfigError, match="one RTDE period") as err:
+        with_link_timeout(config, 0.001, path)  # 500 Hz: a period is 2 ms
+    assert err.value.key == "link_timeout_s"
+    # Both overrides together: the rate is judged against the new timeout.
+    slow = with_rtde_frequency(with_link_timeout(config, 1.5, path), 1.0, path)
+    assert (slow.rtde_frequency_hz, slow.link_timeout_s) == (1.0, 1.5)
+
+
 def test_node_main_refuses_an_rtde_rate_out_of_range_with_exit_status_2(capsys) -> None:
     from tlt_drivers.ur.node import main
 
     assert main(["--config", str(CONFIG_DIR / "ur_x.yaml"), "--rtde-frequency-hz", "0"]) == 2
     assert "rtde_frequency_hz" in capsys.readouterr().err
+
+
+def test_node_main_refuses_a_link_timeout_within_one_period_with_exit_status_2(capsys) -> None:
+    from tlt_drivers.ur.node import main
+
+    assert main(["--config", str(CONFIG_DIR / "ur_x.yaml"), "--link-timeout-s", "0"]) == 2
+    assert "link_timeout_s" in capsys.readouterr().err
