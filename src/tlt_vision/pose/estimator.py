@@ -46,6 +46,18 @@ def rotation_to_quaternion(rot: np.ndarray) -> tuple[float, float, float, float]
     return float(q[0]), float(q[1]), float(q[2]), float(q[3])
 
 
+def padded_batch(clouds: Sequence[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Clouds of different sizes as one zero-padded batch (B, N, 3) and the mask (B, N) of their
+    real points."""
+    n = max(len(c) for c in clouds)
+    obs = torch.zeros(len(clouds), n, 3)
+    mask = torch.zeros(len(clouds), n, dtype=torch.bool)
+    for j, c in enumerate(clouds):
+        obs[j, : len(c)] = torch.from_numpy(np.asarray(c, dtype=np.float32))
+        mask[j, : len(c)] = True
+    return obs, mask
+
+
 @dataclass(frozen=True)
 class PoseEstimate:
     """A part's pose in the camera frame with its certificate (maps onto CertifiedPose)."""
@@ -146,12 +158,7 @@ class PoseEstimator:
             else:
                 good.append((i, finite))
         if good:
-            n = max(len(c) for _, c in good)
-            obs = torch.zeros(len(good), n, 3)
-            mask = torch.zeros(len(good), n, dtype=torch.bool)
-            for j, (_, c) in enumerate(good):
-                obs[j, : len(c)] = torch.from_numpy(c)
-                mask[j, : len(c)] = True
+            obs, mask = padded_batch([c for _, c in good])
             with torch.no_grad():
                 kp = self.detector(obs, mask)
             if self.use_corrector:
@@ -193,4 +200,4 @@ class PoseEstimator:
         return [o for o in out if o is not None]
 
 
-__all__ = ["MIN_POINTS", "PoseEstimate", "PoseEstimator", "rotation_to_quaternion"]
+__all__ = ["MIN_POINTS", "PoseEstimate", "PoseEstimator", "padded_batch", "rotation_to_quaternion"]

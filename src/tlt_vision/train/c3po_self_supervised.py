@@ -50,7 +50,7 @@ from tlt_vision.pipeline import Detection, PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.detector import KeypointDetector, symmetric_keypoint_loss
 from tlt_vision.pose.errors import add_s
-from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator
+from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, padded_batch
 from tlt_vision.train.c3po_supervised import save_detector
 from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets, instance_model, instance_part
 from tlt_vision.weights import WeightsError, read_manifest
@@ -157,16 +157,6 @@ def evaluate(estimator: PoseEstimator, clouds: Sequence[SceneCloud], label_batch
     return result
 
 
-def _padded(clouds: Sequence[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
-    n = max(len(c) for c in clouds)
-    obs = torch.zeros(len(clouds), n, 3)
-    mask = torch.zeros(len(clouds), n, dtype=torch.bool)
-    for j, c in enumerate(clouds):
-        obs[j, : len(c)] = torch.from_numpy(np.asarray(c, dtype=np.float32))
-        mask[j, : len(c)] = True
-    return obs, mask
-
-
 def train_epoch(
     detector: KeypointDetector,
     model: CadModel,
@@ -184,7 +174,7 @@ def train_epoch(
     total = 0.0
     for k in range(0, len(order), batch):
         chosen = [samples[i] for i in order[k : k + batch]]
-        obs, mask = _padded([c for c, _ in chosen])
+        obs, mask = padded_batch([c for c, _ in chosen])
         target = torch.as_tensor(np.stack([t for _, t in chosen]), dtype=torch.float32)
         loss = symmetric_keypoint_loss(detector(obs, mask), target, sym) / scale2
         optimiser.zero_grad()
