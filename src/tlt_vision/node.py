@@ -32,9 +32,8 @@ import argparse
 import logging
 import math
 import sys
-import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -45,6 +44,7 @@ from geometry_msgs.msg import Pose
 from rclpy._rclpy_pybind11 import InvalidHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
 from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
@@ -56,6 +56,7 @@ from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.stamps import set_stamp
+from tlt_common.stop_signals import stop_on_signals
 from tlt_vision import inspection
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
@@ -594,11 +595,11 @@ class VisionNode(LeanNode):
         return response
 
 
-def spin(executor: Any, context: Any = None, stop: threading.Event | None = None) -> None:
-    """Spin ``executor`` until its context shuts down or ``stop`` is set. A wait set built while a
-    request destroys its frame subscriptions can meet a destroyed handle; the next wait is clean,
+def spin(executor: Any, context: Any = None, stop: Callable[[], bool] | None = None) -> None:
+    """Spin ``executor`` until its context shuts down or ``stop()`` is true. A wait set built while
+    a request destroys its frame subscriptions can meet a destroyed handle; the next wait is clean,
     so carry on."""
-    while rclpy.ok(context=context) and not (stop is not None and stop.is_set()):
+    while rclpy.ok(context=context) and not (stop is not None and stop()):
         try:
             executor.spin_once(timeout_sec=0.2)
         except InvalidHandle:
@@ -631,7 +632,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tlt-vision: refused: {exc}", file=sys.stderr)
         return 2
     share_the_interpreter_quickly()  # poses are computed beside the executor's busy threads
-    rclpy.init(args=["tlt-vision", *ros_args])
+    # rclpy's own handler would shut the context down under a pose being computed on an executor
+    # thread: a signal asks the spin loop to end instead (tlt_common/stop_signals.py).
+    stop = stop_on_signals()
+    rclpy.init(args=["tlt-vision", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         try:
@@ -642,8 +646,8 @@ def main(argv: list[str] | None = None) -> int:
         executor = MultiThreadedExecutor(num_threads=8)
         executor.add_node(node)
         try:
-            spin(executor)
-        except (KeyboardInterrupt, ExternalShutdownException):
+            spin(executor, stop=lambda: bool(stop))
+        except ExternalShutdownException:  # a context shut down by someone else
             pass
         finally:
             executor.shutdown(timeout_sec=2.0)

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import math
 import queue
+import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -21,7 +24,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -148,7 +151,8 @@ class Rig:
         for n in (self.vision, self.client):
             self.executor.add_node(n)
         self.stop = threading.Event()
-        self.spin = threading.Thread(target=spin, args=(self.executor, self.context, self.stop), daemon=True)
+        self.spin = threading.Thread(target=spin, args=(self.executor, self.context, self.stop.is_set),
+                                     daemon=True)
         self.spin.start()
 
     def call(self, srv_type, name: str, request):
@@ -386,3 +390,32 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "none.pt" in err and "weights file not found" in err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_process_exits_cleanly_on_a_signal(sig):
+    """As a launcher stops it: the spin loop ends and the node is destroyed with rclpy's context
+    still valid (rclpy's own handler would shut it down under a pose being computed)."""
+    proc = subprocess.Popen([sys.executable, "-m", "tlt_vision.node"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    context = Context()
+    rclpy.init(context=context)
+    probe = Node("vision_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    try:
+        client = probe.create_client(InspectPart, ros_names.VISION_INSPECT_PART)
+        deadline = time.monotonic() + 60
+        while not client.service_is_ready():
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < deadline, "the vision process never served InspectPart"
+            executor.spin_once(timeout_sec=0.1)
+        proc.send_signal(sig)
+        assert proc.wait(timeout=20) == 0, proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        executor.shutdown()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
