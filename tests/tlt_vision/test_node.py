@@ -396,15 +396,19 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
 def test_process_exits_cleanly_on_a_signal(sig):
     """As a launcher stops it: the spin loop ends and the node is destroyed with rclpy's context
     still valid (rclpy's own handler would shut it down under a pose being computed)."""
-    proc = subprocess.Popen([sys.executable, "-m", "tlt_vision.node"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    # Its own service name: in this session other vision nodes came and went, and the graph may
+    # still list theirs (a clean-clone run once signalled the process before it had started).
+    service = f"/signal_test_{sig}_{time.monotonic_ns()}/inspect_part"
+    proc = subprocess.Popen([sys.executable, "-m", "tlt_vision.node", "--ros-args", "-r",
+                             f"{ros_names.VISION_INSPECT_PART}:={service}"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     context = Context()
     rclpy.init(context=context)
     probe = Node("vision_probe", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     try:
-        client = probe.create_client(InspectPart, ros_names.VISION_INSPECT_PART)
+        client = probe.create_client(InspectPart, service)
         deadline = time.monotonic() + 60
         while not client.service_is_ready():
             assert proc.poll() is None, proc.stderr.read()
