@@ -12,7 +12,7 @@ import rclpy
 import yaml
 from action_msgs.msg import GoalStatus
 from py_trees.common import Status
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember, AffixMember
 from tlt_interfaces.msg import MemberState, MissionProgress
@@ -125,7 +125,7 @@ def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars
 
 
 @pytest.mark.parametrize("stop", ["ground", signal.SIGINT, signal.SIGTERM])
-def test_process_exits_cleanly_on_ground_stop_and_on_a_signal(stop):
+def test_process_exits_cleanly_on_ground_stop_and_on_a_signal(stop, wait_for_service):
     import subprocess
     import sys
 
@@ -135,21 +135,11 @@ def test_process_exits_cleanly_on_ground_stop_and_on_a_signal(stop):
         stderr=subprocess.PIPE,
         text=True,
     )
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = Node("ground_probe", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
     try:
-        ground = node.create_client(GroundCommand, ros_names.ground_command_service("ars_y"))
-        deadline = time.monotonic() + 30
-        while not ground.service_is_ready():
-            assert proc.poll() is None, proc.stderr.read()
-            assert time.monotonic() < deadline, "the ARS process never served its ground commands"
-            executor.spin_once(timeout_sec=0.1)
+        ground = wait_for_service(proc, GroundCommand, ros_names.ground_command_service("ars_y"), 30)
         if stop == "ground":
             future = ground.call_async(GroundCommand.Request(command=GroundCommand.Request.STOP))
-            executor.spin_until_future_complete(future, timeout_sec=10)
+            wait_for_service.executor.spin_until_future_complete(future, timeout_sec=10)
             assert future.result().accepted
         else:  # as a launcher stops it: rclpy's context stays valid until the node is destroyed
             proc.send_signal(stop)
@@ -158,9 +148,6 @@ def test_process_exits_cleanly_on_ground_stop_and_on_a_signal(stop):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):

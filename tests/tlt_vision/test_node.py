@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -393,7 +393,7 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_process_exits_cleanly_on_a_signal(sig):
+def test_process_exits_cleanly_on_a_signal(sig, wait_for_service):
     """As a launcher stops it: the spin loop ends and the node is destroyed with rclpy's context
     still valid (rclpy's own handler would shut it down under a pose being computed)."""
     # Its own service name: in this session other vision nodes came and went, and the graph may
@@ -402,24 +402,11 @@ def test_process_exits_cleanly_on_a_signal(sig):
     proc = subprocess.Popen([sys.executable, "-m", "tlt_vision.node", "--ros-args", "-r",
                              f"{ros_names.VISION_INSPECT_PART}:={service}"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    context = Context()
-    rclpy.init(context=context)
-    probe = Node("vision_probe", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(probe)
     try:
-        client = probe.create_client(InspectPart, service)
-        deadline = time.monotonic() + 60
-        while not client.service_is_ready():
-            assert proc.poll() is None, proc.stderr.read()
-            assert time.monotonic() < deadline, "the vision process never served InspectPart"
-            executor.spin_once(timeout_sec=0.1)
+        wait_for_service(proc, InspectPart, service)
         proc.send_signal(sig)
         assert proc.wait(timeout=20) == 0, proc.stderr.read()
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-        executor.shutdown()
-        probe.destroy_node()
-        rclpy.try_shutdown(context=context)
