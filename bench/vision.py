@@ -167,6 +167,8 @@ def main() -> int:
             "merge": ()}
     pipelines = {name: PartPipeline({estimators[name].model.object_class: e}, **opts)
                  for name, e in estimators.items()}
+    # A frame's parts of every kind posed in one call, as the node does (tubes as verticals).
+    frame_pipeline = PartPipeline({cls: estimators[instance_model(cls, "")] for cls in POSED}, **opts)
     min_score = config.raw["segmentation"]["min_score"]
 
     with tempfile.TemporaryDirectory(prefix="tlt_bench_vision_") as tmp:
@@ -190,10 +192,9 @@ def main() -> int:
             pred = detect_rgb(model, s.rgb, max_size)
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
-            # Every detected part posed, as a frame's worth of work (tubes as verticals).
-            frame_items = [(d, instance_model(d.object_class, "")) for d in dets if d.object_class in POSED]
-            for name in {n for _, n in frame_items}:
-                pipelines[name].observe([d for d, n in frame_items if n == name], s.depth, intrinsics)
+            # Every detected part posed, as a frame's worth of work.
+            frame_items = [d for d in dets if d.object_class in POSED]
+            frame_pipeline.observe(frame_items, s.depth, intrinsics)
             frame_s.append(time.perf_counter() - t0)
             seg_s.append(t1 - t0)
             parts.append(len(frame_items))

@@ -29,7 +29,7 @@ import torch
 
 from tlt_vision.inspection import Observation
 from tlt_vision.pointcloud import MIN_POINTS, MaskedCloud, PinholeIntrinsics, masked_point_cloud
-from tlt_vision.pose.estimator import PoseEstimator
+from tlt_vision.pose.estimator import PoseEstimator, estimate_together
 
 BORDER_DEPTH_MARGIN = 0.01  # m
 
@@ -158,7 +158,8 @@ class PartPipeline:
     ) -> list[Observation]:
         """Poses of ``detections``; ``prior(object_class, points)``, when given, says where a piece
         with those points (camera frame) is expected (4x4, camera frame) or None
-        (:meth:`PoseEstimator.estimate_batch`)."""
+        (:meth:`PoseEstimator.estimate_batch`). Every class's clouds are posed together
+        (:func:`~tlt_vision.pose.estimator.estimate_together`)."""
         dets = merge_instances(detections, self.merge)
         out: list[Observation | None] = [None] * len(dets)
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
@@ -172,9 +173,12 @@ class PartPipeline:
                 )
             else:
                 pending.setdefault(d.object_class, []).append((i, cloud.points))
+        jobs = []
         for cls, items in pending.items():
-            priors = [prior(cls, p) for _, p in items] if prior is not None else None
-            estimates = self.estimators[cls].estimate_batch([p for _, p in items], priors)
+            clouds = [p for _, p in items]
+            priors = None if prior is None else [prior(cls, p) for p in clouds]
+            jobs.append((self.estimators[cls], clouds, priors))
+        for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, _), e in zip(items, estimates, strict=True):
                 out[i] = Observation(cls, e, "", dets[i].object_id)
         return [o for o in out if o is not None]

@@ -10,6 +10,8 @@ lie) and a bound inside it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 
@@ -37,6 +39,30 @@ class SurfaceDistance:
         self.seg_flat = torch.tensor([s.flat_ends for s in seg], dtype=torch.bool)
         self.box_c = t([x.centre for x in box], (len(box), 3))
         self.box_h = t([x.half for x in box], (len(box), 3))
+
+    @classmethod
+    def stacked(cls, surfaces: Sequence[SurfaceDistance]) -> SurfaceDistance:
+        """One surface per batch element: called with points (B, N, 3), element ``b`` is measured
+        against ``surfaces[b]``. Elements with fewer primitives are padded with ones a kilometre
+        away, which are never the nearest."""
+        out = cls.__new__(cls)
+        far = 1e3
+
+        def pad(name: str, fill: float | bool, width: int) -> torch.Tensor:
+            rows = []
+            for s in surfaces:
+                value = getattr(s, name)
+                extra = value.new_full((width - value.shape[0], *value.shape[1:]), fill)
+                rows.append(torch.cat([value, extra]))
+            return torch.stack(rows)[:, None]  # (B, 1, width, ...): broadcast over the points
+
+        segments = max(s.seg_len.numel() for s in surfaces)
+        boxes = max(s.box_h.shape[0] for s in surfaces)
+        out.seg_a, out.seg_u = pad("seg_a", far, segments), pad("seg_u", 0.0, segments)
+        out.seg_len, out.seg_r = pad("seg_len", 0.0, segments), pad("seg_r", 0.0, segments)
+        out.seg_flat = pad("seg_flat", False, segments)
+        out.box_c, out.box_h = pad("box_c", far, boxes), pad("box_h", 0.0, boxes)
+        return out
 
     def signed(self, points: torch.Tensor) -> torch.Tensor:
         """Signed distance (..., N): negative inside the part."""

@@ -91,6 +91,18 @@ def test_surface_distance_hand_computed(models):
     assert fitting.surface(p).item() == pytest.approx(0.05, abs=1e-6)
 
 
+
+def test_a_stacked_surface_measures_each_element_against_its_own_model(models):
+    """Several models in one batch (a frame's parts posed together): a model with fewer segments or
+    no box is padded with primitives that are never the nearest."""
+    from tlt_vision.cad.surface import SurfaceDistance
+
+    names = ["corner_joint", "cross_frame", "end_fitting", "rivet", "strut_tube/vertical"]
+    stacked = SurfaceDistance.stacked([models[n].surface for n in names])
+    points = torch.tensor(np.random.default_rng(3).normal(0.0, 0.3, (len(names), 200, 3))).float()
+    alone = torch.stack([models[n].surface.signed(points[i]) for i, n in enumerate(names)])
+    assert torch.equal(stacked.signed(points), alone)
+
 def test_visible_points_face_the_camera(models):
     cube = models["corner_joint"]
     pts = visible_points(cube, np.eye(3), np.array([0.0, 0.0, 0.5]), np.random.default_rng(0))

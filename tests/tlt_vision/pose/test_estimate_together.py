@@ -1,0 +1,44 @@
+"""estimate_together: a frame's parts of several kinds posed in one batch get the poses and
+certificates they get in their own model's batch."""
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tlt_common.mission.schema import load_mission
+from tlt_vision.cad.views import random_rotation, synthetic_view
+from tlt_vision.node_config import load_config
+from tlt_vision.ops.registration import rotation_angle
+from tlt_vision.part_inspection import load_estimators
+from tlt_vision.pose.estimator import estimate_together
+
+ROOT = Path(__file__).resolve().parents[3]
+KINDS = ("corner_joint", "end_fitting", "rivet", "strut_tube/vertical")
+
+
+def test_parts_of_four_kinds_together_are_posed_as_alone():
+    mission = ROOT / "missions" / "one_bay.yaml"
+    config = load_config(ROOT / "config/vision/node.yaml", mission)
+    estimators = load_estimators(config, load_mission(mission))
+    rng = np.random.default_rng(11)
+    jobs = []
+    for kind in KINDS:
+        est = estimators[kind]
+        truth = [(random_rotation(rng), np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), 0.9]))
+                 for _ in range(3)]  # fmt: skip
+        clouds = [synthetic_view(est.model, r, t, 400, rng, noise=0.0003) for r, t in truth]
+        clouds.append(np.zeros((3, 3)))  # too few points: failed with its reason, in its place
+        jobs.append((est, clouds, None))
+    together = estimate_together(jobs)
+    for (est, clouds, _), poses in zip(jobs, together, strict=True):
+        alone = est.estimate_batch(clouds)
+        assert [p.model_name for p in poses] == [est.model.name] * len(clouds)
+        assert poses[-1].certificate.reason.startswith("too few points")
+        assert [p.certified for p in poses] == [p.certified for p in alone]
+        assert sum(p.certified for p in poses) >= 2, [p.certificate.reason for p in poses]
+        for a, b in zip(alone[:-1], poses[:-1], strict=True):
+            assert np.linalg.norm(a.translation - b.translation) < 0.001
+            if est.model.name == "corner_joint":  # the others turn freely about their axis
+                turn = rotation_angle(torch.as_tensor(a.rotation), torch.as_tensor(b.rotation))
+                assert np.degrees(float(turn)) < 1.0
