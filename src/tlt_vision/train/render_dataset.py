@@ -31,9 +31,9 @@ the images before it:
 Instances are the twin's (:class:`tlt_sim.model.cameras.GeomLabels`, as
 :class:`tlt_vision.segmentation_source.TwinLabels` uses them): a strut's tube and each end fitting,
 each side and each corner joint of a cross frame, a rivet. Only those of the vision classes with at
-least ``min_pixels`` visible pixels are kept. Masks come from an exact (not multisampled) label
-render; RGB and depth from the multisampled render the detectors see (``--no-antialias``: one
-plain render). Depth is metres along the optical axis, 0 where nothing was hit.
+least ``min_pixels`` visible pixels are kept. Masks and depth come from an exact (not
+multisampled) render (``Scene.render``); RGB from the multisampled render the detectors see
+(``--no-antialias``: plain). Depth is metres along the optical axis, 0 where nothing was hit.
 
 **Poses** (``poses[i]``, 4x4): the transform from the CAD model's frame
 (:mod:`tlt_vision.cad.models`: origin at the part's centre, z along a strut's axis, a cross frame in
@@ -403,14 +403,8 @@ class TwinRenderer:
 
     def _capture(self, camera: str) -> Sample:
         s = self.settings
-        if s.antialias:
-            frame = self.scene.render(camera, s.width, s.height, segmentation=False)
-            seg = self.scene.render(
-                camera, s.width, s.height, depth=False, rgb=False, antialias=False
-            ).segmentation
-        else:
-            frame = self.scene.render(camera, s.width, s.height, antialias=False)
-            seg = frame.segmentation
+        frame = self.scene.render(camera, s.width, s.height, antialias=s.antialias)
+        seg = frame.segmentation
         counts = np.bincount(seg[seg >= 0].ravel(), minlength=len(frame.labels.instance_names))
         keep = [int(i) for i in np.flatnonzero(counts >= s.min_pixels) if int(i) in self.recipes]
         cam_pos, cam_rot = frame.position, frame.rotation
@@ -533,7 +527,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--min-pixels", type=int, default=RenderSettings.min_pixels,
                    help="instances with fewer visible pixels are dropped")
     p.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=True,
-                   help="multisampled RGB and depth (as the detectors see); --no-antialias is cheaper")
+                   help="multisampled RGB (as the detectors see); --no-antialias is cheaper")
     p.add_argument("--progress-every", type=int, default=1, help="print progress every k images")
     args = p.parse_args(argv)
     if args.count < 1:
