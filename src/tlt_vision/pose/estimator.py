@@ -1,9 +1,10 @@
-"""C-3PO pose estimation of one part model: detect keypoints, correct them, register, certify.
+"""C-3PO pose estimation: detect keypoints, correct them, register, certify.
 
-:class:`PoseEstimator` reads an observed cloud (N, 3) in the camera frame and returns a
-:class:`PoseEstimate`: rotation, translation, corrected keypoints and the certificate. It never
-raises on bad input: too few points give an uncertified estimate whose reason says so, and an
-uncertified estimate is always marked ``certified=False`` whatever its pose looks like.
+:class:`PoseEstimator` (one part model) reads an observed cloud (N, 3) in the camera frame and
+returns a :class:`PoseEstimate`: rotation, translation, corrected keypoints and the certificate.
+:func:`estimate_together` poses the clouds of several models in one batch. Neither raises on bad
+input: too few points give an uncertified estimate whose reason says so, and an uncertified
+estimate is always marked ``certified=False`` whatever its pose looks like.
 """
 
 from __future__ import annotations
@@ -154,6 +155,8 @@ class PoseEstimator:
 
 @dataclass(frozen=True)
 class _Cloud:
+    """One cloud of :func:`estimate_together`: where its estimate goes, and what poses it."""
+
     job: int
     index: int
     estimator: PoseEstimator
