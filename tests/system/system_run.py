@@ -445,16 +445,20 @@ class SystemRun:
                 last[tf.child_frame_id] = np.array([t.x, t.y, t.z])
         return last
 
-    def recorded(self, topic: str) -> list[Any]:
+    def recorded(self, topic: str, *, times: bool = False) -> list[Any]:
         """The decoded messages of ``topic`` in the run's MCAP recording (complete once the
-        launcher has stopped: the recorder closes the file on its way out)."""
+        launcher has stopped: the recorder closes the file on its way out); with ``times``, as
+        (time, message) pairs, the time the recorder's ROS time in s (the twin's clock)."""
         from mcap.exceptions import McapError
 
         from tlt_common.recording.reading import read_messages
 
         path = self.run_dir / "recording.mcap"
         try:
-            return [decoded for _s, _c, _m, decoded in read_messages(path, topics=[topic])]
+            messages = read_messages(path, topics=[topic])
+            if times:
+                return [(m.log_time * 1e-9, decoded) for _s, _c, m, decoded in messages]
+            return [decoded for _s, _c, _m, decoded in messages]
         except McapError as exc:
             said = [line for line in self.log_path.read_text(errors="replace").splitlines()
                     if line.startswith("[recorder]") or (line.startswith("[launch]") and "recorder" in line)]
