@@ -1,5 +1,13 @@
 #!/usr/bin/env bash
-# Sets up whatever is missing, then lints and runs the whole test suite (extra arguments go to pytest).
+# Sets up whatever is missing, then lints and runs the whole test suite.
+#
+# With no arguments the suite runs in two stages: the tests outside tests/system on
+# $TLT_TEST_WORKERS pytest-xdist workers (2 by default; each test file stays on one worker, in
+# order, with its module fixtures), then the system tests one at a time, since each starts the
+# whole system and the nominal build takes every core it can get. Most of the first stage waits
+# on the wall clock (arms moving at their real speed, links timing out), so two workers on two
+# cores take about half its time. Both stages run; the exit status is the first failing one's.
+# With arguments, they go to one plain pytest run.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"
@@ -7,5 +15,13 @@ VENV="${TLT_VENV:-$ROOT/.venv}"
 cd "$ROOT"
 echo "[test] ruff check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tests bench 2>/dev/null)
-echo "[test] pytest"
-exec "$VENV/bin/python" -m pytest "$@"
+if [ $# -gt 0 ]; then
+    echo "[test] pytest $*"
+    exec "$VENV/bin/python" -m pytest "$@"
+fi
+status=0
+echo "[test] pytest, everything but the system tests, on ${TLT_TEST_WORKERS:-2} workers"
+"$VENV/bin/python" -m pytest -m "not system" -n "${TLT_TEST_WORKERS:-2}" --dist loadfile || status=$?
+echo "[test] pytest, the system tests"
+"$VENV/bin/python" -m pytest -m system || { s=$?; [ "$status" -ne 0 ] || status=$s; }
+exit "$status"
