@@ -63,7 +63,7 @@ SCHEMA = {
 class TwinSettings:
     """Validated run settings; sizes are (width, height) in pixels."""
 
-    sync_period_s: float = 0.01
+    sync_period_s: float = 0.02
     rtf: float = 1.0
     driver_wait_s: float = 0.5
     driver_lead_s: float = 0.05

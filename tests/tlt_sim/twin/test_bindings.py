@@ -77,7 +77,7 @@ def test_an_empty_close_is_not_blocked(make_twin):
 
 
 def test_lifter_firmware_velocities_move_the_carriages_and_encoders_read_them_back(make_twin):
-    twin = make_twin()
+    twin = make_twin(sync_period_s=0.01)  # ticks of 10 ms, as the commands below count
     fw = twin.devices.firmware
     start = twin.scene.position("lifter_joint_2")
     twin.run_for(0.6)  # past the firmware's initialisation

@@ -11,6 +11,8 @@ from tlt_sim.twin.simulation import lead_s
 
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
 
+SYNC = 0.01  # the twins here tick in 10 ms sync periods: the steps below count them
+
 
 class FakeWall:
     def __init__(self) -> None:
@@ -37,7 +39,7 @@ def _crs_control(twin):
 
 
 def test_sim_time_waits_for_a_late_lifter_command(make_twin):
-    twin = make_twin(driver_wait_s=5.0)
+    twin = make_twin(driver_wait_s=5.0, sync_period_s=SYNC)
     fw = _crs_control(twin)
     twin.tick()
     assert not twin.hold_for_drivers(), "10 ms after a command: no need to wait"
@@ -55,7 +57,7 @@ def test_sim_time_waits_for_a_late_lifter_command(make_twin):
 
 
 def test_a_driver_that_stopped_still_trips_the_watchdog(make_twin):
-    twin = make_twin(driver_wait_s=0.25)
+    twin = make_twin(driver_wait_s=0.25, sync_period_s=SYNC)
     fw = _crs_control(twin)
     wall = FakeWall()
     held = 0
@@ -74,7 +76,7 @@ def test_a_driver_that_stopped_still_trips_the_watchdog(make_twin):
 
 
 def test_servo_links_are_kept_pace_with_and_silent_links_ignored(make_twin):
-    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.0)
+    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.0, sync_period_s=SYNC)
     chain = twin.devices.chains["active_grippers"]  # its driver runs at 100 Hz: 15 ms of lead
     wall = FakeWall()
     assert not twin.hold_for_drivers(clock=wall.clock, sleep=wall.sleep), "no driver has talked yet"
@@ -105,7 +107,7 @@ def test_the_lead_is_driver_lead_s_or_longer_and_below_a_watchdog():
 
 
 def test_a_servo_link_may_lag_driver_lead_s_before_sim_time_waits(make_twin):
-    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.05)
+    twin = make_twin(driver_wait_s=0.1, driver_lead_s=0.05, sync_period_s=SYNC)
     chain = twin.devices.chains["active_grippers"]  # 100 Hz, no watchdog: 50 ms of lead
     wall = FakeWall()
     chain.handle(proto.build_packet(1, proto.PING))

@@ -12,7 +12,7 @@ from tlt_common.config_schema import ConfigError
 
 def test_shipped_settings_load():
     s = load_settings()
-    assert s.rtf == 1.0 and s.sync_period_s == 0.01
+    assert s.rtf == 1.0 and s.sync_period_s == 0.02
     assert s.camera_size("ars_x/d405_a") == (320, 240)
 
 
