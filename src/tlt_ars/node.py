@@ -206,10 +206,8 @@ class ArsNode(LeanNode):
             callback_group=MutuallyExclusiveCallbackGroup(),
         )
         ticks = MutuallyExclusiveCallbackGroup()
+        # A request's first tick runs when its goal is accepted (_accepted), not at the next period.
         self._timer = self.create_timer(1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=ticks)
-        # A request starts on a tick at once, not at the next period (the CRS waits on it), and its
-        # feedback goes out after the tick that changed it.
-        self._kick = self.create_guard_condition(self._tick, callback_group=ticks)
 
     # ----- goals -----
     def _refusal(self, request: Request) -> str | None:
@@ -231,6 +229,7 @@ class ArsNode(LeanNode):
             # the placement), and the MissionProgress carrying that change travels on its own
             # topic: the mission check is made on a progress message newer than the goal.
             self._await_progress(FRESH_PROGRESS_WAIT_S)
+        started = False
         with self._lock:
             goal = ActiveGoal(kind, handle, request, threading.Event())
             running = self.active
@@ -243,10 +242,14 @@ class ArsNode(LeanNode):
             else:
                 self.active = goal
                 self.tree.submit(Job(request, lambda ok, why, g=goal: self._finish(g, ok, why)))
-                self._kick.trigger()
-        with self._lock:
+                started = True
             self._goals[bytes(handle.goal_id.uuid)] = goal
         handle.execute()
+        if started:
+            # The request's first tick runs here, on the thread that accepted it, rather than on
+            # the tick group's thread after a guard condition wakes the executor: the CRS waits on
+            # that tick's feedback. Ticks are serialised by the lock, whichever thread runs them.
+            self._tick()
 
     def _take_over(self, running: ActiveGoal, goal: ActiveGoal) -> None:
         """``goal`` follows the job of ``running`` (the same request) from here; ``running`` ends."""
