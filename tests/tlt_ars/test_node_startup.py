@@ -205,6 +205,44 @@ def test_a_goal_for_the_running_request_takes_the_job_over(idle_ars):
     assert ars.active is None
 
 
+def test_a_request_starts_on_a_tick_when_its_goal_is_accepted_not_at_the_next_period():
+    """The CRS waits for a request's first feedback: the ARS ticks the request's branch as it
+    accepts the goal, so the feedback does not wait for the tick timer (1 s apart here)."""
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(started_on_launch=True, check_reach=False, tick_rate_hz=1.0)
+    raw["timeouts"].update(server_s=0.2, service_s=0.2, stop_s=0.2, sensor_s=0.2, planning_s=0.2)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    ars = ArsNode(ars_config_from_dict(raw), context=context)
+    client = Node("ars_probe", context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor.add_node(ars)
+    executor.add_node(client)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+        assert action.wait_for_server(timeout_sec=10)
+        goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
+        delays = []
+        for _ in range(3):  # were it the timer's tick, each delay would be anywhere up to 1 s
+            first = threading.Event()
+            sent = time.monotonic()
+            handle = _wait(action.send_goal_async(goal, feedback_callback=lambda _f, e=first: e.set()))
+            assert handle.accepted and first.wait(5.0), "no feedback"
+            delays.append(time.monotonic() - sent)
+            result = _wait(handle.get_result_async())  # no arm here: it fails on a later tick
+            assert result.status == GoalStatus.STATUS_ABORTED
+        assert max(delays) < 0.4, delays
+    finally:
+        executor.shutdown(timeout_sec=5)
+        thread.join(timeout=5)
+        ars.close()
+        ars.destroy_node()
+        client.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
 def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_starts_it():
     """The CRS waits for a request's first tick: on it only the first phase of an Add Member is
     built; the rest are built on the next tick, the same branch as one built whole."""
