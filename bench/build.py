@@ -23,11 +23,17 @@ Two figures of the issue "whole system", read from one run of the main job:
 The bay's span (first CRS step to the packet saying it is built) comes from the ground archive
 (``tlt_gsw.summary``), the records from the MCAP recording, both on the twin's sim clock.
 
+Also, on the twin, where each member's part stands against its place: the twin's last ground
+truth in the recording (``/twin/ground_truth``) puts every part; a part's body frame sits at its
+member's first joint (the mission file), and the part nearest that joint from the member's
+dispenser is taken as the member's. Members more than ``PLACE_WARN_M`` off are listed.
+
 Usage:
   python bench/build.py [--mission two_bay] [--rtf R]   # run scripts/main.sh into a fresh run
                                                       # folder (the twin at real-time factor R: 0 no
                                                       # limit; the main job's 1 if not given), report
-  python bench/build.py --run-dir DIR          # report on a finished run (archive and recording)
+  python bench/build.py --run-dir DIR [--mission NAME]   # report on a finished run (archive and
+                                                      # recording; the mission for the placements)
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ TOPIC_SUFFIX = "/executed_trajectories"
 COMMAND_SUFFIX = "/position_command"
 WALL_GOAL_S = 600.0  # a 2-bay tower
 RATIO_GOAL = 1.25
+PLACE_WARN_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -167,14 +174,55 @@ def read_motions(recording: Path) -> list[Motion]:
     return motions
 
 
+def read_placements(recording: Path, mission_path: Path) -> list[tuple[str, str, float]]:
+    """(member id, part, metres off) for every placed member of the mission, from the recording's
+    last twin ground truth; empty when the recording has none (a run on the hardware)."""
+    import numpy as np
+
+    from tlt_common.mission.schema import load_mission
+    from tlt_common.recording.reading import read_messages
+
+    last: dict[str, np.ndarray] = {}
+    for _schema, _channel, _message, msg in read_messages(recording, topics=["/twin/ground_truth"]):
+        for tf in msg.transforms:
+            t = tf.transform.translation
+            last[tf.child_frame_id] = np.array([t.x, t.y, t.z])
+    if "tower" not in last:
+        return []
+    out = []
+    for member in load_mission(mission_path).members:
+        if member.kind == "foundation_rivet" or not member.joints:
+            continue
+        place = last["tower"] + np.asarray(member.joints[0][1])
+        parts = {k: v for k, v in last.items() if k.startswith(f"part/{member.dispenser}/")}
+        if parts:
+            part = min(parts, key=lambda k: float(np.linalg.norm(parts[k] - place)))
+            out.append((member.id, part, float(np.linalg.norm(parts[part] - place))))
+    return out
+
+
+def _print_placements(placements: list[tuple[str, str, float]]) -> None:
+    if not placements:
+        print("\nplacement: no twin ground truth in the recording")
+        return
+    offs = sorted(off for _, _, off in placements)
+    worst = max(placements, key=lambda p: p[2])
+    print(f"\nplacement (twin ground truth, each part against its place): {len(placements)} members, "
+          f"median {1000 * offs[len(offs) // 2]:.1f} mm, worst {1000 * worst[2]:.1f} mm ({worst[0]})")
+    for member, part, off in placements:
+        if off > PLACE_WARN_M:
+            print(f"  {member}: {part} {1000 * off:.1f} mm off")
+
+
 def _ratio(value: float | None, goal: float) -> str:
     if value is None:
         return "n/a"
     return f"{value:.2f} (goal <= {goal:g}: {'met' if value <= goal else 'not met'})"
 
 
-def report(run_dir: Path, job_wall_s: float | None = None) -> int:
-    """Print the figures of a finished run; 0 when it had what they need, 1 otherwise."""
+def report(run_dir: Path, job_wall_s: float | None = None, mission: str | None = None) -> int:
+    """Print the figures of a finished run (and, given its ``mission``, where each member's part
+    stands); 0 when it had what they need, 1 otherwise."""
     from tlt_gsw.summary import summarize_file
 
     archive, recording = run_dir / "gsw_archive.sqlite", run_dir / "recording.mcap"
@@ -215,6 +263,8 @@ def report(run_dir: Path, job_wall_s: float | None = None) -> int:
     if bays:
         worst = max((r.ratio for r in bays if r.ratio is not None), default=None)
         print(f"\nsim time per bay / motion lower bound, worst bay: {_ratio(worst, RATIO_GOAL)}")
+    if mission is not None:
+        _print_placements(read_placements(recording, ROOT / "missions" / f"{mission}.yaml"))
     return 0 if rows else 1
 
 
@@ -235,12 +285,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rtf", type=float, help="the twin's real-time factor (0: as fast as it can)")
     args = parser.parse_args(argv)
     if args.run_dir is not None:
-        return report(args.run_dir)
+        return report(args.run_dir, mission=args.mission)
     run_dir = Path(tempfile.mkdtemp(prefix="tlt-bench-build."))
     status, wall = run_job(args.mission, run_dir, args.rtf)
     rtf = "" if args.rtf is None else f" (twin real-time factor {args.rtf:g})"
     print(f"\nbuild bench: main job on {args.mission}{rtf} exited {status} after {wall:.0f} s\n")
-    return report(run_dir, wall) or status
+    return report(run_dir, wall, args.mission) or status
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ of ExecutedTrajectory records) whose figures are computed by hand."""
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -129,3 +130,53 @@ def test_a_run_without_its_recording_is_refused_with_the_file_named(bench, tmp_p
     _archive(tmp_path / "gsw_archive.sqlite")
     assert bench.report(tmp_path) == 1
     assert "recording.mcap" in capsys.readouterr().err
+
+
+def test_each_members_part_is_measured_against_its_place_from_the_twins_ground_truth(bench, run_dir, capsys):
+    """one_bay's parts where the twin would put them: each at its member's first joint from the
+    tower, the near vertical 23 mm off, one part still in its dispenser (not the member's)."""
+    import numpy as np
+    from geometry_msgs.msg import TransformStamped
+    from tlt_interfaces.msg import TransformArray
+
+    from tlt_common.mission.schema import load_mission
+
+    mission = load_mission(bench.ROOT / "missions" / "one_bay.yaml")
+    tower = np.array([0.0, 0.0, 1.8])
+    poses = {"tower": tower}
+    counts: Counter = Counter()
+    for member in mission.members:
+        if member.kind == "foundation_rivet":
+            continue
+        off = np.array([0.02, -0.011, 0.0]) if member.id == "bay1/vertical/x0_y0" else np.zeros(3)
+        place = tower + np.asarray(member.joints[0][1])
+        poses[f"part/{member.dispenser}/{counts[member.dispenser]}"] = place + off
+        counts[member.dispenser] += 1
+    poses["part/vertical_dispenser_x/9"] = np.array([-1.3, -0.6, 0.4])  # a spare, far from any place
+    msg = TransformArray()
+    for name, p in poses.items():
+        tf = TransformStamped(child_frame_id=name)
+        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = map(float, p)
+        msg.transforms.append(tf)
+    recording = run_dir / "truth.mcap"
+    writer = McapRecordingWriter(recording, compression="none")
+    kind = "tlt_interfaces/msg/TransformArray"
+    channel = writer.add_channel("/twin/ground_truth", kind, MessageDefinitionSource().full_text(kind), "")
+    writer.write(channel, serialize_message(msg), 1, 1)
+    writer.close()
+
+    placements = bench.read_placements(recording, bench.ROOT / "missions" / "one_bay.yaml")
+    offs = {member: off for member, _part, off in placements}
+    assert len(offs) == sum(counts.values()) == 9
+    assert offs.pop("bay1/vertical/x0_y0") == pytest.approx(np.hypot(0.02, 0.011))
+    assert max(offs.values()) < 1e-9
+    recording.replace(run_dir / "recording.mcap")  # the bay's own records are gone: still reported
+    bench.report(run_dir, mission="one_bay")
+    out = capsys.readouterr().out
+    assert "9 members, median 0.0 mm, worst 22.8 mm (bay1/vertical/x0_y0)" in out, out
+    assert "  bay1/vertical/x0_y0: part/vertical_dispenser_x/" in out
+
+
+def test_a_recording_without_ground_truth_says_so(bench, run_dir, capsys):
+    assert bench.report(run_dir, mission="one_bay") == 0
+    assert "placement: no twin ground truth in the recording" in capsys.readouterr().out
