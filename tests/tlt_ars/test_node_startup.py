@@ -3,6 +3,7 @@ refusals that happen before anything moves."""
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
@@ -56,11 +57,9 @@ def test_a_member_out_of_reach_stops_the_start(tmp_path):
         rclpy.try_shutdown(context=context)
 
 
-@pytest.fixture
-def idle_ars():
-    raw = load_yaml(default_config_path("ars_x"))
-    raw.update(started_on_launch=False, check_reach=False)
-    raw["timeouts"]["planning_s"] = 3.0  # no arm here: a request that gets to planning fails soon
+@contextlib.contextmanager
+def _spun_ars(raw: dict):
+    """An ARS from the ARS file ``raw`` and a probe node, spun together in a context of their own."""
     context = rclpy.Context()
     rclpy.init(context=context)
     ars = ArsNode(ars_config_from_dict(raw), context=context)
@@ -70,13 +69,24 @@ def idle_ars():
     executor.add_node(client)
     thread = threading.Thread(target=executor.spin, daemon=True)
     thread.start()
-    yield ars, client
-    executor.shutdown(timeout_sec=5)
-    thread.join(timeout=5)
-    ars.close()
-    ars.destroy_node()
-    client.destroy_node()
-    rclpy.try_shutdown(context=context)
+    try:
+        yield ars, client
+    finally:
+        executor.shutdown(timeout_sec=5)
+        thread.join(timeout=5)
+        ars.close()
+        ars.destroy_node()
+        client.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def idle_ars():
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(started_on_launch=False, check_reach=False)
+    raw["timeouts"]["planning_s"] = 3.0  # no arm here: a request that gets to planning fails soon
+    with _spun_ars(raw) as spun:
+        yield spun
 
 
 def _wait(future, timeout=10.0):
@@ -211,16 +221,7 @@ def test_a_request_starts_on_a_tick_when_its_goal_is_accepted_not_at_the_next_pe
     raw = load_yaml(default_config_path("ars_x"))
     raw.update(started_on_launch=True, check_reach=False, tick_rate_hz=1.0)
     raw["timeouts"].update(server_s=0.2, service_s=0.2, stop_s=0.2, sensor_s=0.2, planning_s=0.2)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    ars = ArsNode(ars_config_from_dict(raw), context=context)
-    client = Node("ars_probe", context=context)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
-    executor.add_node(ars)
-    executor.add_node(client)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    try:
+    with _spun_ars(raw) as (_ars, client):
         action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
         assert action.wait_for_server(timeout_sec=10)
         goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
@@ -234,13 +235,6 @@ def test_a_request_starts_on_a_tick_when_its_goal_is_accepted_not_at_the_next_pe
             result = _wait(handle.get_result_async())  # no arm here: it fails on a later tick
             assert result.status == GoalStatus.STATUS_ABORTED
         assert max(delays) < 0.4, delays
-    finally:
-        executor.shutdown(timeout_sec=5)
-        thread.join(timeout=5)
-        ars.close()
-        ars.destroy_node()
-        client.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_starts_it():
