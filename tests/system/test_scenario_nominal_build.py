@@ -14,8 +14,9 @@ tests/system/system_run.py) with the test as the ground station. Checked:
   inspection pass, and no part discarded;
 * in the twin (its ground truth in the run's MCAP recording) the cross frame, the four verticals
   and the four diagonals stand where the mission puts them on the tower, each a part of its own,
-  within 3 cm (the near verticals stand 23 mm off, a known fault: the twin's UR controller reports
-  its path, not the arm a contact pushed aside; docs/system.md);
+  within 1 cm (each within a millimetre in a bench run; the near verticals stood 2 cm off while
+  the planner did not know of the end effector's camera housings, one of which struck a lifter
+  post and pushed the arm aside);
 * each request succeeded once at its ARS (the action servers' goal statuses in the recording):
   no member placed or riveted twice.
 
@@ -48,7 +49,7 @@ pytestmark = [pytest.mark.system, pytest.mark.timeout(2700)]
 
 MISSION = Path(__file__).resolve().parents[2] / "missions" / "one_bay.yaml"
 BUILD_TIMEOUT_S = 2400.0  # 13-25 min on 2 cores; CI machines vary
-PLACE_TOLERANCE = 0.03  # m, a part's body from its member's place on the tower
+PLACE_TOLERANCE = 0.01  # m, a part's body from its member's place on the tower
 SUCCEEDED = 4  # action_msgs/GoalStatus
 # The action each member kind is asked for, and the ARS action that rivets an affix joint.
 ACTIONS = {"cross_frame": "add_cross_frame", "vertical": "add_member", "diagonal": "add_member",

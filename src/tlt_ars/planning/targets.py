@@ -66,8 +66,10 @@ def _target(label: str, pose: np.ndarray, back: np.ndarray) -> Target:
 
 
 def _horizontal_approaches(axis: np.ndarray, towards: np.ndarray) -> list[np.ndarray]:
-    """Horizontal unit directions at right angles to ``axis`` that go away from the arm
-    (positive along ``towards``), best aligned first."""
+    """Horizontal unit directions at right angles to ``axis`` that do not come back towards the
+    arm (not negative along ``towards``), best aligned first. Those across the arm's reach come
+    last: a near vertical has the lifter post between it and the arm, and only a sideways
+    approach keeps the end effector's cameras off the post."""
     if abs(axis[2]) > 0.999:
         dirs = [np.array([math.cos(a), math.sin(a), 0.0]) for a in np.arange(8) * math.pi / 4]
     else:
@@ -79,7 +81,7 @@ def _horizontal_approaches(axis: np.ndarray, towards: np.ndarray) -> list[np.nda
     if n < 1e-9:
         return dirs
     flat /= n
-    good = [d for d in dirs if np.dot(d, flat) > 1e-6]
+    good = [d for d in dirs if np.dot(d, flat) > -1e-6]
     return sorted(good, key=lambda d: -float(np.dot(d, flat)))
 
 

@@ -76,16 +76,14 @@ def test_rivet_feeders_agree(scene):
 
 
 # Twin geom (after "<arm>/") -> the planner's box that must hold it. The jaws and the fixed fingers
-# are left out on both sides: they close on the part. So, for now, are the D405 housings
-# (`<arm>/d405_<side>/housing`): at every candidate pose for placing a near vertical the planner's
-# kinematics put housing a inside the lifter post beside it (config/planning/scene.yaml says so);
-# in the twin the contact pushes the arm, a likely cause of the near verticals standing 23 mm off.
+# are left out on both sides: they close on the part.
 EE_BOXES = {
     "ee/hub": "hub",
     "ee/bar": "bar",
     **{f"gripper_{s}/body": f"gripper_{s}" for s in "ab"},
     **{f"rivet_gun_{s}/body": f"rivet_gun_{s}" for s in "ab"},
     **{f"rivet_gun_{s}/bracket": f"gun_bracket_{s}" for s in "ab"},
+    **{f"d405_{s}/housing": f"d405_{s}" for s in "ab"},
 }
 
 
