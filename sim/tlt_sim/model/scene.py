@@ -401,6 +401,18 @@ class Scene:
             total += world if b == b2 else -world
         return total
 
+    def contacts_of(self, prefix: str) -> list[tuple[str, str]]:
+        """(own geom, other geom) names of the contacts now of geoms named ``prefix``..."""
+        out = []
+        for i in range(self.data.ncon):
+            c = self.data.contact[i]
+            a, b = self.model.geom(c.geom1).name, self.model.geom(c.geom2).name
+            if b.startswith(prefix) and not a.startswith(prefix):
+                a, b = b, a
+            if a.startswith(prefix) and (a, b) not in out:
+                out.append((a, b))
+        return out
+
     # -- staging (tests, data generation, pictures) ------------------------------------------
     def place_part(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
         """Put a free part at a world pose at rest (no dynamics), as if it had been set there."""

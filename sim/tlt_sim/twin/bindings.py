@@ -16,7 +16,8 @@ Every binding has two halves the twin calls once per sync period, from its one s
   joints' positions (counts = m x counts_per_m), so the limit switches follow the positions.
 * :class:`URArmBinding`: the UR controller's motion generator (stepped on sim time, in its own
   process: :mod:`tlt_sim.twin.ur_host`) is the arm's commanded path; the model joints follow it at
-  their rated speeds.
+  their rated speeds. The controller reports that path, so an arm that a contact holds off it is
+  logged by the twin (what the contact is), the one place it can be seen.
 * :class:`EEGpioBinding`: the EE limit switch input is the model's width switch; a rising edge on a
   rivet-gun output fires that gun in the model; a gun inserted at a rivet feeder takes a rivet.
 """
@@ -137,11 +138,21 @@ class LifterBinding:
 
 @dataclass
 class URArmBinding:
-    """One UR controller's arm (six joints, UR order, read by ``positions``) on the model's arm joints."""
+    """One UR controller's arm (six joints, UR order, read by ``positions``) on the model's arm joints.
+
+    An arm that stands commanded for ``settle_s`` with a model joint more than ``pushed_rad`` off
+    its command is logged once, with the contacts of the arm's geoms: the controller reports the
+    commanded path, so nothing else shows a strike (a camera housing on a lifter post held an arm
+    2 cm off its pose for whole builds, unseen).
+    """
 
     positions: Callable[[], list[float]]
     joints: list[str]
+    settle_s: float = 0.5
+    pushed_rad: float = 0.005
     _commanded: list[float] = field(default_factory=list)
+    _still_s: float = 0.0
+    _reported: bool = False
 
     def drive(self, scene: Scene, dt: float) -> None:
         q = self.positions()
@@ -150,9 +161,24 @@ class URArmBinding:
                 if old is None or abs(value - old) > 1e-9:
                     scene.command_position(joint, value)
             self._commanded = q
+            self._still_s = 0.0
+            self._reported = False
 
     def sense(self, scene: Scene, dt: float) -> None:
         """The generator's path is what the controller reports (see the module docstring)."""
+        if self._reported or not self._commanded:
+            return
+        self._still_s += dt
+        if self._still_s < self.settle_s:
+            return
+        off = [scene.position(j) - q for j, q in zip(self.joints, self._commanded, strict=True)]
+        worst = max(range(len(off)), key=lambda i: abs(off[i]))
+        if abs(off[worst]) > self.pushed_rad:
+            arm = self.joints[0].split("/", 1)[0]
+            touching = ", ".join(f"{a} on {b}" for a, b in scene.contacts_of(f"{arm}/")) or "none"
+            log.warning("%s held off its commanded joints (%s %.1f mrad) at %.3f s: contacts %s",
+                        arm, self.joints[worst], 1000 * off[worst], scene.time, touching)
+        self._reported = True  # one look per commanded pose
 
 
 @dataclass

@@ -6,6 +6,7 @@ GPIO lines, UR motion commands); the bring-up test does the same through the rea
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -13,6 +14,8 @@ import pytest
 from tlt_sim.emulators.gpio_chip import EmulatedGpioChip, EmulatedLines
 from tlt_sim.model import ik, names
 from tlt_sim.model.geometry import frame_from_axes
+from tlt_sim.model.scene import Scene
+from tlt_sim.twin.bindings import URArmBinding
 
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
@@ -176,6 +179,33 @@ def test_ur_controller_motion_moves_the_model_arm(make_twin):
     twin.run_for(0.5)
     assert twin.scene.position(names.arm_joint("ars_y", 5)) == pytest.approx(goal[5], abs=0.005)
     assert twin.scene.position(names.arm_joint("ars_y", 0)) == pytest.approx(q0[0], abs=0.005)
+
+
+# ARS X's joints at a near vertical's placement in a build before the planner knew of the D405
+# housings: housing a stands in the lifter post beside the strut.
+HOUSING_IN_POST = [2.054, -0.644, 2.531, 1.254, -5.981, 1.571]
+FREE = [0.965, -0.747, 1.142, 3.317, -1.922, -3.567]
+
+
+@pytest.mark.parametrize(("q", "pushed"), [(HOUSING_IN_POST, True), (FREE, False)])
+def test_an_arm_held_off_its_commanded_joints_is_logged_with_what_it_touches(tmp_path, caplog, q, pushed):
+    arm = "ars_x"
+    joints = names.arm_joints(arm)
+    with Scene(out_dir=tmp_path / "model") as scene:
+        for joint, value in zip(joints, q, strict=True):
+            scene.set_joint_state(joint, value)
+        binding = URArmBinding(lambda: list(q), joints)
+        with caplog.at_level(logging.WARNING, logger="tlt.twin"):
+            for _ in range(50):  # 1 s at the twin's 20 ms sync period
+                binding.drive(scene, 0.02)
+                scene.advance(0.02)
+                binding.sense(scene, 0.02)
+    said = [r.getMessage() for r in caplog.records if "held off its commanded joints" in r.getMessage()]
+    if pushed:
+        assert len(said) == 1, said  # once per commanded pose
+        assert "ars_x/d405_a/housing on lifter/post_0" in said[0], said
+    else:
+        assert said == []
 
 
 def test_top_gripper_pins_start_engaged_and_follow_their_actuators(make_twin):
