@@ -73,6 +73,7 @@ from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
+from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
 
 ACTION_TYPES = {
@@ -460,6 +461,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
+    clock_watch = watch_sim_clock(node)
     try:
         while not stop and rclpy.ok() and not node.finished.is_set():
             executor.spin_once(timeout_sec=0.1)
@@ -471,6 +473,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ExternalShutdownException:  # the context shut down by someone else
         pass
     finally:
+        if clock_watch is not None:
+            clock_watch.stop()
         node.close()
         executor.shutdown(timeout_sec=2.0)
         node.destroy_node()

@@ -47,6 +47,7 @@ from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
+from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
 from tlt_crs.behaviours.inspection import serve_inspect_part
 from tlt_crs.commands import CommandProcessor, CommandQueue
@@ -293,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
             _autostart_when_ready(node)
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
+        clock_watch = watch_sim_clock(node)
         try:
             while not stop and rclpy.ok() and not node.finished:
                 executor.spin_once(timeout_sec=0.1)
@@ -306,6 +308,8 @@ def main(argv: list[str] | None = None) -> int:
         except ExternalShutdownException:  # the context shut down by someone else
             pass
         finally:
+            if clock_watch is not None:
+                clock_watch.stop()
             node.interrupt()
             if link is not None:
                 link.close()
