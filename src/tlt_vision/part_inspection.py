@@ -15,8 +15,10 @@ joints, a strut's fittings sit on its tube's ends); the part presented is the on
 pixels of its main class (a cross frame's sides, a strut's tube), kept to ``reach`` of its biggest
 main instance. Other parts in view, however close in the image (the lifter's top cross frame below
 a held one, the rest of a dispenser's stack behind it, a few pixels of a fitting in a rack beside a
-held strut), stay out of it as long as they do not touch it. Without a ``gap`` the biggest main
-instance is the anchor and every instance within ``reach`` of its centre is taken.
+held strut), stay out of it as long as they do not touch it. A strut is one tube: a group of
+several (struts of the tower in view, joined at their joints) is not the strut presented. Without
+a ``gap`` the biggest main instance is the anchor and every instance within ``reach`` of its
+centre is taken.
 """
 
 from __future__ import annotations
@@ -105,9 +107,12 @@ def select_part(
     depth_range: Sequence[float],
     min_pixels: int,
     gap: float | None = None,
+    anchors_per_part: int | None = None,
 ) -> list[Detection]:
     """The instances of one part (see the module docstring); empty when no anchor instance of at
-    least ``min_pixels`` pixels lies in ``depth_range``: the part is not in view."""
+    least ``min_pixels`` pixels lies in ``depth_range``: the part is not in view. With
+    ``anchors_per_part`` (a strut: one tube), groups with more anchors than a part has are
+    structure in view, passed over while a group that could be the part remains."""
     if depth is None:
         return []
     near, far = depth_range
@@ -126,11 +131,13 @@ def select_part(
         return [i.detection for i in found if np.linalg.norm(i.centre - first.centre) <= reach]
     # Parts as groups of instances joined within ``gap``; the part presented is the group with
     # the most pixels of the anchor class (a held frame, not the bigger side of one behind it).
-    groups = _joined(found, gap)
-    best = max(
-        (g for g in groups if any(i in anchors for i in g)),
-        key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor),
-    )
+    groups = [g for g in _joined(found, gap) if any(i in anchors for i in g)]
+    if anchors_per_part is not None:
+        # A held strut before a lifted bay: the bay's near vertical, riveted to its diagonal,
+        # showed more tube than the strut and was inspected in its place.
+        parts = [g for g in groups if sum(i.detection.object_class == anchor for i in g) <= anchors_per_part]
+        groups = parts or groups
+    best = max(groups, key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor))
     first = max((i for i in best if i in anchors), key=_pixels)
     return [i.detection for i in best if np.linalg.norm(i.centre - first.centre) <= reach]
 
@@ -242,6 +249,7 @@ class PartInspector:
             # Not only within reach: 5 pixels of a racked strut's fitting near a held one's tube
             # were taken for a third fitting, which could not be measured, and failed good struts.
             gap=raw["part_gap"],
+            anchors_per_part=1,
             **common,
         )
 

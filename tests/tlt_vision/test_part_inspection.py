@@ -87,3 +87,34 @@ def test_a_strut_is_its_tube_and_the_fittings_on_it_not_a_racked_fitting_within_
     ]
     picked = inspector.select("vertical", dets, depth, K)
     assert _ids(picked) == ["held/fitting_a", "held/fitting_b", "held/tube"]
+
+
+def test_a_held_strut_not_the_struts_of_a_lifted_bay_joined_behind_it():
+    """In a two-bay build ARS X held bay 2's first vertical before the lifter ZED, and bay 1's
+    near vertical, riveted to its diagonal, was in view at the same distance: the two tubes
+    joined showed more tube than the held strut, were inspected in its place and failed it as a
+    "bent tube". A strut is one tube; a group of several is structure."""
+    depth = np.zeros((100, 100), dtype=np.float32)
+    held = _mask(slice(48, 52), slice(30, 70))  # 160 pixels
+    held_a, held_b = _mask(slice(47, 53), slice(24, 30)), _mask(slice(47, 53), slice(70, 76))
+    vertical = _mask(slice(0, 40), slice(5, 8))  # 120 pixels, its foot on the diagonal's end
+    diagonal = _mask(slice(40, 43), slice(5, 40))  # 105 pixels
+    for m, z in ((held, 0.85), (held_a, 0.85), (held_b, 0.85), (vertical, 0.9), (diagonal, 0.9)):
+        depth[m] = z
+    dets = [
+        Detection("strut_tube", held, object_id="held/tube"),
+        Detection("end_fitting", held_a, object_id="held/fitting_a"),
+        Detection("end_fitting", held_b, object_id="held/fitting_b"),
+        Detection("strut_tube", vertical, object_id="bay1/vertical/tube"),
+        Detection("strut_tube", diagonal, object_id="bay1/diagonal/tube"),
+    ]
+    args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.5, (0.15, 2.0), 20)
+    assert _ids(select_part(*args, gap=0.03)) == ["bay1/diagonal/tube", "bay1/vertical/tube"], "the old rule"
+    assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
+        "held/fitting_a", "held/fitting_b", "held/tube"
+    ]
+    # A structure alone in view is still what there is to inspect (and fails for what it is).
+    alone = [d for d in dets if not d.object_id.startswith("held/")]
+    assert _ids(select_part(alone, depth, K, *args[3:], gap=0.03, anchors_per_part=1)) == [
+        "bay1/diagonal/tube", "bay1/vertical/tube"
+    ]
