@@ -16,6 +16,7 @@ import logging
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 _log = logging.getLogger("tlt.sim_clock")
@@ -24,7 +25,7 @@ _log = logging.getLogger("tlt.sim_clock")
 class SimClockWatch:
     """The thread of :func:`watch_sim_clock`; ``stalls`` counts the stalls it reported."""
 
-    def __init__(self, now_ns: Any, name: str, stall_s: float, period_s: float) -> None:
+    def __init__(self, now_ns: Callable[[], int], name: str, stall_s: float, period_s: float) -> None:
         self._now_ns = now_ns
         self.name = name
         self.stall_s = stall_s
