@@ -16,25 +16,23 @@ def _mask(rows: slice, cols: slice) -> np.ndarray:
     return m
 
 
-def _scene():
+def _frame(*instances: tuple[str, np.ndarray, float, str]) -> tuple[list[Detection], np.ndarray]:
+    """Detections and a depth image from (class, mask, depth in m, object id) per instance."""
     depth = np.zeros((100, 100), dtype=np.float32)
-    # The held frame, 0.6 m away: two sides meeting at a corner joint.
-    a1, a2, joint = (
-        _mask(slice(10, 20), slice(10, 40)),
-        _mask(slice(20, 50), slice(10, 20)),
-        _mask(slice(10, 20), slice(40, 45)),
+    for _, mask, z, _ in instances:
+        depth[mask] = z
+    return [Detection(cls, mask, object_id=oid) for cls, mask, _, oid in instances], depth
+
+
+def _scene():
+    # The held frame, 0.6 m away: two sides meeting at a corner joint; another frame 1.5 m away,
+    # one side bigger than either held side, fewer pixels in all.
+    return _frame(
+        ("cross_frame", _mask(slice(10, 20), slice(10, 40)), 0.6, "a/side_0"),
+        ("cross_frame", _mask(slice(20, 50), slice(10, 20)), 0.6, "a/side_1"),
+        ("corner_joint", _mask(slice(10, 20), slice(40, 45)), 0.6, "a/corner_1"),
+        ("cross_frame", _mask(slice(60, 75), slice(10, 40)), 1.5, "b/side_0"),
     )
-    # Another frame 1.5 m away: one side bigger than either held side, fewer pixels in all.
-    b = _mask(slice(60, 75), slice(10, 40))
-    for m, z in ((a1, 0.6), (a2, 0.6), (joint, 0.6), (b, 1.5)):
-        depth[m] = z
-    dets = [
-        Detection("cross_frame", a1, object_id="a/side_0"),
-        Detection("cross_frame", a2, object_id="a/side_1"),
-        Detection("corner_joint", joint, object_id="a/corner_1"),
-        Detection("cross_frame", b, object_id="b/side_0"),
-    ]
-    return dets, depth
 
 
 def _ids(picked):
@@ -73,18 +71,12 @@ def test_a_strut_is_its_tube_and_the_fittings_on_it_not_a_racked_fitting_within_
 
     mission = load_mission(Path(__file__).resolve().parents[2] / "missions" / "two_bay.yaml")
     inspector = PartInspector(load_config(), mission)
-    depth = np.zeros((100, 100), dtype=np.float32)
-    tube = _mask(slice(48, 52), slice(20, 80))
-    fitting_a, fitting_b = _mask(slice(47, 53), slice(14, 20)), _mask(slice(47, 53), slice(80, 86))
-    racked = _mask(slice(60, 62), slice(50, 53))  # 6 pixels
-    for m, z in ((tube, 0.6), (fitting_a, 0.6), (fitting_b, 0.6), (racked, 0.7)):
-        depth[m] = z
-    dets = [
-        Detection("strut_tube", tube, object_id="held/tube"),
-        Detection("end_fitting", fitting_a, object_id="held/fitting_a"),
-        Detection("end_fitting", fitting_b, object_id="held/fitting_b"),
-        Detection("end_fitting", racked, object_id="racked/fitting_b"),
-    ]
+    dets, depth = _frame(
+        ("strut_tube", _mask(slice(48, 52), slice(20, 80)), 0.6, "held/tube"),
+        ("end_fitting", _mask(slice(47, 53), slice(14, 20)), 0.6, "held/fitting_a"),
+        ("end_fitting", _mask(slice(47, 53), slice(80, 86)), 0.6, "held/fitting_b"),
+        ("end_fitting", _mask(slice(60, 62), slice(50, 53)), 0.7, "racked/fitting_b"),  # 6 pixels
+    )
     picked = inspector.select("vertical", dets, depth, K)
     assert _ids(picked) == ["held/fitting_a", "held/fitting_b", "held/tube"]
 
@@ -94,20 +86,14 @@ def test_a_held_strut_not_the_struts_of_a_lifted_bay_joined_behind_it():
     near vertical, riveted to its diagonal, was in view at the same distance: the two tubes
     joined showed more tube than the held strut, were inspected in its place and failed it as a
     "bent tube". A strut is one tube; a group of several is structure."""
-    depth = np.zeros((100, 100), dtype=np.float32)
-    held = _mask(slice(48, 52), slice(30, 70))  # 160 pixels
-    held_a, held_b = _mask(slice(47, 53), slice(24, 30)), _mask(slice(47, 53), slice(70, 76))
-    vertical = _mask(slice(0, 40), slice(5, 8))  # 120 pixels, its foot on the diagonal's end
-    diagonal = _mask(slice(40, 43), slice(5, 40))  # 105 pixels
-    for m, z in ((held, 0.85), (held_a, 0.85), (held_b, 0.85), (vertical, 0.9), (diagonal, 0.9)):
-        depth[m] = z
-    dets = [
-        Detection("strut_tube", held, object_id="held/tube"),
-        Detection("end_fitting", held_a, object_id="held/fitting_a"),
-        Detection("end_fitting", held_b, object_id="held/fitting_b"),
-        Detection("strut_tube", vertical, object_id="bay1/vertical/tube"),
-        Detection("strut_tube", diagonal, object_id="bay1/diagonal/tube"),
-    ]
+    dets, depth = _frame(
+        ("strut_tube", _mask(slice(48, 52), slice(30, 70)), 0.85, "held/tube"),  # 160 pixels
+        ("end_fitting", _mask(slice(47, 53), slice(24, 30)), 0.85, "held/fitting_a"),
+        ("end_fitting", _mask(slice(47, 53), slice(70, 76)), 0.85, "held/fitting_b"),
+        # 120 + 105 pixels: the vertical's foot on the diagonal's end.
+        ("strut_tube", _mask(slice(0, 40), slice(5, 8)), 0.9, "bay1/vertical/tube"),
+        ("strut_tube", _mask(slice(40, 43), slice(5, 40)), 0.9, "bay1/diagonal/tube"),
+    )
     args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.5, (0.15, 2.0), 20)
     assert _ids(select_part(*args, gap=0.03)) == ["bay1/diagonal/tube", "bay1/vertical/tube"], "the old rule"
     assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [

@@ -402,7 +402,7 @@ class Scene:
         return total
 
     def contacts_of(self, prefix: str) -> list[tuple[str, str]]:
-        """(own geom, other geom) names of the contacts now of geoms named ``prefix``..."""
+        """(own geom, other geom) names of the contacts now of geoms whose names start with ``prefix``."""
         out = []
         for i in range(self.data.ncon):
             c = self.data.contact[i]
