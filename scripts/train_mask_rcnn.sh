@@ -10,6 +10,8 @@
 # have is used (240), and MODEL: the trainer's options for the model (default full-size images,
 # 56x56 masks, anchors scaled with the image: models/vision/README.md, GPU runs). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
+# RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
+# "rendered" marker) and trains on them, so two models can train side by side on one device.
 #
 # Shard k renders with seed 1000 + k, so shards never repeat each other, the validation set or the
 # benchmark's seeds (900, 901). A shard stopped at RENDER_LIMIT_S keeps its last whole index.
@@ -28,32 +30,54 @@ EPOCHS=${EPOCHS:-40}
 BATCH=${BATCH:-8}
 LR=${LR:-2e-3}
 RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
+RENDER=${RENDER:-1}
 MODEL=${MODEL:---config mask_pool=28 --config anchor_sizes=[32,64,128,256]}
 data=${DATA_DIR:-/tmp/tlt-vision-data}
 mkdir -p "$out" "$data"
 log() { echo "[train_mask_rcnn $(date -u +%H:%M:%S)] $*"; }
 
-# 1. Fail fast: two rendered images and one training step on the device.
-log "smoke test: render 2 images, train one step on $DEVICE"
-"$PYTHON" -m tlt_vision.train.render_dataset --out "$data/smoke" --count 2 --seed 999 --progress-every 2
-# shellcheck disable=SC2086
-"$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" --out "$data/smoke_out/w.pt" \
-    --epochs 1 --batch 2 --device "$DEVICE" $MODEL > "$out/smoke.log"
-log "smoke test passed"
+smoke_train() {
+    # shellcheck disable=SC2086
+    "$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" \
+        --out "$out/smoke_out/w.pt" --epochs 1 --batch 2 --device "$DEVICE" $MODEL > "$out/smoke.log"
+    rm -rf "$out/smoke_out"
+    log "smoke test passed"
+}
 
-# 2. The shards and the validation set, in parallel.
-per=$(( (COUNT + SHARDS - 1) / SHARDS ))
-log "rendering $COUNT images in $SHARDS shards of $per, and $VAL validation images"
-pids=()
-for k in $(seq 0 $(( SHARDS - 1 ))); do
-    timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/train_$k" \
-        --count "$per" --seed $(( 1000 + k )) --progress-every 50 > "$data/render_$k.log" 2>&1 &
+if [ "$RENDER" = 0 ]; then
+    log "waiting for the images of the run rendering into $data"
+    waited=0
+    until [ -f "$data/rendered" ]; do
+        sleep 2
+        waited=$(( waited + 2 ))
+        # The rendering run's smoke test and its shards' time limit, and a margin.
+        [ "$waited" -lt $(( RENDER_LIMIT_S + 300 )) ] || { log "no images in $data after ${waited} s"; exit 1; }
+    done
+    log "smoke test: train one step on $DEVICE"
+    smoke_train
+else
+    rm -f "$data/rendered"
+    # 1. Fail fast: two rendered images and one training step on the device.
+    log "smoke test: render 2 images, train one step on $DEVICE"
+    "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/smoke" --count 2 --seed 999 --progress-every 2
+    smoke_train
+
+    # 2. The shards and the validation set, in parallel.
+    per=$(( (COUNT + SHARDS - 1) / SHARDS ))
+    log "rendering $COUNT images in $SHARDS shards of $per, and $VAL validation images"
+    pids=()
+    for k in $(seq 0 $(( SHARDS - 1 ))); do
+        timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/train_$k" \
+            --count "$per" --seed $(( 1000 + k )) --progress-every 50 > "$data/render_$k.log" 2>&1 &
+        pids+=($!)
+    done
+    timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/val" --count "$VAL" \
+        --seed 1 --progress-every 20 > "$data/render_val.log" 2>&1 &
     pids+=($!)
-done
-timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/val" --count "$VAL" \
-    --seed 1 --progress-every 20 > "$data/render_val.log" 2>&1 &
-pids+=($!)
-for pid in "${pids[@]}"; do wait "$pid" || true; done
+    for pid in "${pids[@]}"; do wait "$pid" || true; done
+    tail -n 2 "$data"/render_*.log > "$out/render.log" 2>/dev/null || true
+    touch "$data/rendered"
+fi
 shards=()
 for k in $(seq 0 $(( SHARDS - 1 ))); do
     [ -f "$data/train_$k/index.json" ] && shards+=("$data/train_$k")
@@ -61,8 +85,7 @@ done
 [ ${#shards[@]} -gt 0 ] || { log "no shard rendered an image set"; exit 1; }
 rendered=$("$PYTHON" -c "import sys; from tlt_vision.train.dataset import ImageSet
 print(sum(len(ImageSet(p)) for p in sys.argv[1:]))" "${shards[@]}")
-log "rendered $rendered training images in ${#shards[@]} shards"
-tail -n 2 "$data"/render_*.log > "$out/render.log" 2>/dev/null || true
+log "$rendered training images in ${#shards[@]} shards"
 
 # 3. Train within the budget, validating each epoch; the best epoch's weights are kept.
 log "training on $DEVICE for at most $BUDGET_MIN min"

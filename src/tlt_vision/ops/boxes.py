@@ -90,4 +90,19 @@ class BoxCoder:
         return torch.stack([cx - 0.5 * w, cy - 0.5 * h, cx + 0.5 * w, cy + 0.5 * h], dim=1)
 
 
-__all__ = ["DEFAULT_SCALE_CLAMP", "BoxCoder", "box_area", "box_iou", "clip_boxes"]
+def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
+    """Tight (x1, y1, x2, y2) pixel-edge boxes (N, 4) of non-empty masks (N, H, W)."""
+    if masks.shape[0] == 0:
+        return torch.zeros((0, 4), device=masks.device)
+    rows, cols = masks.any(dim=2), masks.any(dim=1)
+    h, w = masks.shape[-2:]
+    ar_h = torch.arange(h, device=masks.device)
+    ar_w = torch.arange(w, device=masks.device)
+    y1 = torch.where(rows, ar_h, h).min(dim=1).values
+    y2 = torch.where(rows, ar_h, -1).max(dim=1).values + 1
+    x1 = torch.where(cols, ar_w, w).min(dim=1).values
+    x2 = torch.where(cols, ar_w, -1).max(dim=1).values + 1
+    return torch.stack([x1, y1, x2, y2], dim=1).to(torch.float32)
+
+
+__all__ = ["DEFAULT_SCALE_CLAMP", "BoxCoder", "box_area", "box_iou", "boxes_from_masks", "clip_boxes"]

@@ -24,7 +24,7 @@ def _block(cin: int, cout: int, stride: int) -> nn.Sequential:
 
 
 class Backbone(nn.Module):
-    """Image (B, 3, H, W) -> [C2, C3, C4, C5] at strides 4, 8, 16, 32."""
+    """Image (B, 3, H, W) -> [C2, C3, C4, C5] at strides 4, 8, 16, 32 (and the stem at 2)."""
 
     def __init__(self, channels: tuple[int, int, int, int]) -> None:
         super().__init__()
@@ -37,12 +37,16 @@ class Backbone(nn.Module):
         )
 
     def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
-        x = self.stem(x)
+        return self.pyramid(x)[1]
+
+    def pyramid(self, x: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        """The stem's stride-2 features and [C2..C5]."""
+        stem = x = self.stem(x)
         out = []
         for stage in self.stages:
             x = stage(x)
             out.append(x)
-        return out
+        return stem, out
 
 
 class FPN(nn.Module):

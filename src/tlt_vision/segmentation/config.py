@@ -41,6 +41,23 @@ class MaskRCNNConfig:
     pixel_mean: tuple[float, float, float] = (0.485, 0.456, 0.406)
     pixel_std: tuple[float, float, float] = (0.229, 0.224, 0.225)
     strides: tuple[int, int, int, int] = field(default=(4, 8, 16, 32))
+    # Classes found as connected regions of a per-pixel class map (the semantic head, stride 2)
+    # instead of by box and box-sized mask: a strut lying across the view is a line a few pixels
+    # wide that few anchors overlap and a 28x28 mask over its box cannot draw. Empty: no head.
+    semantic_classes: tuple[str, ...] = ()
+    semantic_channels: int = 32
+    semantic_fg_weight: float = 3.0  # cross-entropy weight of object pixels against background
+    semantic_min_area: int = 12  # pixels at the model's input size; smaller regions are noise
+
+    def __post_init__(self) -> None:
+        unknown = [c for c in self.semantic_classes if c not in self.classes]
+        if unknown:
+            raise ValueError(f"semantic_classes {unknown} are not among the classes {list(self.classes)}")
+
+    @property
+    def semantic_labels(self) -> tuple[int, ...]:
+        """1-based labels of ``semantic_classes``."""
+        return tuple(self.classes.index(c) + 1 for c in self.semantic_classes)
 
     @property
     def num_classes(self) -> int:

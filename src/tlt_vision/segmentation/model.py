@@ -5,6 +5,10 @@
 ``cfg.classes[label - 1]``), ``scores`` (D,) and ``masks`` (D, H, W) bool. Images are float
 (B, 3, H, W) in [0, 1]; targets are dicts of ``boxes`` (G, 4) pixels, ``labels`` (G,) and
 ``masks`` (G, H, W) bool.
+
+With ``cfg.semantic_classes`` a semantic head also classifies every pixel; in training its loss is
+``semantic``, and in eval the instances of those classes are its connected regions
+(:mod:`tlt_vision.segmentation.semantic`), not the box branch's detections of them.
 """
 
 from __future__ import annotations
@@ -16,6 +20,12 @@ from tlt_vision.segmentation.backbone import FPN, Backbone
 from tlt_vision.segmentation.config import MaskRCNNConfig
 from tlt_vision.segmentation.roi_heads import RoIHeads
 from tlt_vision.segmentation.rpn import RPN
+from tlt_vision.segmentation.semantic import (
+    SemanticHead,
+    instances_from_semantic,
+    semantic_loss,
+    upsample_logits,
+)
 
 
 class MaskRCNN(nn.Module):
@@ -26,11 +36,14 @@ class MaskRCNN(nn.Module):
         self.fpn = FPN(self.cfg.backbone_channels, self.cfg.fpn_channels)
         self.rpn = RPN(self.cfg)
         self.roi_heads = RoIHeads(self.cfg)
+        self.semantic = SemanticHead(self.cfg) if self.cfg.semantic_classes else None
         self.register_buffer("pixel_mean", torch.tensor(self.cfg.pixel_mean).view(1, 3, 1, 1))
         self.register_buffer("pixel_std", torch.tensor(self.cfg.pixel_std).view(1, 3, 1, 1))
 
-    def features(self, images: torch.Tensor) -> list[torch.Tensor]:
-        return self.fpn(self.backbone((images - self.pixel_mean) / self.pixel_std))
+    def features(self, images: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        """The stem's stride-2 features and the FPN levels [P2..P5]."""
+        stem, feats = self.backbone.pyramid((images - self.pixel_mean) / self.pixel_std)
+        return stem, self.fpn(feats)
 
     def forward(
         self, images: torch.Tensor, targets: list[dict[str, torch.Tensor]] | None = None
@@ -38,15 +51,26 @@ class MaskRCNN(nn.Module):
         if images.dim() != 4 or images.shape[1] != 3:
             raise ValueError(f"expected images (B, 3, H, W), got {tuple(images.shape)}")
         size = (int(images.shape[-2]), int(images.shape[-1]))
-        feats = self.features(images)
+        stem, feats = self.features(images)
+        logits = self.semantic(stem, feats[0]) if self.semantic is not None else None
         if self.training:
             if targets is None or len(targets) != images.shape[0]:
                 raise ValueError("training needs one target dict per image")
             proposals, losses = self.rpn(feats, size, [t["boxes"] for t in targets])
             losses.update(self.roi_heads.losses(feats, proposals, targets))
+            if logits is not None:
+                losses["semantic"] = semantic_loss(logits, targets, self.cfg.semantic_fg_weight)
             return losses
         proposals, _ = self.rpn(feats, size)
-        return self.roi_heads.detect(feats, proposals, size)
+        results = self.roi_heads.detect(feats, proposals, size, skip_labels=self.cfg.semantic_labels)
+        if logits is None:
+            return results
+        probs = torch.softmax(upsample_logits(logits, size), dim=1)
+        for r, p in zip(results, probs, strict=True):
+            found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area)
+            for key in r:
+                r[key] = torch.cat([r[key], found[key].to(r[key].dtype)])
+        return results
 
 
 def train_step(

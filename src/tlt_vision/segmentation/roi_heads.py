@@ -159,8 +159,10 @@ class RoIHeads(nn.Module):
 
     @torch.no_grad()
     def detect(
-        self, feats: list[torch.Tensor], proposals: list[torch.Tensor], image_size: tuple[int, int]
+        self, feats: list[torch.Tensor], proposals: list[torch.Tensor], image_size: tuple[int, int],
+        skip_labels: tuple[int, ...] = (),
     ) -> list[dict[str, torch.Tensor]]:
+        """Detections per image; none of the classes ``skip_labels`` (found another way)."""
         cfg = self.cfg
         x = multilevel_roi_align(feats, proposals, cfg.strides, cfg.box_pool)
         cls_logits, deltas = self.box_head(x)
@@ -180,6 +182,8 @@ class RoIHeads(nn.Module):
             keep = scores > cfg.score_threshold
             wh = boxes[:, 2:] - boxes[:, :2]
             keep &= (wh >= cfg.min_box_size).all(dim=1)
+            for label in skip_labels:
+                keep &= labels != label
             boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
             k = batched_nms(boxes, scores, labels, cfg.detection_nms, max_keep=cfg.detections_per_image)
             results.append({"boxes": boxes[k], "scores": scores[k], "labels": labels[k]})

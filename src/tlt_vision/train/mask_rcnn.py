@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import MaskRCNNConfig
 from tlt_vision.segmentation.evaluate import MaskAP
 from tlt_vision.segmentation.inference import (
@@ -61,8 +62,9 @@ from tlt_vision.weights import WeightsError, save_weights
 
 VERSION = "1"
 LOSSES = ("rpn_objectness", "rpn_box", "roi_cls", "roi_box", "roi_mask")
+SEMANTIC = "semantic"  # the semantic head's loss, when the model has one
 SHORT = {"rpn_objectness": "rpn_obj", "rpn_box": "rpn_box", "roi_cls": "cls", "roi_box": "box",
-         "roi_mask": "mask"}
+         "roi_mask": "mask", SEMANTIC: "sem"}
 
 
 class InputError(Exception):
@@ -99,20 +101,6 @@ def open_set(root: str | Path, classes: Sequence[str]) -> ImageSet:
 def open_sets(roots: Sequence[str | Path], classes: Sequence[str]) -> ImageSets:
     """The sets at ``roots`` (each checked as :func:`open_set`) read as one."""
     return ImageSets([open_set(root, classes) for root in roots])
-
-
-def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
-    """Tight (x1, y1, x2, y2) pixel-edge boxes (N, 4) of non-empty masks (N, H, W)."""
-    if masks.shape[0] == 0:
-        return torch.zeros((0, 4))
-    rows, cols = masks.any(dim=2), masks.any(dim=1)
-    h, w = masks.shape[-2:]
-    ar_h, ar_w = torch.arange(h), torch.arange(w)
-    y1 = torch.where(rows, ar_h, h).min(dim=1).values
-    y2 = torch.where(rows, ar_h, -1).max(dim=1).values + 1
-    x1 = torch.where(cols, ar_w, w).min(dim=1).values
-    x2 = torch.where(cols, ar_w, -1).max(dim=1).values + 1
-    return torch.stack([x1, y1, x2, y2], dim=1).to(torch.float32)
 
 
 def load_sample(
@@ -251,8 +239,8 @@ def plot_curves(path: Path, step_losses: Sequence[dict[str, float]], history: Se
     fig, (ax_loss, ax_ap) = plt.subplots(1, 2, figsize=(12, 4.5))
     window = max(1, len(step_losses) // 50)
     steps = np.arange(1, len(step_losses) + 1)
-    for key in (*LOSSES, "total"):
-        values = [s[key] for s in step_losses]
+    for key in (*LOSSES, SEMANTIC, "total"):
+        values = [s[key] for s in step_losses if key in s]
         if values:
             ax_loss.plot(steps, _smooth(values, window), label=key, lw=2.0 if key == "total" else 1.0)
     ax_loss.set_yscale("log")
@@ -417,6 +405,7 @@ def train(args: argparse.Namespace) -> int:
     model = MaskRCNN(cfg).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment()
+    loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
     steps_per_epoch = math.ceil(len(train_set) / args.batch)
     epochs = args.epochs  # lowered by --time-budget-min once an epoch's duration is known
     total_steps = epochs * steps_per_epoch
@@ -476,14 +465,14 @@ def train(args: argparse.Namespace) -> int:
                 now = time.perf_counter()
                 rate = window_images / max(now - t_window, 1e-9)
                 left = (now - t_start) / steps_done * (total_steps - global_step - 1)
-                terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in LOSSES)
+                terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in loss_keys)
                 print(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
                       f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
                       f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
                 t_window, window_images = now, 0
         record: dict[str, Any] = {
             "epoch": epoch + 1,
-            "train_losses": {k: float(np.mean([s[k] for s in epoch_losses])) for k in (*LOSSES, "total")},
+            "train_losses": {k: float(np.mean([s[k] for s in epoch_losses])) for k in (*loss_keys, "total")},
             "train_seconds": time.perf_counter() - t_epoch,
             "val_map": None,
             "val_ap50": {},

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.segmentation.model import MaskRCNN
@@ -17,7 +18,6 @@ from tlt_vision.train.dataset import Sample, write_index, write_sample
 from tlt_vision.train.mask_rcnn import (
     Augment,
     augment,
-    boxes_from_masks,
     build_config,
     epochs_within,
     evaluate,

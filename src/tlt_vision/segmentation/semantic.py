@@ -1,0 +1,113 @@
+"""Per-pixel classes for the thin parts, and their instances as connected regions.
+
+A strut tube or a cross-frame side lying across the view is a line a few pixels wide: the anchors
+of the region proposal network barely overlap its box, and a 28x28 mask stretched over that box
+cannot draw it (models/vision/README.md: tubes had a mask AP50 of 0.02). A per-pixel class map at
+stride 2 draws such a line directly. Its regions of one class, split where they do not touch, are
+that class's instances: tubes of one strut are separated by their end fittings, frame sides by
+their corner joints, racked tubes by the gaps between them.
+
+``SemanticHead`` joins the FPN's finest level (P2, stride 4: what the pixel is) with the stem's
+stride-2 features (where its edges are). ``semantic_loss`` is a weighted cross-entropy at the
+input's size; ``instances_from_semantic`` turns the class probabilities of one image into
+detections in the format of the box branch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from tlt_vision.ops.boxes import boxes_from_masks
+from tlt_vision.segmentation.config import MaskRCNNConfig
+
+
+class SemanticHead(nn.Module):
+    """(stem (B, C1, H/2, W/2), P2 (B, F, H/4, W/4)) -> class logits (B, classes, H/2, W/2).
+
+    What a pixel is comes from P2, in two convolutions at stride 4; where its edges are, from the
+    stem, in one narrower convolution at stride 2 (at full size a stride-2 map is 320x240, and
+    convolutions there cost four times those at stride 4: the CPU's frame time decides)."""
+
+    def __init__(self, cfg: MaskRCNNConfig) -> None:
+        super().__init__()
+        c, fine = cfg.semantic_channels, max(cfg.semantic_channels // 2, 1)
+        self.context = nn.Sequential(nn.Conv2d(cfg.fpn_channels, c, 3, padding=1), nn.ReLU(),
+                                     nn.Conv2d(c, c, 3, padding=1), nn.ReLU(), nn.Conv2d(c, fine, 1))
+        self.from_stem = nn.Conv2d(cfg.backbone_channels[0], fine, 1)
+        self.refine = nn.Sequential(nn.Conv2d(fine, fine, 3, padding=1), nn.ReLU())
+        self.logits = nn.Conv2d(fine, cfg.num_classes, 1)
+
+    def forward(self, stem: torch.Tensor, p2: torch.Tensor) -> torch.Tensor:
+        x = F.interpolate(self.context(p2), size=stem.shape[-2:], mode="bilinear", align_corners=False)
+        return self.logits(self.refine(x + self.from_stem(stem)))
+
+
+def upsample_logits(logits: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """Stride-2 logits at the input's ``size`` (bilinear)."""
+    return F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
+
+
+def label_map(target: dict[str, torch.Tensor], size: tuple[int, int]) -> torch.Tensor:
+    """(H, W) long: each pixel's instance label, 0 where no instance is. Instances' visible masks
+    do not overlap; where they would, the later one wins."""
+    out = torch.zeros(size, dtype=torch.long, device=target["labels"].device)
+    for mask, label in zip(target["masks"], target["labels"], strict=True):
+        out[mask] = label
+    return out
+
+
+def semantic_loss(logits: torch.Tensor, targets: Sequence[dict[str, torch.Tensor]], fg_weight: float
+                  ) -> torch.Tensor:
+    """Cross-entropy of stride-2 ``logits`` (B, classes, h, w) against every image's label map at
+    the input's size, object pixels weighted ``fg_weight`` against background (a strut is a
+    sliver of a frame; unweighted, a map of background alone is already a low loss)."""
+    size = tuple(targets[0]["masks"].shape[-2:]) if len(targets) else None
+    if size is None or len(size) != 2:
+        raise ValueError("semantic loss needs every target's masks (G, H, W)")
+    labels = torch.stack([label_map(t, size) for t in targets])  # type: ignore[arg-type]
+    weight = torch.full((logits.shape[1],), float(fg_weight), device=logits.device, dtype=logits.dtype)
+    weight[0] = 1.0
+    return F.cross_entropy(upsample_logits(logits, size), labels, weight=weight)  # type: ignore[arg-type]
+
+
+def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area: int
+                            ) -> dict[str, torch.Tensor]:
+    """Detections of the classes ``labels`` in one image's class probabilities ``probs`` (C, H, W):
+    each 8-connected region of pixels whose most probable class is the label, of at least
+    ``min_area`` pixels, is one instance. ``boxes`` (D, 4) are its pixel-edge bounds, ``scores``
+    the mean probability of its class over it, ``masks`` (D, H, W) bool."""
+    h, w = probs.shape[-2:]
+    best = probs.argmax(dim=0).cpu().numpy()
+    masks: list[np.ndarray] = []
+    out_labels: list[int] = []
+    scores: list[float] = []
+    for label in labels:
+        count, regions = cv2.connectedComponents((best == label).astype(np.uint8), connectivity=8)
+        if count <= 1:
+            continue
+        p = probs[label].detach().cpu().numpy()
+        area = np.bincount(regions.ravel(), minlength=count)
+        mass = np.bincount(regions.ravel(), weights=p.ravel(), minlength=count)
+        for k in range(1, count):
+            if area[k] >= min_area:
+                masks.append(regions == k)
+                out_labels.append(label)
+                scores.append(float(mass[k] / area[k]))
+    device = probs.device
+    if not masks:
+        return {"boxes": torch.zeros((0, 4), device=device),
+                "labels": torch.zeros(0, dtype=torch.long, device=device),
+                "scores": torch.zeros(0, device=device),
+                "masks": torch.zeros((0, h, w), dtype=torch.bool, device=device)}
+    m = torch.from_numpy(np.stack(masks)).to(device)
+    return {"boxes": boxes_from_masks(m), "labels": torch.tensor(out_labels, dtype=torch.long, device=device),
+            "scores": torch.tensor(scores, device=device), "masks": m}
+
+
+__all__ = ["SemanticHead", "instances_from_semantic", "label_map", "semantic_loss", "upsample_logits"]

@@ -1,0 +1,112 @@
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from tlt_vision.segmentation.config import MaskRCNNConfig
+from tlt_vision.segmentation.model import MaskRCNN, predict
+from tlt_vision.segmentation.semantic import instances_from_semantic, label_map, semantic_loss
+from tlt_vision.segmentation.synthetic import toy_batch
+
+TINY = MaskRCNNConfig(backbone_channels=(8, 8, 16, 16), fpn_channels=16, representation=32, mask_convs=1,
+                      rpn_pre_nms_top_n=100, rpn_post_nms_top_n_train=50, rpn_post_nms_top_n_test=30,
+                      rpn_batch_per_image=64, roi_batch_per_image=32, semantic_channels=16,
+                      semantic_classes=("strut_tube", "cross_frame"))
+
+
+def _probs(label_image: np.ndarray, classes: int = 6, confidence: float = 0.9) -> torch.Tensor:
+    """Class probabilities (C, H, W) that put ``confidence`` on each pixel's label."""
+    lab = torch.from_numpy(label_image).long()
+    p = torch.full((classes, *lab.shape), (1 - confidence) / (classes - 1))
+    p.scatter_(0, lab[None], confidence)
+    return p
+
+
+def test_regions_of_a_class_are_its_instances():
+    image = np.zeros((20, 30), dtype=np.int64)
+    image[2:4, 1:25] = 1  # a tube lying level
+    image[8:10, 1:25] = 1  # a second one, a gap of four rows below
+    image[12:18, 12] = 1  # touching nothing: a third
+    image[14, 20:22] = 1  # two pixels: noise
+    image[15:19, 25:29] = 4  # a corner joint: not a semantic class here
+    image[2:4, 25:28] = 2  # an end fitting closing the first tube
+    found = instances_from_semantic(_probs(image), labels=(1, 3), min_area=4)
+    assert found["labels"].tolist() == [1, 1, 1]
+    assert found["boxes"].tolist() == [[1, 2, 25, 4], [1, 8, 25, 10], [12, 12, 13, 18]]
+    expected = np.zeros((3, 20, 30), dtype=bool)
+    expected[0, 2:4, 1:25] = expected[1, 8:10, 1:25] = expected[2, 12:18, 12] = True
+    assert np.array_equal(found["masks"].numpy(), expected)
+    assert torch.allclose(found["scores"], torch.full((3,), 0.9))
+
+
+def test_a_diagonal_line_is_one_region_and_an_empty_map_gives_nothing():
+    image = np.zeros((16, 16), dtype=np.int64)
+    idx = np.arange(2, 14)
+    image[idx, idx] = 3  # pixels touching at their corners only
+    found = instances_from_semantic(_probs(image), labels=(1, 3), min_area=4)
+    assert found["labels"].tolist() == [3] and int(found["masks"].sum()) == 12
+    none = instances_from_semantic(_probs(np.zeros((16, 16), dtype=np.int64)), labels=(1, 3), min_area=4)
+    assert none["boxes"].shape == (0, 4) and none["masks"].shape == (0, 16, 16)
+
+
+def test_label_map_and_loss_weighting():
+    masks = torch.zeros(2, 4, 4, dtype=torch.bool)
+    masks[0, 0, :] = True
+    masks[1, 3, 1:3] = True
+    target = {"masks": masks, "labels": torch.tensor([1, 4])}
+    expected = torch.zeros(4, 4, dtype=torch.long)
+    expected[0, :] = 1
+    expected[3, 1:3] = 4
+    assert torch.equal(label_map(target, (4, 4)), expected)
+    # Stride-2 logits that say "background" everywhere: the object pixels cost more when weighted.
+    logits = torch.zeros(1, 6, 2, 2)
+    logits[:, 0] = 2.0
+    plain = semantic_loss(logits, [target], fg_weight=1.0)
+    weighted = semantic_loss(logits, [target], fg_weight=3.0)
+    assert weighted > plain > 0
+
+
+def test_semantic_classes_must_be_classes():
+    with pytest.raises(ValueError, match="semantic_classes"):
+        MaskRCNNConfig(semantic_classes=("strut",))
+    assert TINY.semantic_labels == (1, 3)
+    assert MaskRCNNConfig.from_dict(TINY.to_dict()) == TINY
+
+
+def test_model_trains_its_semantic_head_and_finds_thin_parts_with_it():
+    torch.manual_seed(0)
+    model = MaskRCNN(TINY)
+    images, targets = toy_batch(np.random.default_rng(3), 4, size=(48, 48))
+    model.train()
+    losses = model(images, targets)
+    assert "semantic" in losses
+    losses["semantic"].backward()
+    assert model.semantic.logits.weight.grad.abs().sum() > 0
+    assert model.backbone.stem[0].weight.grad.abs().sum() > 0
+    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+    semantic = []
+    for _ in range(40):  # the semantic loss alone: the box branch is another test's
+        loss = model(images, targets)["semantic"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        semantic.append(float(loss.detach()))
+    assert semantic[-1] < 0.5 * semantic[0]
+    tubes = [t["masks"][t["labels"] == 1] for t in targets]
+    found = 0
+    for det, truth in zip(predict(model, images), tubes, strict=True):
+        sem = det["masks"][det["labels"] == 1]
+        for gt in truth:
+            inter = (sem & gt).flatten(1).sum(1).float()
+            union = (sem | gt).flatten(1).sum(1).float()
+            found += int(len(sem) > 0 and (inter / union).max() >= 0.5)
+    assert found >= 0.75 * sum(len(t) for t in tubes)
+
+
+def test_box_branch_detections_of_semantic_classes_are_dropped():
+    torch.manual_seed(0)
+    lax = dataclasses.replace(TINY, score_threshold=0.0, semantic_min_area=10**6)
+    for det in predict(MaskRCNN(lax), torch.rand(2, 3, 40, 56)):
+        assert len(det["labels"]) > 0
+        assert not ((det["labels"] == 1) | (det["labels"] == 3)).any()
