@@ -10,6 +10,7 @@
 # have is used (240), and MODEL: the trainer's options for the model (default full-size images,
 # 56x56 masks, anchors scaled with the image: models/vision/README.md, GPU runs). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
+# INIT: weights to start from (the trainer's --init: each lent machine's minutes add to the last's).
 # RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
 # "rendered" marker) and trains on them, so two models can train side by side on one device.
 #
@@ -31,6 +32,7 @@ BATCH=${BATCH:-8}
 LR=${LR:-2e-3}
 RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
 RENDER=${RENDER:-1}
+INIT=${INIT:-}
 MODEL=${MODEL:---config mask_pool=28 --config anchor_sizes=[32,64,128,256]}
 data=${DATA_DIR:-/tmp/tlt-vision-data}
 mkdir -p "$out" "$data"
@@ -93,6 +95,7 @@ log "training on $DEVICE for at most $BUDGET_MIN min"
 "$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
     --workers "$WORKERS" --threads 4 --time-budget-min "$BUDGET_MIN" --log-every 50 $MODEL \
+    ${INIT:+--init "$INIT"} \
     2>&1 | tee "$out/train.log"
 rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships
 log "done: $out"

@@ -6,6 +6,7 @@ Train (``--train`` one or more sets, read as one, and optionally ``--val``, in t
     python -m tlt_vision.train.mask_rcnn --train DIR [DIR ...] [--val DIR] --out build/vision/mask_rcnn.pt \\
         [--epochs 20] [--batch 4] [--lr 1e-3] [--seed 0] [--threads 2] [--max-size 320] \\
         [--device cpu|cuda] [--workers N] [--time-budget-min M] [--config key=value ...] [--resume CKPT]
+        [--init WEIGHTS]
 
 Every ``--log-every`` steps it prints the epoch, step, images per second, the five losses and the
 time left; after each epoch the validation mask AP50 per class and mean. It keeps the weights of
@@ -14,7 +15,9 @@ the best epoch by validation AP (the last epoch without ``--val``) in ``--out`` 
 node then uses too; figures: epochs, images, losses, AP50 per class, seconds). Beside it:
 ``<stem>_checkpoint.pt`` after every epoch (``--resume`` continues from it), ``<stem>_curves.png``
 (losses per step, smoothed; validation AP per epoch) and ``<stem>_samples.png`` (validation images
-with the predicted masks, boxes, classes and scores).
+with the predicted masks, boxes, classes and scores). ``--init WEIGHTS`` starts from trained
+weights (the tensors of the same name and shape; a part the model adds, such as a semantic head,
+starts fresh), so that short runs on lent machines can build on each other.
 
 Evaluate saved weights::
 
@@ -58,7 +61,7 @@ from tlt_vision.segmentation.inference import (
 )
 from tlt_vision.segmentation.model import MaskRCNN, train_step
 from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets
-from tlt_vision.weights import WeightsError, save_weights
+from tlt_vision.weights import WeightsError, read_manifest, save_weights
 
 VERSION = "1"
 LOSSES = ("rpn_objectness", "rpn_box", "roi_cls", "roi_box", "roi_mask")
@@ -389,6 +392,33 @@ def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str
     return ckpt
 
 
+def init_from(model: MaskRCNN, path: Path, classes: Sequence[str]) -> list[str]:
+    """Copy into ``model`` the tensors of Mask R-CNN weights ``path`` that it has by the same name and
+    shape; returns the names it has that the file does not give (left as initialised). InputError
+    for weights of another kind or class list, or that give less than half the model's parameters."""
+    try:
+        manifest = read_manifest(path)
+        if manifest["kind"] != KIND or manifest["classes"] != list(classes):
+            raise InputError(f"{path}: --init needs {KIND} weights for classes {list(classes)}, not "
+                             f"{manifest['kind']} weights for {manifest['classes']}")
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except WeightsError as exc:
+        raise InputError(str(exc)) from exc
+    except InputError:
+        raise
+    except Exception as exc:  # torch raises several types for a corrupt file
+        raise InputError(f"{path}: unreadable weights: {exc}") from exc
+    own = model.state_dict()
+    given = {k: v for k, v in state.items() if k in own and own[k].shape == v.shape}
+    params = dict(model.named_parameters())
+    total = sum(v.numel() for v in params.values())
+    share = sum(v.numel() for k, v in params.items() if k in given) / max(total, 1)
+    if share < 0.5:  # a model of another size: a few biases would match, nothing learned would carry
+        raise InputError(f"{path}: gives only {share:.0%} of the model's parameters (another --config?)")
+    model.load_state_dict(given, strict=False)
+    return sorted(set(own) - set(given))
+
+
 def train(args: argparse.Namespace) -> int:
     cfg = build_config(parse_overrides(args.config))
     settings = weights_settings(cfg, args.max_size)
@@ -402,7 +432,12 @@ def train(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
-    model = MaskRCNN(cfg).to(device)
+    model = MaskRCNN(cfg)
+    if args.init:
+        fresh = init_from(model, Path(args.init), cfg.classes)
+        print(f"initialised from {args.init}" + (f"; {len(fresh)} tensors fresh, from {fresh[0]}"
+                                                  if fresh else ""), flush=True)
+    model.to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment()
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
@@ -585,6 +620,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--log-every", type=int, default=10, help="steps between progress lines")
     p.add_argument("--val-limit", type=int, default=None, help="evaluate on the first N validation images")
     p.add_argument("--resume", help="checkpoint (<out stem>_checkpoint.pt) to continue from")
+    p.add_argument("--init", metavar="WEIGHTS",
+                   help="start from these trained weights (tensors of the same name and shape)")
     p.add_argument("--evaluate", metavar="WEIGHTS",
                    help="evaluate these weights on --val instead of training")
     args = p.parse_args(argv)
@@ -597,6 +634,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         p.error("--time-budget-min must be positive")
     if args.max_size is not None and args.max_size < 32:
         p.error("--max-size must be at least 32 pixels")
+    if args.init and args.resume:
+        p.error("--init and --resume exclude each other (a checkpoint holds the weights)")
     if args.evaluate and not args.val:
         p.error("--evaluate needs --val")
     if not args.evaluate and not args.train:

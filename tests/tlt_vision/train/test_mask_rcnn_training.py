@@ -158,6 +158,24 @@ def test_resume_continues_after_the_checkpoint_epoch(run, capsys):
     assert "fpn_channels" in capsys.readouterr().err
 
 
+def test_init_starts_from_trained_weights_and_a_new_head_starts_fresh(run, tmp_path, capsys):
+    out = tmp_path / "init.pt"
+    semantic = ["--config", 'semantic_classes=["strut_tube"]', "--config", "semantic_channels=8"]
+    args = [*run["args"][: run["args"].index("--out")], "--out", str(out), "--epochs", "1", "--batch", "4",
+            "--threads", "1", *CONFIG_ARGS, *semantic]  # fmt: skip
+    assert main([*args, "--init", str(run["out"])]) == 0
+    text = capsys.readouterr().out
+    assert f"initialised from {run['out']}; 12 tensors fresh, from semantic." in text
+    # After one epoch at a warm-up learning rate it still finds the blocks the first run learned.
+    first = read_manifest(run["out"])["extra"]["figures"]["val_map"]
+    assert read_manifest(out)["extra"]["figures"]["val_map"] >= first - 0.2
+    assert main([*args, "--init", str(tmp_path / "none.pt")]) == 2
+    assert "none.pt" in capsys.readouterr().err
+    assert main([*args, "--init", str(run["out"]), "--config", "fpn_channels=8", "--config",
+                 "backbone_channels=[4,4,4,4]", "--config", "representation=8"]) == 2
+    assert "of the model's parameters (another --config?)" in capsys.readouterr().err
+
+
 def test_evaluate_prints_ap_per_class_and_time(run, capsys):
     assert main(["--evaluate", str(run["out"]), "--val", str(run["val"]), "--threads", "1"]) == 0
     text = capsys.readouterr().out
