@@ -87,7 +87,7 @@ done
 [ ${#shards[@]} -gt 0 ] || { log "no shard rendered an image set"; exit 1; }
 rendered=$("$PYTHON" -c "import sys; from tlt_vision.train.dataset import ImageSet
 print(sum(len(ImageSet(p)) for p in sys.argv[1:]))" "${shards[@]}")
-log "$rendered training images in ${#shards[@]} shards"
+log "rendered $rendered training images in ${#shards[@]} shards"
 
 # 3. Train within the budget, validating each epoch; the best epoch's weights are kept.
 log "training on $DEVICE for at most $BUDGET_MIN min"

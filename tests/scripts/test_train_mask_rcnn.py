@@ -1,6 +1,7 @@
 """scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards and the validation set,
-trains within its budget and leaves the weights, figures and logs; a device it cannot use stops it
-at the smoke test, before anything is rendered at scale."""
+trains within its budget and leaves the weights, figures and logs; a second run trains on the first
+one's images from its weights; a device it cannot use stops it at the smoke test, before anything
+is rendered at scale."""
 
 from __future__ import annotations
 
@@ -37,6 +38,14 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert figures["train"] == [str(tmp_path / "data" / f"train_{k}") for k in range(2)]
     assert figures["images"] == 4 and figures["val_images"] == 2 and figures["device"] == "cpu"
     assert "epoch 1/1 val mask AP50" in (out / "train.log").read_text()
+    # A second run on the same images renders nothing and starts from the first run's weights.
+    again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
+                           timeout=300, env={**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"),
+                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt")})
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert "rendering 4 images" not in again.stdout
+    assert "rendered 4 training images in 2 shards" in again.stdout
+    assert f"initialised from {out / 'mask_rcnn.pt'}" in (tmp_path / "again" / "train.log").read_text()
 
 
 def test_a_device_it_cannot_use_stops_it_at_the_smoke_test(tmp_path):
