@@ -48,6 +48,9 @@ class MaskRCNNConfig:
     semantic_channels: int = 32
     semantic_fg_weight: float = 3.0  # cross-entropy weight of object pixels against background
     semantic_min_area: int = 12  # pixels at the model's input size; smaller regions are noise
+    # Pixels between touching instances of a class that the head learns as background, so that
+    # they are separate regions; 2 is one cell of its stride-2 map (a 1-pixel gap it cannot draw).
+    semantic_gap: int = 2
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.semantic_classes if c not in self.classes]

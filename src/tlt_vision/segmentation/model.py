@@ -59,7 +59,8 @@ class MaskRCNN(nn.Module):
             proposals, losses = self.rpn(feats, size, [t["boxes"] for t in targets])
             losses.update(self.roi_heads.losses(feats, proposals, targets))
             if logits is not None:
-                losses["semantic"] = semantic_loss(logits, targets, self.cfg.semantic_fg_weight)
+                losses["semantic"] = semantic_loss(logits, targets, self.cfg.semantic_fg_weight,
+                                                   self.cfg.semantic_gap)
             return losses
         proposals, _ = self.rpn(feats, size)
         results = self.roi_heads.detect(feats, proposals, size, skip_labels=self.cfg.semantic_labels)

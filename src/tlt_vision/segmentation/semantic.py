@@ -53,24 +53,45 @@ def upsample_logits(logits: torch.Tensor, size: tuple[int, int]) -> torch.Tensor
     return F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
 
 
-def label_map(target: dict[str, torch.Tensor], size: tuple[int, int]) -> torch.Tensor:
-    """(H, W) long: each pixel's instance label, 0 where no instance is. Instances' visible masks
-    do not overlap; where they would, the later one wins."""
-    out = torch.zeros(size, dtype=torch.long, device=target["labels"].device)
-    for mask, label in zip(target["masks"], target["labels"], strict=True):
-        out[mask] = label
-    return out
+def label_map(target: dict[str, torch.Tensor], size: tuple[int, int], gap: int = 0) -> torch.Tensor:
+    """(H, W) long: each pixel's instance label, 0 where no instance is (instances' visible masks do
+    not overlap; where they would, the later one wins). With ``gap``, an instance's pixels within
+    ``gap`` pixels (a square window) of another instance of its class are background: two racked
+    tubes touching in the image are then two regions of the map the head learns to draw, where
+    they would be one (models/vision/README.md: the twin's own map, cut so, gives regions of
+    tube AP50 0.79 at a gap of 2 pixels, 0.66 uncut)."""
+    device = target["labels"].device
+    labels = torch.zeros(size, dtype=torch.long, device=device)
+    ids = torch.zeros(size, dtype=torch.long, device=device)
+    for k, (mask, label) in enumerate(zip(target["masks"], target["labels"], strict=True)):
+        labels[mask] = label
+        ids[mask] = k + 1
+    if gap <= 0:
+        return labels
+    window = 2 * gap + 1
+    none = float(len(target["labels"]) + 1)
+    cut = torch.zeros(size, dtype=torch.bool, device=device)
+    for label in torch.unique(labels[labels > 0]).tolist():
+        own = labels == label
+        mine = torch.where(own, ids, 0).to(torch.float32)[None, None]
+        # Another instance of the class in the window has a larger id than the pixel's, or a smaller.
+        larger = F.max_pool2d(mine, window, stride=1, padding=gap)[0, 0]
+        smaller = -F.max_pool2d(-torch.where(mine > 0, mine, none), window, stride=1, padding=gap)[0, 0]
+        cut |= own & ((larger != mine[0, 0]) | (smaller != mine[0, 0]))
+    labels[cut] = 0
+    return labels
 
 
-def semantic_loss(logits: torch.Tensor, targets: Sequence[dict[str, torch.Tensor]], fg_weight: float
-                  ) -> torch.Tensor:
+def semantic_loss(logits: torch.Tensor, targets: Sequence[dict[str, torch.Tensor]], fg_weight: float,
+                  gap: int = 0) -> torch.Tensor:
     """Cross-entropy of stride-2 ``logits`` (B, classes, h, w) against every image's label map at
     the input's size, object pixels weighted ``fg_weight`` against background (a strut is a
-    sliver of a frame; unweighted, a map of background alone is already a low loss)."""
+    sliver of a frame; unweighted, a map of background alone is already a low loss), instances
+    kept ``gap`` pixels apart (:func:`label_map`)."""
     size = tuple(targets[0]["masks"].shape[-2:]) if len(targets) else None
     if size is None or len(size) != 2:
         raise ValueError("semantic loss needs every target's masks (G, H, W)")
-    labels = torch.stack([label_map(t, size) for t in targets])  # type: ignore[arg-type]
+    labels = torch.stack([label_map(t, size, gap) for t in targets])  # type: ignore[arg-type]
     weight = torch.full((logits.shape[1],), float(fg_weight), device=logits.device, dtype=logits.dtype)
     weight[0] = 1.0
     return F.cross_entropy(upsample_logits(logits, size), labels, weight=weight)  # type: ignore[arg-type]

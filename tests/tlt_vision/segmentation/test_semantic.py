@@ -59,6 +59,26 @@ def test_label_map_and_loss_weighting():
     expected[0, :] = 1
     expected[3, 1:3] = 4
     assert torch.equal(label_map(target, (4, 4)), expected)
+    assert torch.equal(label_map(target, (4, 4), gap=1), expected)  # nothing touches its own class
+
+
+def test_label_map_cuts_touching_instances_of_a_class_apart():
+    masks = torch.zeros(3, 6, 8, dtype=torch.bool)
+    masks[0, 0:2, :] = True  # two tubes racked one on the other: rows 0-1 and 2-3
+    masks[1, 2:4, :] = True
+    masks[2, 4:6, 0:3] = True  # an end fitting below the second tube: another class
+    target = {"masks": masks, "labels": torch.tensor([1, 1, 2])}
+    expected = torch.zeros(6, 8, dtype=torch.long)
+    expected[0, :] = 1  # row 1 and row 2 are within a pixel of the other tube
+    expected[3, :] = 1
+    expected[4:6, 0:3] = 2
+    assert torch.equal(label_map(target, (6, 8), gap=1), expected)
+    # Two pixels: every row of these two-row tubes is near the other, and none is left.
+    assert torch.equal(label_map(target, (6, 8), gap=2)[0:4], torch.zeros(4, 8, dtype=torch.long))
+    # The regions of the cut map are the two tubes.
+    probs = torch.nn.functional.one_hot(label_map(target, (6, 8), gap=1), 6).permute(2, 0, 1).float()
+    found = instances_from_semantic(probs, labels=(1,), min_area=4)
+    assert found["boxes"].tolist() == [[0, 0, 8, 1], [0, 3, 8, 4]]
     # Stride-2 logits that say "background" everywhere: the object pixels cost more when weighted.
     logits = torch.zeros(1, 6, 2, 2)
     logits[:, 0] = 2.0
