@@ -5,7 +5,8 @@ of the region proposal network barely overlap its box, and a 28x28 mask stretche
 cannot draw it (models/vision/README.md: tubes had a mask AP50 of 0.02). A per-pixel class map at
 stride 2 draws such a line directly. Its regions of one class, split where they do not touch, are
 that class's instances: tubes of one strut are separated by their end fittings, frame sides by
-their corner joints, racked tubes by the gaps between them.
+their corner joints, racked tubes that touch in the image by the gap the head is taught to leave
+between them (:func:`label_map`).
 
 ``SemanticHead`` joins the FPN's finest level (P2, stride 4: what the pixel is) with the stem's
 stride-2 features (where its edges are). ``semantic_loss`` is a weighted cross-entropy at the
