@@ -25,7 +25,7 @@ CANDIDATE = ROOT / "models" / "vision" / "candidates" / "mask_rcnn_semantic.pt"
 HELD_OUT_SEED = 901
 IMAGES = 30
 AP50_FLOOR = 0.30
-CANDIDATE_FLOOR = 0.40  # 0.48 on the model card's 40 images
+CANDIDATE_FLOOR = 0.40  # 0.54 on the model card's 40 images, 0.51 on these
 
 
 @pytest.fixture(scope="module")
