@@ -398,14 +398,13 @@ def init_from(model: MaskRCNN, path: Path, classes: Sequence[str]) -> list[str]:
     for weights of another kind or class list, or that give less than half the model's parameters."""
     try:
         manifest = read_manifest(path)
-        if manifest["kind"] != KIND or manifest["classes"] != list(classes):
-            raise InputError(f"{path}: --init needs {KIND} weights for classes {list(classes)}, not "
-                             f"{manifest['kind']} weights for {manifest['classes']}")
-        state = torch.load(path, map_location="cpu", weights_only=True)
     except WeightsError as exc:
         raise InputError(str(exc)) from exc
-    except InputError:
-        raise
+    if manifest["kind"] != KIND or manifest["classes"] != list(classes):
+        raise InputError(f"{path}: --init needs {KIND} weights for classes {list(classes)}, not "
+                         f"{manifest['kind']} weights for {manifest['classes']}")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises several types for a corrupt file
         raise InputError(f"{path}: unreadable weights: {exc}") from exc
     own = model.state_dict()
