@@ -63,6 +63,7 @@ SCHEMA = {
             "step": Field("float", **_POSITIVE),
             "decay": Field("float", minimum=0.5, maximum=1.0),
             "patience": Field("int", minimum=1),
+            "tolerance": opt("float", 1e-4, minimum=0.0, maximum=1.0),
             "refine_iterations": opt("int", 0, minimum=0, maximum=500),
         },
     ),

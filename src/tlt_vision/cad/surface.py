@@ -62,6 +62,20 @@ class SurfaceDistance:
         out.seg_len, out.seg_r = pad("seg_len", 0.0, segments), pad("seg_r", 0.0, segments)
         out.seg_flat = pad("seg_flat", False, segments)
         out.box_c, out.box_h = pad("box_c", far, boxes), pad("box_h", 0.0, boxes)
+        out.batched = True
+        return out
+
+    batched = False  # one surface per batch element (:meth:`stacked`)
+
+    def select(self, rows: torch.Tensor) -> SurfaceDistance:
+        """The surface for the batch elements ``rows`` of points measured against this one: those
+        elements' own of a stacked surface, this one itself otherwise (it serves every element)."""
+        if not self.batched:
+            return self
+        out = SurfaceDistance.__new__(SurfaceDistance)
+        for name in ("seg_a", "seg_u", "seg_len", "seg_r", "seg_flat", "box_c", "box_h"):
+            setattr(out, name, getattr(self, name)[rows])
+        out.batched = True
         return out
 
     def signed(self, points: torch.Tensor) -> torch.Tensor:

@@ -77,7 +77,9 @@ def roi_align(
     for b in torch.unique(batch).tolist():
         sel = torch.nonzero(batch == b).flatten()
         vals = vals.index_copy(0, sel, _bilinear(features[b], yy[sel], xx[sel]))  # (R, PH*s*PW*s, C)
-    vals = vals.reshape(r, ph, s, pw, s, c).mean(dim=(2, 4))
+    # One axis at a time: torch's mean over the two strided sample axes at once took ten times
+    # as long on the CPU (20 ms for a frame's 28x28 mask RoIs).
+    vals = vals.reshape(r, ph, s, pw, s, c).sum(dim=4).sum(dim=2) / (s * s)
     return vals.permute(0, 3, 1, 2).contiguous()
 
 

@@ -4,9 +4,9 @@ For keypoints ``y + d``, registration of the CAD keypoints onto them gives ``R(d
 corrector minimises the one-sided Chamfer objective ``mean_i dist(x_i, R S + t)^2`` of the observed
 points ``x`` against the posed CAD surface ``S`` (exact point-to-surface distances, the limit of a
 dense CAD sample) over the corrections ``d``, by gradient descent (Adam) through the registration.
-It is batched, stops after ``max_iterations`` or when no element improved by more than
-``tolerance`` (relative) for ``patience`` iterations, and keeps each element's best iterate, so
-the objective it returns is never above the one it started from.
+It is batched, each element on its own: an element stops after ``max_iterations`` or when it has
+not improved by more than ``tolerance`` (relative) for ``patience`` iterations, and keeps its best
+iterate, so the objective it returns is never above the one it started from.
 
 :func:`refine_pose` then polishes the registered pose itself (Levenberg-Marquardt over a rotation
 about the cloud's centre and a translation, each element on its own) on the same objective plus a
@@ -41,6 +41,10 @@ class CorrectorConfig:
     tolerance: float = 1e-4
     patience: int = 10
     refine_iterations: int = 0  # at most this many refine_pose steps per start (0: no refinement)
+
+
+_ADAM_BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults
+_ADAM_EPS = 1e-8
 
 
 @dataclass(frozen=True)
@@ -94,36 +98,51 @@ def correct(
     if mask is None:
         mask = torch.ones(observed.shape[:2], dtype=torch.bool, device=observed.device)
     observed, keypoints = observed.detach(), keypoints.detach()
-    model_keypoints = model_keypoints.to(observed.dtype)
+    batch = keypoints.shape[0]
+    model_keypoints = model_keypoints.to(observed.dtype).expand_as(keypoints)
     # The unknowns are in units of each element's scale, so one Adam step size fits every part.
-    unit = torch.as_tensor(scale, dtype=observed.dtype).reshape(-1, 1, 1)
-    delta = torch.zeros_like(keypoints, requires_grad=True)
-    opt = torch.optim.Adam([delta], lr=cfg.step)
-    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=cfg.decay)
+    unit = torch.as_tensor(scale, dtype=observed.dtype).reshape(-1, 1, 1).expand(batch, 1, 1)
 
-    def objective(kp: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        return chamfer_objective(observed, mask, kp, surface, model_keypoints, keypoint_weights)
+    def objective(
+        kp: torch.Tensor, rows: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        if rows is None:
+            return chamfer_objective(observed, mask, kp, surface, model_keypoints, keypoint_weights)
+        weights = None if keypoint_weights is None else keypoint_weights[rows]
+        return chamfer_objective(observed[rows], mask[rows], kp, surface.select(rows), model_keypoints[rows],
+                                 weights)
 
     with torch.no_grad():
         start, _, _ = objective(keypoints)
     best = start.clone()
+    delta = torch.zeros_like(keypoints)
     best_delta = torch.zeros_like(keypoints)
-    stale = 0
+    # Adam by hand, so that each element steps, and stops, on its own: an element no longer
+    # improving leaves the batch, and what a part's pose comes to does not depend on the others
+    # posed with it (a frame's thirty parts no longer all run while one still improves).
+    first, second = torch.zeros_like(keypoints), torch.zeros_like(keypoints)
+    stale = torch.zeros(batch, dtype=torch.long)
+    active = torch.arange(batch)
     iterations = 0
-    for iterations in range(1, cfg.max_iterations + 1):  # noqa: B007 (the count is reported)
-        opt.zero_grad()
-        obj, _, _ = objective(keypoints + delta * unit)
-        obj.sum().backward()
+    for iterations in range(1, cfg.max_iterations + 1):
+        d = delta[active].requires_grad_(True)
+        obj, _, _ = objective(keypoints[active] + d * unit[active], active)
+        (grad,) = torch.autograd.grad(obj.sum(), d)
         with torch.no_grad():
-            improved = obj < best * (1.0 - cfg.tolerance)
-            better = obj < best
-            best_delta = torch.where(better[:, None, None], delta * unit, best_delta)
-            best = torch.where(better, obj, best)
-            stale = 0 if bool(improved.any()) else stale + 1
-        if stale >= cfg.patience:
+            improved = obj < best[active] * (1.0 - cfg.tolerance)
+            better = obj < best[active]
+            best_delta[active] = torch.where(better[:, None, None], d * unit[active], best_delta[active])
+            best[active] = torch.where(better, obj, best[active])
+            stale[active] = torch.where(improved, 0, stale[active] + 1)
+            m = first[active] = _ADAM_BETAS[0] * first[active] + (1 - _ADAM_BETAS[0]) * grad
+            v = second[active] = _ADAM_BETAS[1] * second[active] + (1 - _ADAM_BETAS[1]) * grad * grad
+            lr = cfg.step * cfg.decay ** (iterations - 1)
+            m_hat = m / (1 - _ADAM_BETAS[0] ** iterations)
+            v_hat = v / (1 - _ADAM_BETAS[1] ** iterations)
+            delta[active] = delta[active] - lr * m_hat / (v_hat.sqrt() + _ADAM_EPS)
+            active = active[stale[active] < cfg.patience]
+        if not len(active):
             break
-        opt.step()
-        sched.step()
     with torch.no_grad():
         final_kp = keypoints + best_delta
         final, rot, t = objective(final_kp)
@@ -220,17 +239,22 @@ def refine_pose(
     def chamfer(r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
         return (surface(model_frame(observed, r, tt)).pow(2) * m).sum(-1) / count
 
-    def fit(r: torch.Tensor, tt: torch.Tensor, moved: torch.Tensor) -> _Fit:
+    def fit(r: torch.Tensor, tt: torch.Tensor, moved: torch.Tensor, rows: torch.Tensor | None = None) -> _Fit:
+        """The state at ``r, tt`` of every element, or of the elements ``rows`` (r, tt, moved theirs)."""
+        def own(x: torch.Tensor) -> torch.Tensor:
+            return x if rows is None else x[rows]
+
+        on = surface if rows is None else surface.select(rows)
         # A slight pull to the start: along a direction the cloud leaves open (a tube along its
         # axis, its ends hidden in the fittings) the pose stays as corrected, not drifted.
         value = PROXIMAL * moved.pow(2).sum(-1)
         hessian = proximal.expand(len(r), 6, 6).clone()
         gradient = torch.cat([torch.zeros_like(moved), PROXIMAL * moved], -1)
         for points, arm, free in ((observed, arms[0], False), (front, arms[1], True)):
-            res, dres = _residuals(surface, points, r, tt, free)
+            res, dres = _residuals(on, own(points), r, tt, free)
             # d(residual)/d(rotation w about the centre) = -(arm x dres); d/d(translation mm) = -dres mm.
-            jac = torch.cat([-torch.linalg.cross(arm, dres), -_MM * dres], -1) * weight[..., None]
-            res = res * weight
+            jac = torch.cat([-torch.linalg.cross(own(arm), dres), -_MM * dres], -1) * own(weight)[..., None]
+            res = res * own(weight)
             value = value + res.pow(2).sum(-1)
             hessian = hessian + jac.transpose(-1, -2) @ jac
             gradient = gradient + (jac * res[..., None]).sum(1)
@@ -249,38 +273,38 @@ def refine_pose(
     offsets = offsets.expand(len(rot), offsets.shape[-1]) if offsets.dim() == 1 else offsets
     eye = torch.eye(6, dtype=torch.float64)
     for k in range(offsets.shape[1]):
-        state = fit(rot, t + offsets[:, k, None] * view, torch.zeros_like(t))
+        state = fit(rot.clone(), t + offsets[:, k, None] * view, torch.zeros_like(t))  # updated in place
         damping = torch.full_like(best, LM_DAMPING, dtype=torch.float64)
         done = torch.zeros_like(best, dtype=torch.bool)
         for _ in range(iterations):
-            h, g = state.hessian.double(), state.gradient.double()
+            # Only the elements still converging take a step: a frame's parts settle in 3-6
+            # steps, a few take all of them.
+            rows = (~done).nonzero()[:, 0]
+            h, g = state.hessian[rows].double(), state.gradient[rows].double()
             diag = torch.diagonal(h, dim1=-2, dim2=-1)
             # Marquardt's scaling, with a floor for a direction the cloud leaves open (a tube's
             # turn about its axis), whose diagonal is zero.
             scaled = diag + 1e-9 * diag.mean(-1, keepdim=True) + 1e-30
-            step = torch.linalg.solve(h + damping[:, None, None] * eye * scaled[..., None], -g)
+            step = torch.linalg.solve(h + damping[rows, None, None] * eye * scaled[..., None], -g)
             # What the step is expected to gain: the Gauss-Newton model's decrease.
             expected = -(g * step).sum(-1) - 0.5 * (step[:, None, :] @ h @ step[..., None])[:, 0, 0]
             step = step.to(observed.dtype)
             turn = _rotation(step[:, :3])
-            r = turn @ state.rot
-            tt = centre + (turn @ (state.t - centre)[..., None])[..., 0] + step[:, 3:] * _MM
-            trial = fit(r, tt, state.moved + step[:, 3:])
-            accept = (trial.value < state.value) & ~done
-            gain = (state.value - trial.value) / state.value.clamp(min=1e-30)
-            keep = accept[:, None]
-            state = _Fit(
-                torch.where(keep[..., None], trial.rot, state.rot),
-                torch.where(keep, trial.t, state.t),
-                torch.where(keep, trial.moved, state.moved),
-                torch.where(accept, trial.value, state.value),
-                torch.where(keep[..., None], trial.hessian, state.hessian),
-                torch.where(keep, trial.gradient, state.gradient),
-            )
-            damping = torch.where(accept, damping / 3.0, damping * 4.0)
+            r = turn @ state.rot[rows]
+            tt = centre[rows] + (turn @ (state.t[rows] - centre[rows])[..., None])[..., 0] + step[:, 3:] * _MM
+            trial = fit(r, tt, state.moved[rows] + step[:, 3:], rows)
+            before = state.value[rows]
+            accept = trial.value < before
+            gain = (before - trial.value) / before.clamp(min=1e-30)
+            taken = rows[accept]
+            state.rot[taken], state.t[taken] = trial.rot[accept], trial.t[accept]
+            state.moved[taken], state.value[taken] = trial.moved[accept], trial.value[accept]
+            state.hessian[taken], state.gradient[taken] = trial.hessian[accept], trial.gradient[accept]
+            damping[rows] = torch.where(accept, damping[rows] / 3.0, damping[rows] * 4.0)
             # Converged: a step that gained (or would gain) less than LM_TOLERANCE of the
             # objective, or one that fails however short it is made.
-            done |= (accept & (gain < LM_TOLERANCE)) | (expected < LM_TOLERANCE * state.value.double())
+            small = expected < LM_TOLERANCE * state.value[rows].double()
+            done[rows] = (accept & (gain < LM_TOLERANCE)) | small
             done |= damping > LM_MAX_DAMPING
             if bool(done.all()):
                 break

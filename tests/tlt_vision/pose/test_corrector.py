@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from tlt_vision.cad.models import build_models
+from tlt_vision.cad.surface import SurfaceDistance
 from tlt_vision.cad.views import random_rotation, synthetic_view
 from tlt_vision.ops.registration import rotation_angle, transform
 from tlt_vision.pose.corrector import CorrectorConfig, chamfer_objective, correct
@@ -58,3 +59,43 @@ def test_zero_iterations_returns_the_input():
     )
     assert torch.equal(res.keypoints, kp)
     assert res.iterations == 0
+
+
+def _two_parts():
+    """A corner joint whose detected keypoints are close and a tube's that are far off: the
+    first settles in a few iterations, the second takes many."""
+    models = build_models(0.75, {"vertical": 0.75})
+    names = ("corner_joint", "strut_tube/vertical")
+    k = max(len(models[n].keypoints) for n in names)
+    rng = np.random.default_rng(3)
+    obs, kps, model_kps, surfaces, scales = [], [], [], [], []
+    for name, off in zip(names, (0.02, 0.3), strict=True):
+        m = models[name]
+        rot, t = random_rotation(rng), np.array([0.05, -0.02, 0.9])
+        obs.append(torch.tensor(synthetic_view(m, rot, t, 300, rng, noise=0.0003)[:200], dtype=torch.float32))
+        model_kp = torch.zeros(k, 3)
+        model_kp[: len(m.keypoints)] = torch.tensor(m.keypoints, dtype=torch.float32)
+        gt = transform(model_kp, torch.tensor(rot).float(), torch.tensor(t).float())
+        kps.append(gt + torch.randn(gt.shape, generator=torch.Generator().manual_seed(1)) * off * m.diameter)
+        model_kps.append(model_kp)
+        surfaces.append(m.surface)
+        scales.append(m.diameter / 2)
+    weights = torch.tensor([[1.0] * len(models[n].keypoints) + [0.0] * (k - len(models[n].keypoints))
+                            for n in names])  # fmt: skip
+    return torch.stack(obs), torch.stack(kps), surfaces, torch.stack(model_kps), torch.tensor(scales), weights
+
+
+def test_each_element_is_corrected_as_if_alone():
+    """A part's correction does not depend on what else is in the batch: it stops when it stops
+    improving, not when the slowest part does."""
+    obs, kps, surfaces, model_kps, scales, weights = _two_parts()
+    cfg = CorrectorConfig(max_iterations=150, step=0.02, decay=0.98, patience=10)
+    both = correct(obs, kps, SurfaceDistance.stacked(surfaces), model_kps, scales, config=cfg,
+                   keypoint_weights=weights)  # fmt: skip
+    for b in range(2):
+        alone = correct(obs[b : b + 1], kps[b : b + 1], surfaces[b], model_kps[b], scales[b : b + 1],
+                        config=cfg, keypoint_weights=weights[b : b + 1])  # fmt: skip
+        assert torch.allclose(both.keypoints[b], alone.keypoints[0], atol=1e-6)
+        assert torch.allclose(both.objective_after[b], alone.objective_after[0], rtol=1e-5)
+    assert (both.objective_after < both.objective_before).all()
+
