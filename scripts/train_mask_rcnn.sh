@@ -7,10 +7,12 @@
 # validation images (80, seed 1: the validation set of models/vision/README.md), DEVICE (cuda),
 # WORKERS loader processes (8), BUDGET_MIN minutes of training (the epochs that fit; 8), EPOCHS at
 # most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
-# have is used (240), and MODEL: the trainer's options for the model (default full-size images,
-# 56x56 masks, anchors scaled with the image: models/vision/README.md, GPU runs). PYTHON (python3) must import the project
+# have is used (240), and MODEL: the trainer's options for the model (default the shipped model's:
+# full-size images, 56x56 masks, anchors 16-128, the semantic head for tubes and frame sides;
+# models/vision/README.md). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
-# INIT: weights to start from (the trainer's --init: each lent machine's minutes add to the last's).
+# INIT: weights to start from (the trainer's --init; INIT=models/vision/mask_rcnn.pt continues the
+# shipped model, so each lent machine's minutes add to the last's).
 # RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
 # "rendered" marker) and trains on them, so two models can train side by side on one device.
 #
@@ -33,7 +35,7 @@ LR=${LR:-2e-3}
 RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
 RENDER=${RENDER:-1}
 INIT=${INIT:-}
-MODEL=${MODEL:---config mask_pool=28 --config anchor_sizes=[32,64,128,256]}
+MODEL=${MODEL:---config semantic_classes=[\"strut_tube\",\"cross_frame\"] --config mask_pool=28 --config anchor_sizes=[16,32,64,128] --config rpn_fg_iou=0.5}
 data=${DATA_DIR:-/tmp/tlt-vision-data}
 mkdir -p "$out" "$data"
 log() { echo "[train_mask_rcnn $(date -u +%H:%M:%S)] $*"; }
