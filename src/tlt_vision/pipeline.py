@@ -137,6 +137,7 @@ class PartPipeline:
     ) -> MaskedCloud:
         """The point cloud C-3PO is given for one detection (its reason when there is none)."""
         small = int(detection.mask.sum()) < self.keep_border_below
+        estimator = self.estimators.get(detection.object_class)
         return masked_point_cloud(
             border_kept(detection.mask, depth) if small else detection.mask,
             depth,
@@ -146,6 +147,7 @@ class PartPipeline:
             max_points=self.max_points,
             rng=self.rng,
             erode=0 if small else 1,
+            extent=estimator.model.diameter if estimator is not None else None,
         )
 
     def observe(

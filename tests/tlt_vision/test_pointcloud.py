@@ -64,3 +64,15 @@ def test_max_points_and_matrix_intrinsics():
     assert k == K
     out = masked_point_cloud(np.ones((10, 10), bool), np.ones((10, 10)), k, min_points=5, max_points=20)
     assert len(out.points) == 20
+
+
+def test_pixels_beyond_the_part_size_from_its_median_depth_are_dropped():
+    """A learned mask straying past the part onto the floor behind it: with the part's size given,
+    those pixels give no points; the part's own, whatever its depth across, all stay."""
+    mask = np.ones((6, 6), dtype=bool)
+    depth = np.linspace(1.00, 1.05, 36).reshape(6, 6)  # the part, 5 cm deep across
+    depth[0, :3] = 2.5  # the floor, through the mask's stray pixels
+    kept = masked_point_cloud(mask, depth, K, min_points=4, erode=0, extent=0.06)
+    assert kept.ok and len(kept.points) == 33
+    assert kept.points[:, 2].max() <= 1.05
+    assert len(masked_point_cloud(mask, depth, K, min_points=4, erode=0).points) == 36
