@@ -126,7 +126,7 @@ def load_sample(
     masks = resize_masks(torch.as_tensor(s.masks, dtype=torch.bool), size)
     # Counted in numpy: torch's sum of a bool (N, H*W) took 33 ms a full-size image, most of the
     # loader's time.
-    keep = torch.from_numpy(np.count_nonzero(masks.reshape(len(masks), -1).numpy(), axis=1) >= min_area)
+    keep = torch.from_numpy(np.count_nonzero(masks.flatten(1).numpy(), axis=1) >= min_area)
     masks, labels = masks[keep], labels[keep]
     return image, {"boxes": boxes_from_masks(masks), "labels": labels, "masks": masks}
 

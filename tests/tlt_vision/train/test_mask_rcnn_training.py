@@ -14,13 +14,14 @@ from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.segmentation.model import MaskRCNN
-from tlt_vision.train.dataset import Sample, write_index, write_sample
+from tlt_vision.train.dataset import ImageSet, Sample, write_index, write_sample
 from tlt_vision.train.mask_rcnn import (
     Augment,
     augment,
     build_config,
     epochs_within,
     evaluate,
+    load_sample,
     main,
     open_set,
     parse_overrides,
@@ -262,3 +263,28 @@ def test_a_time_budget_trains_the_epochs_that_fit(tmp_path, capsys):
     assert main(args) == 0
     assert "time budget 1e-06 min: 1 epochs fit, not 5" in capsys.readouterr().out
     assert torch.load(out.parent / "w_checkpoint.pt", weights_only=True)["epoch"] == 1
+
+
+def test_the_loader_drops_instances_under_the_minimum_area_and_takes_an_image_with_none(tmp_path):
+    """An image of the twin can show no part (a feeder scene looking past the racks): it trains as
+    all background, and a sliver of a part under ``min_area`` pixels is dropped, not trained on."""
+    empty = np.zeros((0, SIZE, SIZE), dtype=bool)
+    sliver = np.zeros((2, SIZE, SIZE), dtype=bool)
+    sliver[0, 10:20, 10:20] = True  # 100 px
+    sliver[1, 30, 30:33] = True  # 3 px
+    files = []
+    for i, masks in enumerate((empty, sliver)):
+        n = len(masks)
+        write_sample(tmp_path / f"{i}.npz", Sample(
+            rgb=np.zeros((SIZE, SIZE, 3), np.uint8), depth=np.ones((SIZE, SIZE), np.float32), masks=masks,
+            labels=np.full(n, BLOCK), names=np.array(["block"] * n), poses=np.tile(np.eye(4), (n, 1, 1)),
+            defects=np.array([""] * n), intrinsics=np.eye(3)))  # fmt: skip
+        files.append(f"{i}.npz")
+    write_index(tmp_path, list(CLASSES), SIZE, SIZE, files, {"drawn": "slivers"})
+    images = ImageSet(tmp_path)
+    image, target = load_sample(images, 0, None, min_area=4)
+    assert image.shape == (3, SIZE, SIZE)
+    assert target["boxes"].shape == (0, 4) and target["masks"].shape == (0, SIZE, SIZE)
+    _, target = load_sample(images, 1, None, min_area=4)
+    assert target["labels"].tolist() == [BLOCK]
+    assert target["boxes"].tolist() == [[10.0, 10.0, 20.0, 20.0]]
