@@ -296,6 +296,10 @@ class Stack:
         self.handles: list = []
         self.client = Node("ars_test_crs", context=self.context)
         self.ee_states: list[EndEffectorState] = []
+        # A test that wants every state adds a listener, never a subscription of its own: destroying
+        # a subscription while the executor's thread builds its wait set kills that thread
+        # (rclpy's InvalidHandle), and with it every callback of the ARS and the stand-ins.
+        self.ee_listeners: list[Callable[[EndEffectorState], None]] = []
         self.client.create_subscription(EndEffectorState, "/ee_x/state", self._ee_state, 10)
         # Its own group: a call held at the gate must not hold up the stand-ins' other callbacks,
         # and two calls are still answered one after the other, in order.
@@ -330,6 +334,8 @@ class Stack:
     def _ee_state(self, msg: EndEffectorState) -> None:
         self.ee_states.append(msg)
         del self.ee_states[:-400]
+        for listener in tuple(self.ee_listeners):
+            listener(msg)
 
     # ----- stand-ins -----
     def _crs_inspect(self, request, response):

@@ -99,9 +99,11 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     before = state.remaining["diagonal_dispenser_x"]
     stack.inspection_verdicts[:] = [False]  # the CRS fails the first part
     widths = []
-    seen = stack.client.create_subscription(
-        type(stack.ee_states[-1]), "/ee_x/state", lambda m: widths.append(m.position[2]), 10
-    )
+
+    def record(state) -> None:
+        widths.append(state.position[2])
+
+    stack.ee_listeners.append(record)
     steps = []  # (step, the width when its first feedback came)
 
     def feedback(f) -> None:
@@ -112,7 +114,7 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
         handle = add_member(stack, "bay1/diagonal/face_x0", DIAGONAL, feedback)
         result = stack.result(handle, timeout=180)  # two parts fetched and inspected, one discarded
     finally:
-        stack.client.destroy_subscription(seen)
+        stack.ee_listeners.remove(record)
     assert result.status == GoalStatus.STATUS_SUCCEEDED, result.result.reason
     assert result.result.parts_discarded == 1
     assert state.remaining["diagonal_dispenser_x"] == before - 2  # the discarded part and its replacement
