@@ -27,6 +27,7 @@ import py_trees
 import pytest
 import rclpy
 from py_trees.common import Status
+from rclpy._rclpy_pybind11 import InvalidHandle
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -447,10 +448,15 @@ class Rig:
         self._thread.start()
 
     def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except Exception:  # shutting down
-            pass
+        while not CLOSING.is_set() and rclpy.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.1)
+            except InvalidHandle:
+                # A stand-in withdrawn (VisionStandIn.withdraw) while the wait set was built: the
+                # next wait is clean. Stopping here would leave every callback of the rig unserved.
+                continue
+            except Exception:  # shutting down
+                return
 
     def add(self, node: Node) -> None:
         self.executor.add_node(node)
