@@ -68,6 +68,11 @@ venv_stage() {
     h=$(hash_of requirements/runtime.txt requirements/dev.txt)
     stamp_ok pip "$h" && return 0
     rm -f "$STAMPS/pip" "$STAMPS/cmake-paths" "$STAMPS/msgs" "$STAMPS/project"
+    # Fail before pip does: it runs out of room half-way through with only "No space left on device".
+    local free_kib need_gib=${TLT_MIN_FREE_GIB:-5}
+    free_kib=$(df -Pk "$VENV" | awk 'NR == 2 {print $4}')
+    [ "$free_kib" -ge $(( need_gib * 1024 * 1024 )) ] || fail "the pinned Python dependencies need about \
+${need_gib} GiB free for $VENV (3.5 GiB installed, and pip's unpacking); $(( free_kib / 1024 )) MiB free there"
     say "installing pinned Python dependencies (first run: several minutes)"
     pip_install -r "$ROOT/requirements/runtime.txt" -r "$ROOT/requirements/dev.txt"
     "$VENV/bin/python" -m pip check >/dev/null 2>&1 || {
