@@ -164,7 +164,7 @@ def main() -> int:
     config = load_config(args.config, args.mission)
     estimators = load_estimators(config, mission)
     opts = {"max_points": config.raw["max_points"], "keep_border_below": config.raw["keep_border_below"],
-            "merge": ()}
+            "merge": (), "free_space": config.free_space}
     pipelines = {name: PartPipeline({estimators[name].model.object_class: e}, **opts)
                  for name, e in estimators.items()}
     # A frame's parts of every kind posed in one call, as the node does (tubes as verticals).

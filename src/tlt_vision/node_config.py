@@ -17,6 +17,8 @@ import numpy as np
 
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
+from tlt_vision.pose.free_space import FreeSpace
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_CONFIG = REPO_ROOT / "config" / "vision" / "node.yaml"
@@ -65,6 +67,16 @@ SCHEMA = {
             "patience": Field("int", minimum=1),
             "tolerance": opt("float", 1e-4, minimum=0.0, maximum=1.0),
             "refine_iterations": opt("int", 0, minimum=0, maximum=500),
+        },
+    ),
+    "free_space": opt(
+        "dict",
+        {"margin": FREE_SPACE.margin, "max_fraction": FREE_SPACE.max_fraction, "window": FREE_SPACE.window},
+        schema={
+            "margin": opt("float", FREE_SPACE.margin, minimum=0.0, maximum=0.1),
+            "max_fraction": opt("float", FREE_SPACE.max_fraction, minimum=0.0, maximum=1.0),
+            "window": opt("int", FREE_SPACE.window, minimum=1, maximum=31,
+                          check=lambda v: None if v % 2 else "must be odd"),
         },
     ),
     "timeouts": Field(
@@ -153,6 +165,10 @@ class VisionConfig:
         """The configured camera ``name`` means (directly or through an alias), or None."""
         name = self.raw["camera_aliases"].get(name, name)
         return name if name in self.cameras else None
+
+    @property
+    def free_space(self) -> FreeSpace:
+        return FreeSpace(**self.raw["free_space"])
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

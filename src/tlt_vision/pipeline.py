@@ -10,6 +10,10 @@ The twin (and a segmentation model trained on it) labels each side of a cross fr
 instance, while the cross-frame CAD model is the whole square: instances of the classes in
 ``merge`` are joined into one before the pose is estimated (one part is inspected at a time).
 
+Every certified pose is then checked against the whole depth image (``free_space``,
+:mod:`tlt_vision.pose.free_space`): a pose that puts the model where the camera saw past it is
+not certified.
+
 A mask's border pixels are dropped (their depth may be what lies behind the part), except on a
 mask smaller than ``keep_border_below`` pixels: on a small corner joint (100-300 pixels at a metre)
 the border is most of the mask, and without it the cube's corners go unseen, so a good joint read
@@ -30,6 +34,8 @@ import torch
 from tlt_vision.inspection import Observation
 from tlt_vision.pointcloud import MIN_POINTS, MaskedCloud, PinholeIntrinsics, masked_point_cloud
 from tlt_vision.pose.estimator import PoseEstimator, estimate_together
+from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
+from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
 
 BORDER_DEPTH_MARGIN = 0.01  # m
 
@@ -120,8 +126,11 @@ class PartPipeline:
         merge: Sequence[str] = ("cross_frame",),
         seed: int = 0,
         keep_border_below: int = 0,
+        free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
     ) -> None:
         self.estimators = dict(estimators)
+        self.free_space = free_space
+        self._surfaces: dict[str, np.ndarray] = {}
         self.keep_border_below = keep_border_below
         self.max_points = max_points
         self.min_points = min_points
@@ -180,10 +189,22 @@ class PartPipeline:
             clouds = [p for _, p in items]
             priors = None if prior is None else [prior(cls, p) for p in clouds]
             jobs.append((self.estimators[cls], clouds, priors))
+        near = None
+        if pending and self.free_space is not None and depth is not None:
+            near = nearest_depth(depth, self.free_space.window)
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, _), e in zip(items, estimates, strict=True):
+                if near is not None:
+                    e = checked(e, near, intrinsics, self._surface(cls), self.free_space)
                 out[i] = Observation(cls, e, "", dets[i].object_id)
         return [o for o in out if o is not None]
+
+    def _surface(self, object_class: str) -> np.ndarray:
+        """The free-space check's fixed surface sample of the class's model."""
+        if object_class not in self._surfaces:
+            model = self.estimators[object_class].model
+            self._surfaces[object_class] = model.sample(self.free_space.samples, np.random.default_rng(0))[0]
+        return self._surfaces[object_class]
 
 
 __all__ = [
