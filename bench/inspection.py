@@ -35,13 +35,13 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
+from tlt_vision.train.render_dataset import ARMS, inspection_joints
 
 ROOT = Path(__file__).resolve().parents[1]
 CAUGHT_GOAL = 0.99
 REJECTED_GOAL = 0.02
 # The lifter ZED that faces each arm's inspection pose (zed_1 looks away from ARS X at every angle).
 CAMERAS = {"ars_x": "zed_2", "ars_y": "zed_1"}
-ARMS = tuple(CAMERAS)
 RUN = load_yaml(ROOT / "config" / "twin" / "run.yaml")
 RUN_SIZE = (RUN["cameras"]["zed"]["width"], RUN["cameras"]["zed"]["height"])
 
@@ -100,35 +100,11 @@ def scenario(mission, bends: list[float]):
     return Scenario(name="inspection bench", description="struts defective in turn", defects=defects)
 
 
-def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
-    a /= np.linalg.norm(a)
-    return a, np.cross(u, a)
-
-
-def inspection_joints() -> dict[str, np.ndarray]:
-    """Each arm's ``poses.inspection`` joints (config/ars/<arm>.yaml)."""
-    poses = {arm: load_yaml(ROOT / "config" / "ars" / f"{arm}.yaml")["poses"] for arm in ARMS}
-    return {arm: np.asarray(p["inspection"]["joints"], dtype=float) for arm, p in poses.items()}
-
-
-def present(scene, names, part, arm: str, joints: np.ndarray, rng: np.random.Generator, jitter: Jitter):
+def present(scene, part, arm: str, joints: np.ndarray, rng: np.random.Generator, jitter: Jitter):
     """Seat ``part`` in ``arm``'s grasp at ``joints`` jittered, slid and rolled; render the ZED."""
-    import mujoco
-
-    jittered = joints + rng.normal(0.0, jitter.joint_rad, joints.size)
-    for j, v in zip(names.arm_joints(arm), jittered, strict=True):
-        scene.set_joint_state(j, float(v))
-    mujoco.mj_forward(scene.model, scene.data)
-    centre, axis = scene.assembly.grasp_line(arm)
-    middle = (part.ends["a"] + part.ends["b"]) / 2
-    along = (part.ends["b"] - part.ends["a"]) / np.linalg.norm(part.ends["b"] - part.ends["a"])
+    scene.pose_arm(arm, joints + rng.normal(0.0, jitter.joint_rad, joints.size))
     roll = rng.uniform(0.0, 2 * np.pi)
-    p, q = _perpendiculars(axis)
-    p, q = np.cos(roll) * p + np.sin(roll) * q, -np.sin(roll) * p + np.cos(roll) * q
-    seated = np.column_stack([axis, p, q]) @ np.column_stack([along, *_perpendiculars(along)]).T
-    slide = rng.uniform(-jitter.slide_m, jitter.slide_m) * axis
-    scene.place_part(part.name, centre + slide - seated @ middle, seated)
+    scene.seat_in_grasp(part.name, arm, roll, rng.uniform(-jitter.slide_m, jitter.slide_m))
     return scene.render(CAMERAS[arm], *RUN_SIZE)
 
 
@@ -172,7 +148,7 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 arm = ARMS[(i + round_) % 2]  # each strut by the other arm next round
                 part = scene.part(name)
                 home = scene.body_pose(part.body)
-                frame = present(scene, names, part, arm, arms[arm], rng, jitter)
+                frame = present(scene, part, arm, arms[arm], rng, jitter)
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
                 report, _ = inspector.inspect(

@@ -30,6 +30,13 @@ from tlt_sim.model.geometry import frame_from_axes, mat_to_quat
 from tlt_sim.model.scenario import NOMINAL, Scenario, load_scenario
 
 
+def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors that make a right-handed frame with unit ``u``."""
+    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    return a, np.cross(u, a)
+
+
 class ModelCompileError(RuntimeError):
     """MuJoCo could not compile the generated model."""
 
@@ -438,6 +445,26 @@ class Scene:
             )
         else:
             self.place_part(part, centre - rot[:, 0] * info.length / 2, frame_from_axes(rot[:, 1], rot[:, 0]))
+
+    def pose_arm(self, arm: str, joints: np.ndarray) -> None:
+        """Set ``arm``'s six joints at rest (no dynamics), as if it had moved there."""
+        for joint, value in zip(names.arm_joints(arm), joints, strict=True):
+            self.set_joint_state(joint, float(value))
+        mujoco.mj_forward(self.model, self.data)
+
+    def seat_in_grasp(self, part: str, arm: str, roll: float = 0.0, slide: float = 0.0) -> None:
+        """Put strut ``part`` where ``arm``'s closed jaws hold it (data generation, the inspection
+        bench): its axis along the grasp line, its middle ``slide`` m along the line from the
+        grasp's centre, turned ``roll`` rad about its axis. Nothing is welded."""
+        info = self.info.parts[part]
+        centre, axis = self.assembly.grasp_line(arm)
+        middle = (info.ends["a"] + info.ends["b"]) / 2
+        along = info.ends["b"] - info.ends["a"]
+        p, q = _perpendiculars(axis)
+        p, q = math.cos(roll) * p + math.sin(roll) * q, -math.sin(roll) * p + math.cos(roll) * q
+        along = along / np.linalg.norm(along)
+        rotation = np.column_stack([axis, p, q]) @ np.column_stack([along, *_perpendiculars(along)]).T
+        self.place_part(part, centre + slide * axis - rotation @ middle, rotation)
 
     def member_pose(self, member: Member, kind: str) -> tuple[np.ndarray, np.ndarray]:
         """World pose a part's body takes when it is ``member`` (mission joints, present tower)."""

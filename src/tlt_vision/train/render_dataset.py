@@ -10,7 +10,10 @@ same images whatever ``--count`` is, and it sets everything it randomises, so it
 the images before it:
 
 * **the scene** (``scenes`` weights in the settings): ``held`` - one strut or cross frame across the
-  view 0.3-1.8 m ahead, tilted and turned, as a ZED or an EE D405 inspects a held part; ``scatter``
+  view 0.3-1.8 m ahead, tilted and turned, as a ZED or an EE D405 inspects a held part;
+  ``presented`` - a strut seated in an ARS's grasp (the arm near its inspection pose, the jaws and
+  rivet guns beside the tube and fittings, as the CRS's ZED sees a part presented for inspection)
+  seen from 0.4-1.6 m, aimed anywhere along it; ``scatter``
   - two to five parts at random rotations (uniform on SO(3)) 0.4-2.5 m ahead anywhere in the view;
   ``bay`` - bay 1 built (every member at its mission place, from parts drawn at random), seen from
   0.8-2.5 m or from 0.3-0.6 m at one of its joints; ``feeder`` - a rivet feeder's tray from
@@ -62,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from tlt_common.config_schema import ConfigError
+from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_vision.cad.views import random_rotation
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.train.dataset import Sample, write_index, write_sample
@@ -71,6 +74,8 @@ REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_MISSION = REPO_ROOT / "missions" / "one_bay.yaml"
 PREVIEW = "preview.png"
 ZED, D405 = "zed_1", "ars_x/d405_a"  # the cameras whose optics (field of view) an image uses
+ARMS = ("ars_x", "ars_y")
+SCENES = ("held", "presented", "scatter", "bay", "feeder")
 
 
 @dataclass(frozen=True)
@@ -85,8 +90,9 @@ class RenderSettings:
     min_pixels: int = 40  # fewer visible pixels: the instance is dropped
     antialias: bool = True
     scenes: dict[str, float] = field(
-        default_factory=lambda: {"held": 0.3, "scatter": 0.3, "bay": 0.3, "feeder": 0.1}
+        default_factory=lambda: {"held": 0.2, "presented": 0.15, "scatter": 0.25, "bay": 0.3, "feeder": 0.1}
     )
+    presented_jitter_rad: float = 0.12  # each arm joint about its inspection pose (normal, sd)
     close_below: float = 0.7  # m: nearer views use the D405's optics, further ones the ZED's
     bend_deg: tuple[float, float] = (3.0, 15.0)  # range of a bent tube's kink
 
@@ -126,6 +132,12 @@ def _pose(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     t = np.eye(4)
     t[:3, :3], t[:3, 3] = rotation, translation
     return t
+
+
+def inspection_joints() -> dict[str, np.ndarray]:
+    """Each arm's ``poses.inspection`` joints (config/ars/<arm>.yaml), where it presents a part."""
+    poses = {arm: load_yaml(REPO_ROOT / "config" / "ars" / f"{arm}.yaml")["poses"] for arm in ARMS}
+    return {arm: np.asarray(p["inspection"]["joints"], dtype=float) for arm, p in poses.items()}
 
 
 class RenderError(ValueError):
@@ -198,6 +210,7 @@ class TwinRenderer:
         bay = [self.scene.joint_position_world(j) for j in mission.joints if j.startswith(("bay0/", "bay1/"))]
         self.bay_joints = np.array(bay)
         self.centre = self.bay_joints.mean(axis=0)
+        self.inspection_joints = inspection_joints()
 
     def _has_mat(self, name: str) -> bool:
         try:
@@ -337,6 +350,19 @@ class TwinRenderer:
             self._put(part, centre, _frame_with_z(axis, rng.uniform(0, 2 * math.pi)))
         return name
 
+    def _presented(self, rng: np.random.Generator) -> str:
+        arm = str(rng.choice(ARMS))
+        joints = self.inspection_joints[arm]
+        self.scene.pose_arm(arm, joints + rng.normal(0.0, self.settings.presented_jitter_rad, joints.size))
+        part = self._pick(rng, str(rng.choice(["vertical", "diagonal"])), set())
+        self.scene.seat_in_grasp(part, arm, rng.uniform(0, 2 * math.pi), rng.uniform(-0.02, 0.02))
+        centre, axis = self.scene.assembly.grasp_line(arm)
+        target = centre + axis * rng.uniform(-0.5, 0.5) * self.parts[part].length
+        pos, rot, distance = self._camera_around(rng, target, 0.4, 1.6)
+        name = self._optics(distance)
+        self._place_camera(name, pos, rot)
+        return name
+
     def _scatter(self, rng: np.random.Generator) -> str:
         pos, rot, _ = self._camera_around(rng, self.centre, 0.8, 2.5)
         name = self._optics(rng.uniform(0.4, 2.0))
@@ -396,9 +422,10 @@ class TwinRenderer:
         kinds = [k for k, w in s.scenes.items() if w > 0 and (k != "feeder" or self.feeders)]
         weights = np.array([s.scenes[k] for k in kinds])
         kind = kinds[int(rng.choice(len(kinds), p=weights / weights.sum()))]
-        camera = {"held": self._held, "scatter": self._scatter, "bay": self._bay, "feeder": self._feeder}[
-            kind
-        ](rng)
+        camera = {
+            "held": self._held, "presented": self._presented, "scatter": self._scatter, "bay": self._bay,
+            "feeder": self._feeder,
+        }[kind](rng)
         return self._capture(camera), kind
 
     def _capture(self, camera: str) -> Sample:
@@ -510,6 +537,29 @@ def render_set(
     return files
 
 
+def parse_scene_weights(items: list[str]) -> dict[str, float]:
+    """``["held=0.2", "presented=0.5"]`` as weights; a ValueError names the item at fault."""
+    weights: dict[str, float] = {}
+    for item in items:
+        kind, _, value = item.partition("=")
+        if kind not in SCENES:
+            raise ValueError(f"{item!r}: unknown scene kind {kind!r} (kinds: {', '.join(SCENES)})")
+        try:
+            weight = float(value)
+        except ValueError:
+            raise ValueError(f"{item!r}: the weight must be a number (KIND=WEIGHT)") from None
+        if not weight >= 0:
+            raise ValueError(f"{item!r}: a weight must not be negative")
+        weights[kind] = weight
+    if not sum(weights.values()) > 0:
+        raise ValueError("no scene kind has a weight above 0")
+    return weights
+
+
+def _weights_text(weights: dict[str, float]) -> str:
+    return " ".join(f"{k}={w:g}" for k, w in weights.items())
+
+
 def _fail(message: str) -> int:
     print(f"render_dataset: error: {message}", file=sys.stderr, flush=True)
     return 2
@@ -529,6 +579,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=True,
                    help="multisampled RGB (as the detectors see); --no-antialias is cheaper")
     p.add_argument("--progress-every", type=int, default=1, help="print progress every k images")
+    p.add_argument("--scenes", nargs="+", metavar="KIND=WEIGHT",
+                   help=f"how often each scene kind is drawn (relative; kinds left out are not drawn): "
+                        f"{', '.join(SCENES)}; default {_weights_text(RenderSettings().scenes)}")
     args = p.parse_args(argv)
     if args.count < 1:
         return _fail(f"--count must be at least 1, got {args.count}")
@@ -540,6 +593,12 @@ def main(argv: list[str] | None = None) -> int:
         return _fail("--min-pixels and --progress-every must be at least 1")
     if not args.mission.is_file():
         return _fail(f"--mission {args.mission}: no such file")
+    scenes = RenderSettings().scenes
+    if args.scenes is not None:
+        try:
+            scenes = parse_scene_weights(args.scenes)
+        except ValueError as exc:
+            return _fail(f"--scenes: {exc}")
     try:
         args.out.mkdir(parents=True, exist_ok=True)
         probe = args.out / ".write_test"
@@ -555,6 +614,7 @@ def main(argv: list[str] | None = None) -> int:
         defective_fraction=args.defective_fraction,
         min_pixels=args.min_pixels,
         antialias=args.antialias,
+        scenes=scenes,
     )
     try:
         render_set(args.out, args.count, settings, progress_every=args.progress_every)

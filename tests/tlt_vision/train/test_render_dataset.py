@@ -2,6 +2,7 @@
 agree with each other and with the CAD models, seeds reproduce, defects are recorded, bad options
 exit 2. Tiny images (160x120) keep it to seconds."""
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from tlt_vision.train.dataset import ImageSet
 
 pytest.importorskip("tlt_sim.model.scene")
 from tlt_vision.train.render_dataset import (
+    ARMS,
     PREVIEW,
     ZED,
     RenderSettings,
@@ -130,6 +132,34 @@ def test_rivets_in_a_feeder_are_labelled_and_posed(renderer):
         assert sample.masks[i][round(v / w), round(u / w)], sample.names[i]
 
 
+def test_a_presented_strut_lies_in_an_arms_grasp_and_is_in_view(renderer):
+    scene = renderer.scene
+    scene.reset()
+    sample = renderer._capture(renderer._presented(np.random.default_rng(4)))
+    seated = []
+    for arm in ARMS:
+        centre, axis = scene.assembly.grasp_line(arm)
+        for name in (*renderer.struts["vertical"], *renderer.struts["diagonal"]):
+            pos, rot = scene.body_pose(scene.part(name).body)
+            a, b = (pos + rot @ scene.part(name).ends[e] for e in ("a", "b"))
+            along = (b - a) / np.linalg.norm(b - a)
+            off = (centre - a) - ((centre - a) @ along) * along
+            if np.linalg.norm(off) < 1e-6 and abs(along @ axis) > 1 - 1e-9:
+                seated.append((arm, name))
+    assert len(seated) == 1, seated  # one strut, on one arm's grasp line
+    body = scene.part(seated[0][1]).body
+    assert f"{body}/tube" in list(sample.names)
+
+
+def test_scene_kinds_are_drawn_by_their_weights(tmp_path):
+    out = tmp_path / "set"
+    argv = ["--out", str(out), "--count", "3", "--width", str(W), "--height", str(H), "--scenes"]
+    assert main([*argv, "presented=1", "held=0"]) == 0
+    settings = json.loads((out / "index.json").read_text())["settings"]
+    assert settings["scenes"] == {"presented": 1.0, "held": 0.0}
+    assert set(settings["scene_kinds"].values()) == {"presented"}
+
+
 def test_same_seed_same_images_another_seed_others(rendered, renderer):
     first = ImageSet(rendered)[0]
     again, _ = renderer.sample(0)
@@ -162,6 +192,10 @@ def test_same_seed_same_images_another_seed_others(rendered, renderer):
         (["--count", "1", "--mission", "missions/nope.yaml"], "nope.yaml"),
         (["--count", "1", "--defective-fraction", "1.5"], "--defective-fraction"),
         (["--count", "1", "--width", "5000"], "offscreen buffer"),
+        (["--count", "1", "--scenes", "fog=1"], "unknown scene kind 'fog'"),
+        (["--count", "1", "--scenes", "held=lots"], "'held=lots': the weight must be a number"),
+        (["--count", "1", "--scenes", "held=-1"], "must not be negative"),
+        (["--count", "1", "--scenes", "held=0"], "no scene kind has a weight above 0"),
     ],
 )
 def test_bad_options_exit_2(tmp_path, capsys, args, message):
