@@ -15,7 +15,7 @@ figures against the goals.
 
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
-        [--segmentation twin|mask_rcnn] [--threads 2]
+        [--segmentation twin|mask_rcnn] [--weights W] [--threads 2]
 """
 
 from __future__ import annotations
@@ -108,14 +108,15 @@ def present(scene, part, arm: str, joints: np.ndarray, rng: np.random.Generator,
     return scene.render(CAMERAS[arm], *RUN_SIZE)
 
 
-def detector(kind: str):
-    """Detections of a rendered frame: the twin's labels, or the configured Mask R-CNN."""
+def detector(kind: str, weights: str | None = None):
+    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights``, by default
+    the configured ones)."""
     if kind == "twin":
         return TwinLabels.detect_render
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     seg = load_config().raw["segmentation"]
-    segmenter = MaskRcnnSegmenter(seg["weights"], seg["min_score"])
+    segmenter = MaskRcnnSegmenter(weights or seg["weights"], seg["min_score"])
 
     def detect(frame, camera: str):
         k = frame.intrinsics
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> list[Presented]:
     mission = load_mission(ROOT / "missions" / f"{args.mission}.yaml")
     scen = scenario(mission, args.bends)
     inspector = PartInspector(load_config(), mission)
-    detect = detector(args.segmentation)
+    detect = detector(args.segmentation, args.weights)
     rng = np.random.default_rng(args.seed)
     jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
     arms = inspection_joints()
@@ -206,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--slide-mm", type=float, default=nominal.slide_m * 1000, help="along the grasp, +-")
     parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
+    parser.add_argument("--weights", help="Mask R-CNN weights (default: config/vision/node.yaml's)")
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
