@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from tlt_vision.pointcloud import PinholeIntrinsics, project
+from tlt_vision.pose.estimator import PoseEstimate
 
 
 @dataclass(frozen=True)
@@ -57,8 +58,7 @@ def free_space_fraction(
     (:func:`nearest_depth`) more than ``margin`` beyond them, among those that project onto a
     pixel with depth; 0 when none does."""
     p = np.asarray(points, dtype=float)
-    ahead = p[:, 2] > 1e-6
-    p = p[ahead]
+    p = p[p[:, 2] > 1e-6]
     if not len(p):
         return 0.0
     uv = np.rint(project(p, intrinsics)).astype(np.int64)
@@ -72,10 +72,15 @@ def free_space_fraction(
     return float(np.count_nonzero(z[counted] < seen[counted] - margin) / np.count_nonzero(counted))
 
 
-def checked(estimate, near: np.ndarray, intrinsics: PinholeIntrinsics, surface: np.ndarray, check: FreeSpace):
-    """``estimate`` (a :class:`~tlt_vision.pose.estimator.PoseEstimate`) as it is when it passes
-    the check or is not certified; otherwise uncertified, with the fraction in the reason.
-    ``surface``: the model's surface sample (M, 3), model frame."""
+def checked(
+    estimate: PoseEstimate,
+    near: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    surface: np.ndarray,
+    check: FreeSpace,
+) -> PoseEstimate:
+    """``estimate`` as it is when it passes the check or is not certified; otherwise uncertified,
+    with the fraction in the reason. ``surface``: the model's surface sample (M, 3), model frame."""
     if not estimate.certified:
         return estimate
     posed = surface @ estimate.rotation.T + estimate.translation
