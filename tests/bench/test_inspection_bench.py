@@ -35,15 +35,13 @@ def test_half_the_struts_are_defective_with_every_kind_and_bend(bench):
 
 def test_jittered_presentations_of_a_good_and_a_defective_strut_are_decided_right(bench):
     scene_mod = pytest.importorskip("tlt_sim.model.scene")
-    from tlt_sim.model import names
-
     scen = bench.scenario(MISSION, [8.0])
     inspector = PartInspector(load_config(), MISSION)
     rng = np.random.default_rng(5)
     decided, joints = {}, bench.inspection_joints()
     with scene_mod.Scene(mission=MISSION, scenario=scen) as scene:
         for arm, name in (("ars_x", "vertical_dispenser_x/0"), ("ars_y", "vertical_dispenser_x/1")):
-            frame = bench.present(scene, names, scene.part(name), arm, joints[arm], rng, bench.Jitter())
+            frame = bench.present(scene, scene.part(name), arm, joints[arm], rng, bench.Jitter())
             detections = bench.detector("twin")(frame, bench.CAMERAS[arm])
             decided[name], _ = inspector.inspect(
                 "bench/vertical", "vertical", detections, frame.depth, frame.intrinsics, frame.rgb
