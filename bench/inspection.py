@@ -15,7 +15,7 @@ figures against the goals.
 
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
-        [--segmentation twin|mask_rcnn] [--weights W] [--threads 2]
+        [--segmentation twin|mask_rcnn] [--weights W] [--no-self-filter] [--threads 2]
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
+from tlt_vision.self_filter import boxes_in_camera, drop_inside, load_boxes
 from tlt_vision.train.render_dataset import ARMS, inspection_joints
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,6 +109,25 @@ def present(scene, part, arm: str, joints: np.ndarray, rng: np.random.Generator,
     return scene.render(CAMERAS[arm], *RUN_SIZE)
 
 
+def _pose(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = rotation, position
+    return t
+
+
+def without_own_ee(scene, frame, boxes, margin: float) -> np.ndarray:
+    """The frame's depth with both arms' end effectors taken out, as the vision node does from the
+    arms' joint states (here the twin's own poses of the flanges and the width joints)."""
+    from tlt_sim.model import names
+
+    camera = _pose(frame.position, frame.rotation)
+    placed = []
+    for arm in ARMS:
+        flange = _pose(*scene.body_pose(names.ee_body(arm)))
+        placed += boxes_in_camera(boxes, camera, flange, scene.position(names.width_joint(arm)))
+    return drop_inside(frame.depth, frame.intrinsics, placed, margin)[0]
+
+
 def detector(kind: str, weights: str | None = None):
     """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights``, by default
     the configured ones)."""
@@ -132,7 +152,9 @@ def run(args: argparse.Namespace) -> list[Presented]:
 
     mission = load_mission(ROOT / "missions" / f"{args.mission}.yaml")
     scen = scenario(mission, args.bends)
-    inspector = PartInspector(load_config(), mission)
+    config = load_config()
+    inspector = PartInspector(config, mission)
+    boxes, margin = load_boxes(config.raw["ee_self_filter"]["boxes"]), config.raw["ee_self_filter"]["margin"]
     detect = detector(args.segmentation, args.weights)
     rng = np.random.default_rng(args.seed)
     jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
@@ -150,10 +172,11 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 part = scene.part(name)
                 home = scene.body_pose(part.body)
                 frame = present(scene, part, arm, arms[arm], rng, jitter)
+                depth = without_own_ee(scene, frame, boxes, margin) if args.self_filter else frame.depth
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
                 report, _ = inspector.inspect(
-                    f"bench/{kind}", kind, detect(frame, camera), frame.depth, frame.intrinsics, frame.rgb
+                    f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb
                 )
                 defect = defect_label(scen.defects.get(name))
                 results.append(Presented(name, arm, defect, report.passed, tuple(report.reasons)))
@@ -208,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slide-mm", type=float, default=nominal.slide_m * 1000, help="along the grasp, +-")
     parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
     parser.add_argument("--weights", help="Mask R-CNN weights (default: config/vision/node.yaml's)")
+    parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
+                        help="take the end effectors out of the depth first, as the vision node does")
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)

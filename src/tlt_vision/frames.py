@@ -156,6 +156,18 @@ class CameraRig:
         values = self.joints.get(names, at, self.max_age)
         return self.pose_from_joints(camera, dict(zip(names, values, strict=True)))
 
+    def flange(self, arm: str, at: float) -> tuple[np.ndarray, float]:
+        """World pose (4x4) of ``arm``'s flange and its EE's width (m) at ROS time ``at``."""
+        kinematics = next((c.kinematics for c in self.ee.values() if c.arm == arm), None)
+        if kinematics is None:
+            raise FrameUnavailable(f"no EE camera configured on {arm!r}, so no forward kinematics for it")
+        values = self.joints.get([*arm_joint_names(arm), width_joint_name(arm)], at, self.max_age)
+        return kinematics.forward(values[:6]), float(values[6])
+
+    @property
+    def arms(self) -> list[str]:
+        return sorted({c.arm for c in self.ee.values()})
+
     def tool_pose(self, camera: str, at: float, tool: np.ndarray) -> np.ndarray:
         """World pose of the tool frame (``tool`` in the flange) of the arm carrying EE ``camera``."""
         ee = self.ee[camera]

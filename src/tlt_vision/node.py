@@ -66,6 +66,7 @@ from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
 from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
+from tlt_vision.self_filter import boxes_in_camera, drop_inside, load_boxes
 from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
@@ -110,6 +111,7 @@ class VisionNode(LeanNode):
         self.parts, self.tol = self.inspector.parts, self.inspector.tol
         self.estimators, self.pipelines = self.inspector.estimators, self.inspector.pipelines
         self.rig = CameraRig(config)
+        self.ee_boxes = load_boxes(raw["ee_self_filter"]["boxes"])
         self._set_up_torch(raw["torch_threads"])
         self.tags = TagLocator(TagConfig.load())
         self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
@@ -159,7 +161,7 @@ class VisionNode(LeanNode):
             self.rig.joints.update(list(msg.joint_names), list(msg.position), self._msg_time(msg))
 
         components = {ros_names.CAMERA_MOUNTS} if self.rig.lifter else set()
-        arms = {c.arm for c in self.rig.ee.values()}
+        arms = set(self.rig.arms)
         components |= {ros_names.ur(a) for a in arms}
         for c in sorted(components):
             self.create_subscription(
@@ -291,10 +293,32 @@ class VisionNode(LeanNode):
         except NoFrame as exc:
             return self._failed(member_id, kind, str(exc))
         report, obs = self.inspector.inspect(
-            member_id, kind, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb")
+            member_id, kind, detections, self._without_own_ee(frame), frame.intrinsics, frame.get("rgb")
         )
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return self._report_msg(report, frame.stamp, frame.frame_id, ids)
+
+    def _without_own_ee(self, frame: CameraFrame) -> np.ndarray | None:
+        """The frame's depth with the arms' end effectors taken out (:mod:`tlt_vision.self_filter`):
+        a presented part's fittings sit beside its EE's rivet guns. An arm whose joint states are
+        missing or old stays in, with a warning (both, when the camera's own pose is unknown)."""
+        depth = frame.get("depth")
+        if depth is None or not self.ee_boxes:
+            return depth
+        try:
+            camera_pose = self.rig.camera_pose(frame.camera, frame.stamp)
+        except FrameUnavailable as exc:
+            self.get_logger().warning(f"end effectors left in {frame.camera}'s depth: {exc}")
+            return depth
+        placed = []
+        for arm in self.rig.arms:
+            try:
+                flange, width = self.rig.flange(arm, frame.stamp)
+            except FrameUnavailable as exc:
+                self.get_logger().warning(f"{arm}'s end effector left in {frame.camera}'s depth: {exc}")
+                continue
+            placed += boxes_in_camera(self.ee_boxes, camera_pose, flange, width)
+        return drop_inside(depth, frame.intrinsics, placed, self.config.raw["ee_self_filter"]["margin"])[0]
 
     def _inspect_rivet(self, member_id: str, camera_name: str, deadline: float) -> InspectionReport:
         """Is a rivet in gun ``<ars>/<gun>``: a certified rivet pose at the gun's muzzle, seen by the

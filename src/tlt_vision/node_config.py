@@ -79,6 +79,21 @@ SCHEMA = {
                           check=lambda v: None if v % 2 else "must be odd"),
         },
     ),
+    "ee_self_filter": opt(
+        "dict",
+        {"margin": 0.01, "boxes": {}},
+        schema={
+            "margin": opt("float", 0.01, minimum=0.0, maximum=0.1),
+            "boxes": opt(
+                "map",
+                {},
+                item=Field(
+                    "dict",
+                    schema={"centre": _vec(3), "half": _vec(3), "on_width_slide": Field("bool")},
+                ),
+            ),
+        },
+    ),
     "timeouts": Field(
         "dict",
         schema={

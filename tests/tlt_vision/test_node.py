@@ -410,3 +410,43 @@ def test_process_exits_cleanly_on_a_signal(sig, wait_for_service):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_an_arms_end_effector_is_taken_out_of_the_depth_where_the_twin_has_it(rig):
+    """InspectPart poses the part on a depth without the arms' own EE bodies (node.yaml
+    ``ee_self_filter``), placed by the published joint states: the pixels the node drops are the
+    ones the twin's own EE boxes hold."""
+    from tlt_vision.train.render_dataset import inspection_joints
+
+    joints = inspection_joints()["ars_x"]
+    boxes = [f"ars_x/{name}" for name in rig.vision.config.raw["ee_self_filter"]["boxes"]]
+    margin = rig.vision.config.raw["ee_self_filter"]["margin"]
+
+    def present_arm(scene: Scene) -> None:
+        scene.command_positions(names.arm_joints("ars_x"), list(joints))
+        scene.pose_arm("ars_x", joints)
+
+    rig.twin.do(present_arm)
+    time.sleep(1.0)  # joint states and frames of the arm standing there
+    node = rig.vision
+    frame = node._grab("zed_2", node._frame_streams(), node._deadline())  # zed_2 faces ARS X
+    depth = frame.get("depth")
+    dropped = (depth > 0) & (node._without_own_ee(frame) == 0)
+
+    def in_the_twins_boxes(scene: Scene) -> np.ndarray:
+        position, rotation = scene.camera_pose("zed_2")
+        k = frame.intrinsics
+        v, u = np.mgrid[0 : depth.shape[0], 0 : depth.shape[1]]
+        local = np.stack([(u - k.cx) * depth / k.fx, (v - k.cy) * depth / k.fy, depth], -1)
+        world = local.reshape(-1, 3) @ rotation.T + position
+        inside = np.zeros(len(world), dtype=bool)
+        for name in boxes:
+            g = scene.model.geom(name).id
+            box = (world - scene.data.geom_xpos[g]) @ scene.data.geom_xmat[g].reshape(3, 3)
+            inside |= np.all(np.abs(box) <= scene.model.geom_size[g] + margin, axis=1)
+        return inside.reshape(depth.shape) & (depth > 0)
+
+    truth = rig.twin.do(in_the_twins_boxes)
+    assert truth.sum() > 300, truth.sum()  # the EE is in view
+    iou = (dropped & truth).sum() / (dropped | truth).sum()
+    assert iou > 0.9, (iou, dropped.sum(), truth.sum())
