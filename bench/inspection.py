@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config
@@ -109,21 +110,15 @@ def present(scene, part, arm: str, joints: np.ndarray, rng: np.random.Generator,
     return scene.render(CAMERAS[arm], *RUN_SIZE)
 
 
-def _pose(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    t = np.eye(4)
-    t[:3, :3], t[:3, 3] = rotation, position
-    return t
-
-
 def without_own_ee(scene, frame, boxes, margin: float) -> np.ndarray:
     """The frame's depth with both arms' end effectors taken out, as the vision node does from the
     arms' joint states (here the twin's own poses of the flanges and the width joints)."""
     from tlt_sim.model import names
 
-    camera = _pose(frame.position, frame.rotation)
+    camera = pose_matrix(frame.position, frame.rotation)
     placed = []
     for arm in ARMS:
-        flange = _pose(*scene.body_pose(names.ee_body(arm)))
+        flange = pose_matrix(*scene.body_pose(names.ee_body(arm)))
         placed += boxes_in_camera(boxes, camera, flange, scene.position(names.width_joint(arm)))
     return drop_inside(frame.depth, frame.intrinsics, placed, margin)[0]
 

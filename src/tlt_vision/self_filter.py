@@ -46,8 +46,8 @@ def boxes_in_camera(
     boxes: Iterable[EeBox], camera_pose: np.ndarray, flange_pose: np.ndarray, width: float
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Each box as its rotation (3x3) and centre (3) in the camera's optical frame, and its half
-    extents:
-    ``camera_pose`` and ``flange_pose`` are world poses (4x4), ``width`` the EE's width joint (m)."""
+    extents; ``camera_pose`` and ``flange_pose`` are world poses (4x4), ``width`` the EE's width
+    joint (m)."""
     to_camera = np.linalg.inv(camera_pose) @ flange_pose
     rot, origin = to_camera[:3, :3], to_camera[:3, 3]
     placed = []
