@@ -97,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.chunk_size <= 0:
         parser.error(f"--chunk-size must be > 0, got {args.chunk_size}")
     out = args.out or default_output()
+    # From here on a signal only asks to stop, and a file once created is finished however early
+    # the signal comes: installed after the writer, a SIGINT while it wrote the file's header left
+    # the file without its footer (KeyboardInterrupt, exit status -2).
+    stop = stop_on_signals()
     try:
         moved = keep_existing(out)
         writer = McapRecordingWriter(
@@ -109,8 +113,6 @@ def main(argv: list[str] | None = None) -> int:
     if moved is not None:
         print(f"tlt-record: kept the previous {out.name} as {moved}", file=sys.stderr)
 
-    # From here on a signal only asks to stop, and the file is finished however early it comes.
-    stop = stop_on_signals()
     node = None
     status = 0
     try:
