@@ -77,6 +77,18 @@ def _split(observations: Sequence[Observation], cls: str) -> tuple[list[PoseEsti
     return good, bad
 
 
+def _one_per_place(estimates: list[PoseEstimate], within: float) -> list[PoseEstimate]:
+    """``estimates`` with those centred within ``within`` (m) of a better one left out: two
+    overlapping masks of one fitting (Mask R-CNN's gun-and-fitting box beside its fitting-only
+    box) give two certified poses of it, which are not two parts. The better one has the lower
+    Chamfer 90th percentile."""
+    kept: list[PoseEstimate] = []
+    for e in sorted(estimates, key=lambda e: e.certificate.chamfer_p90):
+        if all(np.linalg.norm(np.asarray(e.translation) - np.asarray(k.translation)) > within for k in kept):
+            kept.append(e)
+    return kept
+
+
 def _axis(e: PoseEstimate) -> np.ndarray:
     return np.asarray(e.rotation)[:, 2]
 
@@ -130,6 +142,7 @@ def inspect_strut(
     if len(tubes) > 1:
         reasons.append(f"expected one strut tube, found {len(tubes)}: a broken or bent tube")
     fittings, fitting_bad = _split(observations, "end_fitting")
+    fittings = _one_per_place(fittings, tol.position)
     if len(fittings) == 2:
         between, to_chord = _coaxial(*fittings)
         if between > tol.angle or to_chord > tol.angle:

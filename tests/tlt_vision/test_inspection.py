@@ -130,6 +130,20 @@ def test_missing_end_fitting_caught(end):
     assert np.linalg.norm(got - where) < 0.005
 
 
+def test_one_fitting_seen_twice_is_one_fitting_but_a_third_is_not():
+    """Two overlapping masks of one fitting give two certified poses of it a millimetre apart
+    (Mask R-CNN on a held strut); an extra fitting a fitting's length away is still a defect."""
+    obs = _strut(np.random.default_rng(4))
+    fitting = next(o for o in obs if o.object_class == "end_fitting")
+    e = fitting.estimate
+    twice = dataclasses.replace(e, translation=e.translation + [0.001, 0.0, 0.0])
+    rep = inspect_strut("s", "vertical", LENGTH, [*obs, Observation("end_fitting", twice)], PARTS, TOL)
+    assert rep.passed, rep.reasons
+    third = dataclasses.replace(e, translation=e.translation + 0.05 * e.rotation[:, 2])
+    rep = inspect_strut("s", "vertical", LENGTH, [*obs, Observation("end_fitting", third)], PARTS, TOL)
+    assert not rep.passed and "expected two end fittings, found 3" in rep.reasons
+
+
 def test_bent_tube_caught():
     rep = inspect_strut("s", "vertical", LENGTH, _strut(np.random.default_rng(2), bend_deg=8.0), PARTS, TOL)
     assert not rep.passed
