@@ -455,7 +455,10 @@ class Scene:
     def seat_in_grasp(self, part: str, arm: str, roll: float = 0.0, slide: float = 0.0) -> None:
         """Put strut ``part`` where ``arm``'s closed jaws hold it (data generation, the inspection
         bench): its axis along the grasp line, its middle ``slide`` m along the line from the
-        grasp's centre, turned ``roll`` rad about its axis. Nothing is welded."""
+        grasp's centre, turned ``roll`` rad about its axis, the jaws closed on it as a grasp
+        leaves them. Nothing is welded."""
+        for side in ("a", "b"):
+            self.set_joint_state(names.grasp_joint(arm, side), self.edu["end_effector"]["jaw_contact"])
         info = self.info.parts[part]
         centre, axis = self.assembly.grasp_line(arm)
         middle = (info.ends["a"] + info.ends["b"]) / 2

@@ -15,6 +15,8 @@ from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.train.dataset import ImageSet
 
 pytest.importorskip("tlt_sim.model.scene")
+from tlt_sim.model import names
+
 from tlt_vision.train.render_dataset import (
     ARMS,
     PREVIEW,
@@ -147,6 +149,9 @@ def test_a_presented_strut_lies_in_an_arms_grasp_and_is_in_view(renderer):
             if np.linalg.norm(off) < 1e-6 and abs(along @ axis) > 1 - 1e-9:
                 seated.append((arm, name))
     assert len(seated) == 1, seated  # one strut, on one arm's grasp line
+    arm = seated[0][0]
+    for side in ("a", "b"):  # the jaws closed on it, as the ARS presents it
+        assert scene.position(names.grasp_joint(arm, side)) == scene.edu["end_effector"]["jaw_contact"]
     body = scene.part(seated[0][1]).body
     assert f"{body}/tube" in list(sample.names)
 
