@@ -15,7 +15,7 @@ figures against the goals.
 
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
-        [--segmentation twin|mask_rcnn] [--weights W] [--no-self-filter] [--threads 2]
+        [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--no-self-filter] [--threads 2]
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
-from tlt_vision.self_filter import boxes_in_camera, drop_inside, load_boxes
+from tlt_vision.self_filter import EeSelfFilter, drop_inside
 from tlt_vision.train.render_dataset import ARMS, inspection_joints
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,28 +110,30 @@ def present(scene, part, arm: str, joints: np.ndarray, rng: np.random.Generator,
     return scene.render(CAMERAS[arm], *RUN_SIZE)
 
 
-def without_own_ee(scene, frame, boxes, margin: float) -> np.ndarray:
+def without_own_ee(scene, frame, ee_filter: EeSelfFilter) -> np.ndarray:
     """The frame's depth with both arms' end effectors taken out, as the vision node does from the
-    arms' joint states (here the twin's own poses of the flanges and the width joints)."""
+    arms' joint states (here the twin's own poses of the flanges and its width and grasp joints)."""
     from tlt_sim.model import names
 
     camera = pose_matrix(frame.position, frame.rotation)
     placed = []
     for arm in ARMS:
         flange = pose_matrix(*scene.body_pose(names.ee_body(arm)))
-        placed += boxes_in_camera(boxes, camera, flange, scene.position(names.width_joint(arm)))
-    return drop_inside(frame.depth, frame.intrinsics, placed, margin)[0]
+        jaws = {side: scene.position(names.grasp_joint(arm, side)) for side in ("a", "b")}
+        placed += ee_filter.place(camera, flange, scene.position(names.width_joint(arm)), jaws)
+    return drop_inside(frame.depth, frame.intrinsics, placed, ee_filter.margin)[0]
 
 
-def detector(kind: str, weights: str | None = None):
-    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights``, by default
-    the configured ones)."""
+def detector(kind: str, weights: str | None = None, min_score: float | None = None):
+    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights`` and
+    ``min_score``, by default the configured ones)."""
     if kind == "twin":
         return TwinLabels.detect_render
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     seg = load_config().raw["segmentation"]
-    segmenter = MaskRcnnSegmenter(weights or seg["weights"], seg["min_score"])
+    score = seg["min_score"] if min_score is None else min_score
+    segmenter = MaskRcnnSegmenter(weights or seg["weights"], score)
 
     def detect(frame, camera: str):
         k = frame.intrinsics
@@ -149,8 +151,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
     scen = scenario(mission, args.bends)
     config = load_config()
     inspector = PartInspector(config, mission)
-    boxes, margin = load_boxes(config.raw["ee_self_filter"]["boxes"]), config.raw["ee_self_filter"]["margin"]
-    detect = detector(args.segmentation, args.weights)
+    ee_filter = EeSelfFilter.from_config(config.raw["ee_self_filter"])
+    detect = detector(args.segmentation, args.weights, args.min_score)
     rng = np.random.default_rng(args.seed)
     jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
     arms = inspection_joints()
@@ -167,7 +169,7 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 part = scene.part(name)
                 home = scene.body_pose(part.body)
                 frame = present(scene, part, arm, arms[arm], rng, jitter)
-                depth = without_own_ee(scene, frame, boxes, margin) if args.self_filter else frame.depth
+                depth = without_own_ee(scene, frame, ee_filter) if args.self_filter else frame.depth
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
                 report, _ = inspector.inspect(
@@ -226,6 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slide-mm", type=float, default=nominal.slide_m * 1000, help="along the grasp, +-")
     parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
     parser.add_argument("--weights", help="Mask R-CNN weights (default: config/vision/node.yaml's)")
+    parser.add_argument("--min-score", type=float, help="Mask R-CNN's (default: config/vision/node.yaml's)")
     parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
                         help="take the end effectors out of the depth first, as the vision node does")
     parser.add_argument("--threads", type=int, default=2)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -41,6 +42,21 @@ def arm_joint_names(arm: str) -> list[str]:
 def width_joint_name(arm: str) -> str:
     """The EE driver's width joint of ``arm`` (``ars_x`` -> ``ee_x_width``)."""
     return f"{ros_names.ee(arm)}_width"
+
+
+def grasp_joint_names(arm: str) -> dict[str, str]:
+    """The EE driver's grasp joints of ``arm`` by jaw side (``ars_x`` -> a: ``ee_x_grasp_left``,
+    b: ``ee_x_grasp_right``), as the twin binds them."""
+    ee = ros_names.ee(arm)
+    return {"a": f"{ee}_grasp_left", "b": f"{ee}_grasp_right"}
+
+
+class EeState(NamedTuple):
+    """An end effector at one time: its flange's world pose (4x4), width (m) and jaws by side (rad)."""
+
+    flange: np.ndarray
+    width: float
+    jaws: dict[str, float]
 
 
 class JointStates:
@@ -156,13 +172,16 @@ class CameraRig:
         values = self.joints.get(names, at, self.max_age)
         return self.pose_from_joints(camera, dict(zip(names, values, strict=True)))
 
-    def flange(self, arm: str, at: float) -> tuple[np.ndarray, float]:
-        """World pose (4x4) of ``arm``'s flange and its EE's width (m) at ROS time ``at``."""
+    def end_effector(self, arm: str, at: float) -> EeState:
+        """``arm``'s end effector at ROS time ``at`` from the latest joint states."""
         kinematics = next((c.kinematics for c in self.ee.values() if c.arm == arm), None)
         if kinematics is None:
             raise FrameUnavailable(f"no EE camera configured on {arm!r}, so no forward kinematics for it")
-        values = self.joints.get([*arm_joint_names(arm), width_joint_name(arm)], at, self.max_age)
-        return kinematics.forward(values[:6]), float(values[6])
+        jaws = grasp_joint_names(arm)
+        names = [*arm_joint_names(arm), width_joint_name(arm), *jaws.values()]
+        values = self.joints.get(names, at, self.max_age)
+        angles = {side: float(v) for side, v in zip(jaws, values[7:], strict=True)}
+        return EeState(kinematics.forward(values[:6]), float(values[6]), angles)
 
     @property
     def arms(self) -> list[str]:
@@ -178,9 +197,11 @@ class CameraRig:
 __all__ = [
     "CameraRig",
     "EeCamera",
+    "EeState",
     "FrameUnavailable",
     "JointStates",
     "LifterCamera",
     "arm_joint_names",
+    "grasp_joint_names",
     "width_joint_name",
 ]

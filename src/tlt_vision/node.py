@@ -66,7 +66,7 @@ from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
 from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
-from tlt_vision.self_filter import boxes_in_camera, drop_inside, load_boxes
+from tlt_vision.self_filter import EeSelfFilter, drop_inside
 from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
@@ -111,7 +111,7 @@ class VisionNode(LeanNode):
         self.parts, self.tol = self.inspector.parts, self.inspector.tol
         self.estimators, self.pipelines = self.inspector.estimators, self.inspector.pipelines
         self.rig = CameraRig(config)
-        self.ee_boxes = load_boxes(raw["ee_self_filter"]["boxes"])
+        self.ee_filter = EeSelfFilter.from_config(raw["ee_self_filter"])
         self._set_up_torch(raw["torch_threads"])
         self.tags = TagLocator(TagConfig.load())
         self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
@@ -303,7 +303,7 @@ class VisionNode(LeanNode):
         a presented part's fittings sit beside its EE's rivet guns. An arm whose joint states are
         missing or old stays in, with a warning (both, when the camera's own pose is unknown)."""
         depth = frame.get("depth")
-        if depth is None or not self.ee_boxes:
+        if depth is None or self.ee_filter.empty:
             return depth
         try:
             camera_pose = self.rig.camera_pose(frame.camera, frame.stamp)
@@ -313,12 +313,12 @@ class VisionNode(LeanNode):
         placed = []
         for arm in self.rig.arms:
             try:
-                flange, width = self.rig.flange(arm, frame.stamp)
+                ee = self.rig.end_effector(arm, frame.stamp)
             except FrameUnavailable as exc:
                 self.get_logger().warning(f"{arm}'s end effector left in {frame.camera}'s depth: {exc}")
                 continue
-            placed += boxes_in_camera(self.ee_boxes, camera_pose, flange, width)
-        return drop_inside(depth, frame.intrinsics, placed, self.config.raw["ee_self_filter"]["margin"])[0]
+            placed += self.ee_filter.place(camera_pose, *ee)
+        return drop_inside(depth, frame.intrinsics, placed, self.ee_filter.margin)[0]
 
     def _inspect_rivet(self, member_id: str, camera_name: str, deadline: float) -> InspectionReport:
         """Is a rivet in gun ``<ars>/<gun>``: a certified rivet pose at the gun's muzzle, seen by the

@@ -92,6 +92,20 @@ SCHEMA = {
                     schema={"centre": _vec(3), "half": _vec(3), "on_width_slide": Field("bool")},
                 ),
             ),
+            "jaws": opt(
+                "map",
+                {},
+                check=lambda v: None if set(v) <= {"a", "b"} else "keys are the grasp sides a and b",
+                item=Field(
+                    "dict",
+                    schema={
+                        "hinge": _vec(3),
+                        "tip": _vec(3),
+                        "radius": Field("float", **_POSITIVE),
+                        "on_width_slide": Field("bool"),
+                    },
+                ),
+            ),
         },
     ),
     "timeouts": Field(

@@ -4,8 +4,9 @@ The twin here is the real model (``tlt_sim.model.Scene``, scenario ``defective_p
 twin process's own stream publishers (``tlt_sim.twin.ros_streams``: ``/clock``, camera images
 rendered only while subscribed, segmentation labels), stepped on a thread of this process so a
 test can stage parts between steps. The drivers' joint states (``/camera_mounts/joint_states``,
-``/ur_x/joint_states``, ``/ee_x/state``) are published from the model's joints, stamped with sim
-time, as the driver nodes publish them on the twin. The vision node runs on sim time.
+``/ur_x/joint_states``, ``/ee_x/state`` with the width and grasp joints) are published from the
+model's joints, stamped with sim time, as the driver nodes publish them on the twin. The vision
+node runs on sim time.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from tlt_ars.planning.targets import placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
-from tlt_vision.frames import FrameUnavailable, arm_joint_names, width_joint_name
+from tlt_vision.frames import FrameUnavailable, arm_joint_names, grasp_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main, spin
 from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
 
@@ -116,8 +117,11 @@ class TwinHost:
         ee = EndEffectorState()
         ee.header.stamp = stamp
         ee.ars = "ars_x"
-        ee.joint_names = [width_joint_name("ars_x")]
-        ee.position = [s.position(names.width_joint("ars_x"))]
+        jaws = grasp_joint_names("ars_x")
+        ee.joint_names = [width_joint_name("ars_x"), *jaws.values()]
+        ee.position = [s.position(names.width_joint("ars_x"))] + [
+            s.position(names.grasp_joint("ars_x", side)) for side in jaws
+        ]
         self.ee.publish(ee)
 
     def close(self) -> None:
@@ -415,7 +419,7 @@ def test_process_exits_cleanly_on_a_signal(sig, wait_for_service):
 def test_an_arms_end_effector_is_taken_out_of_the_depth_where_the_twin_has_it(rig):
     """InspectPart poses the part on a depth without the arms' own EE bodies (node.yaml
     ``ee_self_filter``), placed by the published joint states: the pixels the node drops are the
-    ones the twin's own EE boxes hold."""
+    ones the twin's own EE boxes and jaw capsules hold."""
     from tlt_vision.train.render_dataset import inspection_joints
 
     joints = inspection_joints()["ars_x"]
@@ -444,6 +448,13 @@ def test_an_arms_end_effector_is_taken_out_of_the_depth_where_the_twin_has_it(ri
             g = scene.model.geom(name).id
             box = (world - scene.data.geom_xpos[g]) @ scene.data.geom_xmat[g].reshape(3, 3)
             inside |= np.all(np.abs(box) <= scene.model.geom_size[g] + margin, axis=1)
+        for side in ("a", "b"):
+            g = scene.model.body_geomadr[scene.model.body(f"ars_x/jaw_{side}").id]
+            radius, half = scene.model.geom_size[g][:2]
+            axis = scene.data.geom_xmat[g].reshape(3, 3)[:, 2]
+            along = np.clip((world - scene.data.geom_xpos[g]) @ axis, -half, half)
+            nearest = scene.data.geom_xpos[g] + along[:, None] * axis
+            inside |= np.linalg.norm(world - nearest, axis=1) <= radius + margin
         return inside.reshape(depth.shape) & (depth > 0)
 
     truth = rig.twin.do(in_the_twins_boxes)

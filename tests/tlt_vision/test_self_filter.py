@@ -1,5 +1,5 @@
-"""The end effectors' self-filter: boxes placed in a camera, pixels inside them given no depth, and
-the configured boxes against the twin's end effector."""
+"""The end effectors' self-filter: boxes and jaws placed in a camera, pixels inside them given no
+depth, and the configured bodies against the twin's end effector."""
 
 from pathlib import Path
 
@@ -9,9 +9,14 @@ import pytest
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_vision.node_config import load_config
 from tlt_vision.pointcloud import Intrinsics
-from tlt_vision.self_filter import EeBox, boxes_in_camera, drop_inside, load_boxes
+from tlt_vision.self_filter import EeBox, EeJaw, EeSelfFilter, PlacedCapsule, drop_inside
 
 K = Intrinsics(fx=100.0, fy=100.0, cx=50.0, cy=50.0)  # a 100 x 100 image
+NO_JAWS = {"a": 0.0, "b": 0.0}
+
+
+def _boxes(*boxes: EeBox) -> EeSelfFilter:
+    return EeSelfFilter(boxes, (), 0.0)
 
 
 def test_pixels_whose_point_lies_inside_a_box_lose_their_depth_and_no_others():
@@ -19,7 +24,7 @@ def test_pixels_whose_point_lies_inside_a_box_lose_their_depth_and_no_others():
     depth[0, 0] = 0.0  # no return stays none
     # A box 0.2 m square about the optical axis, 1 m ahead: it holds the points of pixels 40..60.
     box = EeBox("gun", np.zeros(3), np.array([0.1, 0.1, 0.05]), False)
-    placed = boxes_in_camera([box], pose_matrix([0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 1.0]), 0.0)
+    placed = _boxes(box).place(pose_matrix([0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 1.0]), 0.0, NO_JAWS)
     out, dropped = drop_inside(depth, K, placed, margin=0.0)
     assert dropped == 21 * 21
     assert (out[40:61, 40:61] == 0).all()
@@ -27,7 +32,7 @@ def test_pixels_whose_point_lies_inside_a_box_lose_their_depth_and_no_others():
     assert depth[50, 50] == 1.0  # the input is left alone
     # Grown by the margin it takes a pixel more each way; a box behind the surface takes nothing.
     assert drop_inside(depth, K, placed, margin=0.01)[1] == 23 * 23
-    behind = boxes_in_camera([box], pose_matrix([0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 1.2]), 0.0)
+    behind = _boxes(box).place(pose_matrix([0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 1.2]), 0.0, NO_JAWS)
     assert drop_inside(depth, K, behind, margin=0.0)[1] == 0
 
 
@@ -36,10 +41,32 @@ def test_a_box_on_the_width_slide_moves_with_the_width_along_flange_x():
     flange = pose_matrix([0.0, 0.0, 1.0], turn)
     fixed = EeBox("a", np.array([0.1, 0.0, 0.0]), np.ones(3) * 0.01, False)
     sliding = EeBox("b", np.array([0.1, 0.0, 0.0]), np.ones(3) * 0.01, True)
-    (rot, at_fixed, _), (_, at_sliding, _) = boxes_in_camera([fixed, sliding], np.eye(4), flange, 0.2)
+    (rot, at_fixed, _), (_, at_sliding, _) = _boxes(fixed, sliding).place(np.eye(4), flange, 0.2, NO_JAWS)
     np.testing.assert_allclose(rot, turn)
     np.testing.assert_allclose(at_fixed, [0.0, 0.1, 1.0], atol=1e-12)
     np.testing.assert_allclose(at_sliding, [0.0, 0.3, 1.0], atol=1e-12)
+
+
+def test_a_capsule_takes_the_points_within_its_radius_of_its_segment():
+    depth = np.full((100, 100), 1.0, dtype=np.float32)
+    # A segment along camera x from -0.1 to 0.1 m, 1 m ahead, radius 0.05: pixels 40..60 across
+    # its middle, 35..65 along it up to its round ends.
+    capsule = PlacedCapsule(np.array([-0.1, 0.0, 1.0]), np.array([0.1, 0.0, 1.0]), 0.05)
+    out, dropped = drop_inside(depth, K, [capsule], margin=0.0)
+    assert (out[45:56, 40:61] == 0).all() and (out[50, 35:66] == 0).all()
+    assert out[44, 40] == 1.0 and out[50, 34] == 1.0 and out[50, 66] == 1.0
+    assert out[46, 36] == 1.0  # past the end, outside the round cap
+    assert drop_inside(depth, K, [capsule], margin=0.01)[1] > dropped
+
+
+def test_a_jaw_turns_about_flange_x_by_its_grasp_joint_and_rides_the_slide():
+    jaw = EeJaw("b", np.array([0.25, -0.045, 0.115]), np.array([0.25, 0.0, 0.17]), 0.007, True)
+    flt = EeSelfFilter((), (jaw,), 0.0)
+    (start, end, radius), = flt.place(np.eye(4), np.eye(4), 0.1, {"a": 1.0, "b": np.pi / 2})
+    np.testing.assert_allclose(start, [0.35, -0.045, 0.115], atol=1e-12)
+    # (0, 0.045, 0.055) from the hinge turned a quarter about x: (0, -0.055, 0.045).
+    np.testing.assert_allclose(end, [0.35, -0.1, 0.16], atol=1e-12)
+    assert radius == 0.007
 
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")
@@ -47,22 +74,37 @@ names = pytest.importorskip("tlt_sim.model.names")
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_the_configured_boxes_are_the_twins_end_effector_at_any_width(tmp_path):
+def test_the_configured_bodies_are_the_twins_end_effector_at_any_width_and_grasp(tmp_path):
     config = load_config(ROOT / "config" / "vision" / "node.yaml")
-    boxes = load_boxes(config.raw["ee_self_filter"]["boxes"])
-    assert {b.name.split("/")[0] for b in boxes} >= {"rivet_gun_a", "rivet_gun_b", "gripper_a", "gripper_b"}
+    flt = EeSelfFilter.from_config(config.raw["ee_self_filter"])
+    bodies = {b.name.split("/")[0] for b in flt.boxes}
+    assert bodies >= {"rivet_gun_a", "rivet_gun_b", "gripper_a", "gripper_b"}
+    assert {j.side for j in flt.jaws} == {"a", "b"}
     with scene_mod.Scene(out_dir=tmp_path) as scene:
         m, d = scene.model, scene.data
-        for arm, width in (("ars_x", 0.0), ("ars_y", 0.12)):
+        for arm, width, grasp in (("ars_x", 0.0, 1.0), ("ars_y", 0.12, -0.2)):
             scene.set_joint_state(names.width_joint(arm), width)
+            for side in ("a", "b"):
+                scene.set_joint_state(names.grasp_joint(arm, side), grasp + (0.3 if side == "b" else 0.0))
             scene.step()
             position, rotation = scene.body_pose(names.ee_body(arm))
             flange = pose_matrix(position, rotation)
             assert scene.position(names.width_joint(arm)) == pytest.approx(width, abs=1e-3)
-            placed = boxes_in_camera(boxes, np.eye(4), flange, scene.position(names.width_joint(arm)))
-            for box, (rot, centre, half) in zip(boxes, placed, strict=True):
+            jaws = {side: scene.position(names.grasp_joint(arm, side)) for side in ("a", "b")}
+            placed = flt.place(np.eye(4), flange, scene.position(names.width_joint(arm)), jaws)
+            for box, (rot, centre, half) in zip(flt.boxes, placed, strict=False):
                 g = m.geom(f"{arm}/{box.name}").id
                 assert m.geom_type[g] == 6, box.name  # mjGEOM_BOX
                 np.testing.assert_allclose(centre, d.geom_xpos[g], atol=2e-3, err_msg=box.name)
                 np.testing.assert_allclose(rot, d.geom_xmat[g].reshape(3, 3), atol=1e-3, err_msg=box.name)
                 np.testing.assert_allclose(half, m.geom_size[g], atol=1e-9, err_msg=box.name)
+            for jaw, (start, end, radius) in zip(flt.jaws, placed[len(flt.boxes) :], strict=True):
+                g = m.body_geomadr[m.body(f"{arm}/jaw_{jaw.side}").id]
+                assert m.geom_type[g] == 3, jaw.side  # mjGEOM_CAPSULE: centre, axis z, half length
+                axis = d.geom_xmat[g].reshape(3, 3)[:, 2] * m.geom_size[g][1]
+                near, far = d.geom_xpos[g] - axis, d.geom_xpos[g] + axis
+                if np.linalg.norm(far - start) < np.linalg.norm(near - start):
+                    near, far = far, near
+                np.testing.assert_allclose(start, near, atol=1e-3, err_msg=jaw.side)
+                np.testing.assert_allclose(end, far, atol=1e-3, err_msg=jaw.side)
+                assert radius == pytest.approx(m.geom_size[g][0], abs=1e-9)
