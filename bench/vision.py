@@ -163,8 +163,7 @@ def main() -> int:
     mission = load_mission(args.mission)
     config = load_config(args.config, args.mission)
     estimators = load_estimators(config, mission)
-    opts = {"max_points": config.raw["max_points"], "keep_border_below": config.raw["keep_border_below"],
-            "merge": (), "free_space": config.free_space}
+    opts = {**config.pipeline_options, "merge": ()}
     pipelines = {name: PartPipeline({estimators[name].model.object_class: e}, **opts)
                  for name, e in estimators.items()}
     # A frame's parts of every kind posed in one call, as the node does (tubes as verticals).

@@ -17,6 +17,8 @@ import numpy as np
 
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED
+from tlt_vision.pointcloud import Detached
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
 
@@ -77,6 +79,14 @@ SCHEMA = {
             "max_fraction": opt("float", FREE_SPACE.max_fraction, minimum=0.0, maximum=1.0),
             "window": opt("int", FREE_SPACE.window, minimum=1, maximum=31,
                           check=lambda v: None if v % 2 else "must be odd"),
+        },
+    ),
+    "detached": opt(
+        "dict",
+        {"link": DETACHED.link, "below": DETACHED.below},
+        schema={
+            "link": opt("float", DETACHED.link, minimum=0.001, maximum=0.5),
+            "below": opt("float", DETACHED.below, minimum=0.0, maximum=0.5),
         },
     ),
     "ee_self_filter": opt(
@@ -198,6 +208,17 @@ class VisionConfig:
     @property
     def free_space(self) -> FreeSpace:
         return FreeSpace(**self.raw["free_space"])
+
+    @property
+    def pipeline_options(self) -> dict[str, Any]:
+        """The keyword arguments of :class:`tlt_vision.pipeline.PartPipeline` this file sets."""
+        raw = self.raw
+        return {
+            "max_points": raw["max_points"],
+            "keep_border_below": raw["keep_border_below"],
+            "free_space": self.free_space,
+            "detached": Detached(**raw["detached"]),
+        }
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

@@ -189,8 +189,7 @@ class PartInspector:
         self.tol = inspection.Tolerances.from_mission(mission)
         self.estimators = estimators if estimators is not None else load_estimators(config, mission)
         e = self.estimators
-        opts = {"max_points": config.raw["max_points"], "keep_border_below": config.raw["keep_border_below"],
-                "free_space": config.free_space}
+        opts = config.pipeline_options
         self.pipelines = {
             kind: PartPipeline(
                 {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]}, **opts

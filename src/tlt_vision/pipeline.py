@@ -10,6 +10,10 @@ The twin (and a segmentation model trained on it) labels each side of a cross fr
 instance, while the cross-frame CAD model is the whole square: instances of the classes in
 ``merge`` are joined into one before the pose is estimated (one part is inspected at a time).
 
+Pieces of a cloud that nothing joins to the rest and that hold few of its points are dropped
+before the pose is estimated, except from merged instances (whose pieces are parts) (``detached``, :func:`tlt_vision.pointcloud.detached_pieces`): a
+learned mask's stray pixels on what lies behind the part.
+
 Every certified pose is then checked against the whole depth image (``free_space``,
 :mod:`tlt_vision.pose.free_space`): a pose that puts the model where the camera saw past it is
 not certified.
@@ -32,7 +36,15 @@ import numpy as np
 import torch
 
 from tlt_vision.inspection import Observation
-from tlt_vision.pointcloud import MIN_POINTS, MaskedCloud, PinholeIntrinsics, masked_point_cloud
+from tlt_vision.pointcloud import (
+    DEFAULT_DETACHED,
+    MIN_POINTS,
+    Detached,
+    MaskedCloud,
+    PinholeIntrinsics,
+    detached_pieces,
+    masked_point_cloud,
+)
 from tlt_vision.pose.estimator import PoseEstimator, estimate_together
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
@@ -127,9 +139,11 @@ class PartPipeline:
         seed: int = 0,
         keep_border_below: int = 0,
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
+        detached: Detached | None = DEFAULT_DETACHED,
     ) -> None:
         self.estimators = dict(estimators)
         self.free_space = free_space
+        self.detached = detached
         self._surfaces: dict[str, np.ndarray] = {}
         self.keep_border_below = keep_border_below
         self.max_points = max_points
@@ -147,7 +161,7 @@ class PartPipeline:
         """The point cloud C-3PO is given for one detection (its reason when there is none)."""
         small = int(detection.mask.sum()) < self.keep_border_below
         estimator = self.estimators.get(detection.object_class)
-        return masked_point_cloud(
+        cloud = masked_point_cloud(
             border_kept(detection.mask, depth) if small else detection.mask,
             depth,
             intrinsics,
@@ -158,6 +172,18 @@ class PartPipeline:
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
         )
+        if not cloud.ok or self.detached is None or detection.object_class in self.merge:
+            return cloud  # a merged instance (a cross frame's sides) is pieces by design
+        keep = ~detached_pieces(cloud.points, self.detached)
+        if keep.all():
+            return cloud
+        if keep.sum() < self.min_points:
+            return MaskedCloud(
+                cloud.points[:0], None, cloud.mask_pixels,
+                f"too few points: {int(keep.sum())} joined to the part < {self.min_points}",
+            )
+        colours = cloud.colours[keep] if cloud.colours is not None else None
+        return MaskedCloud(cloud.points[keep], colours, cloud.mask_pixels)
 
     def observe(
         self,

@@ -70,6 +70,28 @@ def test_observations_for_every_detection_with_reasons():
     assert pipe.observe(dets[:1], None, K)[0].reason == "no depth image"
 
 
+def test_a_masks_stray_pixels_on_the_floor_behind_reach_no_cloud():
+    """A tube's mask that strays past its end onto the floor 0.4 m behind it (within the tube's
+    size of its depth, so the extent cut keeps them): those points are a detached piece, dropped;
+    the tube's own all stay."""
+    tube = MODELS["strut_tube/vertical"]
+    across = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # its axis along camera x
+    depth, ids = _render([(tube, across, np.array([0.0, 0.0, 1.6]))])
+    mask = ids == 0
+    v, u = np.nonzero(mask)
+    stray = (slice(v.min() - 4, v.min() - 1), slice(u.max() - 2, u.max() + 1))  # 3x3 px above its end
+    mask[stray] = True
+    depth[stray] = 2.0
+    detector = KeypointDetector(len(tube.keypoints), tube.diameter / 2, width=8)
+    est = PoseEstimator(tube, detector, threshold=0.01)
+    det = Detection("strut_tube", mask, 0.9, "t")
+    kept = PartPipeline({"strut_tube": est}, max_points=None).cloud(det, depth, K)
+    whole = PartPipeline({"strut_tube": est}, max_points=None, detached=None).cloud(det, depth, K)
+    assert kept.ok and whole.ok
+    assert whole.points[:, 2].max() > 1.9 and kept.points[:, 2].max() < 1.7
+    assert len(whole.points) - len(kept.points) == 1  # the stray block's one pixel off the mask's border
+
+
 def test_cross_frame_sides_are_merged_and_mask_rcnn_output_converted():
     a = np.zeros((4, 4), bool)
     a[0] = True

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from tlt_vision.pointcloud import Intrinsics, masked_point_cloud, project
+from tlt_vision.pointcloud import Detached, Intrinsics, detached_pieces, masked_point_cloud, project
 
 K = Intrinsics(fx=100.0, fy=200.0, cx=1.5, cy=1.0)
 
@@ -76,3 +76,20 @@ def test_pixels_beyond_the_part_size_from_its_median_depth_are_dropped():
     assert kept.ok and len(kept.points) == 33
     assert kept.points[:, 2].max() <= 1.05
     assert len(masked_point_cloud(mask, depth, K, min_points=4, erode=0).points) == 36
+
+
+def test_small_pieces_nothing_joins_to_the_part_are_detached_and_large_ones_are_not():
+    """A tube 1 m long sampled every centimetre, cut in two by a jaw 3 cm wide in front of it, and a
+    few points of the floor 0.4 m behind its end: the floor goes, both pieces of the tube stay."""
+    rod = np.column_stack([np.linspace(0.0, 1.0, 101), np.zeros(101), np.full(101, 1.0)])
+    tube = rod[(rod[:, 0] < 0.1) | (rod[:, 0] > 0.13)]  # 11 points, then 87
+    floor = np.array([[1.0, 0.0, 1.4], [1.005, 0.0, 1.4], [1.0, 0.005, 1.4]])
+    cloud = np.vstack([tube, floor])
+    out = detached_pieces(cloud, Detached(link=0.02, below=0.05))
+    assert out.tolist() == [False] * len(tube) + [True] * 3
+    # Linked by steps of 5 cm the floor joins the tube: nothing is detached.
+    assert not detached_pieces(cloud, Detached(link=0.5, below=0.05)).any()
+    # The biggest piece stays whatever its share: a cloud in many small pieces is not emptied.
+    scattered = np.column_stack([np.arange(30) * 0.1, np.zeros(30), np.ones(30)])
+    assert detached_pieces(scattered, Detached()).sum() == 29
+    assert detached_pieces(np.zeros((0, 3)), Detached()).shape == (0,)
