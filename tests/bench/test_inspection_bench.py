@@ -52,6 +52,45 @@ def test_jittered_presentations_of_a_good_and_a_defective_strut_are_decided_righ
     assert any(r.startswith("missing end fitting") for r in missing.reasons), missing.reasons
 
 
+def test_the_shipped_mask_rcnn_passes_good_held_struts_and_catches_a_missing_fitting(bench):
+    """As the vision node would run on Mask R-CNN (node.yaml's weights and min_score, the end
+    effectors filtered out): a good vertical and a good diagonal in ARS X's closed jaws pass (the
+    vertical's fitting beside the rivet gun scores under 0.5; the diagonal's tube mask takes in the
+    jaws and the floor behind), and a vertical missing a fitting fails."""
+    scene_mod = pytest.importorskip("tlt_sim.model.scene")
+    from tlt_vision.self_filter import EeSelfFilter
+
+    config = load_config()
+    mission = load_mission(ROOT / "missions" / "two_bay.yaml")  # the bench's first presentation first
+    scen = bench.scenario(mission, [8.0])
+    labels = {name: bench.defect_label(scen.defects.get(name)) for name, _ in bench.struts(mission)}
+    good_vertical, good_diagonal, missing = (
+        next(n for n, label in labels.items() if label.startswith(want) and n.startswith(kind))
+        for want, kind in (("good", "vertical"), ("good", "diagonal"), ("missing", "vertical"))
+    )
+    inspector = PartInspector(config, mission)
+    ee_filter = EeSelfFilter.from_config(config.raw["ee_self_filter"])
+    detect = bench.detector("mask_rcnn")
+    rng = np.random.default_rng(1100)
+    decided, joints = {}, bench.inspection_joints()
+    with scene_mod.Scene(mission=mission, scenario=scen) as scene:
+        for name in (good_vertical, good_diagonal, missing):
+            part = scene.part(name)
+            home = scene.body_pose(part.body)
+            frame = bench.present(scene, part, "ars_x", joints["ars_x"], rng, bench.Jitter())
+            depth = bench.without_own_ee(scene, frame, ee_filter)
+            scene.place_part(name, *home)
+            kind = name.split("_")[0]
+            detections = detect(frame, bench.CAMERAS["ars_x"])
+            decided[name], _ = inspector.inspect(
+                f"bench/{kind}", kind, detections, depth, frame.intrinsics, frame.rgb
+            )
+    assert decided[good_vertical].passed, decided[good_vertical].reasons
+    assert decided[good_diagonal].passed, decided[good_diagonal].reasons
+    reasons = decided[missing].reasons
+    assert not decided[missing].passed and any(r.startswith("missing end fitting") for r in reasons), reasons
+
+
 def test_figures_and_wrong_decisions(bench, capsys):
     P = bench.Presented
     results = [
