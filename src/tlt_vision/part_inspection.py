@@ -135,11 +135,44 @@ def select_part(
     if anchors_per_part is not None:
         # A held strut before a lifted bay: the bay's near vertical, riveted to its diagonal,
         # showed more tube than the strut and was inspected in its place.
-        parts = [g for g in groups if sum(i.detection.object_class == anchor for i in g) <= anchors_per_part]
+        parts = [g for g in groups if _anchors(g, anchor) <= anchors_per_part]
         groups = parts or groups
     best = max(groups, key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor))
     first = max((i for i in best if i in anchors), key=_pixels)
-    return [i.detection for i in best if np.linalg.norm(i.centre - first.centre) <= reach]
+    centre = first.centre
+    if anchors_per_part is not None:  # from the middle of all the pieces of the anchor
+        line = [i.points for i in best if i in anchors and (i is first or _one_line(first.points, i.points))]
+        if len(line) > 1:
+            centre = np.vstack(line).mean(axis=0)
+    return [i.detection for i in best if np.linalg.norm(i.centre - centre) <= reach]
+
+
+# Points of one straight tube lie within its radius (12.5 mm) of the line through its cloud.
+_ONE_LINE = 0.02  # m, 95th percentile of the points' distances from that line
+
+
+def _anchors(group: list[_Instance], anchor: str) -> int:
+    """How many ``anchor`` instances ``group`` holds, pieces along one straight line counted once:
+    Mask R-CNN split a held diagonal's tube into two detections, which are not two tubes (a
+    lifted bay's vertical and diagonal, riveted end to end, are)."""
+    pieces = [i.points for i in group if i.detection.object_class == anchor]
+    lines: list[np.ndarray] = []
+    for p in pieces:
+        for k, line in enumerate(lines):
+            if _one_line(line, p):
+                lines[k] = np.vstack([line, p])
+                break
+        else:
+            lines.append(p)
+    return len(lines)
+
+
+def _one_line(a: np.ndarray, b: np.ndarray) -> bool:
+    p = np.vstack([a, b])
+    centred = p - p.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    off = np.linalg.norm(centred - np.outer(centred @ axis, axis), axis=1)
+    return float(np.percentile(off, 95)) <= _ONE_LINE
 
 
 def _pixels(i: _Instance) -> int:
@@ -190,9 +223,13 @@ class PartInspector:
         self.estimators = estimators if estimators is not None else load_estimators(config, mission)
         e = self.estimators
         opts = config.pipeline_options
+        # A strut has one tube: Mask R-CNN's two detections of one long tube, each too little of it
+        # to pose, are one cloud (a bent tube's two halves then fail the straight tube's fit).
         self.pipelines = {
             kind: PartPipeline(
-                {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]}, **opts
+                {"strut_tube": e[f"strut_tube/{kind}"], "end_fitting": e["end_fitting"]},
+                merge=("strut_tube",),
+                **opts,
             )
             for kind in STRUT_KINDS
         }

@@ -11,8 +11,10 @@ instance, while the cross-frame CAD model is the whole square: instances of the 
 ``merge`` are joined into one before the pose is estimated (one part is inspected at a time).
 
 Pieces of a cloud that nothing joins to the rest and that hold few of its points are dropped
-before the pose is estimated, except from merged instances (whose pieces are parts) (``detached``, :func:`tlt_vision.pointcloud.detached_pieces`): a
-learned mask's stray pixels on what lies behind the part.
+before the pose is estimated (``detached``, :func:`tlt_vision.pointcloud.detached_pieces`): a
+learned mask's stray pixels on what lies behind the part. The classes in ``in_pieces`` keep
+theirs: a cross frame's sides are pieces by design, its corner joints (another class) between
+them, and a side half hidden is a small piece of it.
 
 Every certified pose is then checked against the whole depth image (``free_space``,
 :mod:`tlt_vision.pose.free_space`): a pose that puts the model where the camera saw past it is
@@ -136,6 +138,7 @@ class PartPipeline:
         max_points: int = 1024,
         min_points: int = MIN_POINTS,
         merge: Sequence[str] = ("cross_frame",),
+        in_pieces: Sequence[str] = ("cross_frame",),
         seed: int = 0,
         keep_border_below: int = 0,
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
@@ -149,6 +152,7 @@ class PartPipeline:
         self.max_points = max_points
         self.min_points = min_points
         self.merge = tuple(merge)
+        self.in_pieces = tuple(in_pieces)
         self.rng = np.random.default_rng(seed)
 
     def cloud(
@@ -172,8 +176,8 @@ class PartPipeline:
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
         )
-        if not cloud.ok or self.detached is None or detection.object_class in self.merge:
-            return cloud  # a merged instance (a cross frame's sides) is pieces by design
+        if not cloud.ok or self.detached is None or detection.object_class in self.in_pieces:
+            return cloud
         keep = ~detached_pieces(cloud.points, self.detached)
         if keep.all():
             return cloud

@@ -24,6 +24,7 @@ planning scene with the frame held.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -239,3 +240,25 @@ def test_a_good_held_strut_passes_and_one_missing_a_fitting_fails(held_strut, in
     report = inspect_strut(f"bay1/{kind}", kind, length, without, inspector.parts, inspector.tol)
     assert not report.passed
     assert any(r.startswith("missing end fitting") for r in report.reasons), report.reasons
+
+
+def test_a_held_tube_seen_as_two_detections_is_posed_as_one(held_strut, inspector):
+    """Mask R-CNN split a held diagonal's tube into two detections, neither enough of it to pose:
+    the strut's tube detections are one tube, and the good strut passes."""
+    _, camera, kind, _, part, frame = held_strut
+    detections = []
+    for d in _detections(frame, camera):
+        if d.object_id != f"{part.body}/tube":
+            detections.append(d)
+            continue
+        cols = np.nonzero(d.mask.any(axis=0))[0]
+        cut = int(np.median(cols))
+        left, right = d.mask.copy(), d.mask.copy()
+        left[:, cut:] = False
+        right[:, :cut] = False
+        detections += [replace(d, mask=left, object_id=d.object_id + "_0"), replace(d, mask=right)]
+    report, obs = inspector.inspect(
+        f"bay1/{kind}", kind, detections, frame.depth, frame.intrinsics, frame.rgb
+    )
+    assert report.passed, report.reasons
+    assert sum(o.object_class == "strut_tube" for o in obs) == 1

@@ -104,3 +104,21 @@ def test_a_held_strut_not_the_struts_of_a_lifted_bay_joined_behind_it():
     assert _ids(select_part(alone, depth, K, *args[3:], gap=0.03, anchors_per_part=1)) == [
         "bay1/diagonal/tube", "bay1/vertical/tube"
     ]
+
+
+def test_a_held_tube_in_two_pieces_is_one_tube_and_its_far_fitting_within_reach():
+    """Mask R-CNN split a held diagonal's tube into two detections: they lie along one line, so
+    the held strut is one tube (not structure passed over for the racked strut beside it), and
+    reach is measured from the middle of both pieces, which takes in the fitting at the far end
+    of the bigger piece."""
+    dets, depth = _frame(
+        ("strut_tube", _mask(slice(48, 52), slice(10, 55)), 0.6, "held/tube_0"),  # 180 pixels
+        ("strut_tube", _mask(slice(48, 52), slice(55, 90)), 0.6, "held/tube_1"),  # 140 pixels
+        ("end_fitting", _mask(slice(47, 53), slice(4, 10)), 0.6, "held/fitting_a"),
+        ("end_fitting", _mask(slice(47, 53), slice(90, 96)), 0.6, "held/fitting_b"),
+        ("strut_tube", _mask(slice(10, 12), slice(20, 80)), 1.0, "racked/tube"),  # 120 pixels
+    )
+    args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.35, (0.15, 2.0), 20)
+    assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
+        "held/fitting_a", "held/fitting_b", "held/tube_0", "held/tube_1"
+    ]
