@@ -136,7 +136,7 @@ def test_one_fitting_seen_twice_is_one_fitting_but_a_third_is_not():
     obs = _strut(np.random.default_rng(4))
     fitting = next(o for o in obs if o.object_class == "end_fitting")
     e = fitting.estimate
-    twice = dataclasses.replace(e, translation=e.translation + [0.001, 0.0, 0.0])
+    twice = dataclasses.replace(e, translation=e.translation + np.array([0.001, 0.0, 0.0]))
     rep = inspect_strut("s", "vertical", LENGTH, [*obs, Observation("end_fitting", twice)], PARTS, TOL)
     assert rep.passed, rep.reasons
     third = dataclasses.replace(e, translation=e.translation + 0.05 * e.rotation[:, 2])
