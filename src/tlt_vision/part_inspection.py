@@ -135,15 +135,15 @@ def select_part(
     if anchors_per_part is not None:
         # A held strut before a lifted bay: the bay's near vertical, riveted to its diagonal,
         # showed more tube than the strut and was inspected in its place.
-        parts = [g for g in groups if _anchors(g, anchor) <= anchors_per_part]
+        parts = [g for g in groups if len(_lines(g, anchor)) <= anchors_per_part]
         groups = parts or groups
     best = max(groups, key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor))
     first = max((i for i in best if i in anchors), key=_pixels)
     centre = first.centre
     if anchors_per_part is not None:  # from the middle of all the pieces of the anchor
-        line = [i.points for i in best if i in anchors and (i is first or _one_line(first.points, i.points))]
+        line = next(line for line in _lines(best, anchor) if any(i is first for i in line))
         if len(line) > 1:
-            centre = np.vstack(line).mean(axis=0)
+            centre = np.vstack([i.points for i in line]).mean(axis=0)
     return [i.detection for i in best if np.linalg.norm(i.centre - centre) <= reach]
 
 
@@ -151,20 +151,19 @@ def select_part(
 _ONE_LINE = 0.02  # m, 95th percentile of the points' distances from that line
 
 
-def _anchors(group: list[_Instance], anchor: str) -> int:
-    """How many ``anchor`` instances ``group`` holds, pieces along one straight line counted once:
-    Mask R-CNN split a held diagonal's tube into two detections, which are not two tubes (a
-    lifted bay's vertical and diagonal, riveted end to end, are)."""
-    pieces = [i.points for i in group if i.detection.object_class == anchor]
-    lines: list[np.ndarray] = []
-    for p in pieces:
-        for k, line in enumerate(lines):
-            if _one_line(line, p):
-                lines[k] = np.vstack([line, p])
-                break
+def _lines(group: list[_Instance], anchor: str) -> list[list[_Instance]]:
+    """The ``anchor`` instances of ``group``, those along one straight line together: Mask R-CNN
+    split a held diagonal's tube into two detections, which are not two tubes (a lifted bay's
+    vertical and diagonal, riveted end to end, are)."""
+    lines: list[list[_Instance]] = []
+    for inst in (i for i in group if i.detection.object_class == anchor):
+        along = (line for line in lines if _one_line(np.vstack([i.points for i in line]), inst.points))
+        line = next(along, None)
+        if line is None:
+            lines.append([inst])
         else:
-            lines.append(p)
-    return len(lines)
+            line.append(inst)
+    return lines
 
 
 def _one_line(a: np.ndarray, b: np.ndarray) -> bool:

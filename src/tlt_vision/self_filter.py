@@ -23,6 +23,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
+from tlt_ars.planning.kinematics import rot_x
 from tlt_vision.pointcloud import PinholeIntrinsics
 
 
@@ -76,11 +77,6 @@ class PlacedCapsule(NamedTuple):
         return np.linalg.norm(points - self.start - t[:, None] * d, axis=1) <= self.radius + margin
 
 
-def _rot_x(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
 @dataclass(frozen=True)
 class EeSelfFilter:
     """The end effector's bodies (node.yaml ``ee_self_filter``) and the margin that grows them."""
@@ -124,7 +120,7 @@ class EeSelfFilter:
             PlacedBox(rot, in_camera(b.centre, b.on_width_slide), b.half) for b in self.boxes
         ]
         for jaw in self.jaws:
-            tip = jaw.hinge + _rot_x(jaw_angles[jaw.side]) @ (jaw.tip - jaw.hinge)
+            tip = jaw.hinge + rot_x(jaw_angles[jaw.side]) @ (jaw.tip - jaw.hinge)
             placed.append(
                 PlacedCapsule(
                     in_camera(jaw.hinge, jaw.on_width_slide), in_camera(tip, jaw.on_width_slide), jaw.radius

@@ -92,7 +92,7 @@ def test_the_configured_bodies_are_the_twins_end_effector_at_any_width_and_grasp
             assert scene.position(names.width_joint(arm)) == pytest.approx(width, abs=1e-3)
             jaws = {side: scene.position(names.grasp_joint(arm, side)) for side in ("a", "b")}
             placed = flt.place(np.eye(4), flange, scene.position(names.width_joint(arm)), jaws)
-            for box, (rot, centre, half) in zip(flt.boxes, placed, strict=False):
+            for box, (rot, centre, half) in zip(flt.boxes, placed[: len(flt.boxes)], strict=True):
                 g = m.geom(f"{arm}/{box.name}").id
                 assert m.geom_type[g] == 6, box.name  # mjGEOM_BOX
                 np.testing.assert_allclose(centre, d.geom_xpos[g], atol=2e-3, err_msg=box.name)
