@@ -15,7 +15,8 @@ figures against the goals.
 
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
-        [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--no-self-filter] [--threads 2]
+        [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--second-look S]
+        [--no-self-filter] [--threads 2]
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import torch
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_vision.node_config import load_config
+from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside
@@ -124,16 +125,16 @@ def without_own_ee(scene, frame, ee_filter: EeSelfFilter) -> np.ndarray:
     return drop_inside(frame.depth, frame.intrinsics, placed, ee_filter.margin)[0]
 
 
-def detector(kind: str, weights: str | None = None, min_score: float | None = None):
-    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights`` and
-    ``min_score``, by default the configured ones)."""
+def detector(kind: str, weights: str | None = None, config: VisionConfig | None = None):
+    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights``, by default
+    the configured ones) down to the ``config``'s score floor, as the vision node segments for
+    InspectPart."""
     if kind == "twin":
         return TwinLabels.detect_render
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
-    seg = load_config().raw["segmentation"]
-    score = seg["min_score"] if min_score is None else min_score
-    segmenter = MaskRcnnSegmenter(weights or seg["weights"], score)
+    config = config or load_config()
+    segmenter = MaskRcnnSegmenter(weights or config.raw["segmentation"]["weights"], config.score_floor)
 
     def detect(frame, camera: str):
         k = frame.intrinsics
@@ -150,9 +151,16 @@ def run(args: argparse.Namespace) -> list[Presented]:
     mission = load_mission(ROOT / "missions" / f"{args.mission}.yaml")
     scen = scenario(mission, args.bends)
     config = load_config()
+    seg = config.raw["segmentation"]
+    if args.min_score is not None:
+        seg["min_score"] = args.min_score
+    if args.second_look is not None:
+        seg["second_look_score"] = args.second_look or None
+    if (seg["second_look_score"] or 0.0) > seg["min_score"]:  # a --min-score under it: no second look
+        seg["second_look_score"] = None
     inspector = PartInspector(config, mission)
     ee_filter = EeSelfFilter.from_config(config.raw["ee_self_filter"])
-    detect = detector(args.segmentation, args.weights, args.min_score)
+    detect = detector(args.segmentation, args.weights, config)
     rng = np.random.default_rng(args.seed)
     jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
     arms = inspection_joints()
@@ -229,6 +237,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
     parser.add_argument("--weights", help="Mask R-CNN weights (default: config/vision/node.yaml's)")
     parser.add_argument("--min-score", type=float, help="Mask R-CNN's (default: config/vision/node.yaml's)")
+    parser.add_argument("--second-look", type=float,
+                        help="second_look_score, 0 for none (default: config/vision/node.yaml's)")
     parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
                         help="take the end effectors out of the depth first, as the vision node does")
     parser.add_argument("--threads", type=int, default=2)

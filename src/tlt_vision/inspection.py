@@ -164,6 +164,22 @@ def _fittings_on_tube(
     tube: PoseEstimate, fittings: list[PoseEstimate], length: float, parts: Mapping[str, Any], tol: Tolerances
 ) -> list[str]:
     """Reasons why the fittings are not one at each end of ``tube``, on its axis, parallel to it."""
+    reasons, missing = _on_tube(tube, fittings, length, parts, tol)
+    for where in missing.values():
+        # A tube is the same end for end: "a" and "b" follow the estimated axis, so the reason
+        # also says where the fitting should be.
+        xyz = ", ".join(f"{v:.3f}" for v in where)
+        reasons.append(
+            f"missing end fitting: {2 - len(missing)} of 2 found, none at ({xyz}) m in the camera frame"
+        )
+    return reasons
+
+
+def _on_tube(
+    tube: PoseEstimate, fittings: list[PoseEstimate], length: float, parts: Mapping[str, Any], tol: Tolerances
+) -> tuple[list[str], dict[str, np.ndarray]]:
+    """The fittings matched to the ends of ``tube``: the reasons against those out of place,
+    doubled or misaligned, and where (camera frame) each end that has none should have one."""
     reasons = []
     axis = _axis(tube)
     lay = strut_layout(length, parts)
@@ -194,16 +210,23 @@ def _fittings_on_tube(
         if angle > tol.angle:
             reasons.append(f"end fitting at end {end} misaligned by {math.degrees(angle):.1f} deg")
         found[end] = f
-    for end, sign in (("a", -1.0), ("b", 1.0)):
-        if end not in found:
-            # A tube is the same end for end: "a" and "b" follow the estimated axis, so the
-            # reason also says where the fitting should be.
-            where = centre + sign * offset * axis
-            xyz = ", ".join(f"{v:.3f}" for v in where)
-            reasons.append(
-                f"missing end fitting: {len(found)} of 2 found, none at ({xyz}) m in the camera frame"
-            )
-    return reasons
+    ends = (("a", -1.0), ("b", 1.0))
+    missing = {end: centre + sign * offset * axis for end, sign in ends if end not in found}
+    return reasons, missing
+
+
+def missing_fitting_places(
+    length: float, observations: Sequence[Observation], parts: Mapping[str, Any], tol: Tolerances
+) -> np.ndarray:
+    """Where (camera frame, (n, 3) m) a strut's end fittings should be and none was found, as
+    :func:`inspect_strut` judges ``observations``; empty unless exactly one tube is certified (no
+    tube, no place to look)."""
+    tubes, _ = _split(observations, "strut_tube")
+    if len(tubes) != 1:
+        return np.zeros((0, 3))
+    fittings = _one_per_place(_split(observations, "end_fitting")[0], tol.position)
+    _, missing = _on_tube(tubes[0], fittings, length, parts, tol)
+    return np.array(list(missing.values()), dtype=float).reshape(-1, 3)
 
 
 def inspect_cross_frame(
@@ -483,4 +506,5 @@ __all__ = [
     "inspect_bay",
     "inspect_cross_frame",
     "inspect_strut",
+    "missing_fitting_places",
 ]

@@ -123,7 +123,7 @@ class VisionNode(LeanNode):
         if seg["source"] == "mask_rcnn":
             from tlt_vision.node_config import repo_path
 
-            self.segmenter: Any = MaskRcnnSegmenter(repo_path(seg["weights"]), seg["min_score"])
+            self.segmenter: Any = MaskRcnnSegmenter(repo_path(seg["weights"]), self.config.score_floor)
         else:
             self.segmenter = TwinLabels(lambda: self.labels.wait(0.0))
         self.grabber = FrameGrabber(self, raw["topics"]["image"])
@@ -196,11 +196,16 @@ class VisionNode(LeanNode):
     def _deadline(self) -> float:
         return time.monotonic() + self.config.raw["timeouts"]["request_s"]
 
-    def _segment(self, frame: CameraFrame) -> list[Detection]:
+    def _segment(self, frame: CameraFrame, doubtful: bool = False) -> list[Detection]:
+        """The frame's detections scoring ``min_score`` or more; with ``doubtful`` down to the
+        second look's score too (InspectPart's strut decides which it looks at again)."""
         try:
-            return self.segmenter.detect(frame)
+            detections = self.segmenter.detect(frame)
         except ValueError as exc:
             raise NoFrame(f"segmentation failed: {exc}") from exc
+        if doubtful:
+            return detections
+        return [d for d in detections if d.score >= self.inspector.min_score]
 
     def _frame_streams(self) -> tuple[str, ...]:
         return ("depth", *self.segmenter.streams)
@@ -289,7 +294,7 @@ class VisionNode(LeanNode):
         try:
             camera = self._camera(camera_name)
             frame = self._grab(camera, self._frame_streams(), deadline)
-            detections = self._segment(frame)
+            detections = self._segment(frame, doubtful=True)
         except NoFrame as exc:
             return self._failed(member_id, kind, str(exc))
         report, obs = self.inspector.inspect(

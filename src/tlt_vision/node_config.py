@@ -54,6 +54,7 @@ SCHEMA = {
             "source": Field("str", choices=SEGMENTATION_SOURCES),
             "weights": opt("str", ""),
             "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
+            "second_look_score": opt("float", None, minimum=0.0, maximum=1.0),
         },
     ),
     "detectors": Field("dict", schema={name: Field("str", doc="weights file (.pt)") for name in MODEL_NAMES}),
@@ -220,6 +221,12 @@ class VisionConfig:
             "detached": Detached(**raw["detached"]),
         }
 
+    @property
+    def score_floor(self) -> float:
+        """The lowest score a segmenter keeps: ``second_look_score`` when set, else ``min_score``."""
+        seg = self.raw["segmentation"]
+        return seg["min_score"] if seg["second_look_score"] is None else seg["second_look_score"]
+
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])
 
@@ -244,6 +251,9 @@ def _check(raw: dict[str, Any], source: str) -> None:
         raise ConfigError(source, "part_depth_range", f"expected 0 <= near < far, got [{near}, {far}]")
     if raw["segmentation"]["source"] == "mask_rcnn" and not raw["segmentation"]["weights"]:
         raise ConfigError(source, "segmentation.weights", "mask_rcnn needs a weights file")
+    low, least = raw["segmentation"]["second_look_score"], raw["segmentation"]["min_score"]
+    if low is not None and low > least:
+        raise ConfigError(source, "segmentation.second_look_score", f"{low} is above min_score {least}")
 
 
 def config_from_dict(data: Any, source: str = "<vision config>") -> VisionConfig:

@@ -24,6 +24,7 @@ planning scene with the frame held.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 from pathlib import Path
 
@@ -36,7 +37,7 @@ from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.inspection import inspect_cross_frame, inspect_strut
-from tlt_vision.node_config import load_config
+from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import TwinLabels
 
@@ -262,3 +263,64 @@ def test_a_held_tube_seen_as_two_detections_is_posed_as_one(held_strut, inspecto
     )
     assert report.passed, report.reasons
     assert sum(o.object_class == "strut_tube" for o in obs) == 1
+
+
+def _blind(inspector: PartInspector) -> PartInspector:
+    """The same inspector without a second look."""
+    raw = copy.deepcopy(inspector.config.raw)
+    raw["segmentation"]["second_look_score"] = None
+    return PartInspector(VisionConfig(raw, inspector.config.source), inspector.mission, inspector.estimators)
+
+
+def test_a_fitting_scored_under_min_score_is_found_by_the_second_look(held_strut, inspector):
+    """Mask R-CNN scores a held vertical's fitting beside the rivet gun under min_score now and
+    then: scored between second_look_score and min_score, it is posed where the certified tube
+    misses a fitting, and the good strut passes. Without a second look, or scored under
+    second_look_score, the strut fails for it."""
+    _, camera, kind, _, part, frame = held_strut
+    seg = inspector.config.raw["segmentation"]
+    fitting = f"{part.body}/fitting_a"
+
+    def decide(score: float, by: PartInspector = inspector):
+        detections = [
+            replace(d, score=score) if d.object_id == fitting else d for d in _detections(frame, camera)
+        ]
+        return by.inspect(f"bay1/{kind}", kind, detections, frame.depth, frame.intrinsics, frame.rgb)
+
+    doubtful = (seg["second_look_score"] + seg["min_score"]) / 2
+    report, obs = decide(doubtful)
+    assert report.passed, report.reasons
+    assert fitting in {o.object_id for o in obs}
+    for report, _ in (decide(doubtful, _blind(inspector)), decide(seg["second_look_score"] / 2)):
+        assert not report.passed
+        assert any(r.startswith("missing end fitting") for r in report.reasons), report.reasons
+
+
+def test_the_second_look_does_not_take_the_tube_end_for_a_missing_fitting(held_strut, inspector):
+    """A strut missing a fitting, with a doubtful end fitting detection on its bare tube end next
+    to where the fitting should be (what Mask R-CNN might offer there): the tube's end may fit the
+    fitting model, but not at the fitting's place, and the strut still fails for the missing one."""
+    _, camera, kind, scene, part, frame = held_strut
+    pos, rot = scene.body_pose(part.body)
+    end = frame.rotation.T @ (pos + rot @ part.ends["a"] - frame.position)
+    k = frame.intrinsics
+    v, u = np.indices(frame.depth.shape)
+    z = frame.depth
+    points = np.stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z], axis=-1)
+    # The fitting is 7.5 cm long: the tube's 3 cm next to it.
+    near_end = np.linalg.norm(points - end, axis=-1) < 0.105
+    detections = []
+    for d in _detections(frame, camera):
+        if d.object_id == f"{part.body}/tube":
+            tube_end = d.mask & near_end
+            bare = replace(d, object_class="end_fitting", mask=tube_end, score=0.2, object_id="end")
+            detections.append(bare)
+        if d.object_id != f"{part.body}/fitting_a":
+            detections.append(d)
+    assert tube_end.sum() >= 50, tube_end.sum()  # the bare end is in view
+    report, obs = inspector.inspect(
+        f"bay1/{kind}", kind, detections, frame.depth, frame.intrinsics, frame.rgb
+    )
+    assert not report.passed
+    assert any(r.startswith("missing end fitting") for r in report.reasons), report.reasons
+    assert "end" not in {o.object_id for o in obs}

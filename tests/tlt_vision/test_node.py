@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -230,6 +231,39 @@ def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     )
 
 
+def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_them(rig):
+    """Fittings scored between second_look_score and min_score (Mask R-CNN's, here the twin's
+    labels rescored): InspectPart poses them where the certified tube misses its fittings, and
+    the good strut passes; the node's other requests get only detections scoring min_score."""
+    labels = rig.vision.segmenter
+    seg = rig.vision.config.raw["segmentation"]
+    doubtful = (seg["second_look_score"] + seg["min_score"]) / 2
+
+    class Rescored:
+        streams = labels.streams
+
+        @staticmethod
+        def detect(frame):
+            dets = labels.detect(frame)
+            return [replace(d, score=doubtful) if d.object_class == "end_fitting" else d for d in dets]
+
+    rig.vision.segmenter = Rescored()
+    try:
+        _show(rig, "vertical_dispenser_x/2")
+        good = rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+        ).report
+        assert good.passed, list(good.reasons)
+        assert sorted(p.object_class for p in good.poses) == ["end_fitting", "end_fitting", "strut_tube"]
+        frame = rig.vision._grab("zed_1", rig.vision._frame_streams(), rig.vision._deadline())
+        assert not [d for d in rig.vision._segment(frame) if d.object_class == "end_fitting"]
+        assert [d for d in rig.vision._segment(frame, doubtful=True) if d.object_class == "end_fitting"]
+    finally:
+        rig.vision.segmenter = labels
+
+
 def test_a_part_out_of_view_fails_with_that_reason(rig):
     rig.twin.do(
         lambda s: [
@@ -388,6 +422,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "segmentation.source" in err and "'labels'" in err
+    wrong = vision_config()
+    wrong["segmentation"].update(min_score=0.3, second_look_score=0.4)
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.second_look_score" in err and "above min_score 0.3" in err
     missing = vision_config()
     missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
     path.write_text(__import__("yaml").safe_dump(missing))
