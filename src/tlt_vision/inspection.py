@@ -30,6 +30,9 @@ import numpy as np
 from tlt_vision.cad.models import strut_layout
 from tlt_vision.pose.estimator import PoseEstimate
 
+# How far along its own axis a tube's pose alone may be off (m): its ends are inside the fittings.
+TUBE_AXIAL_UNCERTAINTY = 0.015
+
 
 @dataclass(frozen=True)
 class Observation:
@@ -190,6 +193,14 @@ def _on_tube(
         # seen only to a few millimetres; with both fittings found, their midpoint fixes it.
         mid = (np.asarray(fittings[0].translation) + np.asarray(fittings[1].translation)) / 2
         centre = centre + float((mid - centre) @ axis) * axis
+    elif len(fittings) == 1:
+        # One fitting fixes it as well, when it lies within what the tube alone tells: read
+        # against the tube alone, a good fitting was "out of place" by 5-11 mm along the axis,
+        # and the missing one's place as far off.
+        axial = float((np.asarray(fittings[0].translation) - centre) @ axis)
+        slip = axial - math.copysign(offset, axial)
+        if abs(slip) <= TUBE_AXIAL_UNCERTAINTY:
+            centre = centre + slip * axis
     found: dict[str, PoseEstimate] = {}
     for f in fittings:
         rel = np.asarray(f.translation) - centre

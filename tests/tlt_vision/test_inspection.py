@@ -130,6 +130,30 @@ def test_missing_end_fitting_caught(end):
     assert np.linalg.norm(got - where) < 0.005
 
 
+@pytest.mark.parametrize("slip", [-0.012, 0.012])
+def test_one_fitting_fixes_the_tube_along_its_axis_but_not_one_slid_further(slip):
+    """A tube alone is seen a centimetre off along its axis: with one fitting found, the fitting
+    places it, so the strut fails only for the missing one, at its place. A fitting slid further
+    along the tube than that is out of place."""
+    obs = _strut(np.random.default_rng(1), missing="a")
+    tube = obs[0].estimate
+    axis = STRUT_R[:, 2]
+    off = dataclasses.replace(tube, translation=tube.translation + slip * axis)
+    obs[0] = dataclasses.replace(obs[0], estimate=off)
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert len(rep.reasons) == 1 and rep.reasons[0].startswith("missing end fitting: 1 of 2"), rep.reasons
+    lay = strut_layout(LENGTH, PARTS)
+    where = STRUT_R @ [0.0, 0.0, lay["fitting_a"]] + STRUT_T
+    got = np.array([float(v) for v in rep.reasons[0].split("(")[1].split(")")[0].split(",")])
+    assert np.linalg.norm(got - where) < 0.003
+
+    fitting = obs[1].estimate
+    slid = dataclasses.replace(fitting, translation=fitting.translation - 0.04 * axis)
+    rep = inspect_strut("s", "vertical", LENGTH, [obs[0], Observation("end_fitting", slid)], PARTS, TOL)
+    assert any(r.startswith("end fitting out of place") for r in rep.reasons), rep.reasons
+    assert any(r.startswith("missing end fitting: 0 of 2") for r in rep.reasons), rep.reasons
+
+
 def test_one_fitting_seen_twice_is_one_fitting_but_a_third_is_not():
     """Two overlapping masks of one fitting give two certified poses of it a millimetre apart
     (Mask R-CNN on a held strut); an extra fitting a fitting's length away is still a defect."""
