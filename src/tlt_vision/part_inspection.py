@@ -16,7 +16,8 @@ pixels of its main class (a cross frame's sides, a strut's tube), kept to ``reac
 main instance. Other parts in view, however close in the image (the lifter's top cross frame below
 a held one, the rest of a dispenser's stack behind it, a few pixels of a fitting in a rack beside a
 held strut), stay out of it as long as they do not touch it. A strut is one tube: a group of
-several (struts of the tower in view, joined at their joints) is not the strut presented. Without
+several (struts of the tower in view, joined at their joints) is not the strut presented, while
+pieces of one tube (along one line, or end to end at a bend) count once. Without
 a ``gap`` the biggest main instance is the anchor and every instance within ``reach`` of its
 centre is taken.
 
@@ -34,6 +35,7 @@ the fitting model but not there), so it still fails.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -160,15 +162,18 @@ def select_part(
 
 # Points of one straight tube lie within its radius (12.5 mm) of the line through its cloud.
 _ONE_LINE = 0.02  # m, 95th percentile of the points' distances from that line
+# A bent tube's two halves meet at its bend (the twin bends them 3-12 deg); a lifted bay's vertical
+# and diagonal meet at 45 deg.
+_BEND = np.radians(20.0)
 
 
 def _lines(group: list[_Instance], anchor: str) -> list[list[_Instance]]:
-    """The ``anchor`` instances of ``group``, those along one straight line together: Mask R-CNN
-    split a held diagonal's tube into two detections, which are not two tubes (a lifted bay's
-    vertical and diagonal, riveted end to end, are)."""
+    """The ``anchor`` instances of ``group``, those of one tube together: along one straight line
+    (Mask R-CNN split a held diagonal's tube into two detections) or end to end at a bend (a bent
+    tube split there). A lifted bay's vertical and diagonal, riveted end to end, are two."""
     lines: list[list[_Instance]] = []
     for inst in (i for i in group if i.detection.object_class == anchor):
-        along = (line for line in lines if _one_line(np.vstack([i.points for i in line]), inst.points))
+        along = (line for line in lines if _one_tube(np.vstack([i.points for i in line]), inst.points))
         line = next(along, None)
         if line is None:
             lines.append([inst])
@@ -177,12 +182,26 @@ def _lines(group: list[_Instance], anchor: str) -> list[list[_Instance]]:
     return lines
 
 
-def _one_line(a: np.ndarray, b: np.ndarray) -> bool:
-    p = np.vstack([a, b])
-    centred = p - p.mean(axis=0)
+def _one_tube(a: np.ndarray, b: np.ndarray) -> bool:
+    if _straightness(np.vstack([a, b]))[1] <= _ONE_LINE:
+        return True
+    (ua, off_a), (ub, off_b) = _straightness(a), _straightness(b)
+    if max(off_a, off_b) > _ONE_LINE or math.acos(min(1.0, abs(float(ua @ ub)))) > _BEND:
+        return False
+    # End to end, not side by side: along their common direction they barely overlap.
+    u = ua if float(ua @ ub) >= 0 else -ua
+    u = (u + ub) / np.linalg.norm(u + ub)
+    pa, pb = a @ u, b @ u
+    return min(pa.max(), pb.max()) - max(pa.min(), pb.min()) <= _ONE_LINE
+
+
+def _straightness(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """The direction of the line through ``points`` and the 95th percentile of their distances
+    from it (m)."""
+    centred = points - points.mean(axis=0)
     axis = np.linalg.svd(centred, full_matrices=False)[2][0]
     off = np.linalg.norm(centred - np.outer(centred @ axis, axis), axis=1)
-    return float(np.percentile(off, 95)) <= _ONE_LINE
+    return axis, float(np.percentile(off, 95))
 
 
 def _pixels(i: _Instance) -> int:

@@ -122,3 +122,30 @@ def test_a_held_tube_in_two_pieces_is_one_tube_and_its_far_fitting_within_reach(
     assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
         "held/fitting_a", "held/fitting_b", "held/tube_0", "held/tube_1"
     ]
+
+
+def _slanted(row: int, cols: range, degrees: float, half_width: int = 2) -> np.ndarray:
+    """A tube's mask rising ``degrees`` from ``row`` over ``cols``."""
+    m = np.zeros((100, 100), dtype=bool)
+    for c in cols:
+        r = round(row - (c - cols.start) * np.tan(np.radians(degrees)))
+        m[r - half_width : r + half_width, c] = True
+    return m
+
+
+def test_a_bent_tube_split_at_its_bend_is_one_tube():
+    """Mask R-CNN can split a bent held tube at its bend, the two pieces off one straight line
+    (a held diagonal bent 12 degrees: its ends 4 cm off the line through both pieces): they meet
+    end to end at a few degrees, one bent tube, so the held strut is still the part inspected (and
+    fails as bent), not passed over as two tubes for a racked strut."""
+    held = (
+        ("strut_tube", _mask(slice(58, 62), slice(5, 50)), 0.85, "held/tube_0"),  # 180 pixels
+        ("strut_tube", _slanted(60, range(50, 95), 12.0), 0.85, "held/tube_1"),
+        ("end_fitting", _mask(slice(57, 63), slice(0, 5)), 0.85, "held/fitting_a"),
+    )
+    racked = ("strut_tube", _mask(slice(90, 92), slice(20, 80)), 1.0, "racked/tube")  # 120 pixels
+    dets, depth = _frame(*held, racked)
+    args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.55, (0.15, 2.0), 20)
+    assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
+        "held/fitting_a", "held/tube_0", "held/tube_1"
+    ]
