@@ -16,7 +16,7 @@ figures against the goals.
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
         [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--second-look S]
-        [--no-self-filter] [--threads 2]
+        [--no-closer] [--no-self-filter] [--threads 2]
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -35,7 +36,7 @@ from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import VisionConfig, load_config
-from tlt_vision.part_inspection import PartInspector
+from tlt_vision.part_inspection import LookCloser, PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside
 from tlt_vision.train.render_dataset import ARMS, inspection_joints
@@ -125,23 +126,45 @@ def without_own_ee(scene, frame, ee_filter: EeSelfFilter) -> np.ndarray:
     return drop_inside(frame.depth, frame.intrinsics, placed, ee_filter.margin)[0]
 
 
-def detector(kind: str, weights: str | None = None, config: VisionConfig | None = None):
-    """Detections of a rendered frame: the twin's labels, or Mask R-CNN (``weights``, by default
-    the configured ones) down to the ``config``'s score floor, as the vision node segments for
-    InspectPart."""
+@dataclass(frozen=True)
+class Segmentation:
+    """Detections of a rendered frame as the vision node makes them for InspectPart: the twin's
+    labels, or Mask R-CNN down to the configuration's score floor, with its closer look at a
+    region of the frame (``segmentation.second_look_closer``)."""
+
+    segmenter: Any = None  # MaskRcnnSegmenter; None for the twin's labels
+    scale: float | None = None
+
+    def __call__(self, frame, camera: str):
+        if self.segmenter is None:
+            return TwinLabels.detect_render(frame, camera)
+        return self.segmenter.detect(self._frame(frame, camera))
+
+    def closer(self, frame, camera: str) -> LookCloser | None:
+        if self.segmenter is None or self.scale is None:
+            return None
+        whole = self._frame(frame, camera)
+        return lambda region: self.segmenter.detect_in(whole, region, self.scale)
+
+    @staticmethod
+    def _frame(frame, camera: str) -> CameraFrame:
+        k = frame.intrinsics
+        return CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, {"rgb": frame.rgb})
+
+
+def detector(kind: str, weights: str | None = None, config: VisionConfig | None = None) -> Segmentation:
+    """The twin's labels, or Mask R-CNN (``weights``, by default the configured ones) as the
+    ``config`` (by default config/vision/node.yaml) sets it up."""
     if kind == "twin":
-        return TwinLabels.detect_render
+        return Segmentation()
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     config = config or load_config()
-    segmenter = MaskRcnnSegmenter(weights or config.raw["segmentation"]["weights"], config.score_floor)
-
-    def detect(frame, camera: str):
-        k = frame.intrinsics
-        images = {"rgb": frame.rgb}
-        return segmenter.detect(CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images))
-
-    return detect
+    seg = config.raw["segmentation"]
+    closer = seg["second_look_closer"]
+    return Segmentation(
+        MaskRcnnSegmenter(weights or seg["weights"], config.score_floor), closer["scale"] if closer else None
+    )
 
 
 def run(args: argparse.Namespace) -> list[Presented]:
@@ -158,6 +181,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
         seg["second_look_score"] = args.second_look or None
     if (seg["second_look_score"] or 0.0) > seg["min_score"]:  # a --min-score under it: no second look
         seg["second_look_score"] = None
+    if not args.closer:
+        seg["second_look_closer"] = None
     inspector = PartInspector(config, mission)
     ee_filter = EeSelfFilter.from_config(config.raw["ee_self_filter"])
     detect = detector(args.segmentation, args.weights, config)
@@ -181,7 +206,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
                 report, _ = inspector.inspect(
-                    f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb
+                    f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb,
+                    detect.closer(frame, camera),
                 )
                 defect = defect_label(scen.defects.get(name))
                 results.append(Presented(name, arm, defect, report.passed, tuple(report.reasons)))
@@ -239,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--min-score", type=float, help="Mask R-CNN's (default: config/vision/node.yaml's)")
     parser.add_argument("--second-look", type=float,
                         help="second_look_score, 0 for none (default: config/vision/node.yaml's)")
+    parser.add_argument("--closer", action=argparse.BooleanOptionalAction, default=True,
+                        help="the second look's closer look at a region (Mask R-CNN), as configured")
     parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
                         help="take the end effectors out of the depth first, as the vision node does")
     parser.add_argument("--threads", type=int, default=2)

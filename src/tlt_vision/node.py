@@ -62,7 +62,7 @@ from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
-from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
+from tlt_vision.part_inspection import STRUT_KINDS, LookCloser, PartInspector
 from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
@@ -298,10 +298,19 @@ class VisionNode(LeanNode):
         except NoFrame as exc:
             return self._failed(member_id, kind, str(exc))
         report, obs = self.inspector.inspect(
-            member_id, kind, detections, self._without_own_ee(frame), frame.intrinsics, frame.get("rgb")
+            member_id, kind, detections, self._without_own_ee(frame), frame.intrinsics, frame.get("rgb"),
+            self._closer(frame),
         )
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return self._report_msg(report, frame.stamp, frame.frame_id, ids)
+
+    def _closer(self, frame: CameraFrame) -> LookCloser | None:
+        """The strut's closer look at a region of ``frame`` (``segmentation.second_look_closer``):
+        Mask R-CNN only; the twin's labels leave nothing unseen to look for."""
+        closer = self.config.raw["segmentation"]["second_look_closer"]
+        if closer is None or not hasattr(self.segmenter, "detect_in"):
+            return None
+        return lambda region: self.segmenter.detect_in(frame, region, closer["scale"])
 
     def _without_own_ee(self, frame: CameraFrame) -> np.ndarray | None:
         """The frame's depth with the arms' end effectors taken out (:mod:`tlt_vision.self_filter`):

@@ -55,6 +55,14 @@ SCHEMA = {
             "weights": opt("str", ""),
             "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
             "second_look_score": opt("float", None, minimum=0.0, maximum=1.0),
+            "second_look_closer": opt(
+                "dict",
+                None,
+                schema={
+                    "size": Field("float", minimum=0.01, maximum=2.0, doc="region edge at the place, m"),
+                    "scale": Field("float", minimum=1.0, maximum=8.0, doc="how much it is enlarged"),
+                },
+            ),
         },
     ),
     "detectors": Field("dict", schema={name: Field("str", doc="weights file (.pt)") for name in MODEL_NAMES}),

@@ -25,12 +25,15 @@ Only detections scoring ``segmentation.min_score`` or more are the part. A strut
 missing end fitting gets a second look (``segmentation.second_look_score``): the end fitting
 detections scoring between the two, and only those whose cloud lies where the certified tube puts
 a missing fitting (within ``part_gap`` and the fitting's half size), are posed, and the strut is
-decided again with those certified. It passes if it now passes; otherwise the first decision
-stands, with the reasons of what was seen with confidence. Mask R-CNN scores a held vertical's
-fitting beside the rivet gun under 0.3 now and then; lowering ``min_score`` for every detection
-instead poses every low-scored piece of every frame (9 % more frame time at 0.2). A strut missing
-a fitting has none to certify at its place (its bare tube end, the fitting's length away, may fit
-the fitting model but not there), so it still fails.
+decided again with those certified. If it still fails, and the caller can segment a region of
+the frame again (``closer``: Mask R-CNN on a crop about each missing fitting's place, enlarged,
+``segmentation.second_look_closer``), the end fittings found there are posed and counted the
+same way. It passes if it now passes; otherwise the first decision stands, with the reasons of
+what was seen with confidence. Mask R-CNN scores a held vertical's fitting beside the rivet gun
+under 0.3 now and then, or misses it in the whole frame; lowering ``min_score`` for every
+detection instead poses every low-scored piece of every frame (9 % more frame time at 0.2). A
+strut missing a fitting has none to certify at its place (its bare tube end, the fitting's length
+away, may fit the fitting model but not there), so it still fails.
 """
 
 from __future__ import annotations
@@ -54,6 +57,9 @@ from tlt_vision.train.c3po_supervised import load_detector
 from tlt_vision.weights import WeightsError, read_manifest
 
 STRUT_KINDS = ("vertical", "diagonal")
+Region = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels, x1 and y1 past the last
+# Segments one region of the frame again, enlarged, into detections with full-frame masks.
+LookCloser = Callable[[Region], list[Detection]]
 # Points per instance used to measure how far apart two instances are (a subsample: the gaps
 # looked for are centimetres, the masks thousands of pixels).
 _GAP_POINTS = 400
@@ -250,6 +256,8 @@ class PartInspector:
         seg = config.raw["segmentation"]
         self.min_score: float = seg["min_score"]
         self.second_look_score: float | None = seg["second_look_score"]
+        closer = seg["second_look_closer"]
+        self.closer_size: float | None = closer["size"] if closer else None
         self.parts = load_parts()
         self.tol = inspection.Tolerances.from_mission(mission)
         self.estimators = estimators if estimators is not None else load_estimators(config, mission)
@@ -330,9 +338,11 @@ class PartInspector:
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
+        closer: LookCloser | None = None,
     ) -> tuple[inspection.InspectionReport, list[inspection.Observation]]:
         """InspectPart's decision for a strut (vertical, diagonal) or a cross frame in one frame;
-        ``detections`` may hold those scoring under ``min_score`` for the second look."""
+        ``detections`` may hold those scoring under ``min_score`` for the second look, and
+        ``closer`` segments a region of the frame again, enlarged (the module docstring)."""
         confident = [d for d in detections if d.score >= self.min_score]
         part = self.select(kind, confident, depth, intrinsics)
         obs = self.observe(kind, part, depth, intrinsics, rgb)
@@ -341,40 +351,57 @@ class PartInspector:
             return report, obs
         length = self.mission.strut_lengths[kind]
         report = inspection.inspect_strut(member_id, kind, length, obs, self.parts, self.tol)
-        if not report.passed:
-            seen = self._second_look(kind, length, obs, detections, depth, intrinsics, rgb)
+        floor = self.second_look_score
+        places = (
+            inspection.missing_fitting_places(length, obs, self.parts, self.tol)
+            if not report.passed and floor is not None
+            else np.zeros((0, 3))
+        )
+        if not len(places):
+            return report, obs
+        looks: list[Callable[[], list[Detection]]] = [
+            lambda: [d for d in detections if floor <= d.score < self.min_score]
+        ]
+        if closer is not None and self.closer_size is not None:
+            looks.append(lambda: [d for p in places for d in closer(self._region(p, intrinsics, depth))])
+        seen: list[inspection.Observation] = []
+        for look in looks:
+            seen += self._fittings_at(kind, places, look(), depth, intrinsics, rgb)
             again = inspection.inspect_strut(member_id, kind, length, [*obs, *seen], self.parts, self.tol)
             # Only to pass a good strut: a failure keeps the reasons of what was seen with confidence.
             if seen and again.passed:
                 return again, [*obs, *seen]
         return report, obs
 
-    def _second_look(
+    def _fittings_at(
         self,
         kind: str,
-        length: float,
-        obs: list[inspection.Observation],
-        detections: Sequence[Detection],
+        places: np.ndarray,
+        candidates: Sequence[Detection],
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None,
     ) -> list[inspection.Observation]:
-        """Certified end fittings among the detections scored from ``second_look_score`` to under
-        ``min_score`` whose clouds lie where the strut's certified tube misses one (module
-        docstring); none without a second look configured, a certified tube or a place."""
-        floor = self.second_look_score
-        if floor is None:
-            return []
-        doubtful = [
-            d for d in detections if d.object_class == "end_fitting" and floor <= d.score < self.min_score
-        ]
-        places = inspection.missing_fitting_places(length, obs, self.parts, self.tol) if doubtful else []
-        if not len(places):
-            return []
+        """Certified end fittings among ``candidates`` whose clouds lie at one of ``places``
+        (within ``part_gap`` and the fitting's half size)."""
+        floor = self.second_look_score or 0.0
+        fittings = [d for d in candidates if d.object_class == "end_fitting" and d.score >= floor]
         radius = self.config.raw["part_gap"] + self.estimators["end_fitting"].model.diameter / 2
-        near = detections_near(doubtful, depth, intrinsics, np.eye(4), places, radius)
-        seen = self.observe(kind, near, depth, intrinsics, rgb)
+        near = detections_near(fittings, depth, intrinsics, np.eye(4), places, radius)
+        seen = self.observe(kind, near, depth, intrinsics, rgb) if near else []
         return [o for o in seen if o.estimate is not None and o.estimate.certified]
 
+    def _region(self, place: np.ndarray, intrinsics: PinholeIntrinsics, depth: np.ndarray | None) -> Region:
+        """The pixel box (x0, y0, x1, y1) about ``place`` (camera frame), ``closer_size`` (m)
+        wide at its depth and of the frame's shape (the model was trained on whole frames), within
+        the frame."""
+        h, w = depth.shape if depth is not None else (0, 0)
+        u = intrinsics.fx * place[0] / place[2] + intrinsics.cx
+        v = intrinsics.fy * place[1] / place[2] + intrinsics.cy
+        hu = intrinsics.fx * self.closer_size / place[2] / 2
+        hv = hu * h / max(w, 1)
+        x0, y0 = int(max(0, u - hu)), int(max(0, v - hv))
+        return x0, y0, int(min(w, np.ceil(u + hu))), int(min(h, np.ceil(v + hv)))
 
-__all__ = ["STRUT_KINDS", "PartInspector", "load_estimators", "select_part"]
+
+__all__ = ["STRUT_KINDS", "LookCloser", "PartInspector", "Region", "load_estimators", "select_part"]

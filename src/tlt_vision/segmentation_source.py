@@ -17,9 +17,11 @@ labels received, no image).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from tlt_vision.cad.models import CLASSES
@@ -80,6 +82,32 @@ class MaskRcnnSegmenter:
             raise ValueError("no RGB image")
         result = detect_rgb(self.model, rgb, self.max_size)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
+
+    def detect_in(
+        self, frame: CameraFrame, region: tuple[int, int, int, int], scale: float
+    ) -> list[Detection]:
+        """Detections in ``region`` (x0, y0, x1, y1 pixels) of the frame's RGB, enlarged ``scale``
+        times first (a part too small or too cluttered for the whole frame), with masks of the
+        whole frame's size."""
+        from tlt_vision.segmentation.inference import detect_rgb
+
+        rgb = frame.get("rgb")
+        if rgb is None:
+            return []
+        h, w = rgb.shape[:2]
+        x0, y0, x1, y1 = max(0, region[0]), max(0, region[1]), min(w, region[2]), min(h, region[3])
+        if x1 <= x0 or y1 <= y0:
+            return []
+        crop = rgb[y0:y1, x0:x1]
+        size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
+        result = detect_rgb(self.model, cv2.resize(crop, size, interpolation=cv2.INTER_LINEAR), None)
+        out = []
+        for d in detections_from_mask_rcnn(result, self.cfg.classes, self.min_score):
+            small = cv2.resize(d.mask.astype(np.uint8), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+            mask = np.zeros(rgb.shape[:2], dtype=bool)
+            mask[y0:y1, x0:x1] = small >= 0.5
+            out.append(replace(d, mask=mask))
+        return out
 
 
 __all__ = ["MASK_RCNN_KIND", "MaskRcnnSegmenter", "TwinLabels"]

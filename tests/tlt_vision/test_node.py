@@ -264,6 +264,44 @@ def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_
         rig.vision.segmenter = labels
 
 
+def test_inspect_part_looks_closer_where_the_frame_showed_no_fitting(rig):
+    """A segmenter that finds no end fitting in the whole frame and finds them in the regions it
+    is asked to look at again (Mask R-CNN's closer look): InspectPart asks it at the configured
+    scale, and the good strut passes on what it finds there."""
+    labels = rig.vision.segmenter
+    scale = rig.vision.config.raw["segmentation"]["second_look_closer"]["scale"]
+    asked = []
+
+    class Closer:
+        streams = labels.streams
+
+        @staticmethod
+        def detect(frame):
+            return [d for d in labels.detect(frame) if d.object_class != "end_fitting"]
+
+        @staticmethod
+        def detect_in(frame, region, at):
+            asked.append(at)
+            x0, y0, x1, y1 = region
+            inside = np.zeros(frame.get("depth").shape, dtype=bool)
+            inside[y0:y1, x0:x1] = True
+            fittings = [d for d in labels.detect(frame) if d.object_class == "end_fitting"]
+            return [replace(d, mask=d.mask & inside) for d in fittings if (d.mask & inside).any()]
+
+    rig.vision.segmenter = Closer()
+    try:
+        _show(rig, "vertical_dispenser_x/2")
+        good = rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+        ).report
+    finally:
+        rig.vision.segmenter = labels
+    assert good.passed, list(good.reasons)
+    assert asked and set(asked) == {scale}
+
+
 def test_a_part_out_of_view_fails_with_that_reason(rig):
     rig.twin.do(
         lambda s: [

@@ -122,6 +122,18 @@ def test_saved_weights_load_in_the_node_and_a_mismatched_manifest_is_refused(run
     assert max(dets, key=lambda d: d.score).object_class == "corner_joint"
     iou = max((d.mask & sample.masks[0]).sum() / (d.mask | sample.masks[0]).sum() for d in dets)
     assert iou > 0.5
+    # A region of the frame looked at again (the strut's second look), as it is and enlarged:
+    # masks of the whole frame's size, nothing outside the region, the part found where it is.
+    rows, cols = np.nonzero(sample.masks[0])
+    region = (max(0, cols.min() - 8), max(0, rows.min() - 8), cols.max() + 9, rows.max() + 9)
+    closer = seg.detect_in(frame, region, 1.0)
+    x0, y0, x1, y1 = region
+    inside = np.zeros((SIZE, SIZE), dtype=bool)
+    inside[y0:y1, x0:x1] = True
+    assert closer and all(d.mask.shape == (SIZE, SIZE) and not (d.mask & ~inside).any() for d in closer)
+    assert max((d.mask & sample.masks[0]).sum() / (d.mask | sample.masks[0]).sum() for d in closer) > 0.5
+    enlarged = seg.detect_in(frame, region, 2.0)
+    assert all(d.mask.shape == (SIZE, SIZE) and not (d.mask & ~inside).any() for d in enlarged)
 
     for key, value, reason in (("classes", list(reversed(CLASSES)), "classes"),
                                ("kind", "c3po_detector", "expected 'mask_rcnn'")):  # fmt: skip
