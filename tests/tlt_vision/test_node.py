@@ -11,6 +11,7 @@ node runs on sim time.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import queue
 import signal
@@ -231,6 +232,23 @@ def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     )
 
 
+@contextlib.contextmanager
+def _segmenting_with(rig: Rig, segmenter):
+    """The node segmenting with ``segmenter`` (as Mask R-CNN would, from the twin's labels), and
+    a good vertical before zed_1; yields InspectPart's report on it."""
+    labels = rig.vision.segmenter
+    rig.vision.segmenter = segmenter
+    try:
+        _show(rig, "vertical_dispenser_x/2")
+        yield rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+        ).report
+    finally:
+        rig.vision.segmenter = labels
+
+
 def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_them(rig):
     """Fittings scored between second_look_score and min_score (Mask R-CNN's, here the twin's
     labels rescored): InspectPart poses them where the certified tube misses its fittings, and
@@ -247,21 +265,12 @@ def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_
             dets = labels.detect(frame)
             return [replace(d, score=doubtful) if d.object_class == "end_fitting" else d for d in dets]
 
-    rig.vision.segmenter = Rescored()
-    try:
-        _show(rig, "vertical_dispenser_x/2")
-        good = rig.call(
-            InspectPart,
-            ros_names.VISION_INSPECT_PART,
-            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
-        ).report
+    with _segmenting_with(rig, Rescored()) as good:
         assert good.passed, list(good.reasons)
         assert sorted(p.object_class for p in good.poses) == ["end_fitting", "end_fitting", "strut_tube"]
         frame = rig.vision._grab("zed_1", rig.vision._frame_streams(), rig.vision._deadline())
         assert not [d for d in rig.vision._segment(frame) if d.object_class == "end_fitting"]
         assert [d for d in rig.vision._segment(frame, doubtful=True) if d.object_class == "end_fitting"]
-    finally:
-        rig.vision.segmenter = labels
 
 
 def test_inspect_part_looks_closer_where_the_frame_showed_no_fitting(rig):
@@ -288,17 +297,8 @@ def test_inspect_part_looks_closer_where_the_frame_showed_no_fitting(rig):
             fittings = [d for d in labels.detect(frame) if d.object_class == "end_fitting"]
             return [replace(d, mask=d.mask & inside) for d in fittings if (d.mask & inside).any()]
 
-    rig.vision.segmenter = Closer()
-    try:
-        _show(rig, "vertical_dispenser_x/2")
-        good = rig.call(
-            InspectPart,
-            ros_names.VISION_INSPECT_PART,
-            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
-        ).report
-    finally:
-        rig.vision.segmenter = labels
-    assert good.passed, list(good.reasons)
+    with _segmenting_with(rig, Closer()) as good:
+        assert good.passed, list(good.reasons)
     assert asked and set(asked) == {scale}
 
 
