@@ -53,8 +53,8 @@ def test_jittered_presentations_of_a_good_and_a_defective_strut_are_decided_righ
 
 
 def test_the_shipped_mask_rcnn_passes_good_held_struts_and_catches_a_missing_fitting(bench):
-    """As the vision node would run on Mask R-CNN (node.yaml's weights and min_score, the end
-    effectors filtered out): a good vertical and a good diagonal in ARS X's closed jaws pass (the
+    """As the vision node would run on Mask R-CNN (node.yaml's weights, scores and second look, the
+    end effectors filtered out): a good vertical and a good diagonal in ARS X's closed jaws pass (the
     vertical's fitting beside the rivet gun scores under 0.5; the diagonal's tube mask takes in the
     jaws and the floor behind), and a vertical missing a fitting fails."""
     scene_mod = pytest.importorskip("tlt_sim.model.scene")
@@ -81,9 +81,10 @@ def test_the_shipped_mask_rcnn_passes_good_held_struts_and_catches_a_missing_fit
             depth = bench.without_own_ee(scene, frame, ee_filter)
             scene.place_part(name, *home)
             kind = name.split("_")[0]
-            detections = detect(frame, bench.CAMERAS["ars_x"])
+            camera = bench.CAMERAS["ars_x"]
             decided[name], _ = inspector.inspect(
-                f"bench/{kind}", kind, detections, depth, frame.intrinsics, frame.rgb
+                f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb,
+                detect.closer(frame, camera),
             )
     assert decided[good_vertical].passed, decided[good_vertical].reasons
     assert decided[good_diagonal].passed, decided[good_diagonal].reasons
