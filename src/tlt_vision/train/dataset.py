@@ -109,6 +109,15 @@ class ImageSet:
     def __len__(self) -> int:
         return len(self.files)
 
+    @property
+    def recipe(self) -> dict[str, Any]:
+        """How the set was rendered (its index's settings: seed, size, scene mix, defects), without
+        the per-image lists, and its image count: what a weights manifest records of its data,
+        since the set's own directory is usually scratch space."""
+        settings = self.index.get("settings", {})
+        kept = {k: v for k, v in settings.items() if k not in ("scene_kinds", "defective_parts")}
+        return {**kept, "images": len(self)}
+
     def path(self, i: int) -> Path:
         """The file of image ``i``."""
         return self.root / self.files[i]

@@ -533,6 +533,7 @@ def train(args: argparse.Namespace) -> int:
                 "images": len(train_set),
                 "val_images": len(val_set) if val_set else 0,
                 "train": [str(root) for root in train_set.roots],
+                "train_recipes": [images.recipe for images in train_set.sets],
                 "val": str(val_set.root) if val_set else None,
                 "final_losses": record["train_losses"],
                 "val_map": record["val_map"],

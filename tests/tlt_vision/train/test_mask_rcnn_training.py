@@ -257,6 +257,8 @@ def test_several_training_sets_train_as_one_and_loader_workers_see_the_same_imag
         runs[name] = read_manifest(out)["extra"]["figures"]
     assert "(16 images)" in capsys.readouterr().out
     assert runs["two"]["train"] == [str(p) for p in halves] and runs["two"]["images"] == 16
+    # How each set was rendered, not only where it lay (scratch space, gone after the run).
+    assert runs["two"]["train_recipes"] == [{"half": "a", "images": 8}, {"half": "b", "images": 8}]
     one, two = (runs[n]["history"][0]["train_losses"] for n in ("one", "two"))
     assert one == pytest.approx(two, rel=1e-5)
     assert main(["--train", str(whole), "--out", str(tmp_path / "w.pt"), "--device", "nope"]) == 2
