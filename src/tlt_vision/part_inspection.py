@@ -38,6 +38,7 @@ away, may fit the fitting model but not there), so it still fails.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from collections.abc import Callable, Sequence
@@ -57,6 +58,7 @@ from tlt_vision.train.c3po_supervised import load_detector
 from tlt_vision.weights import WeightsError, read_manifest
 
 STRUT_KINDS = ("vertical", "diagonal")
+log = logging.getLogger("tlt.vision")
 Region = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels, x1 and y1 past the last
 # Segments one region of the frame again, enlarged, into detections with full-frame masks.
 LookCloser = Callable[[Region], list[Detection]]
@@ -359,17 +361,21 @@ class PartInspector:
         )
         if not len(places):
             return report, obs
-        looks: list[Callable[[], list[Detection]]] = [
-            lambda: [d for d in detections if floor <= d.score < self.min_score]
+        doubtful = [d for d in detections if floor <= d.score < self.min_score]
+        looks: list[tuple[str, Callable[[], list[Detection]]]] = [
+            (f"scored {floor} to {self.min_score}", lambda: doubtful)
         ]
         if closer is not None and self.closer_size is not None:
-            looks.append(lambda: [d for p in places for d in closer(self._region(p, intrinsics, depth))])
+            regions = [self._region(p, intrinsics, depth) for p in places]
+            looks.append(("in a closer look", lambda: [d for r in regions for d in closer(r)]))
         seen: list[inspection.Observation] = []
-        for look in looks:
+        for how, look in looks:
             seen += self._fittings_at(kind, places, look(), depth, intrinsics, rgb)
             again = inspection.inspect_strut(member_id, kind, length, [*obs, *seen], self.parts, self.tol)
             # Only to pass a good strut: a failure keeps the reasons of what was seen with confidence.
             if seen and again.passed:
+                # The report has no field for it; an engineer reading the node's log should know.
+                log.info("%s passed on a second look: %d end fitting(s) %s", member_id, len(seen), how)
                 return again, [*obs, *seen]
         return report, obs
 

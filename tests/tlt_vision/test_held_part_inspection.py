@@ -327,7 +327,7 @@ def test_the_second_look_does_not_take_the_tube_end_for_a_missing_fitting(held_s
     assert "end" not in {o.object_id for o in obs}
 
 
-def test_a_fitting_the_frame_missed_is_found_by_a_closer_look_at_its_place(held_strut, inspector):
+def test_a_fitting_the_frame_missed_is_found_by_a_closer_look_at_its_place(held_strut, inspector, caplog):
     """Mask R-CNN missed a held vertical's fitting beside the rivet gun at every score, and found
     it in the region about its place, enlarged (``segmentation.second_look_closer``): the strut's
     second look asks for that region, where the certified tube puts the missing fitting, and the
@@ -342,12 +342,14 @@ def test_a_fitting_the_frame_missed_is_found_by_a_closer_look_at_its_place(held_
         asked.append(region)
         return [missed]
 
+    caplog.set_level("INFO", logger="tlt.vision")
     without = [d for d in detections if d.object_id != fitting]
     report, obs = inspector.inspect(
         f"bay1/{kind}", kind, without, frame.depth, frame.intrinsics, frame.rgb, closer
     )
     assert report.passed, report.reasons
     assert fitting in {o.object_id for o in obs}
+    assert f"bay1/{kind} passed on a second look: 1 end fitting(s) in a closer look" in caplog.text
     # One region, about the fitting, of the frame's shape and the configured width at its depth.
     (x0, y0, x1, y1), = asked
     rows, cols = np.nonzero(missed.mask)
