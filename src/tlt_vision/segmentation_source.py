@@ -11,7 +11,9 @@
   path and the tensor shape expected).
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
-labels received, no image).
+labels received, no image). Mask R-CNN also answers ``detect_in(frame, region, scale)``: the
+detections in a region of the frame, enlarged first (a strut's second look at a missing fitting's
+place, :mod:`tlt_vision.part_inspection`).
 """
 
 from __future__ import annotations
