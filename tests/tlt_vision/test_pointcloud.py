@@ -59,6 +59,20 @@ def test_border_pixels_with_mixed_depth_are_dropped():
     assert not out.ok and out.reason == "too few points: the mask of 7 px has no pixel off its border"
 
 
+def test_a_mask_anywhere_in_the_frame_loses_its_silhouette_but_not_the_frame_edge():
+    """Only the mask's box is looked at: its points are the same wherever it lies, its silhouette
+    eroded, the frame's edge not (a part running out of the picture keeps its pixels there)."""
+    depth = np.full((40, 50), 2.0)
+    inside = np.zeros((40, 50), bool)
+    inside[10:15, 20:28] = True  # 5 x 8 px, 3 x 6 off its silhouette
+    corner = np.zeros((40, 50), bool)
+    corner[35:, 44:] = True  # 5 x 6 px in the frame's corner, 4 x 5 off its silhouette
+    for mask, rows, cols in ((inside, range(11, 14), range(21, 27)), (corner, range(36, 40), range(45, 50))):
+        out = masked_point_cloud(mask, depth, K, min_points=1)
+        pixels = {(round(u), round(v)) for u, v in project(out.points, K).tolist()}
+        assert pixels == {(u, v) for v in rows for u in cols}
+
+
 def test_max_points_and_matrix_intrinsics():
     k = Intrinsics.from_matrix(np.array([[100.0, 0, 1.5], [0, 200.0, 1.0], [0, 0, 1]]))
     assert k == K
@@ -93,3 +107,6 @@ def test_small_pieces_nothing_joins_to_the_part_are_detached_and_large_ones_are_
     scattered = np.column_stack([np.arange(30) * 0.1, np.zeros(30), np.ones(30)])
     assert detached_pieces(scattered, Detached()).sum() == 29
     assert detached_pieces(np.zeros((0, 3)), Detached()).shape == (0,)
+    # A chain of 1000 points 1 mm apart is one piece, however long.
+    chain = np.column_stack([np.arange(1000) * 0.001, np.zeros(1000), np.ones(1000)])
+    assert not detached_pieces(np.random.default_rng(0).permutation(chain), Detached()).any()

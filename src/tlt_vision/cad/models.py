@@ -107,7 +107,7 @@ class CadModel:
     def area(self) -> float:
         return float(sum(p.area() for p in self.primitives))
 
-    @property
+    @cached_property
     def diameter(self) -> float:
         """Bounding-box diagonal of a surface sample, m (the part's size for relative errors)."""
         pts, _ = self.sample(512, np.random.default_rng(0))
