@@ -19,6 +19,8 @@ from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
 from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED
 from tlt_vision.pointcloud import Detached
+from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
+from tlt_vision.pose.axial_slide import AxialSlide
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
 
@@ -88,6 +90,19 @@ SCHEMA = {
             "max_fraction": opt("float", FREE_SPACE.max_fraction, minimum=0.0, maximum=1.0),
             "window": opt("int", FREE_SPACE.window, minimum=1, maximum=31,
                           check=lambda v: None if v % 2 else "must be odd"),
+        },
+    ),
+    "axial_slide": opt(
+        "dict",
+        {"classes": [], "step": AXIAL_SLIDE.step,
+         "hidden_margin": AXIAL_SLIDE.hidden_margin, "min_gain": AXIAL_SLIDE.min_gain},
+        schema={
+            # Parts round about their model's z axis.
+            "classes": opt("list", [],
+                           item=Field("str", choices=("end_fitting", "strut_tube", "rivet"))),
+            "step": opt("float", AXIAL_SLIDE.step, minimum=0.0001, maximum=0.01),
+            "hidden_margin": opt("float", AXIAL_SLIDE.hidden_margin, minimum=0.0, maximum=0.05),
+            "min_gain": opt("float", AXIAL_SLIDE.min_gain, minimum=0.0, maximum=1.0),
         },
     ),
     "detached": opt(
@@ -219,6 +234,11 @@ class VisionConfig:
         return FreeSpace(**self.raw["free_space"])
 
     @property
+    def axial_slide(self) -> AxialSlide | None:
+        raw = self.raw["axial_slide"]
+        return AxialSlide(**{**raw, "classes": tuple(raw["classes"])}) if raw["classes"] else None
+
+    @property
     def pipeline_options(self) -> dict[str, Any]:
         """The keyword arguments of :class:`tlt_vision.pipeline.PartPipeline` this file sets."""
         raw = self.raw
@@ -227,6 +247,7 @@ class VisionConfig:
             "keep_border_below": raw["keep_border_below"],
             "free_space": self.free_space,
             "detached": Detached(**raw["detached"]),
+            "axial_slide": self.axial_slide,
         }
 
     @property

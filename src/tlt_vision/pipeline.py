@@ -16,9 +16,11 @@ learned mask's stray pixels on what lies behind the part. The classes in ``in_pi
 theirs: a cross frame's sides are pieces by design, its corner joints (another class) between
 them, and a side half hidden is a small piece of it.
 
-Every certified pose is then checked against the whole depth image (``free_space``,
-:mod:`tlt_vision.pose.free_space`): a pose that puts the model where the camera saw past it is
-not certified.
+With ``axial_slide`` (off by default), a certified pose of its classes (end fittings) is moved
+along its own axis to where its mask says the part ends (:mod:`tlt_vision.pose.axial_slide`):
+seen from the side, the cloud leaves that open. Every certified pose is then checked against the
+whole depth image (``free_space``, :mod:`tlt_vision.pose.free_space`): a pose that puts the model
+where the camera saw past it is not certified.
 
 A mask's border pixels are dropped (their depth may be what lies behind the part), except on a
 mask smaller than ``keep_border_below`` pixels: on a small corner joint (100-300 pixels at a metre)
@@ -31,7 +33,7 @@ in the twin read the floor a metre behind it).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -47,7 +49,8 @@ from tlt_vision.pointcloud import (
     detached_pieces,
     masked_point_cloud,
 )
-from tlt_vision.pose.estimator import PoseEstimator, estimate_together
+from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
+from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
 
@@ -143,11 +146,14 @@ class PartPipeline:
         keep_border_below: int = 0,
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
         detached: Detached | None = DEFAULT_DETACHED,
+        axial_slide: AxialSlide | None = None,
     ) -> None:
         self.estimators = dict(estimators)
         self.free_space = free_space
         self.detached = detached
+        self.axial_slide = axial_slide
         self._surfaces: dict[str, np.ndarray] = {}
+        self._slide_surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.keep_border_below = keep_border_below
         self.max_points = max_points
         self.min_points = min_points
@@ -223,11 +229,38 @@ class PartPipeline:
         if pending and self.free_space is not None and depth is not None:
             near = nearest_depth(depth, self.free_space.window)
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
-            for (i, _), e in zip(items, estimates, strict=True):
+            for (i, points), e in zip(items, estimates, strict=True):
+                if depth is not None:
+                    e = self._slid(e, points, dets[i].mask, depth, intrinsics)
                 if near is not None:
                     e = checked(e, near, intrinsics, self._surface(cls), self.free_space)
                 out[i] = Observation(cls, e, "", dets[i].object_id)
         return [o for o in out if o is not None]
+
+    def _slid(
+        self,
+        estimate: PoseEstimate,
+        points: np.ndarray,
+        mask: np.ndarray,
+        depth: np.ndarray,
+        intrinsics: PinholeIntrinsics,
+    ) -> PoseEstimate:
+        """``estimate`` placed along its axis by its mask, certified again where it moved (the
+        Chamfer figures change a little, and the certificate says what they are now). A slide the
+        cloud does not certify is not taken: a learned mask is not exact where it ends."""
+        slide, cls = self.axial_slide, estimate.object_class
+        if slide is None or cls not in slide.classes or not estimate.certified:
+            return estimate
+        if cls not in self._slide_surfaces:
+            model = self.estimators[cls].model
+            self._slide_surfaces[cls] = model.sample(slide.samples, np.random.default_rng(0))
+        moved, by = slid_along_axis(
+            estimate, points, mask, depth, intrinsics, self._slide_surfaces[cls], slide
+        )
+        if by == 0.0:
+            return estimate
+        certificate = self.estimators[cls].certify_at(points, moved.rotation, moved.translation)
+        return replace(moved, certificate=certificate) if certificate.certified else estimate
 
     def _surface(self, object_class: str) -> np.ndarray:
         """The free-space check's fixed surface sample of the class's model."""

@@ -466,6 +466,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "segmentation.second_look_score" in err and "above min_score 0.3" in err
+    wrong = vision_config()
+    wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "axial_slide.classes" in err and "corner_joint" in err
     missing = vision_config()
     missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
     path.write_text(__import__("yaml").safe_dump(missing))

@@ -135,6 +135,18 @@ class PoseEstimator:
             float("inf"),
         )
 
+    def certify_at(self, points: np.ndarray | torch.Tensor, rotation: np.ndarray | torch.Tensor,
+                   translation: np.ndarray | torch.Tensor) -> Certificate:
+        """The certificate of the pose ``rotation, translation`` (camera frame) for the observed
+        ``points`` (N, 3)."""
+        seen = torch.as_tensor(points, dtype=torch.float32)
+        rot = torch.as_tensor(rotation, dtype=torch.float32)
+        t = torch.as_tensor(translation, dtype=torch.float32)
+        with torch.no_grad():
+            dist = self.surface(model_frame(seen[None], rot[None], t[None]))[0]
+        posed = transform(self.model_keypoints, rot, t)
+        return certify(seen, dist, posed, self.model.visibility, self.threshold)
+
     def estimate(self, points: np.ndarray) -> PoseEstimate:
         """Pose and certificate of the part from its observed points (N, 3), camera frame, m."""
         return self.estimate_batch([points])[0]
@@ -238,11 +250,8 @@ def _estimate_group(
                     rot[b], t[b], obj[b] = p_rot[i], p_t[i], p_obj[i]
     out = []
     for b, (cloud, estimator) in enumerate(zip(group, estimators, strict=True)):
-        seen = obs[b, : len(cloud.points)]
-        with torch.no_grad():
-            dist = estimator.surface(model_frame(seen[None], rot[b : b + 1], t[b : b + 1]))[0]
         posed_kp = transform(estimator.model_keypoints, rot[b], t[b])
-        cert = certify(seen, dist, posed_kp, estimator.model.visibility, estimator.threshold)
+        cert = estimator.certify_at(obs[b, : len(cloud.points)], rot[b], t[b])
         out.append(
             PoseEstimate(
                 estimator.model.object_class,
