@@ -54,6 +54,7 @@ class Harness:
         self.executor.add_node(self.client)
         self.nodes: list[Node] = []
         self.thread: threading.Thread | None = None
+        self.stopping = threading.Event()
         self.closed = False
 
     def add(self, node: Node) -> Node:
@@ -62,16 +63,23 @@ class Harness:
         return node
 
     def spin(self) -> None:
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        def loop() -> None:
+            while not self.stopping.is_set():
+                self.executor.spin_once(timeout_sec=0.05)
+
+        self.thread = threading.Thread(target=loop, daemon=True)
         self.thread.start()
 
     def close(self) -> None:
         if self.closed:
             return
         self.closed = True
-        self.executor.shutdown(timeout_sec=5.0)
+        # The thread stops before the executor shuts down: Executor.spin racing shutdown() built a
+        # wait set with the guard condition shutdown() had just destroyed, and the thread raised.
+        self.stopping.set()
         if self.thread is not None:
             self.thread.join(timeout=5.0)  # no control cycle may run while the nodes close their links
+        self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
             node.close()
             node.destroy_node()
