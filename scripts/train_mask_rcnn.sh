@@ -12,12 +12,14 @@
 # models/vision/README.md). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
 # INIT: weights to start from (the trainer's --init; INIT=models/vision/mask_rcnn.pt continues the
-# shipped model, so each lent machine's minutes add to the last's).
+# shipped model, so each lent machine's minutes add to the last's). SCENES: the training images'
+# scene weights (render_dataset's --scenes, e.g. "held=0.2 presented=0.3 ..."; default its own).
+# SEED_BASE (1000): shard k renders with seed SEED_BASE + k; give each lending's run new seeds.
 # RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
 # "rendered" marker) and trains on them, so two models can train side by side on one device.
 #
-# Shard k renders with seed 1000 + k, so shards never repeat each other, the validation set or the
-# benchmark's seeds (900, 901). A shard stopped at RENDER_LIMIT_S keeps its last whole index.
+# Shard k renders with seed SEED_BASE + k, so shards never repeat each other, the validation set or
+# the benchmark's seeds (900, 901). A shard stopped at RENDER_LIMIT_S keeps its last whole index.
 # Everything lands in OUT_DIR: mask_rcnn.pt + .json, curves, samples, train.log, render logs.
 set -euo pipefail
 out=${1:?usage: scripts/train_mask_rcnn.sh OUT_DIR}
@@ -35,6 +37,8 @@ LR=${LR:-2e-3}
 RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
 RENDER=${RENDER:-1}
 INIT=${INIT:-}
+SCENES=${SCENES:-}
+SEED_BASE=${SEED_BASE:-1000}
 MODEL=${MODEL:---config semantic_classes=[\"strut_tube\",\"cross_frame\"] --config mask_pool=28 --config anchor_sizes=[16,32,64,128] --config rpn_fg_iou=0.5}
 data=${DATA_DIR:-/tmp/tlt-vision-data}
 mkdir -p "$out" "$data"
@@ -72,7 +76,8 @@ else
     pids=()
     for k in $(seq 0 $(( SHARDS - 1 ))); do
         timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/train_$k" \
-            --count "$per" --seed $(( 1000 + k )) --progress-every 50 > "$data/render_$k.log" 2>&1 &
+            --count "$per" --seed $(( SEED_BASE + k )) --progress-every 50 ${SCENES:+--scenes $SCENES} \
+            > "$data/render_$k.log" 2>&1 &
         pids+=($!)
     done
     timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/val" --count "$VAL" \
