@@ -16,8 +16,8 @@ learned mask's stray pixels on what lies behind the part. The classes in ``in_pi
 theirs: a cross frame's sides are pieces by design, its corner joints (another class) between
 them, and a side half hidden is a small piece of it.
 
-With ``axial_slide`` (off by default), a certified pose of its classes (end fittings) is moved
-along its own axis to where its mask says the part ends (:mod:`tlt_vision.pose.axial_slide`):
+With ``axial_slide`` (node.yaml's is on for end fittings), a certified pose of its classes is
+moved along its own axis to where its mask says the part ends (:mod:`tlt_vision.pose.axial_slide`):
 seen from the side, the cloud leaves that open. Every certified pose is then checked against the
 whole depth image (``free_space``, :mod:`tlt_vision.pose.free_space`): a pose that puts the model
 where the camera saw past it is not certified.
