@@ -180,4 +180,17 @@ def project(points: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
     )
 
 
-__all__ = ["MIN_POINTS", "Intrinsics", "MaskedCloud", "masked_point_cloud", "project"]
+def pixels_in_image(
+    points: np.ndarray, intrinsics: PinholeIntrinsics, shape: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where camera-frame ``points`` (N, 3) in front of the camera land in an image of ``shape``
+    (height, width): their rounded pixels (M, 2) ``(u, v)`` and the indices (M,) of those points."""
+    p = np.asarray(points, dtype=float)
+    ahead = np.flatnonzero(p[:, 2] > 1e-6)
+    uv = np.rint(project(p[ahead], intrinsics)).astype(np.int64)
+    h, w = shape[:2]
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    return uv[inside], ahead[inside]
+
+
+__all__ = ["MIN_POINTS", "Intrinsics", "MaskedCloud", "masked_point_cloud", "pixels_in_image", "project"]

@@ -1,7 +1,14 @@
 import numpy as np
 import pytest
 
-from tlt_vision.pointcloud import Detached, Intrinsics, detached_pieces, masked_point_cloud, project
+from tlt_vision.pointcloud import (
+    Detached,
+    Intrinsics,
+    detached_pieces,
+    masked_point_cloud,
+    pixels_in_image,
+    project,
+)
 
 K = Intrinsics(fx=100.0, fy=200.0, cx=1.5, cy=1.0)
 
@@ -18,6 +25,22 @@ def test_hand_computed_back_projection():
     assert out.points.tolist() == [pytest.approx([0.03, -0.01, 2.0]), pytest.approx([-0.03, 0.01, 2.0])]
     assert out.colours[0].tolist() == [10, 20, 30]
     assert project(out.points, K) == pytest.approx(np.array([[3.0, 0.0], [0.0, 2.0]]), abs=1e-5)
+
+
+def test_only_points_ahead_landing_in_the_image_have_pixels():
+    points = np.array([
+        [0.03, -0.01, 2.0],  # (u=3, v=0): in a 3x4 image
+        [-0.03, 0.01, 2.0],  # (0, 2)
+        [0.03, -0.01, -2.0],  # behind the camera, though it projects onto (0, 2)
+        [0.05, 0.0, 2.0],  # (4, 1): one column past the right edge
+        [0.0, -0.02, 2.0],  # (1.5, -1): above the top row
+        [0.0, 0.0, 0.0],  # at the optical centre
+    ])
+    uv, index = pixels_in_image(points, K, (3, 4))
+    assert uv.tolist() == [[3, 0], [0, 2]]
+    assert index.tolist() == [0, 1]
+    uv, index = pixels_in_image(np.zeros((0, 3)), K, (3, 4))
+    assert uv.shape == (0, 2) and index.shape == (0,)
 
 
 def test_invalid_depth_pixels_dropped():

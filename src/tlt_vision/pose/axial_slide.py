@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tlt_vision.pointcloud import PinholeIntrinsics, project
+from tlt_vision.pointcloud import PinholeIntrinsics, pixels_in_image
 from tlt_vision.pose.estimator import PoseEstimate
 
 
@@ -56,11 +56,8 @@ def overhang(
     """Camera-frame surface ``points`` (N, 3) facing the camera (``normals`` (N, 3)) that project
     into the image outside ``mask`` where the depth seen is not ``hidden_margin`` nearer than them."""
     front = points[np.einsum("ij,ij->i", normals, points) < 0]
-    front = front[front[:, 2] > 1e-6]
-    uv = np.rint(project(front, intrinsics)).astype(np.int64)
-    h, w = mask.shape
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-    uv, z = uv[inside], front[inside, 2]
+    uv, index = pixels_in_image(front, intrinsics, mask.shape)
+    z = front[index, 2]
     seen = depth[uv[:, 1], uv[:, 0]]
     # Only what the camera saw there counts against the pose: no depth (no return, or the arm's own
     # end effector taken out of the image) says nothing.

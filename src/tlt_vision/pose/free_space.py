@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from tlt_vision.pointcloud import PinholeIntrinsics, project
+from tlt_vision.pointcloud import PinholeIntrinsics, pixels_in_image
 from tlt_vision.pose.estimator import PoseEstimate
 
 
@@ -58,14 +58,9 @@ def free_space_fraction(
     (:func:`nearest_depth`) more than ``margin`` beyond them, among those that project onto a
     pixel with depth; 0 when none does."""
     p = np.asarray(points, dtype=float)
-    p = p[p[:, 2] > 1e-6]
-    if not len(p):
-        return 0.0
-    uv = np.rint(project(p, intrinsics)).astype(np.int64)
-    h, w = near.shape
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-    seen = near[uv[inside, 1], uv[inside, 0]]
-    z = p[inside, 2]
+    uv, index = pixels_in_image(p, intrinsics, near.shape)
+    seen = near[uv[:, 1], uv[:, 0]]
+    z = p[index, 2]
     counted = np.isfinite(seen)
     if not counted.any():
         return 0.0
