@@ -14,10 +14,11 @@ takes the slide with the fewest, when the pose as it was overhangs by ``min_over
 more and the slide removes at least ``min_gain`` of that: a view whose overhang hardly changes
 along the axis says nothing about it, and the pose stays. On the held-out images (seed 900) the
 certified end fittings within the ADD-S goal went from 92.7 to 99.5 % on the twin's masks, and
-from 93.5 to 97.2 % on Mask R-CNN's (models/vision/README.md). It is off by default
-(config/vision/node.yaml ``axial_slide``): on Mask R-CNN's masks of held struts it slid good
-fittings out of their place on the tube, and ``bench/inspection.py`` rejected 1 and 3 of 72 good
-struts (seeds 1100 and 1200) against none without; on the twin's masks none.
+from 92.7 to 97.6 % on Mask R-CNN's (models/vision/README.md). config/vision/node.yaml
+``axial_slide`` turns it on for end fittings. It needs masks that end where the part does: with
+the Mask R-CNN weights before 2026-11-28 it slid good held struts' fittings out of their place on
+the tube, and ``bench/inspection.py`` rejected 1 and 3 of 72 good struts (seeds 1100 and 1200);
+with the weights since, and with the twin's masks, none.
 """
 
 from __future__ import annotations
@@ -45,6 +46,32 @@ class AxialSlide:
 DEFAULT = AxialSlide()
 
 
+def overhangs(
+    mask: np.ndarray,
+    depth: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    points: np.ndarray,
+    normals: np.ndarray,
+    hidden_margin: float,
+) -> np.ndarray:
+    """For each of S placings of camera-frame surface ``points`` (S, N, 3), with their ``normals``
+    (N, 3): how many face the camera and project into the image outside ``mask`` where the depth
+    seen is not ``hidden_margin`` nearer than them; (S,). All placings at once: the slides tried
+    for one fitting are tens, and one by one their per-call overhead was most of the cost."""
+    placings, n = points.shape[:2]
+    flat = points.reshape(-1, 3)
+    facing = np.flatnonzero(np.einsum("sij,ij->si", points, normals).reshape(-1) < 0)
+    uv, index = pixels_in_image(flat[facing], intrinsics, mask.shape)
+    which = facing[index]
+    seen = depth[uv[:, 1], uv[:, 0]]
+    # Only what the camera saw there counts against the pose: no depth (no return, or the arm's own
+    # end effector taken out of the image) says nothing.
+    with np.errstate(invalid="ignore"):
+        against = np.isfinite(seen) & (seen > 0) & (seen >= flat[which, 2] - hidden_margin)
+    off = ~mask[uv[:, 1], uv[:, 0]] & against
+    return np.bincount(which[off] // n, minlength=placings)
+
+
 def overhang(
     mask: np.ndarray,
     depth: np.ndarray,
@@ -53,17 +80,8 @@ def overhang(
     normals: np.ndarray,
     hidden_margin: float,
 ) -> int:
-    """Camera-frame surface ``points`` (N, 3) facing the camera (``normals`` (N, 3)) that project
-    into the image outside ``mask`` where the depth seen is not ``hidden_margin`` nearer than them."""
-    front = points[np.einsum("ij,ij->i", normals, points) < 0]
-    uv, index = pixels_in_image(front, intrinsics, mask.shape)
-    z = front[index, 2]
-    seen = depth[uv[:, 1], uv[:, 0]]
-    # Only what the camera saw there counts against the pose: no depth (no return, or the arm's own
-    # end effector taken out of the image) says nothing.
-    with np.errstate(invalid="ignore"):
-        against = np.isfinite(seen) & (seen > 0) & (seen >= z - hidden_margin)
-    return int(np.count_nonzero(~mask[uv[:, 1], uv[:, 0]] & against))
+    """:func:`overhangs` of one placing of ``points`` (N, 3)."""
+    return int(overhangs(mask, depth, intrinsics, np.asarray(points)[None], normals, hidden_margin)[0])
 
 
 def slid_along_axis(
@@ -93,8 +111,8 @@ def slid_along_axis(
     slides = np.union1d(steps * slide.step, [0.0])
     posed, turned = points @ rot.T + t, normals @ rot.T
     mask = np.asarray(mask, dtype=bool)
-    counts = np.array([overhang(mask, depth, intrinsics, posed + s * axis, turned, slide.hidden_margin)
-                       for s in slides])
+    counts = overhangs(mask, depth, intrinsics, posed[None] + slides[:, None, None] * axis, turned,
+                       slide.hidden_margin)
     here = counts[slides == 0.0][0]
     best = slides[counts == counts.min()]
     chosen = float(best[np.argmin(np.abs(best))])
@@ -104,4 +122,4 @@ def slid_along_axis(
     return replace(estimate, translation=t + moved, keypoints=np.asarray(estimate.keypoints) + moved), chosen
 
 
-__all__ = ["DEFAULT", "AxialSlide", "overhang", "slid_along_axis"]
+__all__ = ["DEFAULT", "AxialSlide", "overhang", "overhangs", "slid_along_axis"]
