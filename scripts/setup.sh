@@ -72,7 +72,7 @@ venv_stage() {
     local free_kib need_gib=${TLT_MIN_FREE_GIB:-5}
     free_kib=$(df -Pk "$VENV" | awk 'NR == 2 {print $4}')
     [ "$free_kib" -ge $(( need_gib * 1024 * 1024 )) ] || fail "the pinned Python dependencies need about \
-${need_gib} GiB free for $VENV (3.5 GiB installed, and pip's unpacking); $(( free_kib / 1024 )) MiB free there"
+${need_gib} GiB free for $VENV (2.4 GiB installed, and pip's unpacking); $(( free_kib / 1024 )) MiB free there"
     say "installing pinned Python dependencies (first run: several minutes)"
     pip_install -r "$ROOT/requirements/runtime.txt" -r "$ROOT/requirements/dev.txt"
     "$VENV/bin/python" -m pip check >/dev/null 2>&1 || {
@@ -80,7 +80,7 @@ ${need_gib} GiB free for $VENV (3.5 GiB installed, and pip's unpacking); $(( fre
         fail "pip install -r requirements/runtime.txt -r requirements/dev.txt left broken dependencies"
     }
     "$VENV/bin/python" -c 'import rclpy, py_trees, serial, dynamixel_sdk, rtde_control, cv2, torch, \
-open3d, ompl, pinocchio, mujoco, spacepackets, PySide6, pytest' \
+ompl, pinocchio, mujoco, spacepackets, PySide6, pytest' \
         || fail "a pinned dependency does not import"
     stamp_set pip "$h"
 }
