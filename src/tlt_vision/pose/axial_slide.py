@@ -72,18 +72,6 @@ def overhangs(
     return np.bincount(which[off] // n, minlength=placings)
 
 
-def overhang(
-    mask: np.ndarray,
-    depth: np.ndarray,
-    intrinsics: PinholeIntrinsics,
-    points: np.ndarray,
-    normals: np.ndarray,
-    hidden_margin: float,
-) -> int:
-    """:func:`overhangs` of one placing of ``points`` (N, 3)."""
-    return int(overhangs(mask, depth, intrinsics, np.asarray(points)[None], normals, hidden_margin)[0])
-
-
 def slid_along_axis(
     estimate: PoseEstimate,
     observed: np.ndarray,
@@ -122,4 +110,4 @@ def slid_along_axis(
     return replace(estimate, translation=t + moved, keypoints=np.asarray(estimate.keypoints) + moved), chosen
 
 
-__all__ = ["DEFAULT", "AxialSlide", "overhang", "overhangs", "slid_along_axis"]
+__all__ = ["DEFAULT", "AxialSlide", "overhangs", "slid_along_axis"]

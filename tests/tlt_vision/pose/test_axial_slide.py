@@ -9,7 +9,7 @@ import pytest
 from tlt_common.mission.schema import load_mission
 from tlt_vision.cad.models import models_for_mission
 from tlt_vision.pointcloud import Intrinsics, project
-from tlt_vision.pose.axial_slide import AxialSlide, overhang, slid_along_axis
+from tlt_vision.pose.axial_slide import AxialSlide, overhangs, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate
 
@@ -87,14 +87,13 @@ def test_overhang_counts_surface_facing_the_camera_outside_the_mask_and_not_hidd
     points, normals = fitting.sample(512, np.random.default_rng(0))
     posed, turned = points @ ROTATION.T + TRUE, normals @ ROTATION.T
 
-    def count(shift):
-        return overhang(mask, depth, K, posed - TRUE + _along(shift), turned, 0.003)
-
+    placings = np.stack([posed - TRUE + _along(shift) for shift in (0.0, -0.010, 0.010)])
+    in_place, off_the_end, behind = overhangs(mask, depth, K, placings, turned, 0.003)
     # In place, only the hidden part is off the mask, and it is hidden; moved towards the visible end
     # the model stands against the background; moved the other way it goes behind the occluder.
-    assert count(0.0) <= 2
-    assert count(-0.010) > 20
-    assert count(0.010) <= 2
+    assert in_place <= 2
+    assert off_the_end > 20
+    assert behind <= 2
 
 
 def test_the_pipeline_places_by_its_mask_a_fitting_posed_off_along_its_axis(fitting):
