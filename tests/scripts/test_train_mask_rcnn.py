@@ -1,7 +1,7 @@
-"""scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards and the validation set,
-trains within its budget and leaves the weights, figures and logs; a second run trains on the first
-one's images from its weights; a device it cannot use stops it at the smoke test, before anything
-is rendered at scale."""
+"""scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards (with the seeds and
+scene mix asked for) and the validation set, trains within its budget and leaves the weights,
+figures and logs; a second run trains on the first one's images from its weights; a device it
+cannot use stops it at the smoke test, before anything is rendered at scale."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def _run(tmp_path: Path, **settings: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_renders_shards_and_trains_within_the_budget(tmp_path):
-    result = _run(tmp_path)
+    result = _run(tmp_path, SEED_BASE="1500", SCENES="held=0.5 feeder=0.5")
     assert result.returncode == 0, result.stdout + result.stderr
     out = tmp_path / "out"
     assert "rendered 4 training images in 2 shards" in result.stdout
@@ -37,6 +37,8 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     figures = json.loads((out / "mask_rcnn.json").read_text())["extra"]["figures"]
     assert figures["train"] == [str(tmp_path / "data" / f"train_{k}") for k in range(2)]
     assert figures["images"] == 4 and figures["val_images"] == 2 and figures["device"] == "cpu"
+    assert [r["seed"] for r in figures["train_recipes"]] == [1500, 1501]
+    assert all(r["scenes"] == {"held": 0.5, "feeder": 0.5} for r in figures["train_recipes"])
     assert "epoch 1/1 val mask AP50" in (out / "train.log").read_text()
     # A second run on the same images renders nothing and starts from the first run's weights.
     again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
