@@ -18,6 +18,7 @@ import gc
 import math
 import threading
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -491,7 +492,12 @@ def ros():
     yield
     py_trees.blackboard.Blackboard.clear()
     rclpy.try_shutdown()
-    gc.collect()  # drop the context's participant now, not whenever the collector gets to it
+    with warnings.catch_warnings():
+        # A goal a stand-in ARS accepted as the test ended: its execute coroutine was queued on the
+        # rig's executor, which shut down first (a teardown race, seen once in a clean-clone run).
+        warnings.filterwarnings("ignore", "coroutine 'ActionServer._execute_goal' was never awaited",
+                                RuntimeWarning)
+        gc.collect()  # drop the context's participant now, not whenever the collector gets to it
 
 
 @pytest.fixture
