@@ -80,6 +80,8 @@ SCHEMA = {
             "patience": Field("int", minimum=1),
             "tolerance": opt("float", 1e-4, minimum=0.0, maximum=1.0),
             "refine_iterations": opt("int", 0, minimum=0, maximum=500),
+            # Parts round about their model's z axis and about as long as wide.
+            "turned_starts": opt("list", [], item=Field("str", choices=("end_fitting", "rivet"))),
         },
     ),
     "free_space": opt(

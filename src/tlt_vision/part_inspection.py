@@ -71,7 +71,9 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
     """One estimator per ``detectors`` entry; WeightsError names a file that is missing or wrong."""
     models = models_for_mission(mission)
     thresholds = mission.inspection["chamfer_thresholds"]
-    corrector = CorrectorConfig(**config.raw["corrector"])
+    settings = dict(config.raw["corrector"])
+    turned = set(settings.pop("turned_starts"))
+    corrector = CorrectorConfig(**settings)
     out = {}
     for name in config.raw["detectors"]:
         path = config.detector_path(name)
@@ -81,7 +83,8 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
             raise WeightsError(path, "manifest settings lack the detector width")
         model = models[name]
         out[name] = PoseEstimator(
-            model, load_detector(path, model, width), thresholds[model.object_class], corrector
+            model, load_detector(path, model, width), thresholds[model.object_class], corrector,
+            turned_starts=model.object_class in turned,
         )
     return out
 

@@ -15,7 +15,9 @@ Moving keypoints through a registration is slow to settle a large part's rotatio
 frame's was left a fraction of a degree off, 5-8 mm at its corners, more than the corner-joint
 tolerance. And a thin tube fits almost as well from behind (the observed front surface on the
 model's back one, one diameter too near), which the free-space term rules out; a second start one
-tube diameter further away lets the refinement reach the right side. An element keeps its
+tube diameter further away lets the refinement reach the right side; an end fitting, about as
+long as it is wide, fitted with its axis a quarter turn off, reaches its fit from a start turned
+that much. Every start of every element runs in one batch of steps. An element keeps its
 corrected pose unless a refined one has a lower objective, and the model is unchanged, so a bent
 tube still does not fit a straight one. The objective is a sum of squared residuals (each
 point's distance to the surface, and its ray's depth inside the part), so Gauss-Newton steps
@@ -211,6 +213,8 @@ def refine_pose(
     surface: SurfaceDistance,
     iterations: int,
     depth_offsets: tuple[float, ...] | torch.Tensor = (0.0,),
+    turns: torch.Tensor | None = None,
+    use: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Rotation (B, 3, 3), translation (B, 3) and Chamfer objective (B,) (that of
     :func:`chamfer_objective`) after refining ``rot, t`` (see the module docstring).
@@ -220,24 +224,80 @@ def refine_pose(
     (the pose pushed that far (m) away from the camera along the cloud's mean ray: a tube fitted
     from behind is one diameter too near; a tuple for every element, or a tensor (B, S) of each
     element's own), and keeps per element the pose with the lowest total, the input pose unless a
-    refined one is lower.
+    refined one is lower. ``turns`` (B, S, 3, 3), when given, also turns each start in the model's
+    own frame (``rot @ turn``, about the model's origin: an end fitting fitted with its axis a
+    quarter turn off); ``use`` (B, S) leaves out the starts an element does not have.
     """
     observed, rot, t = observed.detach(), rot.detach().to(observed.dtype), t.detach().to(observed.dtype)
-    m = mask.to(observed.dtype)
-    count = m.sum(-1).clamp(min=1.0)
-    weight = (m / count[:, None]).sqrt() / _MM  # residual (m) -> its share of the objective, mm
-    centre = (observed * m[..., None]).sum(1) / count[:, None]
-    # Free space: the camera saw each point, so the ray just in front of it is outside the part.
-    # Without it a thin tube seen along a strip fits as well from behind (the points on the far
-    # side of a tube moved one diameter towards the camera), 2.4 cm off with a sub-millimetre fit.
-    ray = observed / torch.linalg.vector_norm(observed, dim=-1, keepdim=True).clamp(min=1e-9)
-    front = observed - FREE_SPACE_STEP * ray
-    view = centre / torch.linalg.vector_norm(centre, dim=-1, keepdim=True).clamp(min=1e-9)
+    cloud = _Observed.of(observed, mask)
+    with torch.no_grad():
+        best = cloud.total(surface, rot, t)
+    if iterations <= 0:
+        return rot, t, cloud.chamfer(surface, rot, t)
+    offsets = torch.as_tensor(depth_offsets, dtype=observed.dtype)
+    offsets = offsets.expand(len(rot), offsets.shape[-1]) if offsets.dim() == 1 else offsets
+    if use is None:
+        use = torch.ones(offsets.shape, dtype=torch.bool)
+    # Every element's every start in one batch: a step costs about the same for a few rows as
+    # for many (per-operation overhead), so the starts run side by side, not one after another.
+    element, k = use.nonzero(as_tuple=True)
+    start_rot = rot[element] if turns is None else rot[element] @ turns[element, k].to(rot.dtype)
+    view = cloud.centre / torch.linalg.vector_norm(cloud.centre, dim=-1, keepdim=True).clamp(min=1e-9)
+    start_t = t[element] + offsets[element, k, None] * view[element]
+    r, tt, value = _levenberg_marquardt(cloud.rows(element), surface.select(element), start_rot, start_t,
+                                        iterations)
+    # Per element the lowest total of its starts, the input pose unless a refined one is lower.
+    lowest = torch.full_like(best, float("inf")).scatter_reduce(0, element, value, "amin")
+    taken = (value == lowest[element]) & (value < best[element])
+    best_r, best_t = rot.clone(), t.clone()
+    best_r[element[taken]], best_t[element[taken]] = r[taken], tt[taken]
+    with torch.no_grad():
+        return best_r, best_t, cloud.chamfer(surface, best_r, best_t)
+
+
+@dataclass(frozen=True)
+class _Observed:
+    """The observed points of a batch and what the refinement derives from them once."""
+
+    observed: torch.Tensor  # (B, N, 3)
+    m: torch.Tensor  # (B, N) 1 for a point, 0 for padding
+    count: torch.Tensor  # (B,)
+    front: torch.Tensor  # (B, N, 3) FREE_SPACE_STEP in front of each point along its ray
+    centre: torch.Tensor  # (B, 3)
+
+    @classmethod
+    def of(cls, observed: torch.Tensor, mask: torch.Tensor) -> _Observed:
+        m = mask.to(observed.dtype)
+        count = m.sum(-1).clamp(min=1.0)
+        # Free space: the camera saw each point, so the ray just in front of it is outside the
+        # part. Without it a thin tube seen along a strip fits as well from behind (the points on
+        # the far side of a tube moved one diameter towards the camera), 2.4 cm off with a
+        # sub-millimetre fit.
+        ray = observed / torch.linalg.vector_norm(observed, dim=-1, keepdim=True).clamp(min=1e-9)
+        centre = (observed * m[..., None]).sum(1) / count[:, None]
+        return cls(observed, m, count, observed - FREE_SPACE_STEP * ray, centre)
+
+    def rows(self, rows: torch.Tensor) -> _Observed:
+        return _Observed(*(getattr(self, f)[rows] for f in ("observed", "m", "count", "front", "centre")))
+
+    def chamfer(self, surface: SurfaceDistance, r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
+        return (surface(model_frame(self.observed, r, tt)).pow(2) * self.m).sum(-1) / self.count
+
+    def total(self, surface: SurfaceDistance, r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
+        """The refinement's objective: the Chamfer one plus the free-space term."""
+        inside = torch.relu(-surface.signed(model_frame(self.front, r, tt))).pow(2)
+        return self.chamfer(surface, r, tt) + (inside * self.m).sum(-1) / self.count
+
+
+def _levenberg_marquardt(
+    cloud: _Observed, surface: SurfaceDistance, rot: torch.Tensor, t: torch.Tensor, iterations: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Rotation, translation and total objective of each element after at most ``iterations``
+    steps from ``rot, t`` (see :func:`refine_pose`)."""
+    observed, front, centre = cloud.observed, cloud.front, cloud.centre
+    weight = (cloud.m / cloud.count[:, None]).sqrt() / _MM  # residual (m) -> its share of the objective, mm
     arms = (observed - centre[:, None], front - centre[:, None])
     proximal = torch.diag(torch.tensor([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], dtype=observed.dtype)) * PROXIMAL
-
-    def chamfer(r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
-        return (surface(model_frame(observed, r, tt)).pow(2) * m).sum(-1) / count
 
     def fit(r: torch.Tensor, tt: torch.Tensor, moved: torch.Tensor, rows: torch.Tensor | None = None) -> _Fit:
         """The state at ``r, tt`` of every element, or of the elements ``rows`` (r, tt, moved theirs)."""
@@ -260,61 +320,44 @@ def refine_pose(
             gradient = gradient + (jac * res[..., None]).sum(1)
         return _Fit(r, tt, moved, value, hessian, gradient)
 
-    def total(r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
-        inside = torch.relu(-surface.signed(model_frame(front, r, tt))).pow(2)
-        return chamfer(r, tt) + (inside * m).sum(-1) / count
-
-    with torch.no_grad():
-        best = total(rot, t)
-    if iterations <= 0:
-        return rot, t, chamfer(rot, t)
-    best_r, best_t = rot.clone(), t.clone()
-    offsets = torch.as_tensor(depth_offsets, dtype=observed.dtype)
-    offsets = offsets.expand(len(rot), offsets.shape[-1]) if offsets.dim() == 1 else offsets
     eye = torch.eye(6, dtype=torch.float64)
-    for k in range(offsets.shape[1]):
-        state = fit(rot.clone(), t + offsets[:, k, None] * view, torch.zeros_like(t))  # updated in place
-        damping = torch.full_like(best, LM_DAMPING, dtype=torch.float64)
-        done = torch.zeros_like(best, dtype=torch.bool)
-        for _ in range(iterations):
-            # Only the elements still converging take a step: a frame's parts settle in 3-6
-            # steps, a few take all of them.
-            rows = (~done).nonzero()[:, 0]
-            h, g = state.hessian[rows].double(), state.gradient[rows].double()
-            diag = torch.diagonal(h, dim1=-2, dim2=-1)
-            # Marquardt's scaling, with a floor for a direction the cloud leaves open (a tube's
-            # turn about its axis), whose diagonal is zero.
-            scaled = diag + 1e-9 * diag.mean(-1, keepdim=True) + 1e-30
-            step = torch.linalg.solve(h + damping[rows, None, None] * eye * scaled[..., None], -g)
-            # What the step is expected to gain: the Gauss-Newton model's decrease.
-            expected = -(g * step).sum(-1) - 0.5 * (step[:, None, :] @ h @ step[..., None])[:, 0, 0]
-            step = step.to(observed.dtype)
-            turn = _rotation(step[:, :3])
-            r = turn @ state.rot[rows]
-            tt = centre[rows] + (turn @ (state.t[rows] - centre[rows])[..., None])[..., 0] + step[:, 3:] * _MM
-            trial = fit(r, tt, state.moved[rows] + step[:, 3:], rows)
-            before = state.value[rows]
-            accept = trial.value < before
-            gain = (before - trial.value) / before.clamp(min=1e-30)
-            taken = rows[accept]
-            state.rot[taken], state.t[taken] = trial.rot[accept], trial.t[accept]
-            state.moved[taken], state.value[taken] = trial.moved[accept], trial.value[accept]
-            state.hessian[taken], state.gradient[taken] = trial.hessian[accept], trial.gradient[accept]
-            damping[rows] = torch.where(accept, damping[rows] / 3.0, damping[rows] * 4.0)
-            # Converged: a step that gained (or would gain) less than LM_TOLERANCE of the
-            # objective, or one that fails however short it is made.
-            small = expected < LM_TOLERANCE * state.value[rows].double()
-            done[rows] = (accept & (gain < LM_TOLERANCE)) | small
-            done |= damping > LM_MAX_DAMPING
-            if bool(done.all()):
-                break
-        with torch.no_grad():
-            value = total(state.rot, state.t)
-            better = value < best
-            best = torch.where(better, value, best)
-            best_r[better], best_t[better] = state.rot[better], state.t[better]
+    state = fit(rot.clone(), t.clone(), torch.zeros_like(t))  # updated in place
+    damping = torch.full_like(state.value, LM_DAMPING, dtype=torch.float64)
+    done = torch.zeros_like(state.value, dtype=torch.bool)
+    for _ in range(iterations):
+        if bool(done.all()):
+            break
+        # Only the elements still converging take a step: a frame's parts settle in 3-6
+        # steps, a few take all of them.
+        rows = (~done).nonzero()[:, 0]
+        h, g = state.hessian[rows].double(), state.gradient[rows].double()
+        diag = torch.diagonal(h, dim1=-2, dim2=-1)
+        # Marquardt's scaling, with a floor for a direction the cloud leaves open (a tube's
+        # turn about its axis), whose diagonal is zero.
+        scaled = diag + 1e-9 * diag.mean(-1, keepdim=True) + 1e-30
+        step = torch.linalg.solve(h + damping[rows, None, None] * eye * scaled[..., None], -g)
+        # What the step is expected to gain: the Gauss-Newton model's decrease.
+        expected = -(g * step).sum(-1) - 0.5 * (step[:, None, :] @ h @ step[..., None])[:, 0, 0]
+        step = step.to(observed.dtype)
+        turn = _rotation(step[:, :3])
+        r = turn @ state.rot[rows]
+        tt = centre[rows] + (turn @ (state.t[rows] - centre[rows])[..., None])[..., 0] + step[:, 3:] * _MM
+        trial = fit(r, tt, state.moved[rows] + step[:, 3:], rows)
+        before = state.value[rows]
+        accept = trial.value < before
+        gain = (before - trial.value) / before.clamp(min=1e-30)
+        taken = rows[accept]
+        state.rot[taken], state.t[taken] = trial.rot[accept], trial.t[accept]
+        state.moved[taken], state.value[taken] = trial.moved[accept], trial.value[accept]
+        state.hessian[taken], state.gradient[taken] = trial.hessian[accept], trial.gradient[accept]
+        damping[rows] = torch.where(accept, damping[rows] / 3.0, damping[rows] * 4.0)
+        # Converged: a step that gained (or would gain) less than LM_TOLERANCE of the
+        # objective, or one that fails however short it is made.
+        small = expected < LM_TOLERANCE * state.value[rows].double()
+        done[rows] = (accept & (gain < LM_TOLERANCE)) | small
+        done |= damping > LM_MAX_DAMPING
     with torch.no_grad():
-        return best_r, best_t, chamfer(best_r, best_t)
+        return state.rot, state.t, cloud.total(surface, state.rot, state.t)
 
 
 __all__ = ["Correction", "CorrectorConfig", "chamfer_objective", "correct", "refine_pose"]

@@ -105,6 +105,7 @@ class PoseEstimator:
         threshold: float,
         corrector: CorrectorConfig | None = None,
         use_corrector: bool = True,
+        turned_starts: bool = False,
     ) -> None:
         if detector.num_keypoints != len(model.keypoint_names):
             raise ValueError(
@@ -119,9 +120,16 @@ class PoseEstimator:
         self.surface = model.surface
         self.model_keypoints = torch.as_tensor(model.keypoints, dtype=torch.float32)
         self.scale = model.diameter / 2
-        # Refinement starts: as corrected, and one tube diameter further (a tube fitted from behind).
+        # Refinement starts (model-frame turn, depth offset): as corrected, and one tube diameter
+        # further (a tube fitted from behind); with ``turned_starts`` also the model's z axis turned
+        # a quarter about its x and about its y axis: an end fitting, about as long as it is wide,
+        # was fitted end-on where the camera saw its side (or side-on seen end-on), 4-6 mm off.
         radii = self.surface.seg_r
-        self.depth_offsets = (0.0, 2.0 * float(radii.min())) if radii.numel() else (0.0,)
+        self.starts: list[tuple[np.ndarray, float]] = [(np.eye(3), 0.0)]
+        if radii.numel():
+            self.starts.append((np.eye(3), 2.0 * float(radii.min())))
+        if turned_starts:
+            self.starts += [(_quarter_turn(0), 0.0), (_quarter_turn(1), 0.0)]
 
     def _failed(self, reason: str, n: int) -> PoseEstimate:
         return PoseEstimate(
@@ -206,6 +214,28 @@ def estimate_together(
     return [[e for e in row if e is not None] for row in out]
 
 
+def _quarter_turn(axis: int) -> np.ndarray:
+    """The rotation a quarter turn about the model frame's ``axis`` (0: x, 1: y)."""
+    turn = np.eye(3)
+    a, b = [i for i in range(3) if i != axis]
+    turn[a, a] = turn[b, b] = 0.0
+    turn[a, b], turn[b, a] = -1.0, 1.0
+    return turn
+
+
+def _starts(estimators: Sequence[PoseEstimator]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Each element's refinement starts, padded to the most any has: depth offsets (B, S), turns
+    (B, S, 3, 3) and which of them it has (B, S)."""
+    count = max(len(e.starts) for e in estimators)
+    offsets = torch.zeros(len(estimators), count)
+    turns = torch.eye(3).repeat(len(estimators), count, 1, 1)
+    use = torch.zeros(len(estimators), count, dtype=torch.bool)
+    for b, e in enumerate(estimators):
+        for k, (turn, offset) in enumerate(e.starts):
+            offsets[b, k], turns[b, k], use[b, k] = offset, torch.as_tensor(turn), True
+    return offsets, turns, use
+
+
 def _estimate_group(
     group: Sequence[_Cloud], config: CorrectorConfig, use_corrector: bool
 ) -> list[PoseEstimate]:
@@ -232,18 +262,15 @@ def _estimate_group(
         with torch.no_grad():
             obj, rot, t = chamfer_objective(obs, mask, kp, surface, model_kp, weights)
     if config.refine_iterations > 0:
-        starts = max(len(e.depth_offsets) for e in estimators)
-        # A model with fewer starts repeats its last: the same start again changes nothing.
-        offsets = torch.tensor([[*e.depth_offsets, *[e.depth_offsets[-1]] * (starts - len(e.depth_offsets))]
-                                for e in estimators])
-        rot, t, obj = refine_pose(obs, mask, rot, t, surface, config.refine_iterations, offsets)
+        offsets, turns, use = _starts(estimators)
+        rot, t, obj = refine_pose(obs, mask, rot, t, surface, config.refine_iterations, offsets, turns, use)
         known = [b for b, c in enumerate(group) if c.prior is not None]
         if known:  # both objectives then the refined Chamfer
             start = torch.as_tensor(np.stack([group[b].prior for b in known]), dtype=rot.dtype)
             p_rot, p_t, p_obj = refine_pose(
                 obs[known], mask[known], start[:, :3, :3], start[:, :3, 3],
                 SurfaceDistance.stacked([estimators[b].surface for b in known]),
-                config.refine_iterations, offsets[known],
+                config.refine_iterations, offsets[known], turns[known], use[known],
             )  # fmt: skip
             for i, b in enumerate(known):
                 if p_obj[i] < obj[b]:

@@ -85,3 +85,33 @@ def test_each_element_is_refined_as_it_would_be_alone():
         assert float(obj1[0]) == pytest.approx(float(obj[i]), rel=1e-3)
         assert np.linalg.norm(t[i].numpy() - ts[i]) < 0.001  # at its pose
     assert float(obj[2]) > 100 * float(obj[:2].max())  # the wild start is no fit, and held up nothing
+
+
+def test_an_end_fitting_fitted_end_on_turns_to_its_side_with_the_turned_starts():
+    """Seen from its side, an end fitting (about as long as it is wide) fitted with its axis
+    towards the camera stays there from its own start; the starts turned a quarter about the
+    model's x and y axes reach the side-on fit. A start an element does not ``use`` is not tried."""
+    m = build_models(0.75, {"vertical": 0.75})["end_fitting"]
+    rot = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]) @ _turn_z(30.0)  # axis along x
+    t = np.array([0.05, -0.02, 0.6])
+    obs = torch.tensor(
+        synthetic_view(m, rot, t, 300, np.random.default_rng(2), noise=0.0003), dtype=torch.float32
+    )[None]
+    mask = torch.ones(obs.shape[:2], dtype=torch.bool)
+    end_on = torch.tensor(rot @ _tilt_x(90.0) @ _turn_z(40.0), dtype=torch.float32)[None]
+    t0 = torch.tensor(t + np.array([0.0, 0.0, 0.01]), dtype=torch.float32)[None]
+    turns = torch.tensor(np.stack([np.eye(3), _tilt_x(90.0), _tilt_x(90.0) @ _turn_z(90.0)]),
+                         dtype=torch.float32)[None]
+
+    def axis_error_deg(r: torch.Tensor) -> float:
+        return float(np.degrees(np.arccos(min(1.0, abs(r[0, :, 2].double().numpy() @ rot[:, 2])))))
+
+    stuck, _, stuck_obj = refine_pose(obs, mask, end_on, t0, m.surface, 10, (0.0, 0.0, 0.0))
+    assert axis_error_deg(stuck) > 45.0
+    left_out = torch.tensor([[True, False, False]])
+    same, _, _ = refine_pose(obs, mask, end_on, t0, m.surface, 10, (0.0, 0.0, 0.0), turns, left_out)
+    assert axis_error_deg(same) == pytest.approx(axis_error_deg(stuck), abs=0.01)
+    r, tt, obj = refine_pose(obs, mask, end_on, t0, m.surface, 10, (0.0, 0.0, 0.0), turns)
+    assert axis_error_deg(r) < 2.0
+    assert np.linalg.norm(tt[0].double().numpy() - t) < 0.001
+    assert float(obj[0]) < float(stuck_obj[0]) / 10
