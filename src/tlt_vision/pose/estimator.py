@@ -23,6 +23,11 @@ from tlt_vision.pose.corrector import CorrectorConfig, chamfer_objective, correc
 from tlt_vision.pose.detector import KeypointDetector
 
 MIN_POINTS = 16
+# A quarter turn about the model frame's x axis and one about its y axis (model z -> -y, z -> x).
+_QUARTER_TURNS = (
+    np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+    np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]),
+)
 
 
 def rotation_to_quaternion(rot: np.ndarray) -> tuple[float, float, float, float]:
@@ -129,7 +134,7 @@ class PoseEstimator:
         if radii.numel():
             self.starts.append((np.eye(3), 2.0 * float(radii.min())))
         if turned_starts:
-            self.starts += [(_quarter_turn(0), 0.0), (_quarter_turn(1), 0.0)]
+            self.starts += [(turn, 0.0) for turn in _QUARTER_TURNS]
 
     def _failed(self, reason: str, n: int) -> PoseEstimate:
         return PoseEstimate(
@@ -212,15 +217,6 @@ def estimate_together(
         for cloud, estimate in zip(group, _estimate_group(group, config, use_corrector), strict=True):
             out[cloud.job][cloud.index] = estimate
     return [[e for e in row if e is not None] for row in out]
-
-
-def _quarter_turn(axis: int) -> np.ndarray:
-    """The rotation a quarter turn about the model frame's ``axis`` (0: x, 1: y)."""
-    turn = np.eye(3)
-    a, b = [i for i in range(3) if i != axis]
-    turn[a, a] = turn[b, b] = 0.0
-    turn[a, b], turn[b, a] = -1.0, 1.0
-    return turn
 
 
 def _starts(estimators: Sequence[PoseEstimator]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
