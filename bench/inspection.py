@@ -162,9 +162,8 @@ def detector(kind: str, weights: str | None = None, config: VisionConfig | None 
     config = config or load_config()
     seg = config.raw["segmentation"]
     closer = seg["second_look_closer"]
-    return Segmentation(
-        MaskRcnnSegmenter(weights or seg["weights"], config.score_floor), closer["scale"] if closer else None
-    )
+    segmenter = MaskRcnnSegmenter(weights or seg["weights"], config.score_floor, config.depth_split)
+    return Segmentation(segmenter, closer["scale"] if closer else None)
 
 
 def run(args: argparse.Namespace) -> list[Presented]:

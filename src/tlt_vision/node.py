@@ -123,7 +123,9 @@ class VisionNode(LeanNode):
         if seg["source"] == "mask_rcnn":
             from tlt_vision.node_config import repo_path
 
-            self.segmenter: Any = MaskRcnnSegmenter(repo_path(seg["weights"]), self.config.score_floor)
+            self.segmenter: Any = MaskRcnnSegmenter(
+                repo_path(seg["weights"]), self.config.score_floor, self.config.depth_split
+            )
         else:
             self.segmenter = TwinLabels(lambda: self.labels.wait(0.0))
         self.grabber = FrameGrabber(self, raw["topics"]["image"])

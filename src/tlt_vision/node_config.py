@@ -23,6 +23,7 @@ from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
 from tlt_vision.pose.axial_slide import AxialSlide
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
+from tlt_vision.segmentation.depth_split import DepthSplit
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_CONFIG = REPO_ROOT / "config" / "vision" / "node.yaml"
@@ -63,6 +64,16 @@ SCHEMA = {
                 schema={
                     "size": Field("float", minimum=0.01, maximum=2.0, doc="region edge at the place, m"),
                     "scale": Field("float", minimum=1.0, maximum=8.0, doc="how much it is enlarged"),
+                },
+            ),
+            "depth_split": opt(
+                "dict",
+                None,
+                schema={
+                    "jump": Field("float", minimum=0.0, doc="depth step that cuts a region, m"),
+                    "jump_per_m": Field("float", minimum=0.0, doc="and more per metre of depth"),
+                    "min_area": Field("int", minimum=1, doc="smallest piece kept, pixels"),
+                    "full_score_area": Field("int", minimum=1, doc="pieces smaller scored less, pixels"),
                 },
             ),
         },
@@ -257,6 +268,12 @@ class VisionConfig:
         """The lowest score a segmenter keeps: ``second_look_score`` when set, else ``min_score``."""
         seg = self.raw["segmentation"]
         return seg["min_score"] if seg["second_look_score"] is None else seg["second_look_score"]
+
+    @property
+    def depth_split(self) -> DepthSplit | None:
+        """How Mask R-CNN's thin-part regions are cut where the depth jumps; None: not cut."""
+        raw = self.raw["segmentation"]["depth_split"]
+        return DepthSplit(**raw) if raw else None
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

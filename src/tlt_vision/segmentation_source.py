@@ -8,7 +8,8 @@
   weights; it needs the ``rgb`` stream. The model's configuration and input size are the ones
   the weights' manifest records (``segmentation.inference``). Weights that are missing or do not
   fit the model are refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the
-  path and the tensor shape expected).
+  path and the tensor shape expected). Given a :class:`~tlt_vision.segmentation.depth_split.DepthSplit`,
+  its thin-part regions are cut where the frame's depth jumps (node.yaml ``segmentation.depth_split``).
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
 labels received, no image). Mask R-CNN also answers ``detect_in(frame, region, scale)``: the
@@ -29,6 +30,7 @@ import numpy as np
 from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
+from tlt_vision.segmentation.depth_split import DepthSplit, split_by_depth
 
 MASK_RCNN_KIND = "mask_rcnn"
 
@@ -67,7 +69,7 @@ class TwinLabels:
 class MaskRcnnSegmenter:
     streams = ("rgb",)
 
-    def __init__(self, weights: str | Path, min_score: float) -> None:
+    def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
         # The configuration and the image size come from the weights' manifest, as trained.
@@ -75,6 +77,7 @@ class MaskRcnnSegmenter:
         self.cfg = self.model.cfg
         self.max_size: int | None = manifest["settings"].get("max_size")
         self.min_score = min_score
+        self.depth_split = depth_split
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -83,6 +86,8 @@ class MaskRcnnSegmenter:
         if rgb is None:
             raise ValueError("no RGB image")
         result = detect_rgb(self.model, rgb, self.max_size)
+        if self.depth_split is not None:
+            result = split_by_depth(result, frame.get("depth"), self.cfg.semantic_labels, self.depth_split)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
     def detect_in(
@@ -90,7 +95,7 @@ class MaskRcnnSegmenter:
     ) -> list[Detection]:
         """Detections in ``region`` (x0, y0, x1, y1 pixels) of the frame's RGB, enlarged ``scale``
         times first (a part too small or too cluttered for the whole frame), with masks of the
-        whole frame's size."""
+        whole frame's size. Not cut by depth: it looks for end fittings, a box-branch class."""
         from tlt_vision.segmentation.inference import detect_rgb
 
         rgb = frame.get("rgb")

@@ -467,6 +467,13 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "segmentation.second_look_score" in err and "above min_score 0.3" in err
     wrong = vision_config()
+    wrong["segmentation"]["depth_split"] = {"jump": -0.02, "jump_per_m": 0.01, "min_area": 30,
+                                            "full_score_area": 200}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.depth_split.jump" in err and "-0.02" in err
+    wrong = vision_config()
     wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2

@@ -1,0 +1,78 @@
+import numpy as np
+import torch
+
+from tlt_vision.ops.boxes import boxes_from_masks
+from tlt_vision.segmentation.depth_split import DepthSplit, depth_pieces, split_by_depth
+
+SPLIT = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40)
+TUBE, FITTING = 1, 2
+
+
+def _result(masks: list[np.ndarray], labels: list[int], scores: list[float]) -> dict[str, torch.Tensor]:
+    m = torch.from_numpy(np.stack(masks))
+    return {"boxes": boxes_from_masks(m), "labels": torch.tensor(labels), "scores": torch.tensor(scores),
+            "masks": m}
+
+
+def _tee() -> tuple[np.ndarray, np.ndarray]:
+    """One region in the image: a level tube at 1.0 m with a tube 0.4 m behind it standing on it."""
+    mask = np.zeros((30, 40), dtype=bool)
+    depth = np.full(mask.shape, np.inf)
+    mask[20:23, 2:38] = True
+    depth[20:23, 2:38] = 1.0
+    mask[2:20, 18:21] = True
+    depth[2:20, 18:21] = 1.4
+    return mask, depth
+
+
+def test_a_region_of_two_parts_at_different_depths_is_cut_in_two():
+    mask, depth = _tee()
+    pieces = depth_pieces(mask, depth, SPLIT)
+    assert sorted(int(p.sum()) for p in pieces) == [54, 108]
+    front = next(p for p in pieces if p.sum() == 108)
+    assert np.all(depth[front] == 1.0)
+
+
+def test_a_part_receding_from_the_camera_stays_whole():
+    """A tube seen obliquely: 25 mm deeper each pixel, under the 2 cm + 1 cm/m at 1-2 m."""
+    mask = np.zeros((5, 50), dtype=bool)
+    mask[1:4, 5:45] = True
+    depth = np.tile(1.0 + 0.025 * np.arange(50), (5, 1))
+    assert [int(p.sum()) for p in depth_pieces(mask, depth, SPLIT)] == [120]
+    depth[:, 25:] += 0.1  # another part 10 cm further on
+    assert sorted(int(p.sum()) for p in depth_pieces(mask, depth, SPLIT)) == [60, 60]
+
+
+def test_pixels_without_depth_do_not_cut_a_part():
+    mask, depth = _tee()
+    depth[20:23, 10:12] = np.nan  # the sensor's hole across the front tube
+    depth[21, 30] = 0.0
+    assert sorted(int(p.sum()) for p in depth_pieces(mask, depth, SPLIT)) == [54, 108]
+
+
+def test_pieces_are_scored_by_area_and_small_ones_dropped_box_classes_untouched():
+    mask, depth = _tee()
+    speck = np.zeros_like(mask)
+    speck[5:7, 30:32] = True  # 4 pixels: under min_area
+    depth[5:7, 30:32] = 3.0
+    small = np.zeros_like(mask)
+    small[10:14, 30:35] = True  # 20 pixels: half the full-score area
+    depth[10:14, 30:35] = 2.0
+    fitting = np.zeros_like(mask)
+    fitting[20:23, 38:40] = True
+    result = _result([mask | speck, fitting, small], [TUBE, FITTING, TUBE], [0.8, 0.7, 0.6])
+    out = split_by_depth(result, depth, (TUBE,), SPLIT)
+    assert out["labels"].tolist() == [FITTING, TUBE, TUBE, TUBE]
+    assert torch.equal(out["masks"][0], result["masks"][1]) and float(out["scores"][0]) == np.float32(0.7)
+    areas = out["masks"].flatten(1).sum(1).tolist()
+    assert areas == [6, 54, 108, 20]  # the pieces in raster order: the back tube first
+    assert np.allclose(out["scores"].tolist(), [0.7, 0.8, 0.8, 0.6 * 20 / 40])
+    assert torch.equal(out["boxes"], boxes_from_masks(out["masks"]).to(out["boxes"].dtype))
+
+
+def test_without_a_fitting_depth_image_nothing_is_cut():
+    mask, depth = _tee()
+    result = _result([mask], [TUBE], [0.9])
+    assert split_by_depth(result, None, (TUBE,), SPLIT) is result
+    assert split_by_depth(result, depth[:, :20], (TUBE,), SPLIT) is result
+    assert split_by_depth(result, depth, (FITTING,), SPLIT) is result
