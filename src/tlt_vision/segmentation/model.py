@@ -8,7 +8,10 @@
 
 With ``cfg.semantic_classes`` a semantic head also classifies every pixel; in training its loss is
 ``semantic``, and in eval the instances of those classes are its connected regions
-(:mod:`tlt_vision.segmentation.semantic`), not the box branch's detections of them.
+(:mod:`tlt_vision.segmentation.semantic`), not the box branch's detections of them, and each
+image's result also carries the head's class probabilities, ``semantic_probs`` (C, H, W), by
+which the vision node scores the pieces it cuts those regions into
+(:mod:`tlt_vision.segmentation.depth_split`).
 """
 
 from __future__ import annotations
@@ -71,6 +74,7 @@ class MaskRCNN(nn.Module):
             found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area)
             for key in r:
                 r[key] = torch.cat([r[key], found[key].to(r[key].dtype)])
+            r["semantic_probs"] = p
         return results
 
 

@@ -76,3 +76,15 @@ def test_without_a_fitting_depth_image_nothing_is_cut():
     assert split_by_depth(result, None, (TUBE,), SPLIT) is result
     assert split_by_depth(result, depth[:, :20], (TUBE,), SPLIT) is result
     assert split_by_depth(result, depth, (FITTING,), SPLIT) is result
+
+
+def test_with_the_heads_probabilities_each_piece_is_scored_by_its_own_pixels():
+    mask, depth = _tee()
+    probs = torch.zeros((3, *mask.shape))
+    probs[TUBE][20:23] = 0.9  # the front tube's row: the head is sure of it
+    probs[TUBE][:20] = 0.5  # the tube behind: less so
+    result = {**_result([mask], [TUBE], [0.7]), "semantic_probs": probs}
+    out = split_by_depth(result, depth, (TUBE,), SPLIT)
+    assert out["masks"].flatten(1).sum(1).tolist() == [54, 108]
+    assert np.allclose(out["scores"].tolist(), [0.5, 0.9])
+    assert out["semantic_probs"] is probs

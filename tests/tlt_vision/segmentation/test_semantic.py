@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from tlt_vision.segmentation.config import MaskRCNNConfig
+from tlt_vision.segmentation.inference import detect_rgb
 from tlt_vision.segmentation.model import MaskRCNN, predict
 from tlt_vision.segmentation.semantic import instances_from_semantic, label_map, semantic_loss
 from tlt_vision.segmentation.synthetic import toy_batch
@@ -116,12 +117,21 @@ def test_model_trains_its_semantic_head_and_finds_thin_parts_with_it():
     tubes = [t["masks"][t["labels"] == 1] for t in targets]
     found = 0
     for det, truth in zip(predict(model, images), tubes, strict=True):
+        # The head's class probabilities come with the detections (the vision node scores the
+        # pieces it cuts the regions into by them): each region's score is its class's mean there.
+        probs = det["semantic_probs"]
+        assert probs.shape == (TINY.num_classes, 48, 48) and torch.allclose(probs.sum(0), torch.ones(48, 48))
+        for label, score, mask in zip(det["labels"], det["scores"], det["masks"], strict=True):
+            if int(label) in TINY.semantic_labels:
+                assert float(score) == pytest.approx(float(probs[label][mask].mean()), rel=1e-5)
         sem = det["masks"][det["labels"] == 1]
         for gt in truth:
             inter = (sem & gt).flatten(1).sum(1).float()
             union = (sem | gt).flatten(1).sum(1).float()
             found += int(len(sem) > 0 and (inter / union).max() >= 0.5)
     assert found >= 0.75 * sum(len(t) for t in tubes)
+    rgb = (images[0].permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+    assert detect_rgb(model, rgb, 24)["semantic_probs"].shape == (TINY.num_classes, 48, 48)
 
 
 def test_box_branch_detections_of_semantic_classes_are_dropped():
