@@ -1,4 +1,4 @@
-"""Thin-part instances split where the depth image jumps, and scored by their size.
+"""Thin-part instances split where the depth image jumps, each piece scored by its own pixels and size.
 
 The semantic head's instances are connected regions of one class in the image
 (:mod:`tlt_vision.segmentation.semantic`). Where a tube crosses in front of another, or a rack's
