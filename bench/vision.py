@@ -194,7 +194,7 @@ def main() -> int:
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
             pred = rgb_only if depth_split is None else split_by_depth(
-                rgb_only, s.depth, model.cfg.semantic_labels, depth_split)
+                rgb_only, s.depth, model.cfg.semantic_labels, depth_split, s.intrinsics)
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work.

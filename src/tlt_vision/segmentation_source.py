@@ -9,7 +9,8 @@
   the weights' manifest records (``segmentation.inference``). Weights that are missing or do not
   fit the model are refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the
   path and the tensor shape expected). Given a :class:`~tlt_vision.segmentation.depth_split.DepthSplit`,
-  its thin-part regions are cut where the frame's depth jumps (node.yaml ``segmentation.depth_split``).
+  its thin-part regions are cut where the frame's depth jumps and pieces of one straight part
+  joined again (node.yaml ``segmentation.depth_split``).
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
 labels received, no image). Mask R-CNN also answers ``detect_in(frame, region, scale)``: the
@@ -87,7 +88,8 @@ class MaskRcnnSegmenter:
             raise ValueError("no RGB image")
         result = detect_rgb(self.model, rgb, self.max_size)
         if self.depth_split is not None:
-            result = split_by_depth(result, frame.get("depth"), self.cfg.semantic_labels, self.depth_split)
+            result = split_by_depth(result, frame.get("depth"), self.cfg.semantic_labels, self.depth_split,
+                                    frame.camera_matrix)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
     def detect_in(

@@ -1,8 +1,9 @@
 import numpy as np
+import pytest
 import torch
 
 from tlt_vision.ops.boxes import boxes_from_masks
-from tlt_vision.segmentation.depth_split import DepthSplit, depth_pieces, split_by_depth
+from tlt_vision.segmentation.depth_split import DepthSplit, depth_pieces, join_collinear, split_by_depth
 
 SPLIT = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40)
 TUBE, FITTING = 1, 2
@@ -98,3 +99,32 @@ def test_with_the_heads_probabilities_each_piece_is_scored_by_its_own_pixels():
     assert out["masks"].flatten(1).sum(1).tolist() == [54, 108]
     assert np.allclose(out["scores"].tolist(), [0.5, 0.9])
     assert out["semantic_probs"] is probs
+
+
+K = np.array([[500.0, 0.0, 20.0], [0.0, 500.0, 15.0], [0.0, 0.0, 1.0]])
+
+
+def _bar(rows: slice, cols: slice, z: float, depth: np.ndarray) -> np.ndarray:
+    mask = np.zeros(depth.shape, dtype=bool)
+    mask[rows, cols] = True
+    depth[rows, cols] = z
+    return mask
+
+
+def test_pieces_of_one_straight_part_are_joined_and_others_not():
+    """A tube at 1 m crossed by something in front (6 px, 12 mm, of it hidden) is two pieces on
+    one line: joined. A tube beside it 2 cm away, and one on the same line of sight 0.5 m further,
+    are other parts."""
+    depth = np.full((30, 40), np.inf)
+    left, right = _bar(np.s_[10:13], np.s_[2:15], 1.0, depth), _bar(np.s_[10:13], np.s_[21:37], 1.0, depth)
+    beside = _bar(np.s_[20:23], np.s_[2:37], 1.0, depth)
+    far = np.zeros_like(left)
+    far[3:6, 2:37] = True
+    depth[3:6, 2:37] = 1.5
+    masks, scores = join_collinear([left, right, beside, far], [0.8, 0.5, 0.9, 0.7], depth, K, SPLIT)
+    assert len(masks) == 3
+    assert np.array_equal(masks[0], left | right) and scores[0] == pytest.approx((0.8 * 39 + 0.5 * 48) / 87)
+    assert np.array_equal(masks[1], beside) and np.array_equal(masks[2], far)
+    result = _result([left, right, beside], [TUBE, TUBE, TUBE], [0.8, 0.5, 0.9])
+    assert len(split_by_depth(result, depth, (TUBE,), SPLIT)["masks"]) == 3  # no camera matrix: no join
+    assert len(split_by_depth(result, depth, (TUBE,), SPLIT, K)["masks"]) == 2
