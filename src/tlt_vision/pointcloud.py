@@ -161,15 +161,19 @@ def masked_point_cloud(
         v, u = v[pick], u[pick]
     z = depth[v, u].astype(np.float64)
     v, u = v + top, u + left
-    x = (u - intrinsics.cx) * z / intrinsics.fx
-    y = (v - intrinsics.cy) * z / intrinsics.fy
-    pts = np.stack([x, y, z], axis=1).astype(np.float32)
+    pts = back_project(u, v, z, intrinsics).astype(np.float32)
     colours = np.asarray(rgb)[v, u].astype(np.uint8) if rgb is not None else None
     return MaskedCloud(pts, colours, pixels)
 
 
+def back_project(u: np.ndarray, v: np.ndarray, z: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
+    """Camera-frame points (N, 3) of pixels (``u`` column, ``v`` row) seen at depths ``z``."""
+    return np.stack([(u - intrinsics.cx) * z / intrinsics.fx, (v - intrinsics.cy) * z / intrinsics.fy, z], 1)
+
+
 def project(points: np.ndarray, intrinsics: PinholeIntrinsics) -> np.ndarray:
-    """Pixel coordinates (N, 2) ``(u, v)`` of camera-frame points (N, 3); the inverse of the above."""
+    """Pixel coordinates (N, 2) ``(u, v)`` of camera-frame points (N, 3); the inverse of
+    :func:`back_project`."""
     p = np.asarray(points, dtype=float)
     return np.stack(
         [

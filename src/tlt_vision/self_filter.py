@@ -24,7 +24,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from tlt_ars.planning.kinematics import rot_x
-from tlt_vision.pointcloud import PinholeIntrinsics
+from tlt_vision.pointcloud import PinholeIntrinsics, back_project
 
 
 @dataclass(frozen=True)
@@ -137,10 +137,7 @@ def drop_inside(
     d = np.asarray(depth, dtype=np.float32)
     valid = np.isfinite(d) & (d > 0)
     v, u = np.nonzero(valid)
-    z = d[v, u].astype(float)
-    points = np.column_stack(
-        [(u - intrinsics.cx) * z / intrinsics.fx, (v - intrinsics.cy) * z / intrinsics.fy, z]
-    )
+    points = back_project(u, v, d[v, u].astype(float), intrinsics)
     inside = np.zeros(len(points), dtype=bool)
     for shape in placed:
         inside |= shape.holds(points, margin)

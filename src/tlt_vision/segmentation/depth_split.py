@@ -38,6 +38,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from tlt_vision.ops.boxes import boxes_from_masks
+from tlt_vision.pointcloud import Intrinsics, back_project
 
 # Each pixel linked to its right, lower, lower-right and lower-left neighbours: 8-connectivity,
 # as the head's regions.
@@ -108,8 +109,7 @@ def _points(mask: np.ndarray, depth: np.ndarray, k: np.ndarray, top: int = 0, le
     ys, xs = np.nonzero(mask)
     z = depth[ys, xs]
     ok = np.isfinite(z) & (z > 0)
-    ys, xs, z = ys[ok] + top, xs[ok] + left, z[ok]
-    return np.stack([(xs - k[0, 2]) * z / k[0, 0], (ys - k[1, 2]) * z / k[1, 1], z], axis=1)
+    return back_project(xs[ok] + left, ys[ok] + top, z[ok], Intrinsics.from_matrix(k))
 
 
 def _axis(points: np.ndarray) -> _Axis | None:
