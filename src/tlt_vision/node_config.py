@@ -123,10 +123,13 @@ SCHEMA = {
     ),
     "detached": opt(
         "dict",
-        {"link": DETACHED.link, "below": DETACHED.below},
+        {"link": DETACHED.link, "below": DETACHED.below, "largest_only": []},
         schema={
             "link": opt("float", DETACHED.link, minimum=0.001, maximum=0.5),
             "below": opt("float", DETACHED.below, minimum=0.0, maximum=0.5),
+            # Compact parts only: a tube or a frame side cut by what stands in front is two pieces.
+            "largest_only": opt("list", [],
+                                item=Field("str", choices=("end_fitting", "corner_joint", "rivet"))),
         },
     ),
     "ee_self_filter": opt(
@@ -262,7 +265,7 @@ class VisionConfig:
             "max_points": raw["max_points"],
             "keep_border_below": raw["keep_border_below"],
             "free_space": self.free_space,
-            "detached": Detached(**raw["detached"]),
+            "detached": self.detached,
             "axial_slide": self.axial_slide,
         }
 
@@ -271,6 +274,12 @@ class VisionConfig:
         """The lowest score a segmenter keeps: ``second_look_score`` when set, else ``min_score``."""
         seg = self.raw["segmentation"]
         return seg["min_score"] if seg["second_look_score"] is None else seg["second_look_score"]
+
+    @property
+    def detached(self) -> Detached:
+        """Which pieces of a part's cloud are dropped before its pose."""
+        raw = self.raw["detached"]
+        return Detached(**{**raw, "largest_only": tuple(raw["largest_only"])})
 
     @property
     def depth_split(self) -> DepthSplit | None:

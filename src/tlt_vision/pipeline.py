@@ -12,7 +12,8 @@ instance, while the cross-frame CAD model is the whole square: instances of the 
 
 Pieces of a cloud that nothing joins to the rest and that hold few of its points are dropped
 before the pose is estimated (``detached``, :func:`tlt_vision.pointcloud.detached_pieces`): a
-learned mask's stray pixels on what lies behind the part. The classes in ``in_pieces`` keep
+learned mask's stray pixels on what lies behind the part, and for compact parts every piece but the
+largest (a neighbour of the same kind the mask took in). The classes in ``in_pieces`` keep
 theirs: a cross frame's sides are pieces by design, its corner joints (another class) between
 them, and a side half hidden is a small piece of it.
 
@@ -184,7 +185,7 @@ class PartPipeline:
         )
         if not cloud.ok or self.detached is None or detection.object_class in self.in_pieces:
             return cloud
-        keep = ~detached_pieces(cloud.points, self.detached)
+        keep = ~detached_pieces(cloud.points, self.detached, detection.object_class)
         if keep.all():
             return cloud
         if keep.sum() < self.min_points:

@@ -19,6 +19,10 @@ mask took in a few pixels of the floor 0.4 m behind its end (1-2 % of its cloud)
 C-3PO's tube 5 cm along its axis and failed a good strut. Such pixels make pieces of the cloud no
 chain of close points joins to the part: :func:`detached_pieces` finds them (a cloud is one
 rigid part, seen whole or cut by what stands in front of it, and each piece of it is large).
+A compact part (an end fitting, a corner joint) is rarely cut so, but its learned mask often takes
+in a neighbour of its kind that touches it in the image: fittings side by side in a rack, the
+joints of a bay one behind the other. For the classes in ``largest_only`` only the largest piece
+is kept.
 
 It never raises on bad data and never returns points it could not trust: an empty mask, a mask
 with no valid depth, too few points, or images whose shapes disagree give a :class:`MaskedCloud`
@@ -78,17 +82,20 @@ class MaskedCloud:
 @dataclass(frozen=True)
 class Detached:
     """Which pieces of a cloud are not the part: those that no chain of points at most ``link`` (m)
-    apart joins to the rest and that hold under ``below`` of its points."""
+    apart joins to the rest and that hold under ``below`` of its points, or, for the classes in
+    ``largest_only``, every piece but the largest."""
 
     link: float = 0.02
     below: float = 0.05
+    largest_only: tuple[str, ...] = ()
 
 
 DEFAULT_DETACHED = Detached()
 
 
-def detached_pieces(points: np.ndarray, detached: Detached) -> np.ndarray:
-    """Boolean (N,): the points of ``points`` (N, 3) in detached pieces."""
+def detached_pieces(points: np.ndarray, detached: Detached, object_class: str | None = None) -> np.ndarray:
+    """Boolean (N,): the points of ``points`` (N, 3), a cloud of ``object_class``, in detached
+    pieces."""
     p = np.asarray(points, dtype=np.float64)
     n = len(p)
     if n == 0:
@@ -98,7 +105,8 @@ def detached_pieces(points: np.ndarray, detached: Detached) -> np.ndarray:
     links = coo_matrix((np.ones(len(pairs), dtype=bool), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, label = connected_components(links, directed=False)
     sizes = np.bincount(label)
-    return (sizes[label] < detached.below * n) & (label != np.argmax(sizes))
+    others = label != np.argmax(sizes)
+    return others if object_class in detached.largest_only else others & (sizes[label] < detached.below * n)
 
 
 def _failed(reason: str, mask_pixels: int = 0) -> MaskedCloud:

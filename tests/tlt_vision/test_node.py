@@ -480,6 +480,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "axial_slide.classes" in err and "corner_joint" in err
     wrong = vision_config()
+    wrong["detached"] = {"largest_only": ["strut_tube"]}  # a tube crossed in front is two pieces of it
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "detached.largest_only" in err and "strut_tube" in err
+    wrong = vision_config()
     wrong["corrector"]["turned_starts"] = ["strut_tube"]  # a tube turned end-on is no start
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2

@@ -133,3 +133,19 @@ def test_small_pieces_nothing_joins_to_the_part_are_detached_and_large_ones_are_
     # A chain of 1000 points 1 mm apart is one piece, however long.
     chain = np.column_stack([np.arange(1000) * 0.001, np.zeros(1000), np.ones(1000)])
     assert not detached_pieces(np.random.default_rng(0).permutation(chain), Detached()).any()
+
+
+def test_a_compact_part_keeps_only_its_largest_piece_when_its_class_asks():
+    """An end fitting's cloud with a neighbouring fitting 5 cm beside it, a third of the points (its
+    mask took the neighbour in): only the largest piece stays for a class in ``largest_only``, both
+    for any other class, since each piece holds more than ``below`` of the cloud."""
+    rng = np.random.default_rng(3)
+    fitting = rng.uniform([-0.02, -0.02, 1.0], [0.02, 0.02, 1.01], (200, 3))
+    neighbour = fitting[:100] + np.array([0.09, 0.0, 0.0])  # 5 cm gap beside a 4 cm fitting
+    cloud = np.vstack([neighbour, fitting])
+    detached = Detached(link=0.02, below=0.05, largest_only=("end_fitting", "corner_joint"))
+    assert detached_pieces(cloud, detached, "end_fitting").tolist() == [True] * 100 + [False] * 200
+    assert not detached_pieces(cloud, detached, "strut_tube").any()
+    assert not detached_pieces(cloud, detached).any()
+    # One piece is the part whatever the class.
+    assert not detached_pieces(fitting, detached, "corner_joint").any()
