@@ -25,6 +25,9 @@ from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
 from tlt_vision.segmentation.depth_split import DepthSplit
 
+# Parts about as long as they are wide, seen whole or hardly at all.
+COMPACT = ("end_fitting", "corner_joint", "rivet")
+
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_CONFIG = REPO_ROOT / "config" / "vision" / "node.yaml"
 SEGMENTATION_SOURCES = ("twin_labels", "mask_rcnn")
@@ -96,6 +99,14 @@ SCHEMA = {
             "refine_iterations": opt("int", 0, minimum=0, maximum=500),
             # Parts round about their model's z axis and about as long as wide.
             "turned_starts": opt("list", [], item=Field("str", choices=("end_fitting", "rivet"))),
+            "tilted_starts": opt(
+                "dict",
+                {"classes": [], "angle_deg": 30.0},
+                schema={
+                    "classes": opt("list", [], item=Field("str", choices=COMPACT)),
+                    "angle_deg": opt("float", 30.0, minimum=1.0, maximum=90.0),
+                },
+            ),
         },
     ),
     "free_space": opt(
@@ -128,8 +139,7 @@ SCHEMA = {
             "link": opt("float", DETACHED.link, minimum=0.001, maximum=0.5),
             "below": opt("float", DETACHED.below, minimum=0.0, maximum=0.5),
             # Compact parts only: a tube or a frame side cut by what stands in front is two pieces.
-            "largest_only": opt("list", [],
-                                item=Field("str", choices=("end_fitting", "corner_joint", "rivet"))),
+            "largest_only": opt("list", [], item=Field("str", choices=COMPACT)),
         },
     ),
     "ee_self_filter": opt(

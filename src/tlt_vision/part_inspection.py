@@ -73,6 +73,7 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
     thresholds = mission.inspection["chamfer_thresholds"]
     settings = dict(config.raw["corrector"])
     turned = set(settings.pop("turned_starts"))
+    tilted = settings.pop("tilted_starts")
     corrector = CorrectorConfig(**settings)
     out = {}
     for name in config.raw["detectors"]:
@@ -85,6 +86,7 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
         out[name] = PoseEstimator(
             model, load_detector(path, model, width), thresholds[model.object_class], corrector,
             turned_starts=model.object_class in turned,
+            tilted_deg=tilted["angle_deg"] if model.object_class in tilted["classes"] else 0.0,
         )
     return out
 

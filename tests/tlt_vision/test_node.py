@@ -491,6 +491,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "corrector.turned_starts" in err and "strut_tube" in err
+    wrong = vision_config()
+    wrong["corrector"]["tilted_starts"] = {"classes": ["corner_joint"], "angle_deg": 0.0}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "corrector.tilted_starts.angle_deg" in err
     missing = vision_config()
     missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
     path.write_text(__import__("yaml").safe_dump(missing))
