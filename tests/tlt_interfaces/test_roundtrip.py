@@ -75,10 +75,12 @@ def node(peer):
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     yield node
+    # The spin thread ends before the node goes: a node destroyed under it failed that thread with
+    # InvalidHandle as it added the node's event handlers to its wait set.
     executor.shutdown()
+    spinner.join(timeout=5)
     node.destroy_node()
     rclpy.shutdown()
-    spinner.join(timeout=5)
 
 
 def _wait(event: threading.Event, what: str, resend=None) -> None:
