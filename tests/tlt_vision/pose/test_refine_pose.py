@@ -118,7 +118,6 @@ def test_an_end_fitting_fitted_end_on_turns_to_its_side_with_the_turned_starts()
     assert float(obj[0]) < float(stuck_obj[0]) / 10
 
 
-
 def test_a_corner_joint_fitted_tilted_comes_back_from_the_tilted_starts():
     """A corner joint whose fit starts tilted 45 degrees: from that start alone the refinement
     stops in a fit that is centimetres off; one of the starts turned 30 degrees either way about
