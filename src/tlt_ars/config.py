@@ -39,6 +39,9 @@ SCHEMA = {
     "ars": Field("str", choices=ARS_AGENTS),
     "mission": Field("str", doc="mission file, relative to the repository root or absolute"),
     "scene": Field("str", doc="planning scene file"),
+    # Where the request that set its member is kept across a restart (tlt_ars.request_data);
+    # none: in memory only.
+    "state_file": opt("str", None, doc="ARS state file, relative to the repository root or absolute"),
     "check_reach": opt("bool", True),
     "started_on_launch": opt("bool", True),
     "tick_rate_hz": opt("float", 20.0, minimum=1.0, maximum=200.0),
@@ -178,6 +181,10 @@ class ArsConfig:
     @property
     def scene_path(self) -> Path:
         return _resolve(self.raw["scene"])
+
+    @property
+    def state_path(self) -> Path | None:
+        return None if self.raw.get("state_file") is None else _resolve(self.raw["state_file"])
 
     @property
     def arm(self) -> dict[str, Any]:

@@ -3,23 +3,23 @@ caches, the planner, and the state of the request being carried out.
 
 One :class:`ArsContext` per ARS process. Behaviours read sensors through it (``arm_q`` from the
 UR driver's JointState, ``ee_state`` from the EE driver's EndEffectorState, the other arm's
-configuration for the collision scene) and keep the request's working data in :class:`RequestData`
-(which part is held, the target chosen for an approach, the dispenser pose found on its tag, the
-parts discarded), which the tree resets for each request.
+configuration for the collision scene) and keep the request's working data in
+:class:`~tlt_ars.request_data.RequestData` (which part is held, the target chosen for an approach,
+the dispenser pose found on its tag, the parts discarded), which the tree resets for each request.
 
-A request can end in failure after its member was set (placed, affixed, riveted) while the arm
-still stands at the tower: a Retreat that a lost link or a protective stop failed. Its data is kept
-as the context's ``unfinished`` request; the CRS, which has not recorded the member, sends the same
-request again once the fault is cleared, and :meth:`ArsContext.check_request` lets that one through
-(the mission state alone would refuse it as already placed) so that the ARS can finish it: retreat
-from where the arm stands and report success.
+A request can end after its member was set (placed, affixed, riveted) without the CRS hearing of
+it: a Retreat that a lost link or a protective stop failed, the ARS killed before the Retreat
+ended, or the result lost on a broken link. The CRS, which has not recorded the member, sends the
+same request again, and :meth:`ArsContext.check_request` lets that one through (the mission state
+alone would refuse it as already placed) so that the ARS can finish it: release and retreat from
+where the arm stands, and report success. So the last request that set its member is kept as the
+context's ``unfinished`` request until another request begins, and in the state file when there
+is one (:class:`~tlt_ars.request_data.RequestFile`), where a restarted ARS finds it.
 """
 
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from rclpy.node import Node
@@ -30,27 +30,13 @@ from tlt_interfaces.msg import EndEffectorState, HardwareStatus
 from tlt_ars.config import ArsConfig
 from tlt_ars.mission_state import MissionState, Request
 from tlt_ars.planning.world import SceneConfig, Width
+from tlt_ars.request_data import RequestData, RequestFile
 from tlt_common import ros_names
 from tlt_common.bt.ros import Clock, TopicCache, node_clock
 from tlt_common.mission.schema import Member, Mission
 
 # Above this the width slide is taken to be moving (the servo's 15 mm/s drive, not its jitter).
 WIDTH_MOVING_M_S = 0.002
-
-
-@dataclass
-class RequestData:
-    """Working data of one request; a fresh one for every request."""
-
-    request: Request | None = None
-    member: Member | None = None
-    holding: str | None = None  # part kind in the gripper, for the collision scene
-    dispenser: str | None = None  # the dispenser the held part came from
-    parts_discarded: int = 0
-    targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
-    recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
-    located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
-    alignment: Any = None  # the latest CheckAlignment response
 
 
 class ArsContext:
@@ -64,6 +50,7 @@ class ArsContext:
         scene: SceneConfig,
         *,
         clock: Clock | None = None,
+        request_file: RequestFile | None = None,
     ) -> None:
         self.node = node
         self.config = config
@@ -95,7 +82,11 @@ class ArsContext:
         # Planning is CPU work of up to a second: it runs here, never in the tick.
         self.planning_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.ars}-planner")
         self.data = RequestData()
-        self.unfinished: RequestData | None = None
+        # RequestFileError propagates: the ARS does not start on a state file it cannot read.
+        self.request_file = request_file
+        self.unfinished: RequestData | None = request_file.load() if request_file else None
+        if self.unfinished is not None:
+            self._mark(self.unfinished.member, self.unfinished.recorded)
 
     # ----- sensors -----
     def arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
@@ -201,23 +192,42 @@ class ArsContext:
 
     def begin(self, request: Request) -> bool:
         """Start the working data of ``request``; True when it finishes the unfinished request,
-        whose data (the targets its approaches chose) it carries on with."""
+        whose data (the targets its approaches chose) it carries on with. Any other request drops
+        the unfinished one."""
         finishing = self.finishes(request)
         if finishing:
             self.data = self.unfinished
             self.data.request, self.data.parts_discarded = request, 0  # reported with the failure
         else:
             self.data = RequestData(request=request, member=self.state.member(request.member_id))
+            if self.unfinished is not None and self.request_file is not None:
+                self.request_file.clear()
         self.unfinished = None
         return finishing
 
-    def end(self, request: Request, ok: bool) -> None:
-        """``request`` ended: keep it as unfinished when it failed after setting its member."""
-        if not ok and self.data.recorded and self.data.request == request:
+    def record(self, what: str) -> None:
+        """The request has set its member: ``what`` is placed, affixed or riveted. Marked in the
+        mission state and kept in the state file before anything else moves."""
+        member = self.data.member
+        if member is None:
+            raise ValueError("no member in this request")
+        self._mark(member, what)
+        self.data.recorded = what
+        if self.request_file is not None:
+            self.request_file.save(self.data)
+
+    def _mark(self, member: Member, what: str) -> None:
+        {"placed": self.state.mark_placed, "affixed": self.state.mark_affixed,
+         "riveted": self.state.mark_riveted}[what](member.id)  # fmt: skip
+
+    def end(self, request: Request) -> None:
+        """``request`` ended: kept as unfinished when it set its member, whether it then failed or
+        its success may not reach the CRS."""
+        if self.data.recorded and self.data.request == request:
             self.unfinished = self.data
 
     def close(self) -> None:
         self.planning_pool.shutdown(wait=False, cancel_futures=True)
 
 
-__all__ = ["ArsContext", "RequestData"]
+__all__ = ["ArsContext"]

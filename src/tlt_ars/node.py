@@ -17,9 +17,10 @@ Serves, for the CRS:
   link: either way the member is placed once and the result reaches the CRS that asks now.
   Feedback is the running leaf's path in the tree (``Add Member/Load Rivet/Approach Rivet
   Dispenser/Execute Approach Rivet Dispenser``) and the fraction of the branch's leaves done.
-  The result is success, or failure with the failing step and its reason. A request that failed after
-  its member was set (riveted or released, then a Retreat failed: the arm still stands at the
-  tower) is finished by the same request sent again: the ARS retreats from where the arm stands
+  The result is success, or failure with the failing step and its reason. A request that set its
+  member (riveted, or a cross frame released) and then failed, or whose ARS was killed before it
+  ended (the request is kept in ``--state-file``), or whose success the CRS never heard, is
+  finished by the same request sent again: the ARS lets go, retreats from where the arm stands
   and reports success, instead of refusing the member as already placed. Cancel pre-empts the
   branch (the arm's trajectory goal is canceled, the driver holds the arm), waits until the
   JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal CANCELED.
@@ -66,6 +67,7 @@ from tlt_ars.config import (
 from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
 from tlt_ars.motion import MotionPlanner
+from tlt_ars.request_data import RequestFile, RequestFileError
 from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
@@ -151,7 +153,17 @@ class ArsNode(LeanNode):
             from tlt_ars.planning.reachability import require_reachable
 
             require_reachable(scene, mission, [self.ars], config.ee["width"])
-        self.ctx = ArsContext(self, config, mission, scene)
+        state = config.state_path
+        self.ctx = ArsContext(
+            self, config, mission, scene,
+            request_file=RequestFile(state, mission, self.ars) if state is not None else None,
+        )
+        if self.ctx.unfinished is not None:
+            left = self.ctx.unfinished
+            self.get_logger().warning(
+                f"{state}: {left.request.request} of '{left.member.id}' set its member ({left.recorded})"
+                " before this ARS went down; the same request sent again finishes it"
+            )
         self.planner = MotionPlanner(
             scene,
             self.ars,
@@ -291,7 +303,7 @@ class ArsNode(LeanNode):
         while goal.successor is not None:  # the job was taken over by a newer goal
             goal = goal.successor
         goal.parts_discarded = self.ctx.data.parts_discarded
-        self.ctx.end(goal.request, ok)
+        self.ctx.end(goal.request)
         goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
         with self._lock:
             if self.active is goal:
@@ -409,7 +421,7 @@ class ArsNode(LeanNode):
         if goal is None:
             return
         goal.parts_discarded = self.ctx.data.parts_discarded
-        self.ctx.end(goal.request, state == "succeeded")
+        self.ctx.end(goal.request)
         goal.outcome = (state, reason)
         if self.active is goal:
             self.active = None
@@ -427,6 +439,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ars", choices=ros_names.ARS_AGENTS, required=True, help="which ARS this process is")
     p.add_argument("--config", type=Path, help="ARS file (default config/ars/<ars>.yaml)")
     p.add_argument("--mission", type=Path, help="mission file (overrides the ARS file; the same as the CRS)")
+    p.add_argument(
+        "--state-file", type=Path,
+        help="where a request that set its member is kept for a restart (overrides the ARS file)",
+    )
     p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
     return p
 
@@ -439,9 +455,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(remove_ros_args(["ars", *full])[1:])
     path = args.config or default_config_path(args.ars)
     try:
-        if args.mission is not None:
-            raw = {**load_yaml(path), "mission": str(args.mission.resolve())}
-            config = ars_config_from_dict(raw, str(path))
+        overrides = {
+            key: str(value.resolve())
+            for key, value in (("mission", args.mission), ("state_file", args.state_file))
+            if value is not None
+        }
+        if overrides:
+            config = ars_config_from_dict({**load_yaml(path), **overrides}, str(path))
         else:
             config = load_ars_config(path)
         if config.ars != args.ars:
@@ -455,7 +475,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = None
     try:
         node = ArsNode(config, check_reach=False if args.no_reach_check else None)
-    except (ConfigError, ValueError, OSError) as exc:
+    except (ConfigError, RequestFileError, ValueError, OSError) as exc:
         print(f"ars: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2

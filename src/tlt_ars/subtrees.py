@@ -25,19 +25,20 @@ Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, S
                                        Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
                                        Loaded
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
-Rivet Member                37         Fire Rivet Gun, Release, Record Placed, Retreat (Retract Width
+Rivet Member                37         Fire Rivet Gun, Record Placed, Release, Retreat (Retract Width
                                        for a diagonal, commanded and not waited for)
 Foundation Rivet            38         Load Rivet, Place Rivet (recording the rivet set)
 Affix Member                39         Load Rivet, Place Rivet (recording the member affixed)
 Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
                                        Member (Fire Rivet Gun, Record Riveted / Affixed, Retreat)
-Finish <request>            -          Retreat (Retract Width for a diagonal): the tail of a request
-                                       that failed after its member was set, sent again
+Finish <request>            -          Release (an added member), Retreat (Retract Width for a
+                                       diagonal): the tail of a request that set its member, sent again
 ==========================  =========  ================================================================
 
 A member is recorded the moment it is set (the rivet fired, the cross frame released where it
-belongs), before the Retreat: a Retreat that fails leaves it set all the same, and the request is
-then finished, not run again (:class:`tlt_ars.context.ArsContext`).
+belongs), before the Release and the Retreat, and kept in the ARS's state file: a Retreat that
+fails, or an ARS killed and restarted, leaves it set all the same, and the request sent again is
+finished, not run again (:class:`tlt_ars.context.ArsContext`).
 """
 
 from __future__ import annotations
@@ -118,8 +119,9 @@ def chosen(ctx: ArsContext, key: str, use: str = "pose", contact: bool = False) 
 
 class RecordMember(Action):
     """Record in the ARS's mission state that the request's member is ``what`` (placed, affixed,
-    riveted). Writes the mission state and ``RequestData.recorded``. SUCCESS at once; FAILURE
-    without a member."""
+    riveted). Writes the mission state, ``RequestData.recorded`` and the state file
+    (:meth:`ArsContext.record`). SUCCESS at once; FAILURE without a member, or when the state file
+    cannot be written (the member is still known set in memory, and finished when sent again)."""
 
     def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
         super().__init__(name)
@@ -129,9 +131,10 @@ class RecordMember(Action):
         member = self.ctx.data.member
         if member is None:
             return self.fail("no member in this request")
-        {"placed": self.ctx.state.mark_placed, "affixed": self.ctx.state.mark_affixed,
-         "riveted": self.ctx.state.mark_riveted}[self.what](member.id)  # fmt: skip
-        self.ctx.data.recorded = self.what
+        try:
+            self.ctx.record(self.what)
+        except OSError as exc:
+            return self.fail(f"{member.id} {self.what}, but the state file cannot be written: {exc}")
         self.feedback_message = f"{member.id} {self.what}"
         return Status.SUCCESS
 
@@ -333,14 +336,18 @@ class SubtreeBuilder:
         )
 
     def rivet_member(self, kind: str, *, record: str = "placed") -> Sequence:
-        """Fig. 37: fire the gun; with the member held (``record`` placed), let go of it; record
-        the member ``record``; retreat; for a diagonal, retract the width afterwards."""
+        """Fig. 37: fire the gun; record the member ``record``; with the member held (``record``
+        placed), let go of it; retreat; for a diagonal, retract the width afterwards. The record
+        comes straight after the rivet, which is what sets the member: a Release that fails, or
+        an ARS killed before it, leaves a riveted member that is finished, not placed again."""
         ctx = self.ctx
+        children: list[py_trees.behaviour.Behaviour] = [
+            FireRivetGun("Fire Rivet Gun", ctx),
+            RecordMember(f"Record {record.capitalize()}", ctx, record),
+        ]
         holding = record == "placed"
-        children: list[py_trees.behaviour.Behaviour] = [FireRivetGun("Fire Rivet Gun", ctx)]
         if holding:
             children.append(release(ctx))
-        children.append(RecordMember(f"Record {record.capitalize()}", ctx, record))
         children += self._retreat(kind, "place" if holding else "joint")
         return _seq("Rivet Member", children)
 
@@ -446,13 +453,15 @@ class SubtreeBuilder:
         return builders[request](member, defer=defer)
 
     def finish(self, request: str, member: Member) -> Sequence:
-        """What is left of ``request`` for ``member`` after the member was set: the retreat from
-        the tower along the approach its fine move took (and, after a diagonal, the width
-        retracted). A Retreat that got part of the way starts from where the arm stands."""
+        """What is left of ``request`` for ``member`` after the member was set: an added member let
+        go of (a grasp already open stays open), the retreat from the tower along the approach its
+        fine move took (and, after a diagonal, the width retracted). A Retreat that got part of the
+        way starts from where the arm stands."""
         title = " ".join(w.capitalize() for w in request.split("_"))
         key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
         kind = member.kind if request == "add_member" else ""
-        return _seq(f"Finish {title}", self._retreat(kind, key))
+        let_go = [release(self.ctx)] if request == "add_member" else []
+        return _seq(f"Finish {title}", [*let_go, *self._retreat(kind, key)])
 
 
 def _phase(defer: bool) -> Callable[[str, Callable[[], Sequence]], Sequence]:

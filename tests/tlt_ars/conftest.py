@@ -10,6 +10,8 @@
   them (the emulated grasp servos then stop on it and press, which is what ``part_grasped`` reads);
   jaws opening anywhere else let the part go where it is. The gun passing a rivet pick loads a
   rivet; firing spends it.
+* The ARS keeps its state file in a directory of the stack's own; :meth:`Stack.restart_ars`
+  replaces the ARS by a new one on the same files, as the launcher restarts a dead process.
 * Vision and CRS stand-ins answering LocateTag, CheckAlignment and InspectPart (rivet) from that
   ground truth, and the CRS's InspectPart with a scripted list of verdicts (the issue allows
   answering vision from ground truth until vision lands).
@@ -19,9 +21,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -32,7 +37,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
-from tlt_interfaces.msg import EndEffectorState
+from tlt_interfaces.msg import DispenserState, EndEffectorState, MemberState, MissionProgress
 from tlt_interfaces.srv import CheckAlignment, GroundCommand, InspectPart, LocateTag
 from tlt_sim.emulators.dynamixel_chain import DynamixelChain
 from tlt_sim.emulators.ur_controller import URControllerConfig
@@ -287,7 +292,11 @@ class Stack:
         self.chain.start()
         self.gpio = Gpio(self.chain, 2048 - 0.002 / 0.01 * 4096)
         self.ee = EndEffectorNode(ee_test_config(self.chain.port), self.gpio, context=self.context)
-        self.ars = ArsNode(ars_config_from_dict(ars_test_config(), "ars_x test config"), context=self.context)
+        self.state_dir = Path(tempfile.mkdtemp(prefix="tlt-ars-test-"))
+        self.ars_config = ars_config_from_dict(
+            ars_test_config(state_file=str(self.state_dir / "ars_x.json")), "ars_x test config"
+        )
+        self.ars = ArsNode(self.ars_config, context=self.context)
         self.scene, self.mission = self.ars.ctx.scene, self.ars.ctx.mission
         self.world = World(self)
         self.inspection_verdicts: list[bool | None] = []  # next verdicts (None: not inspected); none: pass
@@ -393,6 +402,30 @@ class Stack:
         response.pose.pose = pose_msg(part)
         return response
 
+    def restart_ars(self, unheard: str) -> None:
+        """The ARS gone and a new one started on the same files. A MissionProgress tells it what
+        the old one knew stands, but for the member ``unheard``, whose result the CRS never heard."""
+        progress = crs_progress(self.ars.ctx.state, unheard)
+        self.executor.remove_node(self.ars)
+        self.ars.close()
+        _destroy(self.ars)
+        self.ars = ArsNode(self.ars_config, context=self.context)
+        self.executor.add_node(self.ars)
+        publisher = self.client.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
+        try:
+            self.wait(lambda: self.ars.ctx.arm_q() is not None, "arm joint states at the new ARS")
+            self.wait(lambda: publisher.get_subscription_count() > 0, "the new ARS subscribed to progress")
+            publisher.publish(progress)
+            state = self.ars.ctx.state
+            placed = {m.member_id for m in progress.members if m.state >= MemberState.STATE_PLACED}
+            self.wait(
+                lambda: placed <= state.placed()
+                and all(state.remaining[d.name] == d.remaining for d in progress.dispensers),
+                "the new ARS told what stands",
+            )
+        finally:
+            self.client.destroy_publisher(publisher)
+
     # ----- helpers -----
     @staticmethod
     def wait(predicate, what: str, timeout: float = WAIT_S):
@@ -459,15 +492,34 @@ class Stack:
         self.ee.close()
         self.ur.shutdown()
         for node in (self.ars, self.ee, self.ur, self.client):
-            # destroy_node leaves action servers and clients, which keep the DDS participant (and
-            # ARS X's servers in the graph) alive after the context is shut down.
-            for waitable in list(node.waitables):
-                if hasattr(waitable, "destroy"):
-                    waitable.destroy()
-            node.destroy_node()
+            _destroy(node)
         rclpy.try_shutdown(context=self.context)
         self.chain.stop()
         self.emulator.close()
+        shutil.rmtree(self.state_dir, ignore_errors=True)
+
+
+def crs_progress(state, leave_out: str) -> MissionProgress:
+    """What the CRS would say of what ``state`` (an ARS's MissionState) knows, but for the member
+    ``leave_out``."""
+    kinds = {"cross_frame": 0, "vertical": 1, "diagonal": 2, "foundation_rivet": 3}
+    progress = MissionProgress(mission=state.mission.name, current_bay=1, started=True)
+    progress.members = [
+        MemberState(member_id=m.id, kind=kinds[m.kind], bay=m.bay, state=MemberState.STATE_PLACED)
+        for m in state.mission.members
+        if state.is_placed(m.id) and m.id != leave_out
+    ]
+    progress.dispensers = [DispenserState(name=name, remaining=n) for name, n in state.remaining.items()]
+    return progress
+
+
+def _destroy(node: Node) -> None:
+    # destroy_node leaves action servers and clients, which keep the DDS participant (and ARS X's
+    # servers in the graph) alive after the context is shut down.
+    for waitable in list(node.waitables):
+        if hasattr(waitable, "destroy"):
+            waitable.destroy()
+    node.destroy_node()
 
 
 @pytest.fixture

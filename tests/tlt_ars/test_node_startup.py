@@ -8,6 +8,7 @@ import signal
 import threading
 import time
 
+import numpy as np
 import pytest
 import rclpy
 import yaml
@@ -20,11 +21,15 @@ from tlt_interfaces.msg import MemberState, MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.config import ars_config_from_dict, default_config_path
+from tlt_ars.mission_state import Request
 from tlt_ars.node import ArsNode, main
 from tlt_ars.planning.reachability import UnreachableMember
+from tlt_ars.planning.targets import Target
+from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
+from tlt_common.mission.schema import load_mission
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -271,3 +276,58 @@ def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_start
         ars.close()
         ars.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def _kept_diagonal(path) -> None:
+    """A state file that says the ARS riveted diagonal face_y0 of the shipped mission and went
+    down before the CRS heard of it."""
+    mission = load_mission("missions/one_bay.yaml")
+    member = mission.member("bay1/diagonal/face_y0")
+    pre = np.eye(4)
+    pre[:3, 3] = (0.5, 0.5, 1.0)
+    RequestFile(path, mission, "ars_x").save(RequestData(
+        request=Request("add_member", member.id, "ars_x", bay=1, kind=2, position="face_y0"),
+        member=member, holding="diagonal", targets={"place": Target("test", pre, pre)}, recorded="placed",
+    ))  # fmt: skip
+
+
+def test_a_state_file_that_cannot_be_read_stops_the_start(tmp_path):
+    path = tmp_path / "ars_x.json"
+    path.write_text("{ half a file")
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(check_reach=False, state_file=str(path))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(RequestFileError, match=f"{path}: ARS state file is not valid JSON"):
+            ArsNode(ars_config_from_dict(raw), context=context)
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_a_restarted_ars_finishes_the_request_its_state_file_kept_and_drops_it_for_another(tmp_path):
+    """The CRS never heard how the kept request ended and sends it again: the restarted ARS runs
+    its Finish (let go, retreat), not the whole request, nor refuses it as placed; the file stays
+    until another request begins. No arm here: each request fails at its first motion."""
+    path = tmp_path / "ars_x.json"
+    _kept_diagonal(path)
+    raw = load_yaml(default_config_path("ars_x"))
+    raw.update(check_reach=False, state_file=str(path))
+    raw["timeouts"].update(server_s=0.5, planning_s=0.5)
+    with _spun_ars(raw) as (ars, client):
+        assert ars.ctx.state.is_placed("bay1/diagonal/face_y0")
+        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+        assert action.wait_for_server(timeout_sec=10)
+        kept = AddMember.Goal(
+            kind=2, bay=1, member_id="bay1/diagonal/face_y0", position="face_y0", ars="ars_x"
+        )
+        result = _wait(_wait(action.send_goal_async(kept)).get_result_async(), timeout=30.0)
+        assert result.result.reason.startswith("Finish Add Member/Release/Open Grasp"), result.result.reason
+        assert path.exists()  # still kept: it failed
+
+        other = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
+        result = _wait(_wait(action.send_goal_async(other)).get_result_async(), timeout=30.0)
+        assert result.result.reason.startswith("Add Member/Load Rivet/"), result.result.reason
+        assert not path.exists()
+        again = _wait(_wait(action.send_goal_async(kept)).get_result_async(), timeout=30.0)
+        assert again.result.reason == "rejected: member 'bay1/diagonal/face_y0' is already placed"

@@ -1,0 +1,149 @@
+"""The working data of one ARS request, and the file that keeps it across a restart once the
+request has set its member.
+
+A member is set (the rivet fired, the cross frame released where it belongs) before the arm
+retreats from the tower. An ARS killed in between comes back knowing nothing of it, and the CRS,
+which never heard the result, sends the same request again: run afresh, it would fetch another
+part for a place that is taken. So the moment a request sets its member its data is written to
+the ARS's state file (``state_file`` in the ARS file, ``--state-file``), and read back at start-up
+as the request left unfinished; :class:`tlt_ars.context.ArsContext` then finishes it when it is
+sent again. What the file keeps is what finishing needs: the request, what it set, the part still
+held (for the collision scene) and the targets its approaches chose (the retreat goes back along
+the one its fine move took). It is replaced by the next request that sets a member and removed
+when another request begins.
+
+The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
+cannot be read, is not such a file, or belongs to another mission or ARS raises
+:class:`RequestFileError` with the path and the reason: the ARS then refuses to start, as the CRS
+does with its tower model, since guessing would risk the very double placement the file prevents.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tlt_ars.mission_state import Request
+from tlt_ars.planning.targets import Target
+from tlt_common.mission.schema import Member, Mission
+from tlt_common.mission.tower_model import atomic_write
+
+FILE_FORMAT = 1
+RECORDS = ("placed", "affixed", "riveted")
+
+
+@dataclass
+class RequestData:
+    """Working data of one request; a fresh one for every request."""
+
+    request: Request | None = None
+    member: Member | None = None
+    holding: str | None = None  # part kind in the gripper, for the collision scene
+    dispenser: str | None = None  # the dispenser the held part came from
+    parts_discarded: int = 0
+    targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
+    recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
+    located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
+    alignment: Any = None  # the latest CheckAlignment response
+
+
+class RequestFileError(RuntimeError):
+    """A state file the ARS cannot resume from (unreadable, not such a file, another mission)."""
+
+
+class RequestFile:
+    """The state file of one ARS (``path``) for ``mission``; see the module docstring."""
+
+    def __init__(self, path: str | Path, mission: Mission, ars: str) -> None:
+        self.path = Path(path)
+        self.mission = mission
+        self.ars = ars
+
+    def save(self, data: RequestData) -> None:
+        """Keep ``data``, a request that has set its member."""
+        if data.request is None or data.recorded not in RECORDS:
+            raise ValueError("only a request that has set its member is kept")
+        document = {
+            "format": FILE_FORMAT,
+            "mission": self.mission.name,
+            "mission_hash": self.mission.hash,
+            "ars": self.ars,
+            "request": asdict(data.request),
+            "recorded": data.recorded,
+            "holding": data.holding,
+            "dispenser": data.dispenser,
+            "targets": {
+                key: {"label": t.label, "pose": t.pose.tolist(), "pre_pose": t.pre_pose.tolist()}
+                for key, t in data.targets.items()
+            },
+        }
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(self.path, json.dumps(document, indent=1).encode())
+
+    def clear(self) -> None:
+        with contextlib.suppress(FileNotFoundError):
+            self.path.unlink()
+
+    def load(self) -> RequestData | None:
+        """The request kept in the file, or None without a file; :class:`RequestFileError` when
+        the file cannot be resumed from."""
+        for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):  # writers killed mid-write
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        try:
+            text = self.path.read_bytes()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            raise self._error(f"cannot be read: {exc.strerror or exc}") from exc
+        try:
+            document = json.loads(text)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise self._error(f"is not valid JSON ({exc}); it may be corrupt") from exc
+        if not isinstance(document, dict) or document.get("format") != FILE_FORMAT:
+            raise self._error(f"is not an ARS state file of format {FILE_FORMAT}")
+        if document.get("mission_hash") != self.mission.hash:
+            raise self._error(
+                f"belongs to mission '{document.get('mission')}', not to '{self.mission.name}'"
+                f" ({self.mission.hash[:12]})"
+            )
+        if document.get("ars") != self.ars:
+            raise self._error(f"belongs to '{document.get('ars')}', not to '{self.ars}'")
+        try:
+            request = Request(**document["request"])
+            member = self.mission.member(request.member_id)
+            targets = {
+                key: Target(str(t["label"]), _pose(t["pose"]), _pose(t["pre_pose"]))
+                for key, t in document["targets"].items()
+            }
+            recorded, holding, dispenser = document["recorded"], document["holding"], document["dispenser"]
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
+        if recorded not in RECORDS:
+            raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)}")
+        return RequestData(
+            request=request,
+            member=member,
+            holding=holding,
+            dispenser=dispenser,
+            targets=targets,
+            recorded=recorded,
+        )
+
+    def _error(self, reason: str) -> RequestFileError:
+        return RequestFileError(f"{self.path}: ARS state file {reason}")
+
+
+def _pose(value: Any) -> np.ndarray:
+    pose = np.asarray(value, dtype=float)
+    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"a pose must be 4x4 finite numbers, got shape {pose.shape}")
+    return pose
+
+
+__all__ = ["RequestData", "RequestFile", "RequestFileError"]
