@@ -8,13 +8,19 @@ configuration for the collision scene) and keep the request's working data in
 the dispenser pose found on its tag, the parts discarded), which the tree resets for each request.
 
 A request can end after its member was set (placed, affixed, riveted) without the CRS hearing of
-it: a Retreat that a lost link or a protective stop failed, the ARS killed before the Retreat
-ended, or the result lost on a broken link. The CRS, which has not recorded the member, sends the
-same request again, and :meth:`ArsContext.check_request` lets that one through (the mission state
-alone would refuse it as already placed) so that the ARS can finish it: release and retreat from
-where the arm stands, and report success. So the last request that set its member is kept as the
-context's ``unfinished`` request until another request begins, and in the state file when there
-is one (:class:`~tlt_ars.request_data.RequestFile`), where a restarted ARS finds it.
+it: a Release or Retreat that a lost link or a protective stop failed, the ARS killed before the
+request ended, or the result lost on a broken link. The CRS, which has not recorded the member,
+sends the same request again, and :meth:`ArsContext.check_request` lets that one through (the
+mission state alone would refuse it as already placed) so that the ARS can finish it: let go and
+retreat from where the arm stands, and report success. So the last request that set its member is
+kept as the context's ``unfinished`` request until another request begins.
+
+A request can also end with a part in the gripper (a motion or a measurement failed on the way to
+the tower): the next request starts holding it (``RequestData.holding``, so the collision scene
+has it) and discards it first (:meth:`tlt_ars.subtrees.SubtreeBuilder.branch`).
+
+Both are kept in the state file when there is one (:class:`~tlt_ars.request_data.RequestFile`,
+brought up to date by :meth:`ArsContext.keep`), where a restarted ARS finds them.
 """
 
 from __future__ import annotations
@@ -81,10 +87,11 @@ class ArsContext:
         self.width_target: float | None = None
         # Planning is CPU work of up to a second: it runs here, never in the tick.
         self.planning_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"{self.ars}-planner")
-        self.data = RequestData()
         # RequestFileError propagates: the ARS does not start on a state file it cannot read.
         self.request_file = request_file
-        self.unfinished: RequestData | None = request_file.load() if request_file else None
+        kept = request_file.load() if request_file is not None else None
+        self.data = kept or RequestData()
+        self.unfinished: RequestData | None = kept if kept is not None and kept.recorded else None
         if self.unfinished is not None:
             self._mark(self.unfinished.member, self.unfinished.recorded)
 
@@ -188,33 +195,58 @@ class ArsContext:
         """``None`` when ``request`` may run (it may finish the unfinished one), else why not."""
         if self.finishes(request):
             return None
+        left = self.unfinished
+        if left is not None and left.holding is not None:
+            return (
+                f"the gripper still holds '{left.member.id}', {left.recorded} in the tower: only"
+                f" {left.request.request} for it, sent again, lets go of it"
+            )
         return self.state.check_request(request)
 
     def begin(self, request: Request) -> bool:
         """Start the working data of ``request``; True when it finishes the unfinished request,
         whose data (the targets its approaches chose) it carries on with. Any other request drops
-        the unfinished one."""
+        the unfinished one, and starts with the part an earlier one left in the gripper.
+        ``OSError`` when the state file cannot be brought up to date."""
         finishing = self.finishes(request)
         if finishing:
             self.data = self.unfinished
             self.data.request, self.data.parts_discarded = request, 0  # reported with the failure
         else:
-            self.data = RequestData(request=request, member=self.state.member(request.member_id))
-            if self.unfinished is not None and self.request_file is not None:
-                self.request_file.clear()
+            held = self.data
+            self.data = RequestData(
+                request=request, member=self.state.member(request.member_id),
+                holding=held.holding, dispenser=held.dispenser,
+            )  # fmt: skip
         self.unfinished = None
+        if (why := self.keep()) is not None:
+            raise OSError(why)
         return finishing
 
-    def record(self, what: str) -> None:
+    def record(self, what: str) -> str | None:
         """The request has set its member: ``what`` is placed, affixed or riveted. Marked in the
-        mission state and kept in the state file before anything else moves."""
+        mission state and kept in the state file before anything else moves; returns why the
+        file could not be written, if it could not (the member stays known set in memory)."""
         member = self.data.member
         if member is None:
             raise ValueError("no member in this request")
         self._mark(member, what)
         self.data.recorded = what
-        if self.request_file is not None:
-            self.request_file.save(self.data)
+        return self.keep()
+
+    def keep(self) -> str | None:
+        """Bring the state file up to date with the request's data: kept while it holds a part or
+        has set its member, removed otherwise. Returns why it could not be written, or None."""
+        if self.request_file is None:
+            return None
+        try:
+            if self.data.recorded or self.data.holding:
+                self.request_file.save(self.data)
+            else:
+                self.request_file.clear()
+        except OSError as exc:
+            return f"the state file {self.request_file.path} cannot be written: {exc.strerror or exc}"
+        return None
 
     def _mark(self, member: Member, what: str) -> None:
         {"placed": self.state.mark_placed, "affixed": self.state.mark_affixed,

@@ -21,9 +21,11 @@ Serves, for the CRS:
   member (riveted, or a cross frame released) and then failed, or whose ARS was killed before it
   ended (the request is kept in ``--state-file``), or whose success the CRS never heard, is
   finished by the same request sent again: the ARS lets go, retreats from where the arm stands
-  and reports success, instead of refusing the member as already placed. Cancel pre-empts the
-  branch (the arm's trajectory goal is canceled, the driver holds the arm), waits until the
-  JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal CANCELED.
+  and reports success, instead of refusing the member as already placed. A part that a failed
+  request left in the jaws (kept in the state file too) is discarded first by the next request.
+  Cancel pre-empts the branch (the arm's trajectory goal is canceled, the driver holds the arm),
+  waits until the JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal
+  CANCELED.
 * ``GroundCommand`` on ``ros_names.ground_command_service(ars)``: Start (lets requests run; the
   ARS starts started when ``started_on_launch``), Pause (stops ticking and holds the arm: the
   running motion is canceled, Resume plans it again from where the arm stands), Resume, Stop

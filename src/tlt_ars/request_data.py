@@ -1,23 +1,24 @@
-"""The working data of one ARS request, and the file that keeps it across a restart once the
-request has set its member.
+"""The working data of one ARS request, and the file that keeps across a restart what the ARS
+must not forget: the part in its gripper, and the last request that set its member.
 
-A member is set (the rivet fired, the cross frame released where it belongs) before the arm
-retreats from the tower. An ARS killed in between comes back knowing nothing of it, and the CRS,
-which never heard the result, sends the same request again: run afresh, it would fetch another
-part for a place that is taken. So the moment a request sets its member its data is written to
-the ARS's state file (``state_file`` in the ARS file, ``--state-file``), and read back at start-up
-as the request left unfinished; :class:`tlt_ars.context.ArsContext` then finishes it when it is
-sent again. What the file keeps is what finishing needs: the request, what it set, the part still
-held (for the collision scene) and the targets its approaches chose (the retreat goes back along
-the one its fine move took). It is replaced by the next request that sets a member and removed
-when another request begins.
+A member is set (the rivet fired, the cross frame released where it belongs) before the gripper
+lets go and the arm retreats from the tower. An ARS killed in between comes back knowing nothing
+of it, and the CRS, which never heard the result, sends the same request again: run afresh, it
+would fetch another part for a place that is taken. And an ARS killed, or a request failed, while
+a part is held would otherwise plan the next request's motions without that part and open the jaws
+on it at a dispenser. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``)
+is written when a part is taken into the gripper, when it is let go of, and when a request sets
+its member, and read back at start-up: :class:`tlt_ars.context.ArsContext` finishes the kept
+request when it is sent again, and has a held part discarded before anything else. What the file
+keeps is what that needs: the request, what it set, the part held and its dispenser, and the
+targets its approaches chose (the retreat goes back along the one its fine move took). It is
+removed once neither is left.
 
 The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
 cannot be read, is not such a file, or belongs to another mission or ARS raises
 :class:`RequestFileError` with the path and the reason: the ARS then refuses to start, as the CRS
 does with its tower model, since guessing would risk the very double placement the file prevents.
 """
-
 from __future__ import annotations
 
 import contextlib
@@ -35,6 +36,7 @@ from tlt_common.mission.tower_model import atomic_write
 
 FILE_FORMAT = 1
 RECORDS = ("placed", "affixed", "riveted")
+PART_KINDS = ("cross_frame", "vertical", "diagonal")
 
 
 @dataclass
@@ -65,9 +67,9 @@ class RequestFile:
         self.ars = ars
 
     def save(self, data: RequestData) -> None:
-        """Keep ``data``, a request that has set its member."""
-        if data.request is None or data.recorded not in RECORDS:
-            raise ValueError("only a request that has set its member is kept")
+        """Keep ``data``, a request that holds a part or has set its member."""
+        if data.request is None or not (data.recorded in RECORDS or data.holding in PART_KINDS):
+            raise ValueError("only a request that holds a part or has set its member is kept")
         document = {
             "format": FILE_FORMAT,
             "mission": self.mission.name,
@@ -124,8 +126,12 @@ class RequestFile:
             recorded, holding, dispenser = document["recorded"], document["holding"], document["dispenser"]
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
-        if recorded not in RECORDS:
-            raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)}")
+        if recorded not in ("", *RECORDS):
+            raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)} or empty")
+        if holding not in (None, *PART_KINDS):
+            raise self._error(f"'holding' is {holding!r}, not one of {', '.join(PART_KINDS)} or null")
+        if dispenser is not None and dispenser not in self.mission.dispensers:
+            raise self._error(f"'dispenser' is {dispenser!r}, not one of mission '{self.mission.name}'")
         return RequestData(
             request=request,
             member=member,

@@ -33,6 +33,8 @@ Place Rivet                 40         Approach Joint (coarse), Fine Approach Jo
                                        Member (Fire Rivet Gun, Record Riveted / Affixed, Retreat)
 Finish <request>            -          Release (an added member), Retreat (Retract Width for a
                                        diagonal): the tail of a request that set its member, sent again
+Discard Held Part           -          Move To Discard, Release, Count Discard: first in a branch when
+                                       an earlier request left a part in the gripper
 ==========================  =========  ================================================================
 
 A member is recorded the moment it is set (the rivet fired, the cross frame released where it
@@ -131,10 +133,8 @@ class RecordMember(Action):
         member = self.ctx.data.member
         if member is None:
             return self.fail("no member in this request")
-        try:
-            self.ctx.record(self.what)
-        except OSError as exc:
-            return self.fail(f"{member.id} {self.what}, but the state file cannot be written: {exc}")
+        if (why := self.ctx.record(self.what)) is not None:
+            return self.fail(f"{member.id} {self.what}, but {why}")
         self.feedback_message = f"{member.id} {self.what}"
         return Status.SUCCESS
 
@@ -201,14 +201,7 @@ class SubtreeBuilder:
         ctx = self.ctx
         present = PresentPart("Present Part", ctx)
         passed = PartPassed("Inspection Passed", present)
-        discard = _seq(
-            "Discard Part",
-            [
-                self._move("Move To Discard", lambda: pose_goal(ctx.config.discard_pose)),
-                release(ctx),
-                CountDiscard("Count Discard", ctx, passed),
-            ],
-        )
+        discard = self._discard("Discard Part", passed)
         return _seq(
             name,
             [
@@ -443,14 +436,36 @@ class SubtreeBuilder:
 
     def branch(self, request: str, member: Member, *, defer: bool = False) -> Sequence:
         """The branch for a CRS request (one of ``ros_names.ARS_ACTIONS``); with ``defer`` its
-        phases after the first are built later (:func:`tlt_common.bt.deferred.build_deferred`)."""
+        phases after the first are built later (:func:`tlt_common.bt.deferred.build_deferred`).
+        When an earlier request left a part in the gripper, the branch discards it first: its
+        motions would carry it unplanned for, and its first grasp would drop it at a dispenser."""
         builders = {
             "add_cross_frame": self.add_cross_frame,
             "add_member": self.add_member,
             "affix_member": self.affix_member,
             "foundation_rivet": self.foundation_rivet,
         }
-        return builders[request](member, defer=defer)
+        branch = builders[request](member, defer=defer)
+        if self.ctx.data.holding is not None:
+            branch.insert_child(self.discard_held(), 0)
+        return branch
+
+    def discard_held(self) -> Sequence:
+        """Drop the part an earlier request left in the gripper and count it discarded (its
+        inspection, if it had one, no longer says how it stands)."""
+        return self._discard("Discard Held Part", None)
+
+    def _discard(self, name: str, verdict: py_trees.behaviour.Behaviour | None) -> Sequence:
+        """Move To Discard, Release, Count Discard (:class:`CountDiscard` with ``verdict``)."""
+        ctx = self.ctx
+        return _seq(
+            name,
+            [
+                self._move("Move To Discard", lambda: pose_goal(ctx.config.discard_pose)),
+                release(ctx),
+                CountDiscard("Count Discard", ctx, verdict),
+            ],
+        )
 
     def finish(self, request: str, member: Member) -> Sequence:
         """What is left of ``request`` for ``member`` after the member was set: an added member let

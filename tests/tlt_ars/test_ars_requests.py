@@ -157,6 +157,28 @@ def test_a_slide_moving_on_a_command_the_ars_never_sent_is_planned_over_its_whol
         ctx.width_target = target
 
 
+def protective_stop_in(stack, member_id: str, kind: int, motion: str) -> None:
+    """Add ``member_id`` with a protective stop as the arm starts the motion ``motion`` (a path
+    below the branch, e.g. ``Rivet Member/Retreat``): the request fails there."""
+    ctx = stack.ars.ctx
+    planning_s = ctx.config.timeouts["planning_s"]
+    ctx.config.timeouts["planning_s"] = 3.0  # how long each attempt waits for the stopped arm
+    stopped = []
+
+    def stop(feedback) -> None:
+        if not stopped and f"/{motion}/" in feedback.step and "Execute" in feedback.step:
+            stopped.append(feedback.step)
+            stack.emulator.call("protective_stop", f"the test's protective stop in {motion}")
+
+    try:
+        result = stack.result(add_member(stack, member_id, kind, stop), timeout=180)
+    finally:
+        ctx.config.timeouts["planning_s"] = planning_s
+    assert stopped, f"the request never reached {motion}"
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert motion in result.result.reason, result.result.reason
+
+
 def test_a_request_failed_after_its_rivet_is_finished_by_the_same_request_sent_again(stack):
     """A protective stop during the Retreat after the rivet fails the request with the diagonal
     riveted and the arm at the tower, and the ARS is then restarted (killed, say, before the CRS
@@ -166,22 +188,7 @@ def test_a_request_failed_after_its_rivet_is_finished_by_the_same_request_sent_a
     rivet or part; asked once more (a success the CRS never heard), it answers success again."""
     state, ctx = stack.ars.ctx.state, stack.ars.ctx
     member = "bay1/diagonal/face_y0"
-    planning_s = ctx.config.timeouts["planning_s"]
-    ctx.config.timeouts["planning_s"] = 3.0  # how long each Retreat attempt waits for the arm
-    stopped = []
-
-    def stop_in_retreat(feedback) -> None:
-        if not stopped and "/Rivet Member/Retreat/" in feedback.step and "Execute" in feedback.step:
-            stopped.append(feedback.step)
-            stack.emulator.call("protective_stop", "the test's protective stop during the Retreat")
-
-    try:
-        first = stack.result(add_member(stack, member, DIAGONAL, stop_in_retreat), timeout=180)
-    finally:
-        ctx.config.timeouts["planning_s"] = planning_s
-    assert stopped, "the request never reached its Retreat"
-    assert first.status == GoalStatus.STATUS_ABORTED
-    assert "Rivet Member/Retreat" in first.result.reason, first.result.reason
+    protective_stop_in(stack, member, DIAGONAL, "Rivet Member/Retreat")
     assert state.is_placed(member)
     retreat = ctx.data.targets["place"].pre_pose
 
@@ -216,6 +223,34 @@ def test_empty_dispenser_fails_the_request_with_that_reason(stack):
     assert result.result.parts_discarded == 1
     assert state.remaining["vertical_dispenser_x"] == 0
     assert not state.is_placed("bay1/vertical/x0_y1")
+    state.remaining["vertical_dispenser_x"] = stack.world.remaining["vertical_dispenser_x"] = 3  # refilled
+
+
+def test_a_part_left_in_the_gripper_is_discarded_before_the_next_request_moves(stack):
+    """A protective stop on the way to inspection fails the request with a vertical in the jaws,
+    and the ARS is then restarted: the new one knows the part from its state file. The request
+    sent again first takes the held part to the discard pose and lets go of it there (counted
+    discarded), and only then loads a rivet and goes for a new part."""
+    member = "bay1/vertical/x0_y1"
+    protective_stop_in(stack, member, VERTICAL, "Inspect Member/Move To Inspection")
+    assert stack.world.held == "vertical_dispenser_x"
+
+    stack.emulator.call("unlock_protective_stop")
+    stack.restart_ars(unheard=member)
+    state = stack.ars.ctx.state
+    assert stack.ars.ctx.data.holding == "vertical"  # from the state file
+    discarded = state.discarded["vertical_dispenser_x"]
+    feedback = []
+    handle = add_member(stack, member, VERTICAL, feedback)
+    rivet_next = "Add Member/Load Rivet/"
+    stack.wait(lambda: any(f.step.startswith(rivet_next) for f in feedback), "the rivet next", 120)
+    assert feedback[0].step.startswith("Add Member/Discard Held Part/"), feedback[0].step
+    assert stack.world.held is None
+    discard = stack.scene.kinematics("ars_x").forward(stack.ars.config.discard_pose.joints)
+    assert np.linalg.norm(stack.world.part_pose[:3, 3] - discard[:3, 3]) < 0.05  # let go of there
+    assert state.discarded["vertical_dispenser_x"] == discarded + 1 and stack.ars.ctx.data.holding is None
+    handle.cancel_goal_async()
+    assert stack.result(handle).status == GoalStatus.STATUS_CANCELED
     state.remaining["vertical_dispenser_x"] = stack.world.remaining["vertical_dispenser_x"] = 3  # refilled
 
 

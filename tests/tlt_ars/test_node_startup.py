@@ -278,16 +278,16 @@ def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_start
         rclpy.try_shutdown(context=context)
 
 
-def _kept_diagonal(path) -> None:
-    """A state file that says the ARS riveted diagonal face_y0 of the shipped mission and went
-    down before the CRS heard of it."""
+def _kept_diagonal(path, holding: str | None) -> None:
+    """A state file that says the ARS riveted diagonal face_y0 of the shipped mission, with the
+    diagonal still ``holding`` or let go of, and went down before the CRS heard of it."""
     mission = load_mission("missions/one_bay.yaml")
     member = mission.member("bay1/diagonal/face_y0")
     pre = np.eye(4)
     pre[:3, 3] = (0.5, 0.5, 1.0)
     RequestFile(path, mission, "ars_x").save(RequestData(
         request=Request("add_member", member.id, "ars_x", bay=1, kind=2, position="face_y0"),
-        member=member, holding="diagonal", targets={"place": Target("test", pre, pre)}, recorded="placed",
+        member=member, holding=holding, targets={"place": Target("test", pre, pre)}, recorded="placed",
     ))  # fmt: skip
 
 
@@ -307,27 +307,35 @@ def test_a_state_file_that_cannot_be_read_stops_the_start(tmp_path):
 
 def test_a_restarted_ars_finishes_the_request_its_state_file_kept_and_drops_it_for_another(tmp_path):
     """The CRS never heard how the kept request ended and sends it again: the restarted ARS runs
-    its Finish (let go, retreat), not the whole request, nor refuses it as placed; the file stays
-    until another request begins. No arm here: each request fails at its first motion."""
+    its Finish (let go, retreat), not the whole request, nor refuses it as placed. While the
+    riveted member is in the gripper nothing else runs; once it was let go of, another request
+    drops the file. No arm here: each request fails at its first motion."""
     path = tmp_path / "ars_x.json"
-    _kept_diagonal(path)
     raw = load_yaml(default_config_path("ars_x"))
     raw.update(check_reach=False, state_file=str(path))
     raw["timeouts"].update(server_s=0.5, planning_s=0.5)
+    kept = AddMember.Goal(kind=2, bay=1, member_id="bay1/diagonal/face_y0", position="face_y0", ars="ars_x")
+    other = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
+
+    def outcome(action, goal) -> str:
+        return _wait(_wait(action.send_goal_async(goal)).get_result_async(), timeout=30.0).result.reason
+
+    _kept_diagonal(path, holding="diagonal")
     with _spun_ars(raw) as (ars, client):
         assert ars.ctx.state.is_placed("bay1/diagonal/face_y0")
         action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
         assert action.wait_for_server(timeout_sec=10)
-        kept = AddMember.Goal(
-            kind=2, bay=1, member_id="bay1/diagonal/face_y0", position="face_y0", ars="ars_x"
-        )
-        result = _wait(_wait(action.send_goal_async(kept)).get_result_async(), timeout=30.0)
-        assert result.result.reason.startswith("Finish Add Member/Release/Open Grasp"), result.result.reason
+        assert outcome(action, kept).startswith("Finish Add Member/Release/Open Grasp")
         assert path.exists()  # still kept: it failed
+        assert outcome(action, other) == (
+            "rejected: the gripper still holds 'bay1/diagonal/face_y0', placed in the tower:"
+            " only add_member for it, sent again, lets go of it"
+        )
 
-        other = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
-        result = _wait(_wait(action.send_goal_async(other)).get_result_async(), timeout=30.0)
-        assert result.result.reason.startswith("Add Member/Load Rivet/"), result.result.reason
+    _kept_diagonal(path, holding=None)  # let go of; the Retreat failed
+    with _spun_ars(raw) as (ars, client):
+        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+        assert action.wait_for_server(timeout_sec=10)
+        assert outcome(action, other).startswith("Add Member/Load Rivet/")
         assert not path.exists()
-        again = _wait(_wait(action.send_goal_async(kept)).get_result_async(), timeout=30.0)
-        assert again.result.reason == "rejected: member 'bay1/diagonal/face_y0' is already placed"
+        assert outcome(action, kept) == "rejected: member 'bay1/diagonal/face_y0' is already placed"

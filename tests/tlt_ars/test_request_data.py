@@ -1,4 +1,5 @@
-"""The ARS state file: the request that set its member, kept for a restarted ARS."""
+"""The ARS state file: the part in the gripper and the request that set its member, kept for a
+restarted ARS."""
 
 from __future__ import annotations
 
@@ -49,12 +50,16 @@ def test_a_request_that_set_its_member_comes_back_as_it_was_kept(tmp_path):
     file.clear()  # clearing twice is no error
 
 
-def test_only_a_request_that_set_its_member_is_kept(tmp_path):
+def test_a_request_is_kept_while_it_holds_a_part_or_has_set_its_member(tmp_path):
+    file = RequestFile(tmp_path / "ars_x.json", MISSION, "ars_x")
     data = _set_request()
-    data.recorded = ""
-    with pytest.raises(ValueError, match="set its member"):
-        RequestFile(tmp_path / "ars_x.json", MISSION, "ars_x").save(data)
-    assert not (tmp_path / "ars_x.json").exists()
+    data.recorded = ""  # taken and held, not set yet
+    file.save(data)
+    back = file.load()
+    assert (back.recorded, back.holding, back.dispenser) == ("", "diagonal", "diagonal_dispenser_x")
+    data.holding = None  # let go of, and nothing set: nothing to keep
+    with pytest.raises(ValueError, match="holds a part or has set its member"):
+        file.save(data)
 
 
 def test_a_writer_killed_mid_write_leaves_nothing_that_is_read(tmp_path):
@@ -78,6 +83,8 @@ def _edited(path, change) -> None:
         (lambda d: d.update(ars="ars_y"), "belongs to 'ars_y', not to 'ars_x'"),
         (lambda d: d.update(format=7), "not an ARS state file of format 1"),
         (lambda d: d.update(recorded="half done"), "'recorded' is 'half done'"),
+        (lambda d: d.update(holding="rivet"), "'holding' is 'rivet'"),
+        (lambda d: d.update(dispenser="bin"), "'dispenser' is 'bin', not one of mission 'two_bay'"),
         (lambda d: d["request"].update(member_id="bay1/vertical/x9_y9"), "has a bad entry"),
         (lambda d: d["targets"]["place"].update(pose=[[1.0, 0.0]]), "a pose must be 4x4"),
         (lambda d: d.pop("targets"), "has a bad entry: KeyError"),

@@ -149,7 +149,8 @@ def release(ctx: ArsContext) -> py_trees.composites.Sequence:
 
 
 class DropHeld(Action):
-    """Forget the held part (after a verified release). Writes ``RequestData.holding``. SUCCESS at once."""
+    """Forget the held part (after a verified release). Writes ``RequestData.holding`` and the
+    state file. SUCCESS at once; FAILURE when the state file cannot be written."""
 
     def __init__(self, name: str, ctx: ArsContext) -> None:
         super().__init__(name)
@@ -157,6 +158,8 @@ class DropHeld(Action):
 
     def update(self) -> Status:
         self.ctx.data.holding = None
+        if (why := self.ctx.keep()) is not None:
+            return self.fail(why)
         return Status.SUCCESS
 
 

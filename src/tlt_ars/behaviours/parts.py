@@ -7,7 +7,8 @@ failed it, and fetching a replacement (paper §IV.B "tracking the available comp
   vision look at the held part with the lifter camera, until a report judges the part (a
   presentation the CRS did not inspect is made again); :class:`PartPassed` reads the verdict.
 * :class:`CountDiscard` records a discarded part (dispenser's ``discarded``, the request's
-  ``parts_discarded``), then fails with the inspection's reason so the attempt ends.
+  ``parts_discarded``), then fails with the inspection's reason so the attempt ends (or, for a
+  part an earlier request left in the gripper, succeeds).
 * :class:`ReplaceDiscarded` (decorator) runs its child again after an attempt that ended with a
   discarded part: a replacement comes from the dispenser until one passes or the dispenser is
   empty (then the request fails with that reason).
@@ -43,8 +44,9 @@ class DispenserHasParts(Condition):
 
 class TakePart(Action):
     """Count a part (or rivet) taken from ``dispenser``: decreases its count. Writes
-    ``RequestData.holding`` (``kind``, when given) and ``.dispenser``. SUCCESS at once; FAILURE
-    when the dispenser is already empty."""
+    ``RequestData.holding`` (``kind``, when given) and ``.dispenser``, and the state file
+    (:meth:`ArsContext.keep`). SUCCESS at once; FAILURE when the dispenser is already empty or the
+    state file cannot be written."""
 
     def __init__(self, name: str, ctx: ArsContext, dispenser: str, kind: str | None) -> None:
         super().__init__(name)
@@ -58,6 +60,8 @@ class TakePart(Action):
         if self.kind is not None:
             self.ctx.data.holding = self.kind
             self.ctx.data.dispenser = self.dispenser
+            if (why := self.ctx.keep()) is not None:
+                return self.fail(why)
         self.feedback_message = f"{left} left in '{self.dispenser}'"
         return Status.SUCCESS
 
@@ -166,11 +170,13 @@ class PartPassed(Condition):
 
 
 class CountDiscard(Action):
-    """Record the part just dropped at the discard pose, then FAIL the attempt with ``reason_of``'s
-    feedback (the failed inspection). Writes the dispenser's ``discarded`` count and
-    ``RequestData.parts_discarded``."""
+    """Record the part just dropped at the discard pose (the Release before it wrote the state
+    file). Writes the dispenser's ``discarded`` count, ``RequestData.parts_discarded`` and
+    ``.holding`` (none). After a failed inspection (``reason_of``, the verdict), FAILS the attempt
+    with that reason; for a part an earlier request left in the gripper (``reason_of`` None),
+    SUCCEEDS."""
 
-    def __init__(self, name: str, ctx: ArsContext, reason_of: py_trees.behaviour.Behaviour) -> None:
+    def __init__(self, name: str, ctx: ArsContext, reason_of: py_trees.behaviour.Behaviour | None) -> None:
         super().__init__(name)
         self.ctx, self.reason_of = ctx, reason_of
 
@@ -180,8 +186,11 @@ class CountDiscard(Action):
             self.ctx.state.count_discard(data.dispenser)
         data.parts_discarded += 1
         data.holding = None
-        reason = self.reason_of.feedback_message or "inspection failed"
-        return self.fail(f"part discarded ({reason})")
+        if self.reason_of is not None:
+            reason = self.reason_of.feedback_message or "inspection failed"
+            return self.fail(f"part discarded ({reason})")
+        self.feedback_message = f"a {data.dispenser or 'held'} part discarded"
+        return Status.SUCCESS
 
 
 class ReplaceDiscarded(py_trees.decorators.Decorator):
