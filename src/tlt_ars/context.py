@@ -17,7 +17,9 @@ kept as the context's ``unfinished`` request until another request begins.
 
 A request can also end with a part in the gripper (a motion or a measurement failed on the way to
 the tower): the next request starts holding it (``RequestData.holding``, so the collision scene
-has it) and discards it first (:meth:`tlt_ars.subtrees.SubtreeBuilder.branch`).
+has it) and discards it first (:meth:`tlt_ars.subtrees.SubtreeBuilder.branch`). Likewise with a
+rivet in the gun (``RequestData.rivet_in_gun``): the next request looks for it before loading one
+(:meth:`tlt_ars.subtrees.SubtreeBuilder.load_rivet`).
 
 Both are kept in the state file when there is one (:class:`~tlt_ars.request_data.RequestFile`,
 brought up to date by :meth:`ArsContext.keep`), where a restarted ARS finds them.
@@ -206,7 +208,8 @@ class ArsContext:
     def begin(self, request: Request) -> bool:
         """Start the working data of ``request``; True when it finishes the unfinished request,
         whose data (the targets its approaches chose) it carries on with. Any other request drops
-        the unfinished one, and starts with the part an earlier one left in the gripper.
+        the unfinished one, and starts with the part and the rivet an earlier one left in the
+        gripper and the gun.
         ``OSError`` when the state file cannot be brought up to date."""
         finishing = self.finishes(request)
         if finishing:
@@ -216,7 +219,7 @@ class ArsContext:
             held = self.data
             self.data = RequestData(
                 request=request, member=self.state.member(request.member_id),
-                holding=held.holding, dispenser=held.dispenser,
+                holding=held.holding, dispenser=held.dispenser, rivet_in_gun=held.rivet_in_gun,
             )  # fmt: skip
         self.unfinished = None
         if (why := self.keep()) is not None:
@@ -236,11 +239,12 @@ class ArsContext:
 
     def keep(self) -> str | None:
         """Bring the state file up to date with the request's data: kept while it holds a part or
-        has set its member, removed otherwise. Returns why it could not be written, or None."""
+        a rivet, or has set its member, removed otherwise. Returns why it could not be written, or
+        None."""
         if self.request_file is None:
             return None
         try:
-            if self.data.recorded or self.data.holding:
+            if self.data.recorded or self.data.holding or self.data.rivet_in_gun:
                 self.request_file.save(self.data)
             else:
                 self.request_file.clear()

@@ -1,18 +1,20 @@
 """The working data of one ARS request, and the file that keeps across a restart what the ARS
-must not forget: the part in its gripper, and the last request that set its member.
+must not forget: the part in its gripper, a rivet in its gun, and the last request that set its
+member.
 
 A member is set (the rivet fired, the cross frame released where it belongs) before the gripper
 lets go and the arm retreats from the tower. An ARS killed in between comes back knowing nothing
 of it, and the CRS, which never heard the result, sends the same request again: run afresh, it
 would fetch another part for a place that is taken. And an ARS killed, or a request failed, while
 a part is held would otherwise plan the next request's motions without that part and open the jaws
-on it at a dispenser. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``)
-is written when a part is taken into the gripper, when it is let go of, and when a request sets
-its member, and read back at start-up: :class:`tlt_ars.context.ArsContext` finishes the kept
-request when it is sent again, and has a held part discarded before anything else. What the file
-keeps is what that needs: the request, what it set, the part held and its dispenser, and the
-targets its approaches chose (the retreat goes back along the one its fine move took). It is
-removed once neither is left.
+on it at a dispenser; and one whose gun holds a rivet would push the loaded gun into the rivet
+feeder. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``) is written
+when a part is taken into the gripper or a rivet into the gun, when the part is let go of, and
+when a request sets its member, and read back at start-up: :class:`tlt_ars.context.ArsContext`
+finishes the kept request when it is sent again, has a held part discarded before anything else,
+and looks for the kept rivet before loading one. What the file keeps is what that needs: the
+request, what it set, the part held and its dispenser, the rivet, and the targets its approaches
+chose (the retreat goes back along the one its fine move took). It is removed once none is left.
 
 The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
 cannot be read, is not such a file, or belongs to another mission or ARS raises
@@ -50,6 +52,7 @@ class RequestData:
     parts_discarded: int = 0
     targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
     recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
+    rivet_in_gun: bool = False  # seen loaded (Verify Rivet Loaded) and not fired since
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
 
@@ -67,9 +70,10 @@ class RequestFile:
         self.ars = ars
 
     def save(self, data: RequestData) -> None:
-        """Keep ``data``, a request that holds a part or has set its member."""
-        if data.request is None or not (data.recorded in RECORDS or data.holding in PART_KINDS):
-            raise ValueError("only a request that holds a part or has set its member is kept")
+        """Keep ``data``, a request that holds a part or a rivet, or has set its member."""
+        worth_keeping = data.recorded in RECORDS or data.holding in PART_KINDS or data.rivet_in_gun
+        if data.request is None or not worth_keeping:
+            raise ValueError("only a request that holds a part or a rivet, or has set its member, is kept")
         document = {
             "format": FILE_FORMAT,
             "mission": self.mission.name,
@@ -79,6 +83,7 @@ class RequestFile:
             "recorded": data.recorded,
             "holding": data.holding,
             "dispenser": data.dispenser,
+            "rivet_in_gun": data.rivet_in_gun,
             "targets": {
                 key: {"label": t.label, "pose": t.pose.tolist(), "pre_pose": t.pre_pose.tolist()}
                 for key, t in data.targets.items()
@@ -124,12 +129,15 @@ class RequestFile:
                 for key, t in document["targets"].items()
             }
             recorded, holding, dispenser = document["recorded"], document["holding"], document["dispenser"]
+            rivet_in_gun = document["rivet_in_gun"]
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
         if recorded not in ("", *RECORDS):
             raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)} or empty")
         if holding not in (None, *PART_KINDS):
             raise self._error(f"'holding' is {holding!r}, not one of {', '.join(PART_KINDS)} or null")
+        if not isinstance(rivet_in_gun, bool):
+            raise self._error(f"'rivet_in_gun' is {rivet_in_gun!r}, not true or false")
         if dispenser is not None and dispenser not in self.mission.dispensers:
             raise self._error(f"'dispenser' is {dispenser!r}, not one of mission '{self.mission.name}'")
         return RequestData(
@@ -139,6 +147,7 @@ class RequestFile:
             dispenser=dispenser,
             targets=targets,
             recorded=recorded,
+            rivet_in_gun=rivet_in_gun,
         )
 
     def _error(self, reason: str) -> RequestFileError:

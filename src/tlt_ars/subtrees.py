@@ -23,7 +23,8 @@ Place Cross Frame           31         Coarse Approach, Fine Approach, Fine Alig
 Add Member                  32         Load Rivet, Get Inspected Member, Place Member, Rivet Member
 Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, Settle, Locate Dispenser Tag,
                                        Fine Approach, Insert Gun, Take Rivet, Withdraw Gun, Verify Rivet
-                                       Loaded
+                                       Loaded, Rivet In Gun (after a request that left a rivet in the
+                                       gun: first Rivet Still Loaded?, the camera)
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
 Rivet Member                37         Fire Rivet Gun, Record Placed, Release, Retreat (Retract Width
                                        for a diagonal, commanded and not waited for)
@@ -51,7 +52,15 @@ import numpy as np
 import py_trees
 from py_trees.common import Status
 
-from tlt_ars.behaviours.end_effector import CommandWidth, FireRivetGun, MoveGrasp, SetWidth, grasp, release
+from tlt_ars.behaviours.end_effector import (
+    CommandWidth,
+    FireRivetGun,
+    MoveGrasp,
+    RivetInGun,
+    SetWidth,
+    grasp,
+    release,
+)
 from tlt_ars.behaviours.parts import (
     CountDiscard,
     DispenserHasParts,
@@ -305,10 +314,12 @@ class SubtreeBuilder:
         return _seq("Place Member", self._approach_placement(member))
 
     # ----- rivets (Figs. 33, 37, 40) -----
-    def load_rivet(self, dispenser: str) -> Sequence:
-        """Fig. 33: take a rivet into the gun; the EE camera confirms it is loaded."""
+    def load_rivet(self, dispenser: str) -> py_trees.behaviour.Behaviour:
+        """Fig. 33: take a rivet into the gun; the EE camera confirms it is loaded. When an earlier
+        request left a rivet in the gun, the camera looks for it first, and only a gun seen empty
+        goes to the feeder (a loaded gun pushed into it would jam)."""
         ctx = self.ctx
-        return _seq(
+        load = _seq(
             "Load Rivet",
             [
                 DispenserHasParts("Rivets Left?", ctx, dispenser),
@@ -325,8 +336,13 @@ class SubtreeBuilder:
                 TakePart("Take Rivet", ctx, dispenser, None),
                 self._move("Withdraw Gun", lambda: back_out(ctx, "rivet")),
                 verify_rivet_loaded(ctx),
+                RivetInGun("Rivet In Gun", ctx),
             ],
         )
+        if not ctx.data.rivet_in_gun:
+            return load
+        load.name = "Load Another Rivet"
+        return _fallback("Load Rivet", [verify_rivet_loaded(ctx, "Rivet Still Loaded?"), load])
 
     def rivet_member(self, kind: str, *, record: str = "placed") -> Sequence:
         """Fig. 37: fire the gun; record the member ``record``; with the member held (``record``

@@ -226,25 +226,29 @@ def test_empty_dispenser_fails_the_request_with_that_reason(stack):
     state.remaining["vertical_dispenser_x"] = stack.world.remaining["vertical_dispenser_x"] = 3  # refilled
 
 
-def test_a_part_left_in_the_gripper_is_discarded_before_the_next_request_moves(stack):
-    """A protective stop on the way to inspection fails the request with a vertical in the jaws,
-    and the ARS is then restarted: the new one knows the part from its state file. The request
-    sent again first takes the held part to the discard pose and lets go of it there (counted
-    discarded), and only then loads a rivet and goes for a new part."""
+def test_a_part_and_a_rivet_left_by_a_failed_request_are_dealt_with_before_the_next_one_moves(stack):
+    """A protective stop on the way to inspection fails the request with a vertical in the jaws
+    and a rivet in the gun, and the ARS is then restarted: the new one knows both from its state
+    file. The request sent again first takes the held part to the discard pose and lets go of it
+    there (counted discarded); then the camera finds the rivet still in the gun, so the gun does
+    not go to the feeder again, and the request goes for a new part."""
     member = "bay1/vertical/x0_y1"
     protective_stop_in(stack, member, VERTICAL, "Inspect Member/Move To Inspection")
-    assert stack.world.held == "vertical_dispenser_x"
+    assert stack.world.held == "vertical_dispenser_x" and stack.world.rivet_loaded
 
     stack.emulator.call("unlock_protective_stop")
     stack.restart_ars(unheard=member)
-    state = stack.ars.ctx.state
-    assert stack.ars.ctx.data.holding == "vertical"  # from the state file
+    state, data = stack.ars.ctx.state, stack.ars.ctx.data
+    assert data.holding == "vertical" and data.rivet_in_gun  # from the state file
     discarded = state.discarded["vertical_dispenser_x"]
     feedback = []
     handle = add_member(stack, member, VERTICAL, feedback)
-    rivet_next = "Add Member/Load Rivet/"
-    stack.wait(lambda: any(f.step.startswith(rivet_next) for f in feedback), "the rivet next", 120)
-    assert feedback[0].step.startswith("Add Member/Discard Held Part/"), feedback[0].step
+    part_next = "Add Member/Get Inspected Member/"
+    stack.wait(lambda: any(f.step.startswith(part_next) for f in feedback), "a new part next", 120)
+    steps = [f.step for f in feedback]
+    assert steps[0].startswith("Add Member/Discard Held Part/"), steps[0]
+    assert any(s.startswith("Add Member/Load Rivet/Rivet Still Loaded?") for s in steps), steps
+    assert not any("Load Another Rivet" in s for s in steps), steps
     assert stack.world.held is None
     discard = stack.scene.kinematics("ars_x").forward(stack.ars.config.discard_pose.joints)
     assert np.linalg.norm(stack.world.part_pose[:3, 3] - discard[:3, 3]) < 0.05  # let go of there

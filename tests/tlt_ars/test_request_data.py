@@ -50,15 +50,19 @@ def test_a_request_that_set_its_member_comes_back_as_it_was_kept(tmp_path):
     file.clear()  # clearing twice is no error
 
 
-def test_a_request_is_kept_while_it_holds_a_part_or_has_set_its_member(tmp_path):
+def test_a_request_is_kept_while_it_holds_a_part_or_a_rivet_or_has_set_its_member(tmp_path):
     file = RequestFile(tmp_path / "ars_x.json", MISSION, "ars_x")
     data = _set_request()
     data.recorded = ""  # taken and held, not set yet
     file.save(data)
     back = file.load()
     assert (back.recorded, back.holding, back.dispenser) == ("", "diagonal", "diagonal_dispenser_x")
-    data.holding = None  # let go of, and nothing set: nothing to keep
-    with pytest.raises(ValueError, match="holds a part or has set its member"):
+    assert not back.rivet_in_gun
+    data.holding, data.rivet_in_gun = None, True  # only a rivet in the gun
+    file.save(data)
+    assert file.load().rivet_in_gun
+    data.rivet_in_gun = False  # nothing held, nothing set: nothing to keep
+    with pytest.raises(ValueError, match="holds a part or a rivet, or has set its member"):
         file.save(data)
 
 
@@ -84,6 +88,7 @@ def _edited(path, change) -> None:
         (lambda d: d.update(format=7), "not an ARS state file of format 1"),
         (lambda d: d.update(recorded="half done"), "'recorded' is 'half done'"),
         (lambda d: d.update(holding="rivet"), "'holding' is 'rivet'"),
+        (lambda d: d.update(rivet_in_gun="yes"), "'rivet_in_gun' is 'yes', not true or false"),
         (lambda d: d.update(dispenser="bin"), "'dispenser' is 'bin', not one of mission 'two_bay'"),
         (lambda d: d["request"].update(member_id="bay1/vertical/x9_y9"), "has a bad entry"),
         (lambda d: d["targets"]["place"].update(pose=[[1.0, 0.0]]), "a pose must be 4x4"),

@@ -148,6 +148,22 @@ def release(ctx: ArsContext) -> py_trees.composites.Sequence:
     return seq
 
 
+class RivetInGun(Action):
+    """Note the rivet Verify Rivet Loaded saw in the gun, so that a request after a failed one
+    does not load another. Writes ``RequestData.rivet_in_gun`` and the state file. SUCCESS at
+    once; FAILURE when the state file cannot be written."""
+
+    def __init__(self, name: str, ctx: ArsContext) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+
+    def update(self) -> Status:
+        self.ctx.data.rivet_in_gun = True
+        if (why := self.ctx.keep()) is not None:
+            return self.fail(why)
+        return Status.SUCCESS
+
+
 class DropHeld(Action):
     """Forget the held part (after a verified release). Writes ``RequestData.holding`` and the
     state file. SUCCESS at once; FAILURE when the state file cannot be written."""
@@ -240,10 +256,11 @@ class CommandWidth(Action):
 class FireRivetGun(Action):
     """Fire the configured rivet gun: output on, hold ``fire_s``, output off (paper §V.B.4: GPIO).
 
-    Reads: EndEffectorState.rivet_gun_output (the GPIO output read back). Writes: nothing.
-    RUNNING while the service calls go out and the gun fires. SUCCESS once the output was seen on
-    and then off. FAILURE when the service refuses or is missing, or the state never shows the
-    output. Pre-empted while firing: the output is switched off.
+    Reads: EndEffectorState.rivet_gun_output (the GPIO output read back). Writes:
+    ``RequestData.rivet_in_gun`` (false once the output was on for ``fire_s``). RUNNING while the
+    service calls go out and the gun fires. SUCCESS once the output was seen on and then off.
+    FAILURE when the service refuses or is missing, or the state never shows the output.
+    Pre-empted while firing: the output is switched off.
     """
 
     def __init__(self, name: str, ctx: ArsContext) -> None:
@@ -300,6 +317,7 @@ class FireRivetGun(Action):
             if seen is True and now - self._since >= self.ctx.config.ee["fire_s"]:
                 self._phase = "call_off"
                 self._since = now
+                self.ctx.data.rivet_in_gun = False  # the record right after writes the state file
             elif now - self._since > self.ctx.config.timeouts["sensor_s"] + self.ctx.config.ee["fire_s"]:
                 self._phase = "call_off"  # switch it off before failing
                 return self.fail(f"{self.gun} output never showed on in the end-effector state")
@@ -330,6 +348,7 @@ __all__ = [
     "DropHeld",
     "FireRivetGun",
     "MoveGrasp",
+    "RivetInGun",
     "SetWidth",
     "grasp",
     "release",
