@@ -94,6 +94,7 @@ class Supervisor:
         self._out_lock = threading.Lock()
         self._shutdown = threading.Event()
         self._hurry = threading.Event()
+        self._signals = 0  # SIGINT/SIGTERM received (see _on_signal)
         self._exit_code = 0
 
     # --- public -----------------------------------------------------------------------------------
@@ -111,7 +112,7 @@ class Supervisor:
                     self._say(f"{proc.spec.name} waits for {proc.spec.wait_for_path}")
                 else:
                     self._start(proc)
-            while not self._shutdown.is_set():
+            while not self._shutdown.is_set() and not self._signals:
                 self._watch()
                 if not any(p.running or p.restart_at is not None or p.waiting_since is not None
                            for p in self._procs):
@@ -128,7 +129,7 @@ class Supervisor:
                     signal.signal(sig, handler)
 
     def request_shutdown(self) -> None:
-        """Stop every process (callable from any thread or a signal handler)."""
+        """Stop every process (callable from any thread; a signal handler uses _on_signal)."""
         if self._shutdown.is_set():
             self._hurry.set()
         self._shutdown.set()
@@ -314,7 +315,8 @@ class Supervisor:
 
     def _wait_for(self, procs: list[_Proc], timeout: float) -> None:
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not self._hurry.is_set():
+        signals = self._signals  # one more while waiting hurries, as request_shutdown does
+        while time.monotonic() < deadline and not self._hurry.is_set() and self._signals == signals:
             for proc in procs:
                 if proc.running and proc.popen and proc.popen.poll() is not None:
                     proc.returncode = proc.popen.returncode
@@ -338,8 +340,14 @@ class Supervisor:
             return {}
         previous = {}
         for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, lambda *_: self.request_shutdown())
+            previous[sig] = signal.signal(sig, self._on_signal)
         return previous
+
+    def _on_signal(self, *_: object) -> None:
+        # Only counted: a handler runs in the main thread between two of its bytecodes, and the
+        # main thread lives in Event.wait, whose lock Event.set would take again and never get (a
+        # launcher once sat through SIGINT and SIGTERM without a word until SIGKILL).
+        self._signals += 1
 
     def _say(self, text: str) -> None:
         self._write(f"[launch] {text}")

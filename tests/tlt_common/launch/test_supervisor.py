@@ -284,3 +284,35 @@ def test_a_device_path_that_never_appears_fails_a_required_process(tmp_path, lau
     run = launcher(path)
     assert run.finish() == 1
     run.wait_for(r"driver cannot start: .*never did not appear within 0.5 s")
+
+
+def test_the_signal_handler_takes_no_lock_the_main_thread_may_hold(tmp_path):
+    """A handler runs in the main thread between two of its bytecodes, and the launcher's main
+    thread lives in Event.wait: a handler that set the event would take the event's lock again
+    while wait held it, and hang the launcher through SIGINT and SIGTERM (seen once, at the end of
+    a system test). The installed handler is called here with that lock held."""
+    from tlt_common.launch.launch_set import load_launch_set
+    from tlt_common.launch.supervisor import Supervisor
+
+    path = write_set(tmp_path, """
+        processes:
+          - name: a
+            executable: python
+    """)
+    supervisor = Supervisor(load_launch_set(path), out=sys.stdout)
+    previous = supervisor._install_signal_handlers()
+    try:
+        handler = signal.getsignal(signal.SIGINT)
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+    returned = threading.Event()
+
+    def signalled_inside_wait() -> None:
+        with supervisor._shutdown._cond:  # what Event.wait holds around its checks
+            handler(signal.SIGINT, None)
+        returned.set()
+
+    threading.Thread(target=signalled_inside_wait, daemon=True).start()
+    assert returned.wait(5.0), "the handler blocked on the lock its own thread held"
+    assert supervisor._signals == 1
