@@ -39,8 +39,8 @@ SCHEMA = {
     "ars": Field("str", choices=ARS_AGENTS),
     "mission": Field("str", doc="mission file, relative to the repository root or absolute"),
     "scene": Field("str", doc="planning scene file"),
-    # Where the request that set its member is kept across a restart (tlt_ars.request_data);
-    # none: in memory only.
+    # Where a held part, a loaded rivet and the request that set its member are kept across a
+    # restart (tlt_ars.request_data); none: in memory only.
     "state_file": opt("str", None, doc="ARS state file, relative to the repository root or absolute"),
     "check_reach": opt("bool", True),
     "started_on_launch": opt("bool", True),

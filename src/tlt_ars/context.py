@@ -244,7 +244,7 @@ class ArsContext:
         if self.request_file is None:
             return None
         try:
-            if self.data.recorded or self.data.holding or self.data.rivet_in_gun:
+            if self.data.worth_keeping():
                 self.request_file.save(self.data)
             else:
                 self.request_file.clear()

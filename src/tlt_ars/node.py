@@ -443,7 +443,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mission", type=Path, help="mission file (overrides the ARS file; the same as the CRS)")
     p.add_argument(
         "--state-file", type=Path,
-        help="where a request that set its member is kept for a restart (overrides the ARS file)",
+        help="where a held part, a rivet and a request that set its member are kept for a restart"
+        " (overrides the ARS file)",
     )
     p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
     return p

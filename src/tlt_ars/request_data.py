@@ -21,6 +21,7 @@ cannot be read, is not such a file, or belongs to another mission or ARS raises
 :class:`RequestFileError` with the path and the reason: the ARS then refuses to start, as the CRS
 does with its tower model, since guessing would risk the very double placement the file prevents.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from tlt_ars.config import PART_KINDS
 from tlt_ars.mission_state import Request
 from tlt_ars.planning.targets import Target
 from tlt_common.mission.schema import Member, Mission
@@ -38,7 +40,7 @@ from tlt_common.mission.tower_model import atomic_write
 
 FILE_FORMAT = 1
 RECORDS = ("placed", "affixed", "riveted")
-PART_KINDS = ("cross_frame", "vertical", "diagonal")
+HELD_KINDS = tuple(k for k in PART_KINDS if k != "rivet")  # a rivet rides in the gun
 
 
 @dataclass
@@ -56,6 +58,11 @@ class RequestData:
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
 
+    def worth_keeping(self) -> bool:
+        """Whether a restart must know of this request: it holds a part or a rivet, or has set
+        its member."""
+        return bool(self.recorded or self.holding or self.rivet_in_gun)
+
 
 class RequestFileError(RuntimeError):
     """A state file the ARS cannot resume from (unreadable, not such a file, another mission)."""
@@ -71,8 +78,7 @@ class RequestFile:
 
     def save(self, data: RequestData) -> None:
         """Keep ``data``, a request that holds a part or a rivet, or has set its member."""
-        worth_keeping = data.recorded in RECORDS or data.holding in PART_KINDS or data.rivet_in_gun
-        if data.request is None or not worth_keeping:
+        if data.request is None or not data.worth_keeping():
             raise ValueError("only a request that holds a part or a rivet, or has set its member, is kept")
         document = {
             "format": FILE_FORMAT,
@@ -134,8 +140,8 @@ class RequestFile:
             raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
         if recorded not in ("", *RECORDS):
             raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)} or empty")
-        if holding not in (None, *PART_KINDS):
-            raise self._error(f"'holding' is {holding!r}, not one of {', '.join(PART_KINDS)} or null")
+        if holding not in (None, *HELD_KINDS):
+            raise self._error(f"'holding' is {holding!r}, not one of {', '.join(HELD_KINDS)} or null")
         if not isinstance(rivet_in_gun, bool):
             raise self._error(f"'rivet_in_gun' is {rivet_in_gun!r}, not true or false")
         if dispenser is not None and dispenser not in self.mission.dispensers:
