@@ -4,7 +4,10 @@ started by the project's launcher, and the ground station's end of the CCSDS lin
 ``SystemRun`` starts ``tlt launch --isolated config/launch/system_twin.yaml`` as a subprocess in a
 process group of its own, with a private run directory (``TLT_RUN_DIR``), the twin's UR
 controllers on private loopback addresses, free UDP ports for the ground link and, optionally, a
-twin scenario. The launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
+twin scenario. A scenario whose members start ``built`` in the twin gets a CRS tower model that
+says so (``<run>/tower_model.json``, as the CRS would have persisted it: the members placed and
+riveted, their parts and rivets taken), so the run begins late in the bay. The launcher's output
+goes to ``<run>/launch.log``. ``start()`` waits until the
 CRS's ``hk_mission`` telemetry arrives over the ground link, and ``start_build()`` until an
 authenticated Start is accepted (the CRS refuses Start with "not ready: ..." until its
 drivers report; it is sent again until it is not).
@@ -37,6 +40,8 @@ from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import Packet
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.reasons import AckStage
+from tlt_common.mission.schema import load_mission
+from tlt_common.mission.tower_model import TowerModel
 from tlt_gsw.link import Ack, GswLink, SentCommand
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -84,10 +89,13 @@ class SystemRun:
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.run_dir / "launch.log"
+        self.mission = load_mission(ROOT / "missions" / f"{mission or 'one_bay'}.yaml")
         scenario_file = ""
         if scenario is not None:  # a twin scenario (config/twin/scenarios/ has the format)
             scenario_file = str(self.run_dir / "twin_scenario.yaml")
             Path(scenario_file).write_text(yaml.safe_dump(dict(scenario)))
+            if scenario.get("built"):
+                self._tower_model(scenario["built"])
         self.crs_port = free_udp_port()
         self.gsw_port = free_udp_port()
         while self.gsw_port == self.crs_port:
@@ -109,6 +117,16 @@ class SystemRun:
         self.gsw: GswLink | None = None
         self.packets: list[Packet] = []
         self.exit_code: int | None = None
+
+    def _tower_model(self, built: list[str]) -> None:
+        model = TowerModel(self.mission, self.run_dir / "tower_model.json")
+        for member in (m for m in self.mission.members if m.id in built):
+            model.take_part(member.dispenser)
+            for rivet in member.rivets:
+                model.take_part(rivet.dispenser)
+            model.place(member.id)
+            if member.kind != "cross_frame":
+                model.rivet(member.id)
 
     # -- life cycle -------------------------------------------------------------------------
     def __enter__(self) -> SystemRun:

@@ -23,6 +23,8 @@ ground. Then:
   CRS, passes, and is placed once; the orphaned goal ends superseded;
 - nothing more is discarded (a part shown to the CRS while it was down is kept and shown again),
   and the defective part's discard, reported with the request's result, is not lost.
+A restarted CRS completing the tower is tested from late in the bay, where a build to
+``tower_built`` fits CI's time (test_scenario_killed_to_tower_built.py).
 """
 
 from __future__ import annotations

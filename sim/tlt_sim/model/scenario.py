@@ -6,6 +6,11 @@ after some seconds; a part taken off-centre ends up placed out of tolerance. Dev
 failure, a stuck lifter limit switch, a dropped link) belong to the emulators: they are validated
 here and handed on unchanged in :attr:`Scenario.device_faults`.
 
+``built`` lists members of the first bay that stand in the tower from the start, placed and
+riveted as the mission says, their parts and rivets taken from the dispensers in order: a run can
+begin late in a bay (a test of the last member, the bay test or the foundation rivets) without
+building the rest first. The CRS must be told the same in its tower model.
+
 :func:`load_scenario` refuses a file with a missing, unknown, out-of-range or inconsistent key
 (a dispenser the mission does not have, a part index beyond its count) with ``ConfigError``
 naming the file, the dotted key and the reason.
@@ -38,6 +43,7 @@ PART = {"dispenser": Field("str"), "index": Field("int", minimum=0, doc="0 = the
 SCHEMA = {
     "name": Field("str", check=lambda v: None if v.strip() else "must not be empty"),
     "description": opt("str", ""),
+    "built": opt("list", [], item=Field("str"), doc="members of bay 1 standing at the start"),
     "faults": Field(
         "dict",
         schema={
@@ -134,6 +140,7 @@ class Scenario:
     slips: dict[tuple[str, int], float] = field(default_factory=dict)  # (arm, grasp number) -> s
     empty: frozenset[str] = frozenset()
     device_faults: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    built: tuple[str, ...] = ()  # member ids, in the mission's build order
 
 
 NOMINAL = Scenario(name="nominal")
@@ -151,6 +158,30 @@ def _check_part(entry: dict[str, Any], key: str, mission: Mission, empty: set[st
     if entry["index"] >= count:
         raise ConfigError(source, f"{key}.index", f"dispenser '{name}' holds {count} part(s)")
     return f"{name}/{entry['index']}"
+
+
+def _check_built(ids: list[str], mission: Mission, empty: set[str], source: str) -> tuple[str, ...]:
+    known = {m.id: m for m in mission.members}
+    taken: dict[str, int] = {}
+    for i, member_id in enumerate(ids):
+        key = f"built[{i}]"
+        member = known.get(member_id)
+        if member is None:
+            raise ConfigError(source, key, f"'{member_id}' is not a member of mission '{mission.name}'")
+        if member_id in ids[:i]:
+            raise ConfigError(source, key, f"'{member_id}' is listed twice")
+        if member.kind == "foundation_rivet" or member.bay != 1:
+            # A later bay stands on an indexed payload, which the twin does not stage.
+            raise ConfigError(source, key, f"'{member_id}': only the members of bay 1 can start built")
+        frame = next(m.id for m in mission.bay_members(1) if m.kind == "cross_frame")
+        if member.kind != "cross_frame" and frame not in ids:
+            raise ConfigError(source, key, f"'{member_id}' needs '{frame}' built too, to be riveted to")
+        for name in (member.dispenser, *(r.dispenser for r in member.rivets)):
+            taken[name] = taken.get(name, 0) + 1
+            if taken[name] > (0 if name in empty else mission.dispensers[name].count):
+                raise ConfigError(source, key, f"dispenser '{name}' runs out building '{member_id}'")
+    order = [m.id for m in mission.members]
+    return tuple(sorted(ids, key=order.index))
 
 
 def parse_scenario(raw: Any, mission: Mission, source: str | Path = "<scenario>") -> Scenario:
@@ -183,8 +214,9 @@ def parse_scenario(raw: Any, mission: Mission, source: str | Path = "<scenario>"
             raise ConfigError(source, f"faults.grasp_slips[{i}]", f"grasp {slot[1]} of {slot[0]} slips twice")
         slips[slot] = entry["after_s"]
     device = {k: faults[k] for k in ("servo_failure", "limit_switch_stuck", "link_drop")}
+    built = _check_built(data["built"], mission, empty, source)
     return Scenario(
-        data["name"], source, data["description"], defects, offsets, slips, frozenset(empty), device
+        data["name"], source, data["description"], defects, offsets, slips, frozenset(empty), device, built
     )
 
 

@@ -126,7 +126,8 @@ class Scene:
         raise KeyError(joint)
 
     def reset(self) -> None:
-        """Back to the start: arms at home, payload held by the Top Grippers, parts in dispensers."""
+        """Back to the start: arms at home, payload held by the Top Grippers, parts in dispensers
+        but for the members the scenario starts built."""
         mujoco.mj_resetData(self.model, self.data)
         self.assembly.reset()
         start = {names.lifter_joint(i): self.edu["lifter"]["build_position"] for i in range(4)}
@@ -144,6 +145,15 @@ class Scene:
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.model, self.data)
         self.assembly.update()
+        # The scenario's members that start built stand as the build would have left them; their
+        # rivets came out of the feeders.
+        for member_id in self.scenario.built:
+            self.stage_member(member_id)
+            for rivet in self.mission.member(member_id).rivets:
+                self.assembly.rivets_left[rivet.dispenser] -= 1
+        if self.scenario.built:
+            mujoco.mj_forward(self.model, self.data)
+            self.assembly.update()
 
     def close(self) -> None:
         for r in self._renderers.values():

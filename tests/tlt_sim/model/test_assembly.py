@@ -193,3 +193,33 @@ def test_last_bay_is_riveted_to_the_foundation(scene, mover):
     m.to(corner, frame([0, 0, 1], [-0.3, 1.0, 0]), "gun_a")
     shot = scene.fire_rivet(arm, "a")
     assert shot.joined == [f"foundation/0/{frame_body}"]
+
+
+def test_a_scenario_starts_members_built_riveted_and_held(tmp_path):
+    from tlt_sim.model.scenario import parse_scenario
+
+    mission = Scene(out_dir=tmp_path / "plain").mission
+    last = "bay1/diagonal/face_y1"
+    built = [m.id for m in mission.bay_members(1) if m.id != last]
+    scenario = parse_scenario({"name": "late", "built": built[::-1], "faults": {}}, mission)
+    assert scenario.built == tuple(built)  # build order, whatever the file's
+    scene = Scene(mission=mission, scenario=scenario, out_dir=tmp_path / "late")
+    frame_body = scene.part("cross_frame_dispenser/0").body
+    assert scene.assembly.latches == [frame_body] * 4  # the Active Grippers hold the frame
+    scene.advance(1.0)  # and everything stays where the build would have left it
+    taken: dict[str, int] = {}
+    for member_id in built:
+        member = mission.member(member_id)
+        index = taken[member.dispenser] = taken.get(member.dispenser, -1) + 1
+        part = f"{member.dispenser}/{index}"  # parts come out of a dispenser in order
+        assert scene.part_state(part) == "placed"
+        if member.kind != "cross_frame":
+            ends = sorted((scene.part_end(part, e) for e in ("a", "b")), key=lambda p: p[2])
+            place = sorted((scene.joint_position_world(j) for j, _ in member.joints), key=lambda p: p[2])
+            assert max(np.linalg.norm(e - p) for e, p in zip(ends, place, strict=True)) < 2e-3, member_id
+    assert scene.next_part("diagonal_dispenser_y") == "diagonal_dispenser_y/1"
+    fired = sum(r.dispenser == "rivet_dispenser_y" for m in built for r in mission.member(m).rivets)
+    assert scene.dispenser_count("rivet_dispenser_y") == mission.dispensers["rivet_dispenser_y"].count - fired
+    result = scene.compression_test(force_n=200.0, settle_s=0.3)
+    assert 0.0 < result.displacement_m < 0.005
+    scene.close()

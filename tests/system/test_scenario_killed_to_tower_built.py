@@ -1,0 +1,128 @@
+"""Scenarios 5 and 6 (issue "whole system") in one run of the system, each to ``tower_built``.
+
+The run starts late in the bay, so that the build can be finished within CI's time: the twin
+scenario has every member of the one-bay mission but the last diagonal standing, riveted, and
+the CRS's tower model says so (tests/system/system_run.py). What is left is that diagonal (ARS
+Y's AddMember), Test Bay and the four foundation rivets.
+
+Scenario 5: an ARS process is killed mid-action. ARS Y is killed (SIGKILL, no goodbye) while its
+arm moves on the last diagonal. The CRS must notice the action server gone and fault with that
+reason (CRS_FAULT); the launch set restarts ARS Y (restart: on-failure); the fault stays until the
+ground clears it, after the ARS is back; then the CRS sends the request again and the diagonal is
+placed once.
+
+Scenario 6: the CRS process is killed mid-build and restarted. The CRS is killed while ARS X's arm
+moves on the first foundation rivet; the launch set restarts it, it comes back idle with the
+tower model it persisted (the bay built), the operator starts it again, and it sends the rivet
+in flight again: ARS X's running job is taken over by the new goal, not started afresh.
+
+Then the build goes on to ``tower_built``: every member placed and riveted, the diagonal's part at
+its place in the twin, one AddMember and one FoundationRivet per foundation joint that succeeded
+(the recording's goal statuses), and no second diagonal taken from its dispenser.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tlt_common.ccsds.reasons import AckStage
+
+_spec = importlib.util.spec_from_file_location("system_run", Path(__file__).with_name("system_run.py"))
+system_run = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(system_run)
+SystemRun = system_run.SystemRun
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(1500)]
+
+LAST = "bay1/diagonal/face_y1"  # ARS Y's, from diagonal_dispenser_y after face_x1's part
+SUCCEEDED = 4  # action_msgs/GoalStatus
+
+
+def _succeeded(run: SystemRun, topic: str) -> int:
+    final: dict[bytes, int] = {}
+    for status in run.recorded(topic):
+        for entry in status.status_list:
+            final[bytes(entry.goal_info.goal_id.uuid)] = entry.status
+    return sum(s == SUCCEEDED for s in final.values())
+
+
+def test_an_ars_and_then_the_crs_killed_late_in_the_bay_and_the_tower_is_built_once(tmp_path):
+    mission = system_run.load_mission(system_run.ROOT / "missions" / "one_bay.yaml")
+    built = [m.id for m in mission.bay_members(1) if m.id != LAST]
+    scenario = {"name": "last_diagonal", "description": f"bay 1 built but {LAST}", "built": built,
+                "faults": {}}
+    with SystemRun(tmp_path / "run", scenario=scenario, rtf=0) as run:
+        run.start()
+        run.wait_ready()
+        assert run.last("hk_mission")["members_placed"] == len(built)
+        assert run.start_build().stage is AckStage.COMPLETED
+        cleared = run.wait_build_moves_arm("ars_y", 150)
+
+        # Scenario 5.
+        mark = len(run.packets)
+        os.kill(run.pid("ars_y"), signal.SIGKILL)
+        fault = run.wait_kind("event", lambda f: f["code"] == "CRS_FAULT", 90, "the CRS's fault", since=mark)
+        assert "ARS 'ars_y' gone while running AddMember" in fault["text"], fault
+        run.wait_output("restarting ars_y", 30)
+        back = len(run.packets)
+        run.wait_kind("tree_status", lambda f: f["agent"] == "ars_y", 120, "the restarted ARS Y ticking",
+                      since=back)
+        run.poll(2.0)
+        # Waiting for help: the ARS is back, but nothing clears the fault but the operator.
+        assert run.last("hk_mission")["run_state"] == "fault", run.last("hk_mission")
+        ack = run.command("set_blackboard_value", {"key": "clear_fault", "value": True})
+        assert ack.stage is AckStage.COMPLETED, ack
+        placed, more = run.wait_through_faults(
+            lambda p: p.kind == "mission_step" and p.fields["members_placed"] > len(built), 400,
+            f"{LAST} placed", since=len(run.packets))
+        assert placed.fields["members_placed"] == len(built) + 1, placed.fields
+
+        # Scenario 6, once ARS X works on the first foundation rivet.
+        step, later = run.wait_through_faults(
+            lambda p: p.kind == "mission_step" and p.fields["member"].startswith("foundation/"), 400,
+            "the foundation rivets begun")
+        rivet = step.fields["member"]
+        assert mission.member(rivet).add_ars == "ars_x", rivet
+        run.wait_arm_moving("ars_x", 120, start=run.arm_q("ars_x")[-1], since=len(run.packets))
+        os.kill(run.pid("crs"), signal.SIGKILL)
+        run.wait_output("restarting crs", 30)
+        mark = len(run.packets)
+        again = run.wait_kind("hk_mission", lambda f: not f["started"], 120, "the restarted CRS's telemetry",
+                              since=mark)
+        assert again["members_placed"] == len(built) + 1 and again["bays_built"] == 1, again
+        assert run.start_build().stage is AckStage.COMPLETED  # the operator starts it again
+
+        done, rest = run.wait_through_faults(
+            lambda p: p.kind == "hk_mission" and p.fields["run_state"] == "done", 900,
+            "the mission done", since=mark)
+        hk = done.fields
+        members = len(mission.members)
+        assert hk["members_placed"] == hk["members_riveted"] == hk["members_total"] == members, hk
+        run.poll(3.0)  # the recorder writes asynchronously: give it the last goal statuses
+        assert run.stop() == 0
+
+    faults = cleared + more + later + rest
+    # Each request succeeded once at its ARS: the diagonal and each foundation rivet.
+    assert _succeeded(run, "/ars_y/add_member/_action/status") == 1, faults
+    for ars in ("ars_x", "ars_y"):
+        rivets = sum(m.kind == "foundation_rivet" and m.add_ars == ars for m in mission.members)
+        assert _succeeded(run, f"/{ars}/foundation_rivet/_action/status") == rivets, (ars, faults)
+    # The dispenser gave the diagonal once (and any part discarded after a failed inspection).
+    dispenser = mission.member(LAST).dispenser
+    model = json.loads((run.run_dir / "tower_model.json").read_text())["dispensers"][dispenser]
+    earlier = sum(mission.member(m).dispenser == dispenser for m in built)
+    assert mission.dispensers[dispenser].count - model["remaining"] == earlier + 1 + model["discarded"], model
+    # In the twin, a part taken after the built ones stands at the diagonal's place (a part's body
+    # frame sits at one of its ends).
+    last = run.last_ground_truth()
+    ends = [last["tower"] + np.asarray(p) for _, p in mission.member(LAST).joints]
+    taken = range(earlier, mission.dispensers[dispenser].count - model["remaining"])
+    off = {i: min(float(np.linalg.norm(last[f"part/{dispenser}/{i}"] - e)) for e in ends) for i in taken}
+    assert min(off.values()) < 0.01, off
