@@ -6,8 +6,10 @@ process group of its own, with a private run directory (``TLT_RUN_DIR``), the tw
 controllers on private loopback addresses, free UDP ports for the ground link and, optionally, a
 twin scenario. A scenario whose members start ``built`` in the twin gets a CRS tower model that
 says so (``<run>/tower_model.json``, as the CRS would have persisted it: the members placed and
-riveted, their parts and rivets taken), so the run begins late in the bay. The launcher's output
-goes to ``<run>/launch.log``. ``start()`` waits until the
+riveted, their parts and rivets taken), so the run begins late in the bay. With ``hosts`` the
+launch set is config/launch/system_hosts_twin.yaml instead: every computer of the EDU an emulated
+host (a network namespace, docs/deployment.md), and the test's ground station on the ground host.
+The launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
 CRS's ``hk_mission`` telemetry arrives over the ground link, and ``start_build()`` until an
 authenticated Start is accepted (the CRS refuses Start with "not ready: ..." until its
 drivers report; it is sent again until it is not).
@@ -28,6 +30,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -40,6 +43,7 @@ from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import Packet
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.reasons import AckStage
+from tlt_common.launch.hosts import enter_namespace, namespace_name
 from tlt_common.mission.schema import load_mission
 from tlt_common.mission.tower_model import TowerModel
 from tlt_gsw.link import Ack, GswLink, SentCommand
@@ -47,6 +51,7 @@ from tlt_gsw.link import Ack, GswLink, SentCommand
 ROOT = Path(__file__).resolve().parents[2]
 TLT = Path(sys.executable).with_name("tlt")
 LAUNCH_SET = ROOT / "config/launch/system_twin.yaml"
+HOSTS_SET = ROOT / "config/launch/system_hosts_twin.yaml"
 
 # Loopback addresses of the twin's UR controllers: away from those of every other test
 # (127.0.0.x emulators, 127.0.77-79.x twin tests) and of a developer's twin (127.0.0.2/.3).
@@ -62,6 +67,26 @@ def _launcher_dies_with_test() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except OSError:
         pass
+
+
+def _in_namespace(namespace: str, make: Callable[[], Any]) -> Any:
+    """``make()`` run on a thread of its own moved into network namespace ``namespace``: a socket
+    it opens stays in that namespace, whichever thread uses it later."""
+    out: list[Any] = []
+
+    def run() -> None:
+        try:
+            enter_namespace(namespace)
+            out.append(make())
+        except BaseException as exc:  # handed to the caller
+            out.append(exc)
+
+    thread = threading.Thread(target=run, name=f"in {namespace}")
+    thread.start()
+    thread.join()
+    if isinstance(out[0], BaseException):
+        raise out[0]
+    return out[0]
 
 
 def free_udp_port() -> int:
@@ -85,6 +110,7 @@ class SystemRun:
         mission: str | None = None,
         rtf: float | None = None,
         env: Mapping[str, str] | None = None,
+        hosts: bool = False,
     ) -> None:
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -100,6 +126,15 @@ class SystemRun:
         self.gsw_port = free_udp_port()
         while self.gsw_port == self.crs_port:
             self.gsw_port = free_udp_port()
+        self.launch_set = HOSTS_SET if hosts else LAUNCH_SET
+        # The ground link's ends: loopback on one machine; on emulated hosts, the CRS host and the
+        # ground host, whose namespace the test's ground station opens its socket in.
+        self.hosts_run = f"t{os.getpid() % 100000}" if hosts else None
+        self.crs_host = self.gsw_host = "127.0.0.1"
+        if hosts:
+            layout = yaml.safe_load(HOSTS_SET.read_text())
+            self.crs_host = layout["env"]["TLT_GROUND_CRS_HOST"]
+            self.gsw_host = layout["env"]["TLT_GROUND_GSW_HOST"]
         self.env = {
             **os.environ,
             "TLT_RUN_DIR": str(self.run_dir),
@@ -108,6 +143,7 @@ class SystemRun:
             "TLT_GROUND_CRS_PORT": str(self.crs_port),
             "TLT_GROUND_GSW_PORT": str(self.gsw_port),
             "TLT_TWIN_SCENARIO": scenario_file,
+            **({"TLT_HOSTS_RUN": self.hosts_run} if hosts else {}),
             **({"TLT_MISSION": mission} if mission else {}),
             **({"TLT_TWIN_RTF": str(rtf)} if rtf is not None else {}),
             **(env or {}),
@@ -147,7 +183,7 @@ class SystemRun:
         log = self.log_path.open("wb")
         try:
             self.proc = subprocess.Popen(
-                [str(TLT), "launch", "--isolated", str(LAUNCH_SET)],
+                [str(TLT), "launch", "--isolated", str(self.launch_set)],
                 stdout=log, stderr=subprocess.STDOUT, env=self.env, cwd=ROOT,
                 preexec_fn=_launcher_dies_with_test,
             )
@@ -156,10 +192,15 @@ class SystemRun:
         key_file = self.run_dir / "ground.key"
         self._wait(lambda: key_file.exists() and key_file.stat().st_size > 0, 60.0,
                    "the run's ground key was not written")
-        self.gsw = GswLink(
-            self.defs, KeyRing.load(key_file), 1, ("127.0.0.1", self.crs_port),
-            bind=("127.0.0.1", self.gsw_port), on_packet=self._keep,
-        )
+
+        def link() -> GswLink:
+            return GswLink(self.defs, KeyRing.load(key_file), 1, (self.crs_host, self.crs_port),
+                           bind=(self.gsw_host, self.gsw_port), on_packet=self._keep)
+
+        if self.hosts_run is None:
+            self.gsw = link()
+        else:
+            self.gsw = _in_namespace(namespace_name(self.hosts_run, "ground"), link)
         self.wait_packet(lambda p: p.kind == "hk_mission", timeout, "hk_mission telemetry from the CRS")
         return self
 

@@ -6,6 +6,7 @@ the file, the key and the reason.
 
 from __future__ import annotations
 
+import ipaddress
 import os
 from pathlib import Path
 from typing import Any
@@ -50,14 +51,19 @@ def expand_path(text: str) -> Path:
 
 
 # Environment overrides of the UDP ports, so that runs side by side (tests, a main job) each have
-# their own link without a file apiece: the CRS's command port and the GSW's telemetry port.
+# their own link without a file apiece: the CRS's command port and the GSW's telemetry port. The
+# hosts' addresses likewise, so that one file serves a run on one machine and on emulated hosts.
 ENV_CRS_PORT = "TLT_GROUND_CRS_PORT"
 ENV_GSW_PORT = "TLT_GROUND_GSW_PORT"
+ENV_CRS_HOST = "TLT_GROUND_CRS_HOST"
+ENV_GSW_HOST = "TLT_GROUND_GSW_HOST"
 
 
 def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
     """Load the link settings: ``path``, else ``$TLT_CCSDS_LINK_CONFIG``, else the project's file;
-    then ``$TLT_GROUND_CRS_PORT`` / ``$TLT_GROUND_GSW_PORT`` replace the ports when set."""
+    then ``$TLT_GROUND_CRS_PORT`` / ``$TLT_GROUND_GSW_PORT`` replace the ports, and
+    ``$TLT_GROUND_CRS_HOST`` / ``$TLT_GROUND_GSW_HOST`` the addresses (each end's own and the one it
+    sends to), when set."""
     chosen = Path(path or os.environ.get(ENV_PATH) or DEFAULT_PATH)
     conf = load_validated(chosen, SCHEMA)
     for var, keys in ((ENV_CRS_PORT, (("crs", "bind_port"), ("gsw", "crs_port"))),
@@ -69,6 +75,17 @@ def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
             raise ConfigError(f"${var}", "", f"{text!r} is not a UDP port")
         for section, key in keys:
             conf[section][key] = int(text)
+    for var, keys in ((ENV_CRS_HOST, (("crs", "bind_host"), ("gsw", "crs_host"))),
+                      (ENV_GSW_HOST, (("crs", "gsw_host"), ("gsw", "bind_host")))):
+        text = os.environ.get(var, "").strip()
+        if not text:
+            continue
+        try:
+            ipaddress.ip_address(text)
+        except ValueError:
+            raise ConfigError(f"${var}", "", f"{text!r} is not an IP address") from None
+        for section, key in keys:
+            conf[section][key] = text
     return conf
 
 

@@ -45,3 +45,14 @@ def test_port_overrides_from_the_environment_give_a_run_its_own_link(monkeypatch
     monkeypatch.setenv("TLT_GROUND_CRS_PORT", "http")
     with pytest.raises(ConfigError, match=r"\$TLT_GROUND_CRS_PORT: 'http' is not a UDP port"):
         load_link_config()
+
+
+def test_address_overrides_put_each_end_on_its_own_host(monkeypatch):
+    monkeypatch.setenv("TLT_GROUND_CRS_HOST", "10.77.0.11")
+    monkeypatch.setenv("TLT_GROUND_GSW_HOST", "10.77.0.14")
+    conf = load_link_config(DEFAULT_PATH.with_name("link_twin.yaml"))
+    assert conf["crs"]["bind_host"] == conf["gsw"]["crs_host"] == "10.77.0.11"
+    assert conf["crs"]["gsw_host"] == conf["gsw"]["bind_host"] == "10.77.0.14"
+    monkeypatch.setenv("TLT_GROUND_GSW_HOST", "ground-laptop")
+    with pytest.raises(ConfigError, match=r"\$TLT_GROUND_GSW_HOST: 'ground-laptop' is not an IP address"):
+        load_link_config()
