@@ -164,10 +164,10 @@ class Driver:
 
     def close(self) -> None:
         self.executor.shutdown()
+        self.thread.join(timeout=5)  # before the entities its wait set holds are destroyed
         self.server.destroy()
         self.node.destroy_node()
         self.context.try_shutdown()
-        self.thread.join(timeout=5)
 
 
 @pytest.fixture

@@ -109,10 +109,12 @@ def ros():
     thread.start()
     yield server_node, client_node
     executor.shutdown(timeout_sec=2.0)
+    # The spin thread may still be building a wait set from the nodes' entities: destroyed under
+    # it, one failed the thread with InvalidHandle (a warning in a clean-clone run).
+    thread.join(timeout=5.0)
     server_node.destroy_node()
     client_node.destroy_node()
     rclpy.shutdown(context=context)
-    thread.join(timeout=5.0)
 
 
 @pytest.fixture(scope="module")
