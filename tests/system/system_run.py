@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from action_msgs.msg import GoalStatus
 
 from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import Packet
@@ -503,6 +504,19 @@ class SystemRun:
                 t = tf.transform.translation
                 last[tf.child_frame_id] = np.array([t.x, t.y, t.z])
         return last
+
+    def goal_statuses(self, action: str) -> dict[bytes, int]:
+        """The last status (``action_msgs/GoalStatus``) of every goal of the action server
+        ``action`` (``/ars_x/add_member``) in the recording, by goal id."""
+        last: dict[bytes, int] = {}
+        for status in self.recorded(f"{action}/_action/status"):
+            for entry in status.status_list:
+                last[bytes(entry.goal_info.goal_id.uuid)] = entry.status
+        return last
+
+    def goals_succeeded(self, action: str) -> int:
+        """How many goals of the action server ``action`` ended SUCCEEDED."""
+        return sum(s == GoalStatus.STATUS_SUCCEEDED for s in self.goal_statuses(action).values())
 
     def recorded(self, topic: str, *, times: bool = False) -> list[Any]:
         """The decoded messages of ``topic`` in the run's MCAP recording (complete once the

@@ -50,19 +50,9 @@ pytestmark = [pytest.mark.system, pytest.mark.timeout(2700)]
 MISSION = Path(__file__).resolve().parents[2] / "missions" / "one_bay.yaml"
 BUILD_TIMEOUT_S = 2400.0  # 13-25 min on 2 cores; CI machines vary
 PLACE_TOLERANCE = 0.01  # m, a part's body from its member's place on the tower
-SUCCEEDED = 4  # action_msgs/GoalStatus
 # The action each member kind is asked for, and the ARS action that rivets an affix joint.
 ACTIONS = {"cross_frame": "add_cross_frame", "vertical": "add_member", "diagonal": "add_member",
            "foundation_rivet": "foundation_rivet"}
-
-
-def _succeeded_goals(run, topic: str) -> int:
-    """Goals that ended SUCCEEDED on an action's status topic (each counted once)."""
-    final: dict[bytes, int] = {}
-    for status in run.recorded(topic):
-        for entry in status.status_list:
-            final[bytes(entry.goal_info.goal_id.uuid)] = entry.status
-    return sum(s == SUCCEEDED for s in final.values())
 
 
 def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
@@ -114,5 +104,5 @@ def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
     # Each request succeeded once at its ARS: nothing placed or riveted twice.
     wanted = Counter((m.add_ars, ACTIONS[m.kind]) for m in mission.members)
     wanted.update((r.ars, "affix_member") for m in mission.members for r in m.rivets if r.step == "affix")
-    got = {key: _succeeded_goals(run, f"/{key[0]}/{key[1]}/_action/status") for key in wanted}
+    got = {key: run.goals_succeeded(f"/{key[0]}/{key[1]}") for key in wanted}
     assert got == dict(wanted), (got, cleared)
