@@ -74,6 +74,7 @@ from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.config_schema import ConfigError, load_yaml
+from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
@@ -499,7 +500,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if clock_watch is not None:
             clock_watch.stop()
         node.close()
-        executor.shutdown(timeout_sec=2.0)
+        for exc in stop_executor(executor, 2.0):  # before the node's handles go
+            node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

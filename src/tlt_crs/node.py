@@ -43,6 +43,7 @@ from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.bt.status_codec import TreeShape
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
+from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
@@ -315,7 +316,8 @@ def main(argv: list[str] | None = None) -> int:
                 link.close()
             # Callbacks still running when the node is destroyed use freed handles: give them
             # time to return first (the context is still valid: tlt_common.stop_signals).
-            executor.shutdown(timeout_sec=5.0)
+            for exc in stop_executor(executor, 5.0):
+                node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
             node.destroy_node()
         return 0
     finally:

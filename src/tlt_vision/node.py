@@ -52,6 +52,7 @@ from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTa
 from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
+from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
@@ -690,7 +691,8 @@ def main(argv: list[str] | None = None) -> int:
         except ExternalShutdownException:  # a context shut down by someone else
             pass
         finally:
-            executor.shutdown(timeout_sec=2.0)
+            for exc in stop_executor(executor, 2.0):  # before the node's handles go
+                node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
     finally:
         if node is not None:
             node.destroy_node()
