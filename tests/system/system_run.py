@@ -24,6 +24,7 @@ Nothing here waits without a bound: every wait takes a timeout and fails with wh
 from __future__ import annotations
 
 import ctypes
+import json
 import os
 import re
 import signal
@@ -88,6 +89,12 @@ def _in_namespace(namespace: str, make: Callable[[], Any]) -> Any:
     if isinstance(out[0], BaseException):
         raise out[0]
     return out[0]
+
+
+def late_bay_scenario(mission: Any, last: str) -> dict[str, Any]:
+    """A twin scenario with every member of bay 1 but ``last`` built (the run begins with it)."""
+    built = [m.id for m in mission.bay_members(1) if m.id != last]
+    return {"name": "late_bay", "description": f"bay 1 built but {last}", "built": built, "faults": {}}
 
 
 def free_udp_port() -> int:
@@ -505,6 +512,10 @@ class SystemRun:
                 last[tf.child_frame_id] = np.array([t.x, t.y, t.z])
         return last
 
+    def tower_model(self) -> dict[str, Any]:
+        """The CRS's persisted tower model (``<run_dir>/tower_model.json``) as it stands."""
+        return json.loads((self.run_dir / "tower_model.json").read_text())
+
     def goal_statuses(self, action: str) -> dict[bytes, int]:
         """The last status (``action_msgs/GoalStatus``) of every goal of the action server
         ``action`` (``/ars_x/add_member``) in the recording, by goal id."""
@@ -548,4 +559,4 @@ class SystemRun:
             time.sleep(0.2)
 
 
-__all__ = ["UR_X_HOST", "UR_Y_HOST", "SystemRun", "free_udp_port"]
+__all__ = ["UR_X_HOST", "UR_Y_HOST", "SystemRun", "free_udp_port", "late_bay_scenario"]

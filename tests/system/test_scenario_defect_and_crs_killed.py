@@ -32,7 +32,6 @@ A restarted CRS completing the tower is tested from late in the bay, where a bui
 from __future__ import annotations
 
 import importlib.util
-import json
 import os
 import signal
 from pathlib import Path
@@ -107,7 +106,7 @@ def test_a_defective_vertical_is_replaced_through_a_crs_restart_and_placed_once(
     faults = cleared + more + later
     mission = load_mission(system_run.ROOT / "missions" / "one_bay.yaml")
     # Scenario 4: the dispenser gave two parts and one was discarded, as persisted by the CRS.
-    model = json.loads((run.run_dir / "tower_model.json").read_text())
+    model = run.tower_model()
     count = mission.dispensers[DISPENSER].count
     assert model["dispensers"][DISPENSER] == {"remaining": count - 2, "discarded": 1}, model["dispensers"]
     assert model["members"][MEMBER] in ("PLACED", "RIVETED", "INSPECTED"), model["members"]

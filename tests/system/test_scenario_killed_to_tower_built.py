@@ -24,7 +24,6 @@ its place in the twin, one AddMember and one FoundationRivet per foundation join
 from __future__ import annotations
 
 import importlib.util
-import json
 import os
 import signal
 from pathlib import Path
@@ -46,9 +45,8 @@ LAST = "bay1/diagonal/face_y1"  # ARS Y's, from diagonal_dispenser_y after face_
 
 def test_an_ars_and_then_the_crs_killed_late_in_the_bay_and_the_tower_is_built_once(tmp_path):
     mission = system_run.load_mission(system_run.ROOT / "missions" / "one_bay.yaml")
-    built = [m.id for m in mission.bay_members(1) if m.id != LAST]
-    scenario = {"name": "last_diagonal", "description": f"bay 1 built but {LAST}", "built": built,
-                "faults": {}}
+    scenario = system_run.late_bay_scenario(mission, LAST)
+    built = scenario["built"]
     with SystemRun(tmp_path / "run", scenario=scenario, rtf=0) as run:
         run.start()
         run.wait_ready()
@@ -107,7 +105,7 @@ def test_an_ars_and_then_the_crs_killed_late_in_the_bay_and_the_tower_is_built_o
         assert run.goals_succeeded(f"/{ars}/foundation_rivet") == rivets, (ars, faults)
     # The dispenser gave the diagonal once (and any part discarded after a failed inspection).
     dispenser = mission.member(LAST).dispenser
-    model = json.loads((run.run_dir / "tower_model.json").read_text())["dispensers"][dispenser]
+    model = run.tower_model()["dispensers"][dispenser]
     earlier = sum(mission.member(m).dispenser == dispenser for m in built)
     assert mission.dispensers[dispenser].count - model["remaining"] == earlier + 1 + model["discarded"], model
     # In the twin, a part taken after the built ones stands at the diagonal's place (a part's body

@@ -226,9 +226,8 @@ CUT_S = 12.0  # s a cut ARS link stays down: four leases of config/dds/emulated_
 def test_the_whole_system_builds_across_hosts_through_a_cut_ars_link(tmp_path):
     last = "bay1/diagonal/face_y1"  # ARS Y's
     mission = system_run.load_mission(ROOT / "missions/one_bay.yaml")
-    built = [m.id for m in mission.bay_members(1) if m.id != last]
-    scenario = {"name": "last_diagonal", "description": f"bay 1 built but {last}", "built": built,
-                "faults": {}}
+    scenario = system_run.late_bay_scenario(mission, last)
+    built = scenario["built"]
     with system_run.SystemRun(tmp_path / "run", scenario=scenario, rtf=0, hosts=True) as run:
         run.start()
         run.wait_ready()
@@ -271,7 +270,7 @@ def test_the_whole_system_builds_across_hosts_through_a_cut_ars_link(tmp_path):
     fired = re.findall(r"twin: (ars_\w) rivet gun \w fired", output)
     assert fired.count("ars_y") == 1, fired
     dispenser = mission.member(last).dispenser
-    model = json.loads((run.run_dir / "tower_model.json").read_text())["dispensers"][dispenser]
+    model = run.tower_model()["dispensers"][dispenser]
     earlier = sum(mission.member(m).dispenser == dispenser for m in built)
     assert mission.dispensers[dispenser].count - model["remaining"] == earlier + 1 + model["discarded"], model
     assert run_namespaces(run.hosts_run) == []
