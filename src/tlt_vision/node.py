@@ -33,7 +33,7 @@ import logging
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 import rclpy
 from geometry_msgs.msg import Pose
-from rclpy._rclpy_pybind11 import InvalidHandle
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -56,6 +55,7 @@ from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
+from tlt_common.spin_loop import spin
 from tlt_common.stamps import set_stamp
 from tlt_common.stop_signals import stop_on_signals
 from tlt_vision import inspection
@@ -634,17 +634,6 @@ class VisionNode(LeanNode):
         response.pose.header.frame_id = self.config.raw["world_frame"]
         response.pose.pose = pose_msg(dispenser)
         return response
-
-
-def spin(executor: Any, context: Any = None, stop: Callable[[], bool] | None = None) -> None:
-    """Spin ``executor`` until its context shuts down or ``stop()`` is true. A wait set built while
-    a request destroys its frame subscriptions can meet a destroyed handle; the next wait is clean,
-    so carry on."""
-    while rclpy.ok(context=context) and not (stop is not None and stop()):
-        try:
-            executor.spin_once(timeout_sec=0.2)
-        except InvalidHandle:
-            continue
 
 
 def build_node(

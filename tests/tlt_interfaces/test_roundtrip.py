@@ -18,6 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from tlt_common.action_client import SerialisedActionClient
 from tlt_common.interfaces import iter_interfaces, message_parts, sample_message
+from tlt_common.spin_loop import spin
 
 INTERFACES = list(iter_interfaces())
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -72,13 +73,17 @@ def node(peer):
     node = Node("tlt_roundtrip_test")
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
+    # Each test destroys its clients while this thread spins: rclpy's own spin loop died of one
+    # destroyed as it built its wait set, and every later action test timed out (a clean run).
+    done = threading.Event()
+    spinner = threading.Thread(target=spin, args=(executor,), kwargs={"stop": done.is_set}, daemon=True)
     spinner.start()
     yield node
     # The spin thread ends before the node goes: a node destroyed under it failed that thread with
     # InvalidHandle as it added the node's event handlers to its wait set.
-    executor.shutdown()
+    done.set()
     spinner.join(timeout=5)
+    executor.shutdown()
     node.destroy_node()
     rclpy.shutdown()
 

@@ -44,8 +44,9 @@ from tlt_ars.planning.targets import placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
+from tlt_common.spin_loop import spin
 from tlt_vision.frames import FrameUnavailable, arm_joint_names, grasp_joint_names, width_joint_name
-from tlt_vision.node import VisionNode, main, spin
+from tlt_vision.node import VisionNode, main
 from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
