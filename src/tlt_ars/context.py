@@ -13,7 +13,11 @@ request ended, or the result lost on a broken link. The CRS, which has not recor
 sends the same request again, and :meth:`ArsContext.check_request` lets that one through (the
 mission state alone would refuse it as already placed) so that the ARS can finish it: let go and
 retreat from where the arm stands, and report success. So the last request that set its member is
-kept as the context's ``unfinished`` request until another request begins.
+kept as the context's ``unfinished`` request until another request begins. So is one that began
+the step that sets its member and never recorded it (``RequestData.setting``: the ARS killed while
+the gun fired or while a cross frame was let go of, the gun's output never seen off): its member
+may be set, so sent again, the request does that step again from where the arm still stands and
+finishes (:meth:`tlt_ars.subtrees.SubtreeBuilder.finish_in_doubt`).
 
 A request can also end with a part in the gripper (a motion or a measurement failed on the way to
 the tower): the next request starts holding it (``RequestData.holding``, so the collision scene
@@ -93,9 +97,9 @@ class ArsContext:
         self.request_file = request_file
         kept = request_file.load() if request_file is not None else None
         self.data = kept or RequestData()
-        self.unfinished: RequestData | None = kept if kept is not None and kept.recorded else None
-        if self.unfinished is not None:
-            self._mark(self.unfinished.member, self.unfinished.recorded)
+        self.unfinished: RequestData | None = kept if kept is not None and kept.unfinished() else None
+        if kept is not None and kept.recorded:
+            self._mark(kept.member, kept.recorded)
 
     # ----- sensors -----
     def arm_q(self, max_age: float = 1.0) -> np.ndarray | None:
@@ -199,8 +203,9 @@ class ArsContext:
             return None
         left = self.unfinished
         if left is not None and left.holding is not None:
+            how = left.recorded or "perhaps set (the step that sets it began)"
             return (
-                f"the gripper still holds '{left.member.id}', {left.recorded} in the tower: only"
+                f"the gripper still holds '{left.member.id}', {how} in the tower: only"
                 f" {left.request.request} for it, sent again, lets go of it"
             )
         return self.state.check_request(request)
@@ -235,6 +240,7 @@ class ArsContext:
             raise ValueError("no member in this request")
         self._mark(member, what)
         self.data.recorded = what
+        self.data.setting, self.data.setting_q = "", None
         return self.keep()
 
     def keep(self) -> str | None:
@@ -257,9 +263,9 @@ class ArsContext:
          "riveted": self.state.mark_riveted}[what](member.id)  # fmt: skip
 
     def end(self, request: Request) -> None:
-        """``request`` ended: kept as unfinished when it set its member, whether it then failed or
-        its success may not reach the CRS."""
-        if self.data.recorded and self.data.request == request:
+        """``request`` ended: kept as unfinished when it set its member (or may have), whether it
+        then failed or its success may not reach the CRS."""
+        if self.data.unfinished() and self.data.request == request:
             self.unfinished = self.data
 
     def close(self) -> None:

@@ -163,9 +163,13 @@ class ArsNode(LeanNode):
         )
         if self.ctx.unfinished is not None:
             left = self.ctx.unfinished
+            how = (
+                f"set its member ({left.recorded})" if left.recorded
+                else f"began the step that sets its member ({left.setting}) and never saw it end"
+            )
             self.get_logger().warning(
-                f"{state}: {left.request.request} of '{left.member.id}' set its member ({left.recorded})"
-                " before this ARS went down; the same request sent again finishes it"
+                f"{state}: {left.request.request} of '{left.member.id}' {how} before this ARS went"
+                " down; the same request sent again finishes it"
             )
         self.planner = MotionPlanner(
             scene,

@@ -8,12 +8,17 @@ of it, and the CRS, which never heard the result, sends the same request again: 
 would fetch another part for a place that is taken. And an ARS killed, or a request failed, while
 a part is held would otherwise plan the next request's motions without that part and open the jaws
 on it at a dispenser; and one whose gun holds a rivet would push the loaded gun into the rivet
-feeder. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``) is written
-when a part is taken into the gripper or a rivet into the gun, when the part is let go of, and
-when a request sets its member, and read back at start-up: :class:`tlt_ars.context.ArsContext`
-finishes the kept request when it is sent again, has a held part discarded before anything else,
-and looks for the kept rivet before loading one. What the file keeps is what that needs: the
-request, what it set, the part held and its dispenser, the rivet, and the targets its approaches
+feeder. And an ARS killed while the step that sets the member runs (the gun firing, a cross frame
+let go of at its place), or whose gun was never seen to stop, does not know whether the member is
+set: a held member discarded then would be torn out of the tower, a cross frame fetched again
+would meet the one in place. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``) is
+written when a part is taken into the gripper or a rivet into the gun, when the part is let go
+of, just before that step (with the arm's joints then), and when a request sets its member, and
+read back at start-up: :class:`tlt_ars.context.ArsContext` finishes the kept request when it is
+sent again (after a step left in doubt, by doing it again from where the arm still stands: a spent
+gun fires empty, open jaws stay open), has a held part discarded before anything else, and looks
+for the kept rivet before loading one. What the file keeps is what that needs: the request, what
+it set or was setting, the part held and its dispenser, the rivet, and the targets its approaches
 chose (the retreat goes back along the one its fine move took). It is removed once none is left.
 
 The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
@@ -55,13 +60,22 @@ class RequestData:
     targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
     recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
     rivet_in_gun: bool = False  # seen loaded (Verify Rivet Loaded) and not fired since
+    # What the step that sets the member (the gun's shot, a cross frame let go of at its place)
+    # sets, from just before that step until the record, and the arm's joints (planning order) then.
+    setting: str = ""
+    setting_q: tuple[float, ...] | None = None
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
 
     def worth_keeping(self) -> bool:
         """Whether a restart must know of this request: it holds a part or a rivet, or has set
-        its member."""
-        return bool(self.recorded or self.holding or self.rivet_in_gun)
+        its member or may have."""
+        return bool(self.unfinished() or self.holding or self.rivet_in_gun)
+
+    def unfinished(self) -> bool:
+        """Whether the request set its member, or may have (the step that sets it left in doubt):
+        sent again, it is finished, never run afresh."""
+        return bool(self.recorded or self.setting)
 
 
 class RequestFileError(RuntimeError):
@@ -90,6 +104,8 @@ class RequestFile:
             "holding": data.holding,
             "dispenser": data.dispenser,
             "rivet_in_gun": data.rivet_in_gun,
+            "setting": data.setting,
+            "setting_q": list(data.setting_q) if data.setting_q is not None else None,
             "targets": {
                 key: {"label": t.label, "pose": t.pose.tolist(), "pre_pose": t.pre_pose.tolist()}
                 for key, t in data.targets.items()
@@ -136,12 +152,20 @@ class RequestFile:
             }
             recorded, holding, dispenser = document["recorded"], document["holding"], document["dispenser"]
             rivet_in_gun = document["rivet_in_gun"]
+            # Files written before the step that sets the member was kept have neither.
+            setting, setting_q = document.get("setting", ""), document.get("setting_q")
+            if setting_q is not None:
+                setting_q = tuple(float(v) for v in setting_q)
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
         if recorded not in ("", *RECORDS):
             raise self._error(f"'recorded' is {recorded!r}, not one of {', '.join(RECORDS)} or empty")
         if holding not in (None, *HELD_KINDS):
             raise self._error(f"'holding' is {holding!r}, not one of {', '.join(HELD_KINDS)} or null")
+        if setting not in ("", *RECORDS):
+            raise self._error(f"'setting' is {setting!r}, not one of {', '.join(RECORDS)} or empty")
+        if setting and (setting_q is None or not np.all(np.isfinite(setting_q))):
+            raise self._error(f"'setting' is {setting!r} but 'setting_q' is {setting_q!r}, not joints")
         if not isinstance(rivet_in_gun, bool):
             raise self._error(f"'rivet_in_gun' is {rivet_in_gun!r}, not true or false")
         if dispenser is not None and dispenser not in self.mission.dispensers:
@@ -154,6 +178,8 @@ class RequestFile:
             targets=targets,
             recorded=recorded,
             rivet_in_gun=rivet_in_gun,
+            setting=setting,
+            setting_q=setting_q if setting else None,
         )
 
     def _error(self, reason: str) -> RequestFileError:

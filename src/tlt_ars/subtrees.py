@@ -33,7 +33,9 @@ Affix Member                39         Load Rivet, Place Rivet (recording the me
 Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
                                        Member (Fire Rivet Gun, Record Riveted / Affixed, Retreat)
 Finish <request>            -          Release (an added member), Retreat (Retract Width for a
-                                       diagonal): the tail of a request that set its member, sent again
+                                       diagonal): the tail of a request that set its member, sent again;
+                                       after a step in doubt, Arm Still There? and that step again:
+                                       Rivet Member, or Let Go At Place (a cross frame)
 Discard Held Part           -          Move To Discard, Release, Count Discard: first in a branch when
                                        an earlier request left a part in the gripper
 ==========================  =========  ================================================================
@@ -41,7 +43,12 @@ Discard Held Part           -          Move To Discard, Release, Count Discard: 
 A member is recorded the moment it is set (the rivet fired, the cross frame released where it
 belongs), before the Release and the Retreat, and kept in the ARS's state file: a Retreat that
 fails, or an ARS killed and restarted, leaves it set all the same, and the request sent again is
-finished, not run again (:class:`tlt_ars.context.ArsContext`).
+finished, not run again (:class:`tlt_ars.context.ArsContext`). The step that sets the member is
+marked in the file before it begins (Mark Shot before Fire Rivet Gun, Mark Release before a cross
+frame is let go of at its place): a request that ends between the mark and the record (killed
+then, the gun's output never seen off) may have set its member, so it is finished by that step
+again from the same place (a spent gun fires empty, open jaws stay open), never by a discard that
+would tear the member out of the tower nor by a new part for a place that may be taken.
 """
 
 from __future__ import annotations
@@ -84,7 +91,7 @@ from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_common.bt.deferred import DeferredSequence
-from tlt_common.bt.nodes import Action
+from tlt_common.bt.nodes import Action, Condition
 from tlt_common.mission.schema import Member
 
 Sequence = py_trees.composites.Sequence
@@ -146,6 +153,46 @@ class RecordMember(Action):
             return self.fail(f"{member.id} {self.what}, but {why}")
         self.feedback_message = f"{member.id} {self.what}"
         return Status.SUCCESS
+
+
+class MarkSetting(Action):
+    """Keep in the state file that the step that sets the request's member begins: ``what`` it
+    sets (placed, affixed, riveted) and the arm's joints now. Writes ``RequestData.setting`` and
+    ``setting_q`` (:meth:`ArsContext.record` clears them). SUCCESS at once; FAILURE without a fresh
+    joint state, or when the state file cannot be written (the step does not begin)."""
+
+    def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
+        super().__init__(name)
+        self.ctx, self.what = ctx, what
+
+    def update(self) -> Status:
+        q = self.ctx.arm_q()
+        if q is None:
+            return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
+        data = self.ctx.data
+        data.setting, data.setting_q = self.what, tuple(float(v) for v in q)
+        if (why := self.ctx.keep()) is not None:
+            return self.fail(why)
+        return Status.SUCCESS
+
+
+class ArmStillThere(Condition):
+    """True when the arm stands where the step that sets the member began (every joint within
+    ``tolerance`` rad of ``RequestData.setting_q``): only there may a step left in doubt be done
+    again."""
+
+    def __init__(self, name: str, ctx: ArsContext, tolerance: float = 0.005) -> None:
+        super().__init__(name)
+        self.ctx, self.tolerance = ctx, tolerance
+
+    def evaluate(self) -> bool:
+        began_at, q = self.ctx.data.setting_q, self.ctx.arm_q()
+        if began_at is None or q is None:
+            self.feedback_message = "no fresh joint state" if q is None else "no joints kept for the step"
+            return False
+        off = float(np.max(np.abs(q - np.asarray(began_at))))
+        self.feedback_message = f"the arm is {off:.4f} rad from where the step began"
+        return off <= self.tolerance
 
 
 class SubtreeBuilder:
@@ -299,6 +346,18 @@ class SubtreeBuilder:
             [
                 *transit,
                 *self._approach_placement(member),
+                self.let_go_at_place(),
+            ],
+        )
+
+    def let_go_at_place(self) -> Sequence:
+        """Fig. 31's end: the cross frame let go of where it belongs, seen there, recorded placed;
+        the retreat."""
+        ctx = self.ctx
+        return _seq(
+            "Let Go At Place",
+            [
+                MarkSetting("Mark Release", ctx, "placed"),
                 release(ctx),
                 # Measured before the retreat: the D405s see the frame's corner joints from the
                 # grasp; from the pre-pose 0.7 m back they look at the floor in front of it.
@@ -351,6 +410,7 @@ class SubtreeBuilder:
         an ARS killed before it, leaves a riveted member that is finished, not placed again."""
         ctx = self.ctx
         children: list[py_trees.behaviour.Behaviour] = [
+            MarkSetting("Mark Shot", ctx, record),
             FireRivetGun("Fire Rivet Gun", ctx),
             RecordMember(f"Record {record.capitalize()}", ctx, record),
         ]
@@ -488,11 +548,31 @@ class SubtreeBuilder:
         go of (a grasp already open stays open), the retreat from the tower along the approach its
         fine move took (and, after a diagonal, the width retracted). A Retreat that got part of the
         way starts from where the arm stands."""
-        title = " ".join(w.capitalize() for w in request.split("_"))
         key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
         kind = member.kind if request == "add_member" else ""
         let_go = [release(self.ctx)] if request == "add_member" else []
-        return _seq(f"Finish {title}", [*let_go, *self._retreat(kind, key)])
+        return _seq(_finish_name(request), [*let_go, *self._retreat(kind, key)])
+
+    def finish_in_doubt(self, request: str, member: Member) -> Sequence:
+        """What is left of ``request`` for ``member`` when the step that sets it began and was never
+        recorded (the ARS killed then, the gun's output never seen off): whether the member is set
+        is not known, so with the arm still where that step began it is done again and the request
+        ends as it would have. Rivet Member: the gun fires again (a spent gun fires empty, a loaded
+        one sets its rivet), the member is recorded, let go of, retreated from. Let Go At Place (a
+        cross frame): the open jaws open, the frame is looked for at its place, recorded, the arm
+        retreats. Never a discard, nor a new part: the member may stand in the tower."""
+        ctx = self.ctx
+        if request == "add_cross_frame":
+            again = self.let_go_at_place()
+        else:
+            kind = member.kind if request == "add_member" else "rivet"
+            again = self.rivet_member(kind, record=ctx.data.setting)
+        return _seq(_finish_name(request), [ArmStillThere("Arm Still There?", ctx), again])
+
+
+def _finish_name(request: str) -> str:
+    """``add_member`` -> ``Finish Add Member``."""
+    return "Finish " + " ".join(w.capitalize() for w in request.split("_"))
 
 
 def _phase(defer: bool) -> Callable[[str, Callable[[], Sequence]], Sequence]:
@@ -507,4 +587,12 @@ def _rivet(member: Member, step: str):
     raise ValueError(f"member '{member.id}' has no {step} rivet in the mission")
 
 
-__all__ = ["RecordMember", "SubtreeBuilder", "back_out", "chosen", "pose_goal"]
+__all__ = [
+    "ArmStillThere",
+    "MarkSetting",
+    "RecordMember",
+    "SubtreeBuilder",
+    "back_out",
+    "chosen",
+    "pose_goal",
+]

@@ -219,7 +219,9 @@ class ArsTree:
         member = self.ctx.data.member
         if member is None:
             raise ValueError(f"unknown member '{job.request.member_id}'")
-        if finishing:
+        if finishing and self.ctx.data.setting:
+            branch = self.builder.finish_in_doubt(job.request.request, member)
+        elif finishing:
             branch = self.builder.finish(job.request.request, member)
         else:
             branch = self.builder.branch(job.request.request, member, defer=True)

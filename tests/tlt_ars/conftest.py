@@ -25,7 +25,7 @@ import shutil
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +51,8 @@ from tlt_ars.planning.world import dispenser_frame
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
+from tlt_common.executor_stop import stop_executor
+from tlt_common.spin_loop import spin
 from tlt_drivers.dynamixel.config import validate_chain
 from tlt_drivers.nodes.ee import EndEffectorNode
 from tlt_drivers.ur.config import CONFIG_DIR as UR_CONFIG_DIR
@@ -147,11 +149,15 @@ class Gpio:
         self.chain, self.switch_ticks = chain, switch_ticks
         self.outputs: dict[str, bool] = {}
         self.fired: list[str] = []
+        self.failing_offs = 0  # this many next writes of 'off' fail, as a stuck output would
 
     def read_input(self, name: str) -> bool:
         return self.chain.servo(3).position <= self.switch_ticks
 
     def write_output(self, name: str, value: bool) -> None:
+        if not value and self.failing_offs > 0:
+            self.failing_offs -= 1
+            raise OSError(f"{name} did not switch off (the test's stuck output)")
         if value and not self.outputs.get(name):
             self.fired.append(name)
         self.outputs[name] = value
@@ -300,6 +306,7 @@ class Stack:
         self.scene, self.mission = self.ars.ctx.scene, self.ars.ctx.mission
         self.world = World(self)
         self.inspection_verdicts: list[bool | None] = []  # next verdicts (None: not inspected); none: pass
+        self.misread_alignments = 0  # this many next CheckAlignment answers read the part 2 cm off
         self.inspection_gate: threading.Event | None = None  # set: the CRS stand-in answers
         self.inspections: list[str] = []
         self.handles: list = []
@@ -333,7 +340,11 @@ class Stack:
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.ars)
         self.executor.add_node(self.client)
-        self.threads = [threading.Thread(target=e.spin, daemon=True) for e in (*self.drivers, self.executor)]
+        self._stop = threading.Event()
+        self.threads = [
+            threading.Thread(target=spin, args=(e, self.context, self._stop.is_set), daemon=True)
+            for e in (*self.drivers, self.executor)
+        ]
         for t in self.threads:
             t.start()
         self.wait(lambda: self.ee_states and self.ee_states[-1].calibrated, "EE calibrated")
@@ -395,6 +406,9 @@ class Stack:
             for t in placement_targets(self.scene, self.mission, member, "ars_x")
         ]
         pos, ang = min(errors, key=lambda e: e[0] + 0.1 * e[1])  # the candidate the part is nearest
+        if self.misread_alignments > 0:
+            self.misread_alignments -= 1
+            pos += 0.02
         response.position_error, response.angle_error = float(pos), float(ang)
         response.aligned = bool(pos <= 0.005 and ang <= 0.035)
         response.pose.header.frame_id = "world"
@@ -405,23 +419,29 @@ class Stack:
     def restart_ars(self, unheard: str) -> None:
         """The ARS gone and a new one started on the same files. A MissionProgress tells it what
         the old one knew stands, but for the member ``unheard``, whose result the CRS never heard."""
-        progress = crs_progress(self.ars.ctx.state, unheard)
+        state = self.ars.ctx.state
+        placed, remaining = state.placed() - {unheard}, dict(state.remaining)
         self.executor.remove_node(self.ars)
         self.ars.close()
         _destroy(self.ars)
         self.ars = ArsNode(self.ars_config, context=self.context)
         self.executor.add_node(self.ars)
+        self.tell(placed, remaining)
+
+    def tell(self, placed: Collection[str], remaining: dict[str, int] | None = None) -> None:
+        """Tell the ARS, as the CRS does with a MissionProgress, that the members ``placed`` stand
+        and the dispensers hold ``remaining`` (by default what the ARS counts); wait until it knows."""
+        state = self.ars.ctx.state
+        progress = crs_progress(state.mission, placed, remaining or state.remaining)
         publisher = self.client.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
         try:
-            self.wait(lambda: self.ars.ctx.arm_q() is not None, "arm joint states at the new ARS")
-            self.wait(lambda: publisher.get_subscription_count() > 0, "the new ARS subscribed to progress")
+            self.wait(lambda: self.ars.ctx.arm_q() is not None, "arm joint states at the ARS")
+            self.wait(lambda: publisher.get_subscription_count() > 0, "the ARS subscribed to progress")
             publisher.publish(progress)
-            state = self.ars.ctx.state
-            placed = {m.member_id for m in progress.members if m.state >= MemberState.STATE_PLACED}
             self.wait(
-                lambda: placed <= state.placed()
+                lambda: set(placed) <= state.placed()
                 and all(state.remaining[d.name] == d.remaining for d in progress.dispensers),
-                "the new ARS told what stands",
+                "the ARS told what stands",
             )
         finally:
             self.client.destroy_publisher(publisher)
@@ -484,10 +504,11 @@ class Stack:
 
     def close(self) -> None:
         self.world.close()
-        for executor in (self.executor, *self.drivers):
-            executor.shutdown(timeout_sec=5)
+        self._stop.set()
         for t in self.threads:
             t.join(timeout=5)
+        for executor in (self.executor, *self.drivers):
+            stop_executor(executor, 5.0)
         self.ars.close()
         self.ee.close()
         self.ur.shutdown()
@@ -499,17 +520,17 @@ class Stack:
         shutil.rmtree(self.state_dir, ignore_errors=True)
 
 
-def crs_progress(state, leave_out: str) -> MissionProgress:
-    """What the CRS would say of what ``state`` (an ARS's MissionState) knows, but for the member
-    ``leave_out``."""
+def crs_progress(mission, placed: Collection[str], remaining: dict[str, int]) -> MissionProgress:
+    """What the CRS would say: of ``mission``, the members ``placed`` stand, and the dispensers
+    hold ``remaining``."""
     kinds = {"cross_frame": 0, "vertical": 1, "diagonal": 2, "foundation_rivet": 3}
-    progress = MissionProgress(mission=state.mission.name, current_bay=1, started=True)
+    progress = MissionProgress(mission=mission.name, current_bay=1, started=True)
     progress.members = [
         MemberState(member_id=m.id, kind=kinds[m.kind], bay=m.bay, state=MemberState.STATE_PLACED)
-        for m in state.mission.members
-        if state.is_placed(m.id) and m.id != leave_out
+        for m in mission.members
+        if m.id in placed
     ]
-    progress.dispensers = [DispenserState(name=name, remaining=n) for name, n in state.remaining.items()]
+    progress.dispensers = [DispenserState(name=name, remaining=n) for name, n in remaining.items()]
     return progress
 
 

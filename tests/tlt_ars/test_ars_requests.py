@@ -438,6 +438,78 @@ def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
     assert np.allclose(ctx.arm_q(), q, atol=1e-3)
 
 
+def test_a_cross_frame_let_go_of_in_doubt_is_looked_for_again_and_never_fetched_again(stack):
+    """Bay 2's cross frame is let go of at its place, and the EE cameras then read it 2 cm off: the
+    request fails with the frame in the tower, unrecorded. The ARS is then restarted (as if killed
+    right after letting go): its state file says only that it let go of the frame there. The CRS's
+    retry does not fetch another frame for a place that may be taken: with the arm still there, the
+    open jaws open, the frame is looked for again, seen in place and recorded, and the arm retreats."""
+    stack.tell({m.id for m in stack.mission.bay_members(1)})  # the CRS: bay 1 stands, bay 2 begins
+    member, state = "bay2/cross_frame", stack.ars.ctx.state
+
+    def misread_after_release(feedback) -> None:
+        if "/Let Go At Place/Release" in feedback.step and not misread:
+            misread.append(feedback.step)
+            stack.misread_alignments = 1
+
+    misread = []
+    fields = dict(bay=2, member_id=member, ars="ars_x")
+    result = stack.result(stack.send("add_cross_frame", misread_after_release, **fields), timeout=180)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert "Let Go At Place/Placed?: misaligned: 2" in result.result.reason, result.result.reason
+    assert stack.world.held is None and not state.is_placed(member)
+    released_at = stack.world.part_pose.copy()
+
+    stack.restart_ars(unheard=member)
+    state, data = stack.ars.ctx.state, stack.ars.ctx.data
+    assert (data.setting, data.holding) == ("placed", None)  # from the state file alone
+    left = state.remaining["cross_frame_dispenser"]
+    feedback = []
+    again = stack.result(stack.send("add_cross_frame", feedback, **fields))
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
+    steps = [f.step for f in feedback]
+    assert {s.split("/")[0] for s in steps} == {"Finish Add Cross Frame"}, steps
+    assert any("/Let Go At Place/Verify Placement/" in s for s in steps)
+    assert state.is_placed(member) and state.remaining["cross_frame_dispenser"] == left
+    np.testing.assert_allclose(stack.world.part_pose, released_at)  # untouched since it was let go of
+
+
+def test_a_shot_in_doubt_is_fired_again_where_it_was_fired_and_the_member_never_discarded(stack):
+    """The gun's output does not switch off after the rivet of bay 2's vertical x1_y0 fired: the
+    request fails with the member riveted and held, and unrecorded. The ARS is then restarted (as
+    if killed while firing): its state file says only that the gun was told to fire, and from
+    where. The CRS's retry neither discards the held member (it would tear it out of the tower) nor
+    fetches another: with the arm still there, the gun fires again (empty), the member is recorded,
+    let go of where it stands, and the arm retreats."""
+    member = "bay2/vertical/x1_y0"
+    state = stack.ars.ctx.state
+    fired = len(stack.gpio.fired)
+    stack.gpio.failing_offs = 1
+    result = stack.result(add_member(stack, member, VERTICAL), timeout=180)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert "Rivet Member/Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded  # riveted
+    assert stack.world.held == "vertical_dispenser_x" and not state.is_placed(member)
+    fired_from = stack.world.tool()
+
+    stack.restart_ars(unheard=member)
+    state, data = stack.ars.ctx.state, stack.ars.ctx.data
+    assert (data.setting, data.holding) == ("placed", "vertical")  # from the state file alone
+    left = (state.remaining["vertical_dispenser_x"], state.remaining["rivet_dispenser_x"])
+    feedback = []
+    again = stack.result(add_member(stack, member, VERTICAL, feedback))
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
+    steps = [f.step for f in feedback]
+    assert {s.split("/")[0] for s in steps} == {"Finish Add Member"}, steps
+    assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Discard" in s for s in steps)
+    assert again.result.parts_discarded == 0
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
+    assert state.is_placed(member) and stack.ars.ctx.data.holding is None
+    assert stack.world.held is None  # let go of where it was riveted:
+    assert np.linalg.norm(stack.world.part_pose[:3, 3] - fired_from[:3, 3]) < 0.005
+    assert (state.remaining["vertical_dispenser_x"], state.remaining["rivet_dispenser_x"]) == left
+
+
 def test_stop_shuts_the_ars_down(stack):
     assert stack.ground_command(GroundCommand.Request.STOP).accepted
     stack.wait(stack.ars.finished.is_set, "the ARS shut down", timeout=10)

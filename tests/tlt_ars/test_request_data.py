@@ -1,5 +1,5 @@
-"""The ARS state file: the part in the gripper and the request that set its member, kept for a
-restarted ARS."""
+"""The ARS state file: the part in the gripper, the step that sets a member left in doubt and the
+request that set its member, kept for a restarted ARS."""
 
 from __future__ import annotations
 
@@ -66,6 +66,31 @@ def test_a_request_is_kept_while_it_holds_a_part_or_a_rivet_or_has_set_its_membe
         file.save(data)
 
 
+def test_a_step_in_doubt_is_kept_with_where_it_began_and_makes_the_request_unfinished(tmp_path):
+    file = RequestFile(tmp_path / "ars_x.json", MISSION, "ars_x")
+    data = _set_request()
+    data.recorded, data.holding, data.rivet_in_gun = "", None, True
+    assert not data.unfinished()
+    data.setting, data.setting_q = "placed", (0.1, -1.2, 1.5, -1.9, -1.6, 0.3)  # the gun told to fire
+    assert data.unfinished()
+    file.save(data)
+    back = file.load()
+    assert back.unfinished() and (back.setting, back.recorded) == ("placed", "")
+    assert back.setting_q == pytest.approx(data.setting_q)
+    data.rivet_in_gun = False  # the gun's output was on for its time, then not seen off
+    file.save(data)  # kept for the step alone
+    assert file.load().setting == "placed"
+
+
+def test_a_file_from_before_steps_in_doubt_were_kept_has_none(tmp_path):
+    path = tmp_path / "ars_x.json"
+    file = RequestFile(path, MISSION, "ars_x")
+    file.save(_set_request())
+    _edited(path, lambda d: (d.pop("setting"), d.pop("setting_q")))
+    back = file.load()
+    assert (back.setting, back.setting_q, back.recorded) == ("", None, "placed")
+
+
 def test_a_writer_killed_mid_write_leaves_nothing_that_is_read(tmp_path):
     file = RequestFile(tmp_path / "ars_x.json", MISSION, "ars_x")
     stale = tmp_path / ".ars_x.json.4242.tmp"
@@ -88,6 +113,9 @@ def _edited(path, change) -> None:
         (lambda d: d.update(format=7), "not an ARS state file of format 1"),
         (lambda d: d.update(recorded="half done"), "'recorded' is 'half done'"),
         (lambda d: d.update(holding="rivet"), "'holding' is 'rivet'"),
+        (lambda d: d.update(setting="fired"), "'setting' is 'fired', not one of placed"),
+        (lambda d: d.update(setting="placed"), "'setting' is 'placed' but 'setting_q' is None"),
+        (lambda d: d.update(setting="placed", setting_q=[0.1, "x"]), "has a bad entry: ValueError"),
         (lambda d: d.update(rivet_in_gun="yes"), "'rivet_in_gun' is 'yes', not true or false"),
         (lambda d: d.update(dispenser="bin"), "'dispenser' is 'bin', not one of mission 'two_bay'"),
         (lambda d: d["request"].update(member_id="bay1/vertical/x9_y9"), "has a bad entry"),

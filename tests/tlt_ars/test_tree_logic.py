@@ -1,14 +1,17 @@
 """Tree mechanics of the ARS without ROS: failure reasons, feedback step and progress, the
-replace-after-discard decorator, and pausing a motion so that it is planned again."""
+replace-after-discard decorator, pausing a motion so that it is planned again, and where a step
+left in doubt may be done again."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import py_trees
 from py_trees.common import Status
 
 from tlt_ars.behaviours.parts import ReplaceDiscarded
+from tlt_ars.subtrees import ArmStillThere
 from tlt_ars.tree import failure_reason, progress, running_step
 from tlt_common.bt.nodes import Action
 
@@ -107,3 +110,18 @@ def test_hold_stops_the_whole_motion_so_resume_plans_again():
     assert execute.status == Status.INVALID and plan.status == Status.INVALID
     root.tick_once()  # Resume: the motion starts over with a new plan from where the arm stands
     assert plan.starts == 2 and execute.starts == 2
+
+
+def test_a_step_left_in_doubt_is_done_again_only_from_where_it_began():
+    began_at = (0.1, -1.2, 1.5, -1.9, -1.6, 0.3)
+    arm = {"q": np.array(began_at) + 0.002}
+    ctx = SimpleNamespace(data=SimpleNamespace(setting_q=began_at), arm_q=lambda: arm["q"])
+    there = ArmStillThere("Arm Still There?", ctx)
+    there.tick_once()
+    assert there.status == S
+    arm["q"] = np.array(began_at) + np.array([0, 0, 0, 0.02, 0, 0])  # moved since: a wrist turned
+    there.tick_once()
+    assert there.status == F and there.feedback_message == "the arm is 0.0200 rad from where the step began"
+    arm["q"] = None  # no fresh joint state
+    there.tick_once()
+    assert there.status == F and there.feedback_message == "no fresh joint state"
