@@ -22,6 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "twin": ("tlt_sim.cli:main", "the digital twin: run it behind the drivers' links, render a PNG"),
     "hosts": ("tlt_common.launch.hosts_cli:main", "emulated hosts: check, list, cut, heal, remove"),
     "mission-check": ("tlt_common.mission.check:main", "validate mission files"),
+    "ars-state": ("tlt_ars.state_cli:main", "an ARS's state file: show, resolve a step in doubt, clear"),
     "mission-generate": ("tlt_common.mission.generate:main", "write a mission file for N bays"),
 }
 
