@@ -312,6 +312,7 @@ def main(argv: list[str] | None = None) -> int:
             if clock_watch is not None:
                 clock_watch.stop()
             node.interrupt()
+            node.ctx.desk.close("the CRS is stopping")
             if link is not None:
                 link.close()
             # Callbacks still running when the node is destroyed use freed handles: give them

@@ -77,6 +77,7 @@ class InspectionDesk:
         self.expected: str | None = None
         self.pending: PendingInspection | None = None
         self.served = 0  # reports forwarded to an ARS
+        self.closed = ""  # why no call is held any more (the CRS stopping)
 
     # ----- tree side -----
     def expect(self, member_id: str) -> None:
@@ -115,10 +116,23 @@ class InspectionDesk:
                 pending.answered.set()
                 self.pending = None
 
+    def close(self, why: str) -> None:
+        """Hold no call any more: the one waiting, and every later one, gets a not-inspected report
+        saying ``why`` at once. The CRS stopping must not wait out a held call's ``timeout``: the
+        process's exit waits for its executor's threads."""
+        with self._lock:
+            self.closed, self.expected = why, None
+            pending, self.pending = self.pending, None
+            if pending is not None:
+                pending.report = not_inspected_report(pending.member_id, pending.part_kind, why)
+                pending.answered.set()
+
     # ----- service side -----
     def serve(self, member_id: str, part_kind: str, camera: str, timeout: float) -> Any:
         """Answer one ``/crs/inspect_part`` call (blocks the calling service thread ≤ ``timeout`` s)."""
         with self._lock:
+            if self.closed:
+                return not_inspected_report(member_id, part_kind, self.closed)
             if self.expected is None:
                 return not_inspected_report(
                     member_id, part_kind, "the CRS is not expecting a part for inspection"

@@ -89,3 +89,20 @@ def test_a_verdict_with_no_call_waiting_is_not_given_away():
     assert desk.answer(MEMBER, InspectionReport(target_id=MEMBER, passed=True))
     thread.join(5.0)
     assert answer["report"].passed
+
+
+def test_a_stopping_crs_releases_the_call_it_holds_and_holds_no_more():
+    """The CRS's exit waits for its service threads: a call held for the whole hand-off time
+    (a minute) kept a stopping CRS alive until the launcher killed it."""
+    desk = InspectionDesk()
+    desk.expect(MEMBER)
+    thread, answer = _serve_in_thread(desk, timeout=60.0)
+    while desk.take(MEMBER) is None:
+        pass
+    desk.close("the CRS is stopping")
+    thread.join(5.0)
+    assert not thread.is_alive()
+    assert answer["report"].not_inspected and answer["report"].reasons == ["the CRS is stopping"]
+    desk.expect(MEMBER)  # a tick still running meanwhile
+    report = desk.serve(MEMBER, "vertical", "zed_1", 60.0)
+    assert report.not_inspected and report.reasons == ["the CRS is stopping"]
