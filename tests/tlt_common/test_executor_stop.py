@@ -33,11 +33,16 @@ def running():
             except Exception:  # a failed callback's exception, raised at the next dispatch
                 pass
 
+    def stop_spinning() -> None:
+        # As in the mains, stop_executor comes after the spin loop has returned: rclpy records a
+        # dispatched callback only after handing it to a worker, which may already be running it.
+        done.set()
+        thread.join(timeout=5)
+
     thread = threading.Thread(target=spin, daemon=True)
     thread.start()
-    yield node, executor, done
-    done.set()
-    thread.join(timeout=5)
+    yield node, executor, stop_spinning
+    stop_spinning()
     node.destroy_node()
     rclpy.try_shutdown(context=context)
 
@@ -55,25 +60,25 @@ def _once(node: Node, callback, group=None) -> threading.Event:
 
 
 def test_it_returns_only_once_the_running_callback_has_ended(running):
-    node, executor, done = running
+    node, executor, stop_spinning = running
     ended = []
     started = _once(node, lambda: (time.sleep(0.5), ended.append(time.monotonic())))
     assert started.wait(5)
-    done.set()  # the spin loop stops, as on a signal
+    stop_spinning()  # as on a signal
     raised = stop_executor(executor, 5.0)
     returned = time.monotonic()
     assert ended and ended[0] <= returned and raised == []
 
 
 def test_it_hands_back_what_a_callback_raised_and_nothing_is_reported_at_exit(running, capsys):
-    node, executor, done = running
+    node, executor, stop_spinning = running
 
     def fail() -> None:
         time.sleep(0.2)
         raise RuntimeError("publisher gone")
 
     assert _once(node, fail).wait(5)
-    done.set()
+    stop_spinning()
     raised = stop_executor(executor, 5.0)
     assert [str(e) for e in raised] == ["publisher gone"]
     executor._futures.clear()  # the executor's last references to the tasks
@@ -82,10 +87,10 @@ def test_it_hands_back_what_a_callback_raised_and_nothing_is_reported_at_exit(ru
 
 
 def test_a_callback_longer_than_the_bound_is_left_running(running):
-    node, executor, done = running
+    node, executor, stop_spinning = running
     release = threading.Event()
     assert _once(node, lambda: release.wait(10)).wait(5)
-    done.set()
+    stop_spinning()
     t0 = time.monotonic()
     assert stop_executor(executor, 0.3) == []
     assert 0.25 <= time.monotonic() - t0 < 2.0
@@ -95,7 +100,7 @@ def test_a_callback_longer_than_the_bound_is_left_running(running):
 def test_a_callback_queued_behind_busy_workers_still_runs_cleanly(running):
     """Both worker threads busy, a third callback waits in the pool: shut down before it starts,
     the executor's guard condition, which it triggers as it starts, would be gone."""
-    node, executor, done = running
+    node, executor, stop_spinning = running
     group = ReentrantCallbackGroup()
     ran = []
     busy = [_once(node, lambda: time.sleep(0.4), group) for _ in range(2)]
@@ -105,6 +110,6 @@ def test_a_callback_queued_behind_busy_workers_still_runs_cleanly(running):
     while len(executor._futures) < 3 and time.monotonic() < deadline:  # dispatched, not started
         time.sleep(0.005)
     assert not queued.is_set()
-    done.set()
+    stop_spinning()
     assert stop_executor(executor, 5.0) == []
     assert ran == [True]
