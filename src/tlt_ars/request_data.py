@@ -1,25 +1,25 @@
 """The working data of one ARS request, and the file that keeps across a restart what the ARS
-must not forget: the part in its gripper, a rivet in its gun, and the last request that set its
-member.
+must not forget: the part in its gripper, a rivet in its gun, the step that sets a member while it
+is in doubt, and the last request that set its member.
 
 A member is set (the rivet fired, the cross frame released where it belongs) before the gripper
-lets go and the arm retreats from the tower. An ARS killed in between comes back knowing nothing
-of it, and the CRS, which never heard the result, sends the same request again: run afresh, it
-would fetch another part for a place that is taken. And an ARS killed, or a request failed, while
-a part is held would otherwise plan the next request's motions without that part and open the jaws
-on it at a dispenser; and one whose gun holds a rivet would push the loaded gun into the rivet
-feeder. And an ARS killed while the step that sets the member runs (the gun firing, a cross frame
-let go of at its place), or whose gun was never seen to stop, does not know whether the member is
-set: a held member discarded then would be torn out of the tower, a cross frame fetched again
-would meet the one in place. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``) is
-written when a part is taken into the gripper or a rivet into the gun, when the part is let go
-of, just before that step (with the arm's joints then), and when a request sets its member, and
-read back at start-up: :class:`tlt_ars.context.ArsContext` finishes the kept request when it is
-sent again (after a step left in doubt, by doing it again from where the arm still stands: a spent
-gun fires empty, open jaws stay open), has a held part discarded before anything else, and looks
-for the kept rivet before loading one. What the file keeps is what that needs: the request, what
-it set or was setting, the part held and its dispenser, the rivet, and the targets its approaches
-chose (the retreat goes back along the one its fine move took). It is removed once none is left.
+lets go and the arm retreats from the tower. An ARS killed in between comes back knowing nothing of
+it, and the CRS, which never heard the result, sends the same request again: run afresh, it would
+fetch another part for a place that is taken. And an ARS killed, or a request failed, while a part
+is held would otherwise plan the next request's motions without that part and open the jaws on it
+at a dispenser; and one whose gun holds a rivet would push the loaded gun into the rivet feeder.
+And an ARS killed while the step that sets the member runs (the gun firing, a cross frame let go of
+at its place), or whose gun was never seen to stop, does not know whether the member is set: a held
+member discarded then would be torn out of the tower, a cross frame fetched again would meet the
+one in place. So the ARS's state file (``state_file`` in the ARS file, ``--state-file``) is written
+when a part is taken into the gripper or a rivet into the gun, when the part is let go of, just
+before that step (with the arm's joints then), and when a request sets its member, and read back at
+start-up: :class:`tlt_ars.context.ArsContext` finishes the kept request when it is sent again
+(after a step left in doubt, by doing it again from where the arm still stands: a spent gun fires
+empty, open jaws stay open), has a held part discarded before anything else, and looks for the kept
+rivet before loading one. What the file keeps is what that needs: the request, what it set or was
+setting, the part held and its dispenser, the rivet, and the targets its approaches chose (the
+retreat goes back along the one its fine move took). It is removed once none is left.
 
 The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
 cannot be read, is not such a file, or belongs to another mission or ARS raises
