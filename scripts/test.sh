@@ -7,7 +7,7 @@
 # whole system and the nominal build takes every core it can get. Most of the first stage waits
 # on the wall clock (arms moving at their real speed, links timing out): on two cores it used
 # about one and a half of them with three workers and took 5.8 minutes, 7.1 with two (one core's
-# worth); tests/tlt_ars/test_ars_requests.py, one stack in file order, takes 5.5 of them on its
+# worth); tests/tlt_ars/test_ars_requests.py, one stack in file order, takes 6.5 of them on its
 # own worker. Both stages run; the exit status is the first failing one's.
 # With arguments, they go to one plain pytest run.
 set -euo pipefail
