@@ -35,12 +35,14 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
 from tlt_common import ros_names
+from tlt_common.executor_stop import stop_executor
 
 REPO = Path(__file__).resolve().parents[2]
 ONE_BAY = REPO / "missions" / "one_bay.yaml"
 TWO_BAY = REPO / "missions" / "two_bay.yaml"
 REGISTRY = REPO / "config" / "crs" / "writable_blackboard.yaml"
 CLOSING = threading.Event()  # set while a rig closes: every stand-in callback returns promptly
+NEVER_AWAITED = "coroutine 'ActionServer._execute_goal' was never awaited"
 
 
 @dataclass
@@ -470,8 +472,8 @@ class Rig:
     def close(self) -> None:
         CLOSING.set()
         try:
-            self.executor.shutdown(timeout_sec=5.0)
             self._thread.join(timeout=5.0)
+            stop_executor(self.executor, 5.0)
             # Destroyed explicitly: a node left to the garbage collector keeps its DDS participant
             # alive after rclpy.shutdown, and later tests' cross-process actions then went unanswered.
             # So does an action server or client: destroy_node leaves them (the stand-in ARS X
@@ -481,6 +483,12 @@ class Rig:
                     if hasattr(waitable, "destroy"):
                         waitable.destroy()
                 node.destroy_node()
+            with warnings.catch_warnings():
+                # A goal a stand-in ARS accepted as the test ended: its execute coroutine, queued on
+                # this executor, never ran. Dropped here, not when pytest lets go of the rig.
+                warnings.filterwarnings("ignore", NEVER_AWAITED, RuntimeWarning)
+                self.executor = None
+                gc.collect()
         finally:
             CLOSING.clear()
 
@@ -495,8 +503,7 @@ def ros():
     with warnings.catch_warnings():
         # A goal a stand-in ARS accepted as the test ended: its execute coroutine was queued on the
         # rig's executor, which shut down first (a teardown race, seen once in a clean-clone run).
-        warnings.filterwarnings("ignore", "coroutine 'ActionServer._execute_goal' was never awaited",
-                                RuntimeWarning)
+        warnings.filterwarnings("ignore", NEVER_AWAITED, RuntimeWarning)
         gc.collect()  # drop the context's participant now, not whenever the collector gets to it
 
 
