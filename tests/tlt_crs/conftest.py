@@ -501,8 +501,8 @@ def ros():
     py_trees.blackboard.Blackboard.clear()
     rclpy.try_shutdown()
     with warnings.catch_warnings():
-        # A goal a stand-in ARS accepted as the test ended: its execute coroutine was queued on the
-        # rig's executor, which shut down first (a teardown race, seen once in a clean-clone run).
+        # A goal a test's own action server accepted as the test ended: its execute coroutine was
+        # queued on an executor that shut down first (the rig drops its own in Rig.close).
         warnings.filterwarnings("ignore", NEVER_AWAITED, RuntimeWarning)
         gc.collect()  # drop the context's participant now, not whenever the collector gets to it
 
