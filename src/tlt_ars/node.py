@@ -80,6 +80,7 @@ from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
 from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
+from tlt_common.topic_silence_watch import TopicSilenceWatch
 
 ACTION_TYPES = {
     "add_cross_frame": AddCrossFrame,
@@ -490,6 +491,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     clock_watch = watch_sim_clock(node)
+    ctx = node.ctx
+    silence_watch = TopicSilenceWatch(ctx.cache, [ctx.joint_topic, ctx.arm_status_topic, ctx.ee_topic],
+                                      node.get_name()).start()  # fmt: skip
     try:
         while not stop and rclpy.ok() and not node.finished.is_set():
             executor.spin_once(timeout_sec=0.1)
@@ -503,6 +507,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if clock_watch is not None:
             clock_watch.stop()
+        silence_watch.stop()
         node.close()
         for exc in stop_executor(executor, 2.0):  # before the node's handles go
             node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")

@@ -423,6 +423,7 @@ class TopicCache:
         self.node = node
         self.clock = clock or node_clock(node)
         self._latest: dict[str, tuple[Any, float] | None] = {}
+        self._heard: dict[str, float] = {}  # time.monotonic() of the newest message, per topic
         self._subscriptions: dict[str, Any] = {}
 
     def watch(self, topic: str, msg_type: Any, qos: QoSProfile | int = 10) -> None:
@@ -433,12 +434,25 @@ class TopicCache:
 
         def store(msg: Any, topic: str = topic) -> None:
             self._latest[topic] = (msg, self.clock())
+            self._heard[topic] = time.monotonic()
 
         self._subscriptions[topic] = self.node.create_subscription(msg_type, topic, store, qos)
 
     def latest(self, topic: str) -> tuple[Any, float] | None:
         """(message, arrival time) of the newest message on ``topic``, or None before the first."""
         return self._latest.get(topic)
+
+    def topics(self) -> list[str]:
+        """The topics watched, in the order they were first watched."""
+        return list(self._subscriptions)
+
+    def heard(self, topic: str) -> float | None:
+        """``time.monotonic()`` when the newest message on ``topic`` arrived; None before the first."""
+        return self._heard.get(topic)
+
+    def publishers(self, topic: str) -> tuple[int, int]:
+        """(publishers of ``topic`` this process's graph knows, those matched to its subscription)."""
+        return self.node.count_publishers(topic), self._subscriptions[topic].get_publisher_count()
 
     def age(self, topic: str) -> float | None:
         """Seconds since the newest message on ``topic`` arrived; None before the first."""

@@ -1,0 +1,80 @@
+"""Say so when a node stops hearing a topic it cannot work without, and whether DDS still sees the
+topic's publisher.
+
+An ARS whose arm's joint states stop coming fails every request on "no fresh joint state", and
+nothing says why the states stopped: the driver is down, or it publishes and this process no longer
+receives it. After a network cut heals, Fast DDS can rediscover a participant without matching its
+endpoints again (docs/deployment.md): the publisher is in this process's graph, yet matched to none
+of its subscriptions. :class:`TopicSilenceWatch` is a thread on the wall clock, outside the
+executor, that logs a warning when a watched topic of a :class:`~tlt_common.bt.ros.TopicCache` has
+been silent for ``stall_s`` seconds of wall time, naming how many publishers the graph knows and how
+many are matched to the subscription, and a note when the topic is heard again.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Sequence
+
+from tlt_common.bt.ros import TopicCache
+
+_log = logging.getLogger("tlt.topic_silence")
+
+
+class TopicSilenceWatch:
+    """Watch ``topics`` of ``cache``; ``silences`` lists (topic, graph publishers, matched) reported."""
+
+    def __init__(self, cache: TopicCache, topics: Sequence[str], name: str, stall_s: float = 10.0,
+                 period_s: float = 1.0) -> None:  # fmt: skip
+        unknown = [t for t in topics if t not in cache.topics()]
+        if unknown:
+            raise ValueError(f"{name}: not watched by the topic cache: {', '.join(unknown)}")
+        self.cache = cache
+        self.topics = list(topics)
+        self.name = name
+        self.stall_s = stall_s
+        self.period_s = period_s
+        self.silences: list[tuple[str, int, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"{name}-topic-silence-watch", daemon=True)
+
+    def start(self) -> TopicSilenceWatch:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2 * self.period_s + 1.0)
+
+    def _run(self) -> None:
+        started = time.monotonic()
+        silent: dict[str, float] = {}  # topic -> wall time of the last message when reported silent
+        while not self._stop.wait(self.period_s):
+            now = time.monotonic()
+            for topic in self.topics:
+                heard = self.cache.heard(topic)
+                if topic in silent:
+                    if heard is not None and heard != silent[topic]:
+                        _log.warning("%s: '%s' heard again after %.0f s of wall time", self.name, topic,
+                                     heard - silent.pop(topic))  # fmt: skip
+                    continue
+                since = started if heard is None else heard
+                if now - since < self.stall_s:
+                    continue
+                try:
+                    known, matched = self.cache.publishers(topic)
+                except Exception:  # the node is being destroyed: nothing left to watch
+                    return
+                silent[topic] = since
+                self.silences.append((topic, known, matched))
+                _log.warning(
+                    "%s: nothing on '%s' for %.0f s of wall time; publishers: %d in this process's graph, "
+                    "%d matched to its subscription%s", self.name, topic, now - since, known, matched,
+                    " (DDS sees the publisher but has not matched it: a rediscovery after a network cut "
+                    "that did not rematch the endpoints)" if known > matched else "",
+                )
+
+
+__all__ = ["TopicSilenceWatch"]
