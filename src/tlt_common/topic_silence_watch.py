@@ -8,7 +8,8 @@ endpoints again (docs/deployment.md): the publisher is in this process's graph, 
 of its subscriptions. :class:`TopicSilenceWatch` is a thread on the wall clock, outside the
 executor, that logs a warning when a watched topic of a :class:`~tlt_common.bt.ros.TopicCache` has
 been silent for ``stall_s`` seconds of wall time, naming how many publishers the graph knows and how
-many are matched to the subscription, and a note when the topic is heard again.
+many are matched to the subscription, again every ``repeat_s`` seconds while it stays silent (what
+DDS sees changes when a cut link heals), and a note when the topic is heard again.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ class TopicSilenceWatch:
     """Watch ``topics`` of ``cache``; ``silences`` lists (topic, graph publishers, matched) reported."""
 
     def __init__(self, cache: TopicCache, topics: Sequence[str], name: str, stall_s: float = 10.0,
-                 period_s: float = 1.0) -> None:  # fmt: skip
+                 repeat_s: float = 30.0, period_s: float = 1.0) -> None:  # fmt: skip
         unknown = [t for t in topics if t not in cache.topics()]
         if unknown:
             raise ValueError(f"{name}: not watched by the topic cache: {', '.join(unknown)}")
@@ -35,6 +36,7 @@ class TopicSilenceWatch:
         self.topics = list(topics)
         self.name = name
         self.stall_s = stall_s
+        self.repeat_s = repeat_s
         self.period_s = period_s
         self.silences: list[tuple[str, int, int]] = []
         self._stop = threading.Event()
@@ -50,24 +52,26 @@ class TopicSilenceWatch:
 
     def _run(self) -> None:
         started = time.monotonic()
-        silent: dict[str, float] = {}  # topic -> wall time of the last message when reported silent
+        silent: dict[str, tuple[float, float]] = {}  # topic -> (last message, last report), wall time
         while not self._stop.wait(self.period_s):
             now = time.monotonic()
             for topic in self.topics:
                 heard = self.cache.heard(topic)
-                if topic in silent:
-                    if heard is not None and heard != silent[topic]:
-                        _log.warning("%s: '%s' heard again after %.0f s of wall time", self.name, topic,
-                                     heard - silent.pop(topic))  # fmt: skip
-                    continue
                 since = started if heard is None else heard
-                if now - since < self.stall_s:
+                if topic in silent:
+                    if heard is not None and heard != silent[topic][0]:
+                        _log.warning("%s: '%s' heard again after %.0f s of wall time", self.name, topic,
+                                     heard - silent.pop(topic)[0])  # fmt: skip
+                        continue
+                    if now - silent[topic][1] < self.repeat_s:
+                        continue
+                elif now - since < self.stall_s:
                     continue
                 try:
                     known, matched = self.cache.publishers(topic)
                 except Exception:  # the node is being destroyed: nothing left to watch
                     return
-                silent[topic] = since
+                silent[topic] = (since, now)
                 self.silences.append((topic, known, matched))
                 _log.warning(
                     "%s: nothing on '%s' for %.0f s of wall time; publishers: %d in this process's graph, "

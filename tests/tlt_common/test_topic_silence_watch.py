@@ -79,7 +79,7 @@ def test_a_publisher_the_graph_knows_but_not_matched_is_named_as_such(nodes, cap
     cache = TopicCache(node)
     cache.watch("/ee", String)
     talker.create_publisher(String, "/ee", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
-    watch = TopicSilenceWatch(cache, ["/ee"], "ars_y", stall_s=1.0, period_s=0.1).start()
+    watch = TopicSilenceWatch(cache, ["/ee"], "ars_y", stall_s=1.0, repeat_s=1.0, period_s=0.1).start()
     try:
         with caplog.at_level(logging.WARNING, logger="tlt.topic_silence"):
             _run(executor, 1.6)  # never heard since the watch started
@@ -87,7 +87,9 @@ def test_a_publisher_the_graph_knows_but_not_matched_is_named_as_such(nodes, cap
             assert len(silent) == 1, silent
             assert "1 in this process's graph, 0 matched" in silent[0], silent
             assert "did not rematch the endpoints" in silent[0], silent
-        assert watch.silences == [("/ee", 1, 0)]
+            _run(executor, 1.0)  # still silent: said again, with what DDS sees now
+            assert len(_said(caplog, SILENT)) == 2
+        assert watch.silences == [("/ee", 1, 0), ("/ee", 1, 0)]
     finally:
         watch.stop()
 
