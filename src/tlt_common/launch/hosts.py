@@ -13,7 +13,9 @@ carry it well (Wi-Fi, managed switches), and the DDS configuration of the hosts 
 so the emulation proves that it does.
 
 Cutting a host's link sets its switch port down: the host's ``eth0`` loses carrier while keeping
-its address, as when its cable is pulled; healing sets the port up again.
+its address, as when its cable is pulled; healing sets the port up again. Each host ignores routes
+whose link is down, as the EDU's computers are to (config/sysctl/60-tlt-link-down.conf), so a cut
+host's sends to the others fail at once instead of blocking its processes.
 
 A run holds an exclusive lock on ``<tmp>/tlt-hosts/<run>.lock`` while its network exists. Whatever
 a run of the same name left behind (a launcher killed with SIGKILL) is removed when the next one
@@ -345,11 +347,29 @@ class HostNetwork:
             _ip("link", "add", "eth0", "netns", ns, "type", "veth", "peer", "name", port, "netns", switch)
             for address in (host.address, *host.extra_addresses):
                 _ip("-n", ns, "addr", "add", address, "dev", "eth0")
+            _ignore_routes_with_linkdown(ns)
             _ip("-n", ns, "link", "set", "eth0", "up")
             _ip("-n", switch, "link", "set", port, "master", "br0")
             if not self.multicast:
                 _bridge("-n", switch, "link", "set", "dev", port, "mcast_flood", "off")
             _ip("-n", switch, "link", "set", port, "up")
+
+
+def _ignore_routes_with_linkdown(namespace: str) -> None:
+    """Make a host's sends to the other hosts fail at once while its ``eth0`` has no carrier.
+
+    Linux keeps using a route whose link is down: each datagram to another host waits for an ARP
+    answer that cannot come, queued up to ``unres_qlen_bytes`` per neighbour (as large as a socket's
+    whole send buffer) and charged to the sending socket until resolution fails some 3 s later. Fast
+    DDS sends everything of a participant through one blocking socket, so during a cut its writes and
+    discovery announcements, to the processes of its own host too, stalled for seconds: publishers
+    blocked, and participants of one host dropped each other on the 3 s lease and did not always
+    match their endpoints again after the heal (an ARS deaf to its own driver). A real Jetson with its
+    cable pulled does the same (docs/deployment.md).
+    """
+    # /proc/sys/net is the namespace's own inside it; "all" counts for every interface.
+    setting = "/proc/sys/net/ipv4/conf/all/ignore_routes_with_linkdown"
+    _ip("netns", "exec", namespace, "sh", "-c", f"echo 1 > {setting}")
 
 
 def _looks_unprivileged(message: str) -> bool:

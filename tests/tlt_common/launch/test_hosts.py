@@ -124,6 +124,29 @@ def test_hosts_reach_each_other_and_a_cut_link_drops_their_packets(network):
         receiver.stop()
 
 
+def test_a_cut_host_fails_its_sends_to_other_hosts_at_once_and_still_reaches_itself(network):
+    # Were the route kept while the link is down, the datagram would be queued for an ARP answer
+    # that cannot come, blocking the sender once its socket's buffer is full (hosts.py).
+    code = textwrap.dedent("""
+        import errno, socket
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.sendto(b'x' * 2000, ('10.77.0.11', 47002))
+            print('queued')
+        except OSError as exc:
+            print(errno.errorcode[exc.errno])
+        r = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        r.bind(('10.77.0.12', 47003))
+        r.settimeout(5)
+        s.sendto(b'self', ('10.77.0.12', 47003))
+        print(r.recv(10).decode())
+        """)
+    network.cut("b")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=30,
+                         preexec_fn=network.preexec("b")).stdout.split()
+    assert out == ["ENETUNREACH", "self"], out
+
+
 @pytest.mark.parametrize("multicast", [False, True])
 def test_the_switch_forwards_multicast_only_when_asked(multicast):
     with HostNetwork(RUN, HOSTS, multicast=multicast) as net:
