@@ -243,8 +243,8 @@ def test_the_whole_system_builds_across_hosts_through_a_cut_ars_link(tmp_path):
         cut_link(run.hosts_run, "ars_y")
         fault = run.wait_kind("event", lambda f: f["code"] == "CRS_FAULT", 90, "the CRS's fault", since=mark)
         assert "ARS 'ars_y' gone while running AddMember" in fault["text"], fault
-        # Out for several leases: every participant must have dropped the other side's before the
-        # link heals, or Fast DDS may never match their endpoints again (docs/deployment.md).
+        # Out for several leases, as a cable pulled for a while: every participant on either side
+        # has dropped the other side's, and all of them are rediscovered after the heal.
         run.poll(max(0.0, CUT_S - (time.monotonic() - cut)))
         heal_link(run.hosts_run, "ars_y")
         healed = len(run.packets)
