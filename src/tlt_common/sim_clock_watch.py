@@ -14,37 +14,27 @@ from __future__ import annotations
 import faulthandler
 import logging
 import sys
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
+from tlt_common.watch_thread import WatchThread
+
 _log = logging.getLogger("tlt.sim_clock")
 
 
-class SimClockWatch:
+class SimClockWatch(WatchThread):
     """The thread of :func:`watch_sim_clock`; ``stalls`` counts the stalls it reported."""
 
     def __init__(self, now_ns: Callable[[], int], name: str, stall_s: float, period_s: float) -> None:
+        super().__init__(name, "sim-clock", period_s)
         self._now_ns = now_ns
-        self.name = name
         self.stall_s = stall_s
-        self.period_s = period_s
         self.stalls = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"{name}-sim-clock-watch", daemon=True)
-
-    def start(self) -> SimClockWatch:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2 * self.period_s + 1.0)
 
     def _run(self) -> None:
         last, since, stalled = 0, time.monotonic(), False
-        while not self._stop.wait(self.period_s):
+        while self._next_period():
             try:
                 now = int(self._now_ns())
             except Exception:  # the node is being destroyed: nothing left to watch

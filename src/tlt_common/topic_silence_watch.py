@@ -15,16 +15,16 @@ DDS sees changes when a cut link heals), and a note when the topic is heard agai
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Sequence
 
 from tlt_common.bt.ros import TopicCache
+from tlt_common.watch_thread import WatchThread
 
 _log = logging.getLogger("tlt.topic_silence")
 
 
-class TopicSilenceWatch:
+class TopicSilenceWatch(WatchThread):
     """Watch ``topics`` of ``cache``; ``silences`` lists (topic, graph publishers, matched) reported."""
 
     def __init__(self, cache: TopicCache, topics: Sequence[str], name: str, stall_s: float = 10.0,
@@ -32,28 +32,17 @@ class TopicSilenceWatch:
         unknown = [t for t in topics if t not in cache.topics()]
         if unknown:
             raise ValueError(f"{name}: not watched by the topic cache: {', '.join(unknown)}")
+        super().__init__(name, "topic-silence", period_s)
         self.cache = cache
         self.topics = list(topics)
-        self.name = name
         self.stall_s = stall_s
         self.repeat_s = repeat_s
-        self.period_s = period_s
         self.silences: list[tuple[str, int, int]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"{name}-topic-silence-watch", daemon=True)
-
-    def start(self) -> TopicSilenceWatch:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2 * self.period_s + 1.0)
 
     def _run(self) -> None:
         started = time.monotonic()
         silent: dict[str, tuple[float, float]] = {}  # topic -> (last message, last report), wall time
-        while not self._stop.wait(self.period_s):
+        while self._next_period():
             now = time.monotonic()
             for topic in self.topics:
                 heard = self.cache.heard(topic)
