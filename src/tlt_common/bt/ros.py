@@ -413,7 +413,8 @@ class ServiceCall(Action):
 
 
 class TopicCache:
-    """Latest message and its arrival time (on ``clock``) per topic, one subscription per topic.
+    """Latest message and its arrival time (on ``clock``, and on the wall clock for
+    :mod:`tlt_common.topic_silence_watch`) per topic, one subscription per topic.
 
     Several behaviours reading one topic share its subscription. Callbacks run on the executor's
     thread; readers get a (message, stamp) pair replaced atomically.
