@@ -155,6 +155,10 @@ class CrsContext:
             self.cache.watch(topic, msg_type)
         self._servers = self._build_server_checks()
 
+    def device_topics(self) -> list[str]:
+        """The state topics of the lifter and the grippers, which the tree cannot build without."""
+        return [topic for topic, _ in self._hardware_topics.values()]
+
     def _build_server_checks(self) -> list[tuple[str, Callable[[], bool]]]:
         """(what, is it up) for every server the CRS calls in a build: each ARS's ground command
         service and action servers, and vision's inspection services (the vision node offers the

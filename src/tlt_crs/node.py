@@ -50,6 +50,7 @@ from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
 from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
+from tlt_common.topic_silence_watch import TopicSilenceWatch
 from tlt_crs.behaviours.inspection import serve_inspect_part
 from tlt_crs.commands import CommandProcessor, CommandQueue
 from tlt_crs.config import REPO_CONFIG, CrsConfig, load_config
@@ -296,6 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
         clock_watch = watch_sim_clock(node)
+        silence_watch = TopicSilenceWatch(node.ctx.cache, node.ctx.device_topics(), node.get_name()).start()
         try:
             while not stop and rclpy.ok() and not node.finished:
                 executor.spin_once(timeout_sec=0.1)
@@ -311,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             if clock_watch is not None:
                 clock_watch.stop()
+            silence_watch.stop()
             node.interrupt()
             node.ctx.desk.close("the CRS is stopping")
             if link is not None:
