@@ -5,10 +5,11 @@ when the executor, or the sim time that drives it, does not."""
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 from typing import Self
 
 
-class WatchThread:
+class WatchThread(ABC):
     """A daemon thread running :meth:`_run`; :meth:`_next_period` waits ``period_s`` and is False
     once :meth:`stop` was called."""
 
@@ -29,8 +30,9 @@ class WatchThread:
     def _next_period(self) -> bool:
         return not self._stop.wait(self.period_s)
 
+    @abstractmethod
     def _run(self) -> None:
-        raise NotImplementedError
+        """The watch itself: loop on :meth:`_next_period` and return when it is False."""
 
 
 __all__ = ["WatchThread"]
