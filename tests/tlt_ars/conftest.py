@@ -510,7 +510,7 @@ class Stack:
         for executor in (self.executor, *self.drivers):
             stop_executor(executor, 5.0)
         self.ars.close()
-        self.ee.close()
+        self.ee.shutdown()
         self.ur.shutdown()
         for node in (self.ars, self.ee, self.ur, self.client):
             _destroy(node)

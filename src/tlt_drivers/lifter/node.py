@@ -26,9 +26,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.executors import ExternalShutdownException
 from rclpy.task import Future
 from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import HardwareStatus, LifterState
@@ -36,11 +34,11 @@ from tlt_interfaces.srv import SetLifterMode
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
+from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, LifterConfig, load_lifter_config
 from .protocol import FirmwareState
@@ -293,9 +291,8 @@ class LifterNode(LeanNode):
         self.hw.shutdown()
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the lifter driver node until interrupted. Returns the process exit status."""
-    args = list(sys.argv[1:] if argv is None else argv)
+def driver(args: list[str]) -> Driver:
+    """The lifter's driver from its arguments; raises :class:`DriverStartError`."""
     parser = argparse.ArgumentParser(
         prog="tlt-lifter", description="Lifter driver node (serial link to the Teensy)"
     )
@@ -311,36 +308,27 @@ def main(argv: list[str] | None = None) -> int:
         help="how long without telemetry is a link fault, overriding the YAML's (an emulated firmware "
         "on a busy machine pauses longer than a Teensy)",
     )
-    own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-lifter", *args])[1:])
+    own = parser.parse_args(args)
     try:
         config = load_lifter_config(own.config)
     except ConfigError as exc:
-        print(f"tlt-lifter: {exc}", file=sys.stderr)
-        return 2
+        raise DriverStartError(str(exc)) from exc
     if own.port:
         config = config.with_port(own.port)
     if own.answer_timeout_s is not None:
         if not 0.0 < own.answer_timeout_s <= 10.0:
-            print("tlt-lifter: --answer-timeout-s must be in (0, 10] s", file=sys.stderr)
-            return 2
+            raise DriverStartError("--answer-timeout-s must be in (0, 10] s")
         config = dataclasses.replace(config, answer_timeout_s=own.answer_timeout_s)
     if own.link_timeout_s is not None:
         if not 0.0 < own.link_timeout_s <= 10.0:
-            print("tlt-lifter: --link-timeout-s must be in (0, 10] s", file=sys.stderr)
-            return 2
+            raise DriverStartError("--link-timeout-s must be in (0, 10] s")
         config = dataclasses.replace(config, link_timeout_s=own.link_timeout_s)
-    share_the_interpreter_quickly()
-    rclpy.init(args=["tlt-lifter", *args])
-    node = LifterNode(config)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return Driver("lifter", lambda: LifterNode(config))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the lifter driver node until interrupted. Returns the process exit status."""
+    return run_driver("tlt-lifter", driver, argv)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
-from tlt_drivers.nodes.node_main import run_node
+from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class GripperGroupNode(DynamixelDriverNode):
@@ -47,8 +47,13 @@ class GripperGroupNode(DynamixelDriverNode):
         self.state_pub.publish(msg)
 
 
+def driver(args: list[str]) -> Driver:
+    """The Active Grippers' driver from its arguments (``chain_driver``'s)."""
+    return chain_driver("active_grippers", "active_grippers.yaml", load_chain, GripperGroupNode, args)
+
+
 def main(argv: list[str] | None = None) -> int:
-    return run_node("active_grippers", "active_grippers.yaml", load_chain, GripperGroupNode, argv)
+    return run_driver("tlt-active-grippers", driver, argv)
 
 
 if __name__ == "__main__":

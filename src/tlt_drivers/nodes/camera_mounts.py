@@ -13,7 +13,7 @@ from sensor_msgs.msg import JointState
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
-from tlt_drivers.nodes.node_main import run_node
+from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class CameraMountsNode(DynamixelDriverNode):
@@ -35,8 +35,13 @@ class CameraMountsNode(DynamixelDriverNode):
         self.state_pub.publish(msg)
 
 
+def driver(args: list[str]) -> Driver:
+    """The camera mounts' driver from its arguments (``chain_driver``'s)."""
+    return chain_driver("camera_mounts", "camera_mounts.yaml", load_chain, CameraMountsNode, args)
+
+
 def main(argv: list[str] | None = None) -> int:
-    return run_node("camera_mounts", "camera_mounts.yaml", load_chain, CameraMountsNode, argv)
+    return run_driver("tlt-camera-mounts", driver, argv)
 
 
 if __name__ == "__main__":

@@ -45,5 +45,6 @@ class DynamixelDriverNode(LeanNode):
     def publish_state(self) -> None:
         """Subclasses publish their state message here (called at state_rate_hz)."""
 
-    def close(self) -> None:
+    def shutdown(self) -> None:
+        """Stop the control loop and close the chain."""
         self.loop.stop()

@@ -17,7 +17,6 @@ joint presses with at least ``ee.grasp_effort_threshold`` of stall current.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -31,7 +30,13 @@ from tlt_drivers.dynamixel.ee_calibration import WidthCalibration
 from tlt_drivers.gpio.lines import open_gpio
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
-from tlt_drivers.nodes.node_main import HARDWARE_CONFIG_DIR, run_node
+from tlt_drivers.nodes.node_main import (
+    HARDWARE_CONFIG_DIR,
+    Driver,
+    DriverStartError,
+    chain_driver,
+    run_driver,
+)
 
 
 class DigitalIO(Protocol):
@@ -131,8 +136,9 @@ class EndEffectorNode(DynamixelDriverNode):
         response.accepted, response.reason = True, ""
         return response
 
-    def close(self) -> None:
-        super().close()
+    def shutdown(self) -> None:
+        """Stop the loop, close the chain and release both rivet guns."""
+        super().shutdown()
         for name in self.ee["rivet_gun_outputs"]:
             try:
                 self.gpio.write_output(name, False)  # never leave a rivet gun firing
@@ -168,7 +174,7 @@ class EndEffectorNode(DynamixelDriverNode):
         self.state_pub.publish(msg)
 
 
-class GpioUnavailable(RuntimeError):
+class GpioUnavailable(DriverStartError):
     """No GPIO backend could be opened for the end effector."""
 
 
@@ -187,28 +193,30 @@ def open_ee_gpio(config: dict[str, Any]) -> DigitalIO:
         raise GpioUnavailable(f"{config['component']}: cannot open GPIO from {path}: {exc}") from exc
 
 
-def main(argv: list[str] | None = None, default_config: str = "ee_x.yaml") -> int:
-    """Run one end-effector node (``--config`` picks ee_x.yaml or ee_y.yaml)."""
-
+def _driver(default_config: str, args: list[str]) -> Driver:
     def build(config: dict[str, Any]) -> EndEffectorNode:
         return EndEffectorNode(config, open_ee_gpio(config))
 
-    try:
-        return run_node("ee", default_config, load_chain, build, argv)
-    except GpioUnavailable as exc:
-        print(f"ee: {exc}", file=sys.stderr)
-        return 2
+    return chain_driver("ee", default_config, load_chain, build, args)
+
+
+def driver_x(args: list[str]) -> Driver:
+    """``ee_x``: the end effector of ars_x (config/hardware/ee_x.yaml unless ``--config``)."""
+    return _driver("ee_x.yaml", args)
+
+
+def driver_y(args: list[str]) -> Driver:
+    """``ee_y``: the end effector of ars_y (config/hardware/ee_y.yaml unless ``--config``)."""
+    return _driver("ee_y.yaml", args)
 
 
 def main_x(argv: list[str] | None = None) -> int:
-    """``ee_x``: the end effector of ars_x (config/hardware/ee_x.yaml unless ``--config``)."""
-    return main(argv, "ee_x.yaml")
+    return run_driver("tlt-ee-x", driver_x, argv)
 
 
 def main_y(argv: list[str] | None = None) -> int:
-    """``ee_y``: the end effector of ars_y (config/hardware/ee_y.yaml unless ``--config``)."""
-    return main(argv, "ee_y.yaml")
+    return run_driver("tlt-ee-y", driver_y, argv)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main_x())

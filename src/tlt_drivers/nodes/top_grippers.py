@@ -18,7 +18,7 @@ from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.driver_loop import DriverLoop
-from tlt_drivers.nodes.node_main import run_node
+from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class TopGrippersNode(LeanNode):
@@ -57,12 +57,18 @@ class TopGrippersNode(LeanNode):
         msg.fault_reason = self.hw.fault
         self.state_pub.publish(msg)
 
-    def close(self) -> None:
+    def shutdown(self) -> None:
+        """Stop the control loop and close the board's port."""
         self.loop.stop()
 
 
+def driver(args: list[str]) -> Driver:
+    """The Top Grippers' driver from its arguments (``chain_driver``'s)."""
+    return chain_driver("top_grippers", "top_grippers.yaml", load_mightyzap, TopGrippersNode, args)
+
+
 def main(argv: list[str] | None = None) -> int:
-    return run_node("top_grippers", "top_grippers.yaml", load_mightyzap, TopGrippersNode, argv)
+    return run_driver("tlt-top-grippers", driver, argv)
 
 
 if __name__ == "__main__":

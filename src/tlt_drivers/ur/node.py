@@ -24,27 +24,23 @@ interpreter for the few milliseconds the controller needs to answer.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
+from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_link_timeout, with_rtde_frequency
 from .hardware import URHardware
@@ -190,12 +186,8 @@ class URNode(LeanNode):
         self.hw.shutdown()
 
 
-SHUTDOWN_TIMEOUT_S = 3.0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run one UR driver node until interrupted. Returns the process exit status."""
-    args = list(sys.argv[1:] if argv is None else argv)
+def driver(args: list[str]) -> Driver:
+    """One arm's driver from its arguments; raises :class:`DriverStartError`."""
     parser = argparse.ArgumentParser(prog="tlt-ur", description="UR10e driver node (ur-rtde)")
     parser.add_argument(
         "--config", type=Path, default=DEFAULT_CONFIG, help="arm YAML (config/hardware/ur_x.yaml)"
@@ -210,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         help="seconds of the loop's clock without new controller data before the link counts as down, "
              "overriding link_timeout_s",
     )
-    own = parser.parse_args(rclpy.utilities.remove_ros_args(["tlt-ur", *args])[1:])
+    own = parser.parse_args(args)
     try:
         config = load_ur_config(own.config)
         if own.link_timeout_s is not None:
@@ -218,29 +210,15 @@ def main(argv: list[str] | None = None) -> int:
         if own.rtde_frequency_hz is not None:
             config = with_rtde_frequency(config, own.rtde_frequency_hz, own.config)
     except ConfigError as exc:
-        print(f"tlt-ur: {exc}", file=sys.stderr)
-        return 2
+        raise DriverStartError(str(exc)) from exc
     if own.host:
         config = replace(config, host=own.host)
-    share_the_interpreter_quickly()
-    rclpy.init(args=["tlt-ur", *args])
-    node = URNode(config)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        # With the controller gone, ur-rtde's disconnect waits on its own reconnect attempts; the
-        # controller stops the arm by itself when the script's connection drops, so do not hang.
-        done = threading.Event()
-        threading.Thread(target=lambda: (node.shutdown(), done.set()), daemon=True).start()
-        if not done.wait(SHUTDOWN_TIMEOUT_S):
-            print(f"tlt-ur: no clean disconnect from {config.host} within {SHUTDOWN_TIMEOUT_S:g} s; "
-                  "exiting without it", file=sys.stderr, flush=True)
-            os._exit(0)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return Driver(config.component, lambda: URNode(config))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one UR driver node until interrupted. Returns the process exit status."""
+    return run_driver("tlt-ur", driver, argv)
 
 
 if __name__ == "__main__":

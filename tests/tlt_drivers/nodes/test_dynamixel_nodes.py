@@ -81,7 +81,7 @@ class Harness:
             self.thread.join(timeout=5.0)  # no control cycle may run while the nodes close their links
         self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
-            node.close()
+            node.shutdown()
             node.destroy_node()
         self.client.destroy_node()
         rclpy.shutdown(context=self.context)

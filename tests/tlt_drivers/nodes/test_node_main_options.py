@@ -4,26 +4,25 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from tlt_drivers.nodes import node_main
 
 
-def test_latency_override_applies_to_dynamixel_chains_only(capsys, monkeypatch):
-    seen = {}
+def test_latency_override_applies_to_dynamixel_chains_only():
+    def load(path):
+        return {"component": "camera_mounts", "port": "/dev/x", "comm": {"latency_timer_ms": 16.0}}
 
-    def build(config):
-        seen.update(config)
-        raise KeyboardInterrupt  # stop before spinning: the options are what is tested
-
-    monkeypatch.setattr(node_main.rclpy, "spin", lambda node: None)
-    status = node_main.run_node(
-        "cams", "camera_mounts.yaml",
-        lambda path: {"port": "/dev/x", "comm": {"latency_timer_ms": 16.0}},
-        build, ["--port", "/tmp/p", "--latency-timer-ms", "60"],
+    driver = node_main.chain_driver(
+        "cams", "camera_mounts.yaml", load, lambda config: config,
+        ["--port", "/tmp/p", "--latency-timer-ms", "60"],
     )
-    assert status == 0 and seen["port"] == "/tmp/p" and seen["comm"]["latency_timer_ms"] == 60.0
-    status = node_main.run_node(
-        "zap", "top_grippers.yaml", lambda path: {"port": "/dev/x"}, build, ["--latency-timer-ms", "60"]
-    )
-    assert status == 2
-    assert "applies to Dynamixel chains only" in capsys.readouterr().err
+    config = driver.build()  # this build hands back the configuration it was given
+    assert driver.name == "camera_mounts"
+    assert config["port"] == "/tmp/p" and config["comm"]["latency_timer_ms"] == 60.0
+    with pytest.raises(node_main.DriverStartError, match="applies to Dynamixel chains only"):
+        node_main.chain_driver(
+            "zap", "top_grippers.yaml", lambda path: {"component": "top_grippers", "port": "/dev/x"},
+            lambda config: config, ["--latency-timer-ms", "60"],
+        )
     assert Path(node_main.HARDWARE_CONFIG_DIR / "camera_mounts.yaml").is_file()

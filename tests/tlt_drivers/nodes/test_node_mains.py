@@ -7,10 +7,10 @@ import pytest
 from tlt_drivers.nodes import active_grippers, camera_mounts, ee, top_grippers
 
 
-@pytest.mark.parametrize("module", [active_grippers, camera_mounts, top_grippers, ee])
-def test_missing_config_file_exits_2_naming_the_file(module, tmp_path, capsys):
+@pytest.mark.parametrize("main", [active_grippers.main, camera_mounts.main, top_grippers.main, ee.main_x])
+def test_missing_config_file_exits_2_naming_the_file(main, tmp_path, capsys):
     missing = tmp_path / "nope.yaml"
-    assert module.main(["--config", str(missing)]) == 2
+    assert main(["--config", str(missing)]) == 2
     assert "nope.yaml" in capsys.readouterr().err
 
 
