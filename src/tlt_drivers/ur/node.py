@@ -157,10 +157,12 @@ class URNode(LeanNode):
         now = stamp.nanoseconds * 1e-9
         period = 1.0 / self.config.joint_state_rate_hz
         # Half a control period early counts as due (cycles fire on ROS time as /clock steps it);
-        # a due time more than a period ahead means ROS time went back (a restarted twin).
-        if now + 0.5 / self.config.control_rate_hz < self._joints_due <= now + period:
+        # a due time more than a period ahead means ROS time went back (a restarted twin, the
+        # system clock stepped back): the next one is then a period from now, as after a stall.
+        due = self._joints_due
+        if now + 0.5 / self.config.control_rate_hz < due <= now + period:
             return
-        self._joints_due = self._joints_due + period if self._joints_due + period > now else now + period
+        self._joints_due = due + period if now < due + period <= now + period * 1.5 else now + period
         msg = JointState()
         msg.header.stamp = stamp.to_msg()
         msg.name = list(self.config.joint_names)
