@@ -1,9 +1,9 @@
 """What the whole system costs while it waits: CPU seconds per simulated second, per process.
 
-Starts ``config/launch/system_twin.yaml`` (the twin, the eight driver nodes in three processes, the
-CRS, both ARSs, vision and the recorder; no ground station, so no Start: nothing builds) in a
-private ROS domain and run folder, lets it settle, then measures over ``--seconds`` of wall time
-how far the sim clock moved and how much CPU each process took. It prints:
+Starts ``config/launch/system_twin.yaml`` (the twin, the eight driver nodes, the CRS, both ARSs,
+vision and the recorder; no ground station, so no Start: nothing builds) in a private ROS domain
+and run folder, lets it settle, then measures over ``--seconds`` of wall time how far the sim
+clock moved and how much CPU each process took. It prints:
 
 * the real-time factor the idle system ran at (with ``--rtf 0``, as fast as the machine allows);
 * the CPU seconds the whole system takes per simulated second, and per process;

@@ -6,9 +6,9 @@ executor and thread of its own, as rclcpp's isolated component container does. O
 node because a driver blocks in its control loop on a serial exchange (a MightyZAP board that
 stops answering holds its loop for the 50 ms response timeout): on one executor that would hold
 the lifter's 50 Hz command stream past the firmware's 40 ms watchdog. One process for several
-because every process is a DDS participant of its own, woken for every ``/clock`` step and
-discovery change: the three driver processes of the twin's launch set take about a seventh less
-CPU than eight (docs/system.md).
+(``tlt-drivers``) because every process is a DDS participant of its own, woken for every
+``/clock`` step and discovery change: on the twin, three processes for the eight drivers took 5 %
+less of the idle system's CPU than eight (docs/system.md, which says why the launch sets keep eight).
 
 A bad argument or configuration is a message and exit code 2, never a traceback; a node whose
 callback raises takes the process down with exit code 1 (the launcher restarts it) after every

@@ -196,8 +196,8 @@ def test_the_twin_on_hosts_places_every_process_like_the_edu():
         assert real == {name for name, h in placed.items() if h == host} - run_only, host
     # The arms' controllers answer on the twin host, where the drivers on the ARS hosts reach them.
     twin = next(h for h in hosts_set.hosts if h.name == "twin")
-    drivers = next(p for p in hosts_set.processes if p.name == "ars_x_drivers")
-    host_arg = drivers.argv[drivers.argv.index("--host") + 1]
+    ur_x = next(p for p in hosts_set.processes if p.name == "ur_x")
+    host_arg = ur_x.argv[ur_x.argv.index("--host") + 1]
     assert f"{host_arg}/24" in twin.extra_addresses
     # The template's peers are the addresses of this set's hosts.
     template_peers = {a.text for a in ET.parse(DEFAULT_PROFILE).getroot().iter(f"{{{NS}}}address")}
