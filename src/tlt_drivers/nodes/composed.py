@@ -15,12 +15,11 @@ device that stops answering holds only its own driver's loop.
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Sequence
 
 from tlt_drivers.lifter import node as lifter
 from tlt_drivers.nodes import active_grippers, camera_mounts, ee, top_grippers
-from tlt_drivers.nodes.node_main import Driver, DriverStartError, own_arguments, spin_drivers
+from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_drivers
 from tlt_drivers.ur import node as ur
 
 PROG = "tlt-drivers"
@@ -68,13 +67,7 @@ def parse_drivers(args: Sequence[str]) -> list[Driver]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the drivers ``argv`` names until interrupted. Returns the process exit status."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        drivers = parse_drivers(own_arguments(PROG, argv))
-    except DriverStartError as exc:
-        print(f"{PROG}: {exc}", file=sys.stderr)
-        return 2
-    return spin_drivers(PROG, drivers, argv)
+    return run_drivers(PROG, parse_drivers, argv)
 
 
 if __name__ == "__main__":

@@ -94,17 +94,22 @@ def chain_driver(
     return Driver(config["component"], lambda: build(config))
 
 
-def run_driver(
-    prog: str, parse: Callable[[list[str]], Driver], argv: Sequence[str] | None = None
+def run_drivers(
+    prog: str, parse: Callable[[list[str]], Sequence[Driver]], argv: Sequence[str] | None = None
 ) -> int:
-    """The ``main`` of a one-driver executable: parse ``argv`` (``sys.argv[1:]`` by default), spin."""
+    """The ``main`` of a driver executable: parse ``argv`` (``sys.argv[1:]`` by default), spin."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        driver = parse(own_arguments(prog, argv))
+        drivers = parse(own_arguments(prog, argv))
     except DriverStartError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
-    return spin_drivers(prog, [driver], argv)
+    return spin_drivers(prog, drivers, argv)
+
+
+def run_driver(prog: str, parse: Callable[[list[str]], Driver], argv: Sequence[str] | None = None) -> int:
+    """The ``main`` of a one-driver executable (:func:`run_drivers`)."""
+    return run_drivers(prog, lambda args: [parse(args)], argv)
 
 
 def spin_drivers(prog: str, drivers: Sequence[Driver], argv: Sequence[str]) -> int:
@@ -216,5 +221,6 @@ __all__ = [
     "chain_driver",
     "own_arguments",
     "run_driver",
+    "run_drivers",
     "spin_drivers",
 ]
