@@ -147,7 +147,7 @@ class DriverLoop:
         was_error = self.hw.state == Lifecycle.ERROR
         if was_error:
             self._fault_controllers()
-            if now - self._last_recover >= self.recover_period:
+            if _due(now, self._last_recover, self.recover_period):
                 self._last_recover = now
                 if self.hw.recover():
                     self.activations += 1
@@ -170,7 +170,7 @@ class DriverLoop:
             self._last_recover = now - self.recover_period / 2
         if self.action is not None:
             self.action.tick()
-        if now - self._last_state >= self.state_period:
+        if _due(now, self._last_state, self.state_period):
             self._last_state = now
             self.publish_status()
             if self._publish_state is not None:
@@ -192,6 +192,12 @@ class DriverLoop:
         if hasattr(self.hw, "retries"):
             self.hw.retries = 0
         self.status_pub.publish(msg)
+
+
+def _due(now: float, last: float, period: float) -> bool:
+    """A period has passed since ``last``, or ROS time went back past it (on hardware the system
+    clock set back; waiting for it to come back to ``last`` would silence the node meanwhile)."""
+    return now - last >= period or now < last
 
 
 __all__ = ["DriverLoop"]

@@ -448,3 +448,25 @@ def test_top_grippers_apply_group_commands_and_reject_out_of_limit(harness):
     finally:
         harness.close()  # the driver lets go of the link before the emulator goes away
         chain.stop()
+
+
+def test_states_go_on_after_ros_time_went_back(harness):
+    # The system clock set back (ROS time on hardware): the last state's stamp lies ahead of now.
+    # Waiting for the clock to come back to it would have silenced the node for that long.
+    chain = MightyZapChain([1, 2, 3, 4])
+    chain.start()
+    try:
+        config = load_mightyzap("config/hardware/top_grippers.yaml")
+        config["port"] = chain.port
+        config["comm"]["response_timeout_s"] = LATENCY_MS * 3 / 1000.0
+        node = harness.add(TopGrippersNode(config, context=harness.context))
+        states: list[GripperState] = []
+        harness.client.create_subscription(GripperState, "/top_grippers/state", states.append, 50)
+        harness.spin()
+        harness.wait(lambda: states, "a state")
+        node.loop._last_state = node.loop.now() + 3600.0
+        seen = len(states)
+        harness.wait(lambda: len(states) >= seen + 3, "states after ROS time went back")
+    finally:
+        harness.close()  # the driver lets go of the link before the emulator goes away
+        chain.stop()
