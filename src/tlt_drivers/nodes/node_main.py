@@ -55,7 +55,7 @@ class Driver:
     build: Callable[[], Node]
 
 
-def own_arguments(prog: str, argv: Sequence[str]) -> list[str]:
+def _own_arguments(prog: str, argv: Sequence[str]) -> list[str]:
     """``argv`` without its ROS arguments (``--ros-args ...``), which rclpy takes."""
     return rclpy.utilities.remove_ros_args([prog, *argv])[1:]
 
@@ -100,7 +100,7 @@ def run_drivers(
     """The ``main`` of a driver executable: parse ``argv`` (``sys.argv[1:]`` by default), spin."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        drivers = parse(own_arguments(prog, argv))
+        drivers = parse(_own_arguments(prog, argv))
     except DriverStartError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
@@ -219,7 +219,6 @@ __all__ = [
     "Driver",
     "DriverStartError",
     "chain_driver",
-    "own_arguments",
     "run_driver",
     "run_drivers",
     "spin_drivers",

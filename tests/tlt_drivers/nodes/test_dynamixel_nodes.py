@@ -422,14 +422,19 @@ def test_ee_calibration_fails_with_reason_when_switch_never_closes(harness):
         chain.stop()
 
 
+def top_grippers_node(chain: MightyZapChain, harness: Harness) -> TopGrippersNode:
+    """The shipped Top Grippers' driver on ``chain``'s port, with room for a loaded machine."""
+    config = load_mightyzap("config/hardware/top_grippers.yaml")
+    config["port"] = chain.port
+    config["comm"]["response_timeout_s"] = LATENCY_MS * 3 / 1000.0
+    return TopGrippersNode(config, context=harness.context)
+
+
 def test_top_grippers_apply_group_commands_and_reject_out_of_limit(harness):
     chain = MightyZapChain([1, 2, 3, 4])
     chain.start()
     try:
-        config = load_mightyzap("config/hardware/top_grippers.yaml")
-        config["port"] = chain.port
-        config["comm"]["response_timeout_s"] = LATENCY_MS * 3 / 1000.0
-        harness.add(TopGrippersNode(config, context=harness.context))
+        harness.add(top_grippers_node(chain, harness))
         states: list[GripperState] = []
         rejected: list[String] = []
         harness.client.create_subscription(GripperState, "/top_grippers/state", states.append, 50)
@@ -456,10 +461,7 @@ def test_states_go_on_after_ros_time_went_back(harness):
     chain = MightyZapChain([1, 2, 3, 4])
     chain.start()
     try:
-        config = load_mightyzap("config/hardware/top_grippers.yaml")
-        config["port"] = chain.port
-        config["comm"]["response_timeout_s"] = LATENCY_MS * 3 / 1000.0
-        node = harness.add(TopGrippersNode(config, context=harness.context))
+        node = harness.add(top_grippers_node(chain, harness))
         states: list[GripperState] = []
         harness.client.create_subscription(GripperState, "/top_grippers/state", states.append, 50)
         harness.spin()
