@@ -37,7 +37,7 @@ from tlt_common.config_schema import ConfigError
 from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
-from tlt_drivers.loop_time import loop_clock
+from tlt_drivers.loop_time import create_loop_timer, loop_clock
 from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, LifterConfig, load_lifter_config
@@ -100,8 +100,8 @@ class LifterNode(LeanNode):
             self.get_logger().error(
                 f"lifter link not up: {self.hw.fault}; retrying every {config.reconnect_period_s} s"
             )
-        self._timer = self.create_timer(config.command_period_s, self._control_cycle)
-        self._status_timer = self.create_timer(1.0 / config.status_rate_hz, self._publish_status)
+        self._timer = create_loop_timer(self, config.command_period_s, self._control_cycle)
+        self._status_timer = create_loop_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
 
     # --- control cycle --------------------------------------------
     def _control_cycle(self) -> None:
@@ -112,7 +112,7 @@ class LifterNode(LeanNode):
     def _cycle(self) -> None:
         hw = self.hw
         now = time.monotonic()
-        loop_now = self._loop_clock()  # the link watchdog's time base (tlt_drivers.loop_time)
+        loop_now = self._loop_clock()  # the link watchdog's and trajectories' time base
         if hw.state == Lifecycle.ERROR:
             self._end_goal("abort", Result.HARDWARE_FAULT, f"lifter link fault: {hw.fault}")
             if now - self._last_reconnect >= self.config.reconnect_period_s:
@@ -145,7 +145,7 @@ class LifterNode(LeanNode):
             name = state.name if state is not None else "unknown"
             self._end_goal("abort", Result.HARDWARE_FAULT, f"lifter firmware left CRS Control (now {name})")
             return
-        step = self.controller.update(self._ros_now(), self._positions_m())
+        step = self.controller.update(self._loop_clock(), self._positions_m())
         try:
             self.hw.set_velocity_command(step.commands)
         except CommandRejected as exc:
@@ -225,7 +225,7 @@ class LifterNode(LeanNode):
         self.controller.start(
             list(traj.joint_names),
             points,
-            self._ros_now(),
+            self._loop_clock(),
             self._positions_m(),
             path_tolerance={t.name: t.position for t in request.path_tolerance},
             goal_tolerance={t.name: t.position for t in request.goal_tolerance},
@@ -252,9 +252,6 @@ class LifterNode(LeanNode):
         if tel is None:
             return [0.0] * len(self.config.joints)
         return [c / j.counts_per_m for c, j in zip(tel.positions, self.config.joints, strict=True)]
-
-    def _ros_now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
 
     def _publish_state(self) -> None:
         msg = LifterState()

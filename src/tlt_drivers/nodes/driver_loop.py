@@ -1,6 +1,7 @@
 """The control loop every Dynamixel/MightyZAP driver node runs, as ros2_control's controller manager would.
 
-Each timer tick (``rate_hz``, on ROS time): ``read`` the hardware, ``update`` the controllers with
+Each timer tick (``rate_hz``, in the loop's time base: sim time on the twin, monotonic on hardware,
+``tlt_drivers.loop_time``): ``read`` the hardware, ``update`` the controllers with
 the actual positions, copy their commands into the interface, ``write``, then let the ROS adapters
 resolve goals and publish. While the interface is in ERROR, goals are aborted with HARDWARE_FAULT,
 group commands are refused, nothing is written, and ``recover`` is tried every
@@ -21,6 +22,7 @@ from tlt_drivers.controllers.group_position import JointGroupPositionController
 from tlt_drivers.controllers.ros_adapters import GroupPositionCommandSubscriber, TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import HardwareInterface, Lifecycle
+from tlt_drivers.loop_time import create_loop_timer, loop_clock
 
 
 class DriverLoop:
@@ -93,10 +95,12 @@ class DriverLoop:
             HardwareStatus, ros_names.hardware_status_topic(component), 10
         )
         self._timer = None
+        self._clock = loop_clock(node)
 
     # --- helpers -----------------------------------------------------------------------------------------
     def now(self) -> float:
-        return self.node.get_clock().now().nanoseconds * 1e-9
+        """Seconds in the loop's time base (trajectories, state and recovery pacing)."""
+        return self._clock()
 
     def actual(self) -> dict[str, float]:
         return dict(self.hw.position)
@@ -129,7 +133,7 @@ class DriverLoop:
 
     def start(self) -> None:
         self.bring_up()
-        self._timer = self.node.create_timer(self.period, self.cycle)
+        self._timer = create_loop_timer(self.node, self.period, self.cycle)
 
     def stop(self) -> None:
         if self._timer is not None:
@@ -195,8 +199,8 @@ class DriverLoop:
 
 
 def _due(now: float, last: float, period: float) -> bool:
-    """A period has passed since ``last``, or ROS time went back past it (on hardware the system
-    clock set back; waiting for it to come back to ``last`` would silence the node meanwhile)."""
+    """A period has passed since ``last``, or the loop's time went back past it (sim time from a
+    restarted twin; waiting for it to come back to ``last`` would silence the node meanwhile)."""
     return now - last >= period or now < last
 
 

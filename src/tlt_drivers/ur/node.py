@@ -39,7 +39,7 @@ from tlt_common.lean_node import LeanNode
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
-from tlt_drivers.loop_time import loop_clock
+from tlt_drivers.loop_time import create_loop_timer, loop_clock
 from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_link_timeout, with_rtde_frequency
@@ -53,7 +53,8 @@ class URNode(LeanNode):
     def __init__(self, config: URConfig, *, hardware: URHardware | None = None, **node_kwargs) -> None:
         super().__init__(node_kwargs.pop("node_name", config.component), **node_kwargs)
         self.config = config
-        self.hw = hardware or URHardware(config, data_clock=loop_clock(self))
+        self._loop_now = loop_clock(self)  # trajectories, joint-state pacing, RTDE data watchdog
+        self.hw = hardware or URHardware(config, data_clock=self._loop_now)
         c = config.component
         self.controller = JointTrajectoryController(
             config.joint_names,
@@ -68,19 +69,19 @@ class URNode(LeanNode):
         self._joint_pub = self.create_publisher(JointState, ros_names.joint_states_topic(c), 10)
         self._status_pub = self.create_publisher(HardwareStatus, ros_names.hardware_status_topic(c), 10)
         self.action = TrajectoryActionServer(
-            self, c, self.controller, lambda: self.hw.positions, self._ros_now
+            self, c, self.controller, lambda: self.hw.positions, self._loop_now
         )
         self.create_service(Trigger, ros_names.ur_unlock_service(c), self._on_unlock)
         self._reported: tuple[Lifecycle, str] | None = None
         self._settling = False
-        self._joints_due = -1e9  # ROS time the next JointState is due
+        self._joints_due = -1e9  # loop time the next JointState is due
         self._last_recovery = time.monotonic()
         if not (self.hw.configure() and self.hw.activate()):
             self.get_logger().error(
                 f"{c}: arm not ready: {self.hw.fault}; retrying every {config.reconnect_period_s} s"
             )
-        self._timer = self.create_timer(1.0 / config.control_rate_hz, self._control_cycle)
-        self._status_timer = self.create_timer(1.0 / config.status_rate_hz, self._publish_status)
+        self._timer = create_loop_timer(self, 1.0 / config.control_rate_hz, self._control_cycle)
+        self._status_timer = create_loop_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
 
     # --- control cycle -------------------------------------------------------------------------
     def _motion_gate(self) -> str | None:
@@ -96,7 +97,7 @@ class URNode(LeanNode):
         if hw.state == Lifecycle.ACTIVE:
             goal = self.controller.active
             if goal is not None and not goal.done:
-                commands = self.controller.update(self._ros_now(), hw.positions)
+                commands = self.controller.update(self._loop_now(), hw.positions)
                 self._settling = True
             elif self._settling and self._still_moving():
                 # After a goal ends the controller holds a point (the final one after success);
@@ -134,9 +135,6 @@ class URNode(LeanNode):
         names = self.config.joint_names
         return any(abs(q - hold.get(n, q)) > 1e-3 for n, q in zip(names, reading.q, strict=True))
 
-    def _ros_now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     # --- services --------------------------------------------------------------------------------
     def _on_unlock(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
@@ -153,18 +151,17 @@ class URNode(LeanNode):
     def _publish_joints_when_due(self) -> None:
         # Every subscriber (both ARSs, vision, the CRS, the recorder) wakes for each message: the
         # arm's state goes out at joint_state_rate_hz, not at the servo stream's control rate.
-        stamp = self.get_clock().now()
-        now = stamp.nanoseconds * 1e-9
+        now = self._loop_now()
         period = 1.0 / self.config.joint_state_rate_hz
-        # Half a control period early counts as due (cycles fire on ROS time as /clock steps it);
-        # a due time more than a period ahead means ROS time went back (a restarted twin, the
-        # system clock stepped back): the next one is then a period from now, as after a stall.
+        # Half a control period early counts as due (on the twin cycles fire as /clock steps sim
+        # time); a due time more than a period ahead means the loop's time went back (a restarted
+        # twin's clock): the next one is then a period from now, as after a stall.
         due = self._joints_due
         if now + 0.5 / self.config.control_rate_hz < due <= now + period:
             return
         self._joints_due = due + period if now < due + period <= now + period * 1.5 else now + period
         msg = JointState()
-        msg.header.stamp = stamp.to_msg()
+        msg.header.stamp = self.get_clock().now().to_msg()
         msg.name = list(self.config.joint_names)
         msg.position = list(self.hw.reading.q)
         msg.velocity = list(self.hw.reading.qd)

@@ -258,3 +258,16 @@ def test_button_press_during_a_goal_aborts_it(harness: Harness) -> None:
     res = h.wait_future(result, "abort when the firmware leaves CRS Control").result
     assert res.error_code == FollowJointTrajectory.Result.HARDWARE_FAULT
     assert "left CRS Control (now HARDWARE_CONTROL)" in res.error_string
+
+
+def test_the_command_stream_goes_on_while_ros_time_stands_still(harness: Harness, stop_ros_time) -> None:
+    # On hardware ROS time is the system clock; set back, it stands still for a timer on it. The
+    # 50 Hz stream stopped with it and the firmware's 40 ms watchdog zeroed the motors.
+    h = harness
+    in_hardware_control(h)
+    frames = h.firmware.frames_received
+    stop_ros_time(h.node)
+    seen = len(h.states)
+    h.wait(lambda: len(h.states) >= seen + 25, "LifterState while ROS time stands still")
+    assert h.firmware.frames_received >= frames + 25
+    assert not h.firmware.watchdog_tripped

@@ -143,11 +143,26 @@ def test_joint_states_go_out_at_their_own_rate_not_the_control_rate(harness: Har
     assert_joint_states_at_their_own_rate(harness)
 
 
-def test_joint_states_keep_their_rate_after_ros_time_went_back(harness: Harness) -> None:
-    # ROS time stepping back (the system clock set back; on the twin, a new twin's clock) leaves
-    # the next state due far ahead of it. They used to go out on every control cycle from then on.
-    harness.node._joints_due = harness.node._ros_now() + 10.0
+def test_joint_states_keep_their_rate_after_the_loop_time_went_back(harness: Harness) -> None:
+    # The loop's time stepping back (on the twin, a new twin's clock) leaves the next state due
+    # far ahead of it. They used to go out on every control cycle from then on.
+    harness.node._joints_due = harness.node._loop_now() + 10.0
     assert_joint_states_at_their_own_rate(harness)
+
+
+def test_the_arm_is_driven_while_ros_time_stands_still(harness: Harness, stop_ros_time) -> None:
+    # On hardware ROS time is the system clock; set back, it stands still for a timer on it: the
+    # servo stream and the joint states stopped with it.
+    h = harness
+    h.ensure_active()
+    stop_ros_time(h.node)
+    q0 = h.latest_q()
+    target = list(q0)
+    target[0] += 0.1
+    _, result_future = h.send_goal([(0.5, target)])
+    result = h.wait_future(result_future, "trajectory result").result
+    assert result.error_code == Result.SUCCESSFUL, result.error_string
+    assert h.emulator.call("positions") == pytest.approx(target, abs=h.config.default_goal_tolerance)
 
 
 def test_trajectory_is_streamed_and_succeeds(harness: Harness) -> None:
