@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import subprocess
 import time
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -25,6 +26,7 @@ share_the_interpreter_quickly()
 ROS_DOMAIN_ID = isolate(os.environ)
 
 import rclpy  # noqa: E402  (after the domain is set)
+from rclpy.clock import ROSClock  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
@@ -55,3 +57,22 @@ def wait_for_service():
     executor.shutdown()
     probe.destroy_node()
     rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def stop_ros_time() -> Iterator[Callable[[Node], None]]:
+    """``stop_ros_time(node)``: from now on ``node``'s ROS time stands still, as the system clock
+    seems to a timer on it after it was set back (a test cannot set the machine's clock back).
+    ROS time runs again after the test."""
+    stopped: list[ROSClock] = []
+
+    def stop(node: Node) -> None:
+        clock = node.get_clock()
+        now = clock.now()
+        clock._set_ros_time_is_active(True)
+        clock.set_ros_time_override(now)
+        stopped.append(clock)
+
+    yield stop
+    for clock in stopped:
+        clock._set_ros_time_is_active(False)

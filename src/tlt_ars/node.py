@@ -78,6 +78,7 @@ from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
 from tlt_common.topic_silence_watch import TopicSilenceWatch
@@ -228,7 +229,9 @@ class ArsNode(LeanNode):
         )
         ticks = MutuallyExclusiveCallbackGroup()
         # A request's first tick runs when its goal is accepted (_accepted), not at the next period.
-        self._timer = self.create_timer(1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=ticks)
+        self._timer = create_periodic_timer(
+            self, 1.0 / config.raw["tick_rate_hz"], self._tick, callback_group=ticks
+        )
 
     # ----- goals -----
     def _refusal(self, request: Request) -> str | None:

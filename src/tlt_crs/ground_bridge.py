@@ -35,6 +35,7 @@ from tlt_common.bt.status_codec import encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_crs.ground_link.link import GroundCommand, GroundLink
 from tlt_crs.node import CrsNode
 
@@ -87,13 +88,15 @@ class GroundBridge:
         ):
             rate = link.defs.packet(kind).rate_hz
             if rate:
-                node.create_timer(1.0 / rate, send, callback_group=telemetry)
+                create_periodic_timer(node, 1.0 / rate, send, callback_group=telemetry)
         self._member_ids = {m.id for m in node.ctx.mission.members}
         self._last_step: tuple[Any, ...] | None = None
         self._last_progress: tuple[int, ...] | None = None
         self._steps: deque[tuple[dict[str, Any], bool]] = deque()
         node.tick_listeners.append(self.note_step)
-        node.create_timer(1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry)
+        create_periodic_timer(
+            node, 1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry
+        )
         self._report_bay_inspections()
 
     def send_housekeeping(self) -> None:

@@ -48,6 +48,7 @@ from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
 from tlt_common.topic_silence_watch import TopicSilenceWatch
@@ -114,8 +115,12 @@ class CrsNode(LeanNode):
             callback_group=self._service_group,
         )
         serve_inspect_part(self.ctx, self._service_group)
-        self.create_timer(1.0 / config.tick_rate_hz, self.tick, callback_group=tick_group)
-        self.create_timer(1.0 / config.progress_rate_hz, self.publish_progress, callback_group=tick_group)
+        # On the steady clock on hardware: a system clock set back must not stop the tree and its
+        # reports (tlt_common.periodic_timer); the tree's own timeouts stay on mission time.
+        create_periodic_timer(self, 1.0 / config.tick_rate_hz, self.tick, callback_group=tick_group)
+        create_periodic_timer(
+            self, 1.0 / config.progress_rate_hz, self.publish_progress, callback_group=tick_group
+        )
         self.ctx.event(
             1, "CRS_UP", f"mission '{mission.name}': {model.bays_built()}/{mission.bay_count} bay(s) built"
         )

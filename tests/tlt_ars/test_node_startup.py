@@ -339,3 +339,15 @@ def test_a_restarted_ars_finishes_the_request_its_state_file_kept_and_drops_it_f
         assert outcome(action, other).startswith("Add Member/Load Rivet/")
         assert not path.exists()
         assert outcome(action, kept) == "rejected: member 'bay1/diagonal/face_y0' is already placed"
+
+
+def test_the_tree_ticks_on_while_ros_time_stands_still(idle_ars, stop_ros_time):
+    # On hardware ROS time is the system clock; set back, it stands still for a timer on it, which
+    # stopped the ARS's tree for as long as the step.
+    ars, _ = idle_ars
+    ticks = ars.tree.tree.count
+    stop_ros_time(ars)
+    deadline = time.monotonic() + 10.0
+    while ars.tree.tree.count < ticks + 5:
+        assert time.monotonic() < deadline, "no ticks while ROS time stands still"
+        time.sleep(0.02)

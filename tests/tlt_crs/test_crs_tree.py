@@ -298,3 +298,14 @@ def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
     crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="vision back")
     final = _start(crs_node, crs).final
     assert final[0] == AckStage.COMPLETED, final[1]
+
+
+def test_the_tree_ticks_on_while_ros_time_stands_still(rig, crs, crs_node, stop_ros_time):
+    # On hardware ROS time is the system clock; set back, it stands still for a timer on it, which
+    # stopped the tree, its progress and the ground telemetry for as long as the step.
+    ticks: list[int] = []
+    crs_node.tick_listeners.append(lambda: ticks.append(1))
+    stop_ros_time(crs_node)
+    crs.wait_for(lambda: len(ticks) >= 5, what="ticks while ROS time stands still")
+    _start(crs_node, crs)
+    crs.wait_for(lambda: rig.recorder.requests, what="a request sent while ROS time stands still")

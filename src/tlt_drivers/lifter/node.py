@@ -35,9 +35,10 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.lean_node import LeanNode
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
-from tlt_drivers.loop_time import create_loop_timer, loop_clock
+from tlt_drivers.loop_time import loop_clock
 from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, LifterConfig, load_lifter_config
@@ -100,8 +101,8 @@ class LifterNode(LeanNode):
             self.get_logger().error(
                 f"lifter link not up: {self.hw.fault}; retrying every {config.reconnect_period_s} s"
             )
-        self._timer = create_loop_timer(self, config.command_period_s, self._control_cycle)
-        self._status_timer = create_loop_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
+        self._timer = create_periodic_timer(self, config.command_period_s, self._control_cycle)
+        self._status_timer = create_periodic_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
 
     # --- control cycle --------------------------------------------
     def _control_cycle(self) -> None:

@@ -18,11 +18,12 @@ from rclpy.node import Node
 from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers.group_position import JointGroupPositionController
 from tlt_drivers.controllers.ros_adapters import GroupPositionCommandSubscriber, TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import HardwareInterface, Lifecycle
-from tlt_drivers.loop_time import create_loop_timer, loop_clock
+from tlt_drivers.loop_time import loop_clock
 
 
 class DriverLoop:
@@ -133,7 +134,7 @@ class DriverLoop:
 
     def start(self) -> None:
         self.bring_up()
-        self._timer = create_loop_timer(self.node, self.period, self.cycle)
+        self._timer = create_periodic_timer(self.node, self.period, self.cycle)
 
     def stop(self) -> None:
         if self._timer is not None:

@@ -36,10 +36,11 @@ from tlt_interfaces.msg import HardwareStatus
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.lean_node import LeanNode
+from tlt_common.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
-from tlt_drivers.loop_time import create_loop_timer, loop_clock
+from tlt_drivers.loop_time import loop_clock
 from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_link_timeout, with_rtde_frequency
@@ -80,8 +81,8 @@ class URNode(LeanNode):
             self.get_logger().error(
                 f"{c}: arm not ready: {self.hw.fault}; retrying every {config.reconnect_period_s} s"
             )
-        self._timer = create_loop_timer(self, 1.0 / config.control_rate_hz, self._control_cycle)
-        self._status_timer = create_loop_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
+        self._timer = create_periodic_timer(self, 1.0 / config.control_rate_hz, self._control_cycle)
+        self._status_timer = create_periodic_timer(self, 1.0 / config.status_rate_hz, self._publish_status)
 
     # --- control cycle -------------------------------------------------------------------------
     def _motion_gate(self) -> str | None:
