@@ -22,9 +22,10 @@ import sys
 from pathlib import Path
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
+from tlt_common.direct_executor import DirectExecutor
 from tlt_common.recording.mcap_writer import McapRecordingWriter, available_compressions
 from tlt_common.recording.recorder import RecorderTiming, TopicRecorder
 from tlt_common.recording.topic_filter import IMAGE_PATTERN, TopicFilter
@@ -122,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
             topic_filter,
             RecorderTiming(args.discovery_period, args.flush_period, args.progress_period),
         )
-        executor = SingleThreadedExecutor()
+        executor = DirectExecutor()
         executor.add_node(node)
         while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=SIGNAL_CHECK_S)

@@ -29,10 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from tlt_common.config_schema import ConfigError
+from tlt_common.direct_executor import DirectExecutor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 
 HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "hardware"
@@ -142,7 +143,7 @@ def _spin_each(nodes: list[tuple[str, Node]]) -> list[str]:
     done = threading.Event()
     failed: list[str] = []
 
-    def spin(name: str, executor: SingleThreadedExecutor) -> None:
+    def spin(name: str, executor: DirectExecutor) -> None:
         try:
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
@@ -158,7 +159,7 @@ def _spin_each(nodes: list[tuple[str, Node]]) -> list[str]:
 
     spinning = []
     for name, node in nodes:
-        executor = SingleThreadedExecutor()
+        executor = DirectExecutor()
         executor.add_node(node)
         thread = threading.Thread(target=spin, args=(name, executor), name=f"spin-{name}", daemon=True)
         thread.start()
