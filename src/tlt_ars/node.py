@@ -35,7 +35,7 @@ Serves, for the CRS:
 Subscribes to the CRS's ``MissionProgress`` to know what stands and which bay is current;
 publishes the tree's status on ``ros_names.tree_status_topic(ars)``.
 
-Threads: a MultiThreadedExecutor; the tick timer owns the tree; action callbacks hand jobs over
+Threads: a DirectMultiThreadedExecutor; the tick timer owns the tree; action callbacks hand jobs over
 under a lock and wait for their result; planning runs in the context's planning thread.
 """
 
@@ -53,7 +53,7 @@ import numpy as np
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
 from tlt_interfaces.msg import MissionProgress
@@ -74,6 +74,7 @@ from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.config_schema import ConfigError, load_yaml
+from tlt_common.direct_executor import DirectMultiThreadedExecutor
 from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
@@ -491,7 +492,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ars: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = DirectMultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     clock_watch = watch_sim_clock(node)
     ctx = node.ctx

@@ -33,6 +33,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from tlt_common import ros_names
 from tlt_common.bt.status_codec import encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
+from tlt_common.direct_executor import QuickCallbackGroup
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
 from tlt_common.periodic_timer import create_periodic_timer
@@ -138,6 +139,7 @@ class GroundBridge:
         ):
             cache.watch(topic, msg_type)
             self._cached.add(topic)
+        stores = QuickCallbackGroup()
         for ars in ros_names.ARS_AGENTS:
             for msg_type, topic in (
                 (EndEffectorState, ros_names.state_topic(ros_names.ee(ars))),
@@ -145,7 +147,8 @@ class GroundBridge:
                 (HardwareStatus, ros_names.hardware_status_topic(ros_names.ur(ars))),
             ):
                 self.node.create_subscription(
-                    msg_type, topic, lambda m, t=topic: self._own.__setitem__(t, m), 10
+                    msg_type, topic, lambda m, t=topic: self._own.__setitem__(t, m), 10,
+                    callback_group=stores,
                 )
         # The ARSs' encoded tree statuses go to the ground as they come, part by part.
         for ars in ros_names.ARS_AGENTS:

@@ -35,7 +35,7 @@ import rclpy
 from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
 from tlt_common import ros_names
@@ -43,6 +43,7 @@ from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.bt.status_codec import TreeShape
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
+from tlt_common.direct_executor import DirectMultiThreadedExecutor
 from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
@@ -299,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
             _log.info("ground link on %s:%d", *link.address)
         if args.autostart:
             _autostart_when_ready(node)
-        executor = MultiThreadedExecutor(num_threads=4)
+        executor = DirectMultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
         clock_watch = watch_sim_clock(node)
         silence_watch = TopicSilenceWatch(node.ctx.cache, node.ctx.device_topics(), node.get_name()).start()

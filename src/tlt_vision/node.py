@@ -42,7 +42,7 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import Pose
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
@@ -51,6 +51,7 @@ from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTa
 from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
+from tlt_common.direct_executor import DirectMultiThreadedExecutor, QuickCallbackGroup
 from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
@@ -118,7 +119,7 @@ class VisionNode(LeanNode):
         self.tag_ids = dispenser_tag_ids(list(self.mission.dispensers))
         self.tool = pose_of(raw["tool"])
 
-        sensors = MutuallyExclusiveCallbackGroup()
+        sensors = QuickCallbackGroup()  # stores only: called on the executor's own thread
         self.labels = SegmentationLabels(self, raw["topics"]["segmentation_labels"], sensors)
         seg = raw["segmentation"]
         if seg["source"] == "mask_rcnn":
@@ -673,7 +674,7 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, WeightsError, KeyError) as exc:
             print(f"tlt-vision: refused: {exc}", file=sys.stderr)
             return 2
-        executor = MultiThreadedExecutor(num_threads=8)
+        executor = DirectMultiThreadedExecutor(num_threads=8)
         executor.add_node(node)
         try:
             spin(executor, stop=lambda: bool(stop))

@@ -1,10 +1,12 @@
 """DirectExecutor against rclpy in one process: timers (on sim time too) and subscriptions called
 directly, async callbacks, services and actions still served, errors out of spin_once, an entity
-destroyed by its own callback."""
+destroyed by its own callback; the multi-threaded one calling /clock and quick subscriptions on its
+spinning thread while a worker is busy, and logging a quick callback's error."""
 
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from collections.abc import Iterator
 
@@ -18,7 +20,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from tlt_interfaces.action import FollowJointTrajectory
 
-from tlt_common.direct_executor import DirectExecutor
+from tlt_common.direct_executor import DirectExecutor, DirectMultiThreadedExecutor, QuickCallbackGroup
 from tlt_common.lean_node import LeanNode
 
 TIMEOUT_S = 10.0
@@ -157,3 +159,61 @@ def test_a_subscription_destroyed_by_its_own_callback_is_not_called_again(rig):
     rig.node.create_timer(0.01, publish)
     rig.spin_until(lambda: ticks[0] >= 20, "twenty publications")
     assert got == ["m1"]
+
+
+def test_the_multi_threaded_one_calls_clock_and_quick_subscriptions_on_its_spinning_thread(rig):
+    executor = DirectMultiThreadedExecutor(num_threads=2, context=rig.context)
+    sim = LeanNode(
+        "on_sim_time_mt", context=rig.context, parameter_overrides=[Parameter("use_sim_time", value=True)]
+    )
+    feeder = LeanNode("feeder", context=rig.context)
+    executor.add_node(sim)
+    executor.add_node(feeder)
+    threads: dict[str, set[str]] = {"quick": set(), "plain": set()}
+    busy = threading.Event()
+
+    def plain(_msg: String) -> None:
+        threads["plain"].add(threading.current_thread().name)
+        busy.set()
+        time.sleep(0.5)  # a worker held: quick callbacks and the clock go on meanwhile
+
+    def quick(msg: String) -> None:
+        threads["quick"].add(threading.current_thread().name)
+        if msg.data == "bad":
+            raise ValueError("a broken store")
+
+    sim.create_subscription(String, "quick", quick, 10, callback_group=QuickCallbackGroup())
+    sim.create_subscription(String, "plain", plain, 10)
+    clock = feeder.create_publisher(Clock, "/clock", 10)
+    quick_pub = feeder.create_publisher(String, "quick", 10)
+    plain_pub = feeder.create_publisher(String, "plain", 10)
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    spinner = threading.Thread(target=spin, name="spinner", daemon=True)
+    spinner.start()
+    try:
+        deadline = time.monotonic() + TIMEOUT_S
+        while not (sim.count_publishers("plain") and feeder.count_subscribers("quick")
+                   and feeder.count_subscribers("/clock")):
+            assert time.monotonic() < deadline, "no match"
+            time.sleep(0.05)
+        plain_pub.publish(String(data="x"))
+        assert busy.wait(TIMEOUT_S)
+        for k in range(5):
+            quick_pub.publish(String(data="bad" if k == 2 else "ok"))
+        while sim.get_clock().now().nanoseconds < 100 * 10**9 or len(threads["quick"]) == 0:
+            assert time.monotonic() < deadline, "the clock and quick callbacks did not run"
+            clock.publish(Clock(clock=rclpy.time.Time(seconds=100).to_msg()))
+            time.sleep(0.02)
+        assert threads["quick"] == {"spinner"}  # and spinning went on after the broken store
+        assert threads["plain"] and "spinner" not in threads["plain"]
+    finally:
+        stop.set()
+        spinner.join(TIMEOUT_S)
+        executor.shutdown()
+        sim.destroy_node()
+        feeder.destroy_node()

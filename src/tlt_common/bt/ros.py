@@ -32,6 +32,7 @@ from tlt_common.action_client import SerialisedActionClient
 from tlt_common.bt.nodes import Action, Condition
 from tlt_common.bt.server_readiness import readiness_of
 from tlt_common.bt.status_codec import DEFAULT_MAX_STATUS_BYTES, TreeShape, encode
+from tlt_common.direct_executor import QuickCallbackGroup
 
 Clock = Callable[[], float]
 
@@ -426,6 +427,7 @@ class TopicCache:
         self._latest: dict[str, tuple[Any, float] | None] = {}
         self._heard: dict[str, float] = {}  # time.monotonic() of the newest message, per topic
         self._subscriptions: dict[str, Any] = {}
+        self._group = QuickCallbackGroup()  # a store never blocks: spun on the executor's own thread
 
     def watch(self, topic: str, msg_type: Any, qos: QoSProfile | int = 10) -> None:
         """Subscribe to ``topic`` once; later calls for the same topic are no-ops."""
@@ -437,7 +439,9 @@ class TopicCache:
             self._latest[topic] = (msg, self.clock())
             self._heard[topic] = time.monotonic()
 
-        self._subscriptions[topic] = self.node.create_subscription(msg_type, topic, store, qos)
+        self._subscriptions[topic] = self.node.create_subscription(
+            msg_type, topic, store, qos, callback_group=self._group
+        )
 
     def latest(self, topic: str) -> tuple[Any, float] | None:
         """(message, arrival time) of the newest message on ``topic``, or None before the first."""
