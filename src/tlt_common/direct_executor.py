@@ -22,8 +22,8 @@ worker threads as before. An exception from such a call is logged, as rclpy's mu
 executor keeps a callback's exception to itself.
 
 They replace rclpy's ``_make_handler`` (and the multi-threaded one its ``_spin_once_impl``) and
-read entity attributes rclpy itself uses, as rclpy 7.1 (Jazzy, pinned in requirements/runtime.txt) has them;
-tests/tlt_common/test_direct_executor.py holds it to that behaviour.
+read entity attributes rclpy itself uses, as rclpy 7.1 (Jazzy, pinned in
+requirements/runtime.txt) has them; tests/tlt_common/test_direct_executor.py holds them to that.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
 from tlt_drivers.ur.hardware import JointLimitError, MotionRefused, URHardware
 from tlt_drivers.ur.rtde_link import probe_rtde
 
-HOST = "127.0.0.2"
+HOST = "127.0.0.62"  # a loopback address no other test file's emulated arm uses (files run side by side)
 
 
 class Rig:

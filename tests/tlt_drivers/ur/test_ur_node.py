@@ -29,7 +29,7 @@ from tlt_common.action_client import SerialisedActionClient
 from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
 from tlt_drivers.ur.node import URNode
 
-HOST = "127.0.0.2"
+HOST = "127.0.0.63"  # a loopback address no other test file's emulated arm uses (files run side by side)
 TIMEOUT_S = 10.0
 Result = FollowJointTrajectory.Result
 

@@ -16,7 +16,7 @@ from tlt_sim.emulators.ur_arm import HOME
 from tlt_sim.emulators.ur_controller import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
-HOST = "127.0.0.2"
+HOST = "127.0.0.64"  # a loopback address no other test file's emulated arm uses (files run side by side)
 
 
 class Arm:
@@ -171,8 +171,8 @@ def test_dashboard_answers_what_the_client_checks(arm: Arm) -> None:
 
 
 def test_second_arm_on_its_own_address() -> None:
-    with URControllerProcess(URControllerConfig(host="127.0.0.3", q0=[0.5, -1.0, 1.0, -1.5, -1.5, 0.0])):
-        receive = rtde_receive.RTDEReceiveInterface("127.0.0.3")
+    with URControllerProcess(URControllerConfig(host="127.0.0.65", q0=[0.5, -1.0, 1.0, -1.5, -1.5, 0.0])):
+        receive = rtde_receive.RTDEReceiveInterface("127.0.0.65")
         try:
             assert receive.getActualQ() == pytest.approx([0.5, -1.0, 1.0, -1.5, -1.5, 0.0])
         finally:
