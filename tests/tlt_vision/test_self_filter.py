@@ -8,8 +8,8 @@ import pytest
 
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_vision.node_config import load_config
-from tlt_vision.pointcloud import Intrinsics
-from tlt_vision.self_filter import EeBox, EeJaw, EeSelfFilter, PlacedCapsule, drop_inside
+from tlt_vision.pointcloud import Intrinsics, back_project
+from tlt_vision.self_filter import EeBox, EeJaw, EeSelfFilter, PlacedBox, PlacedCapsule, drop_inside
 
 K = Intrinsics(fx=100.0, fy=100.0, cx=50.0, cy=50.0)  # a 100 x 100 image
 NO_JAWS = {"a": 0.0, "b": 0.0}
@@ -34,6 +34,59 @@ def test_pixels_whose_point_lies_inside_a_box_lose_their_depth_and_no_others():
     assert drop_inside(depth, K, placed, margin=0.01)[1] == 23 * 23
     behind = _boxes(box).place(pose_matrix([0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 1.2]), 0.0, NO_JAWS)
     assert drop_inside(depth, K, behind, margin=0.0)[1] == 0
+
+
+def _every_pixel_tested(depth: np.ndarray, placed: list, margin: float) -> np.ndarray:
+    """What ``drop_inside`` must drop, by its definition: every pixel's point against every shape."""
+    v, u = np.nonzero(np.isfinite(depth) & (depth > 0))
+    points = back_project(u, v, depth[v, u].astype(float), K)
+    inside = np.zeros(len(points), dtype=bool)
+    for shape in placed:
+        inside |= shape.holds(points, margin)
+    want = np.zeros(depth.shape, dtype=bool)
+    want[v[inside], u[inside]] = True
+    return want
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.diag(r))
+
+
+def test_only_the_pixels_near_a_shape_are_tested_and_none_it_holds_is_missed():
+    # Boxes and capsules at random poses, some reaching through the camera's plane or behind it,
+    # some beside the image, over a depth image with holes whose pixels also see points inside
+    # them, their corners and ends first (where a window too small would cut).
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        depth = rng.uniform(0.05, 2.0, (100, 100)).astype(np.float32)
+        placed: list = []
+        seen: list[np.ndarray] = []
+        for _ in range(4):
+            rot, centre = _random_rotation(rng), rng.uniform([-0.8, -0.8, -0.2], [0.8, 0.8, 1.8])
+            half = rng.uniform(0.02, 0.3, 3)
+            corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)]) * 0.99
+            inner = np.vstack([corners, rng.uniform(-1, 1, (60, 3))])
+            placed.append(PlacedBox(rot, centre, half))
+            seen.append(centre + (inner * half) @ rot.T)
+            end, radius = centre + rng.normal(scale=0.2, size=3), rng.uniform(0.005, 0.1)
+            placed.append(PlacedCapsule(centre, end, radius))
+            ball = rng.normal(size=(60, 3))
+            ball *= radius * 0.99 * rng.uniform(0, 1, (60, 1)) / np.linalg.norm(ball, axis=1, keepdims=True)
+            seen.append(np.vstack([centre + ball[:30], end + ball[30:]]))
+        points = np.vstack(seen)
+        points = points[points[:, 2] > 0.01]
+        u = np.rint(points[:, 0] / points[:, 2] * K.fx + K.cx).astype(int)
+        v = np.rint(points[:, 1] / points[:, 2] * K.fy + K.cy).astype(int)
+        on = (u >= 0) & (u < 100) & (v >= 0) & (v < 100)
+        depth[v[on], u[on]] = points[on, 2]
+        depth[rng.random((100, 100)) < 0.03] = 0.0
+        depth[rng.random((100, 100)) < 0.01] = np.nan
+        out, dropped = drop_inside(depth, K, placed, margin=0.01)
+        want = _every_pixel_tested(depth, placed, 0.01)
+        assert dropped == int(want.sum())
+        assert (out[want] == 0).all()
+        np.testing.assert_array_equal(out[~want], depth[~want])
 
 
 def test_a_box_on_the_width_slide_moves_with_the_width_along_flange_x():
