@@ -354,9 +354,15 @@ class VisionNode(LeanNode):
             detections = [d for d in self._segment(frame) if d.object_class == "rivet"]
         except NoFrame as exc:
             return self._failed(member_id, "rivet", str(exc))
-        obs = self._observe("rivet", detections, frame)
         muzzle = cam.gun_in_camera()
         radius = self.config.raw["rivet_in_gun_radius"]
+        # Only a rivet near the muzzle can pass: the others in view (a feeder's, one already set
+        # in the structure) would cost a pose each for nothing.
+        reach = radius + self.inspector.estimators["rivet"].model.diameter / 2
+        seen = detections
+        detections = detections_near(seen, frame.get("depth"), frame.intrinsics, np.eye(4), muzzle, reach)
+        elsewhere = len(seen) - len(detections)
+        obs = self._observe("rivet", detections, frame)
         certified = [o.estimate for o in obs if o.estimate is not None and o.estimate.certified]
         near = [e for e in certified if np.linalg.norm(e.translation - muzzle) <= radius]
         used = tuple(o.estimate for o in obs if o.estimate is not None)
@@ -364,6 +370,8 @@ class VisionNode(LeanNode):
             report = inspection.InspectionReport(member_id, "rivet", True, (), used)
         else:
             why = [f"no rivet in the gun: none certified within {radius * 1000:.0f} mm of {gun}"]
+            if elsewhere:
+                why.append(f"{elsewhere} rivet(s) seen farther from the muzzle, not posed")
             why += [f"rivet: {o.reason}" for o in obs if o.estimate is None]
             why += [f"rivet: pose not certified ({e.certificate.reason})" for e in used if not e.certified]
             report = inspection.InspectionReport(member_id, "rivet", False, tuple(why), used)

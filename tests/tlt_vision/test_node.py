@@ -39,8 +39,8 @@ from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
 from tlt_sim.twin.settings import load_settings
 
 from tlt_ars.planning.kinematics import pose_error, pose_matrix
-from tlt_ars.planning.reachability import reach_target
-from tlt_ars.planning.targets import placement_targets
+from tlt_ars.planning.reachability import TargetUnreachable, reach_target
+from tlt_ars.planning.targets import dispenser_targets, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
@@ -399,19 +399,7 @@ def test_a_cross_frame_held_at_its_place_is_aligned_from_the_d405s(rig):
         )
 
     rig.twin.do(hold)
-    # The node keeps the latest joint states: wait until they are the new pose's (a fixed half
-    # second was too short on a loaded CI machine, and the D405s were placed from the old pose).
-    def heard() -> bool:
-        try:
-            now = rig.vision.rig.joints.get(arm_joint_names("ars_x"), 0.0, math.inf)
-            return np.allclose(now, q, atol=1e-3)
-        except FrameUnavailable:  # none heard yet
-            return False
-
-    deadline = time.monotonic() + 20.0
-    while not heard():
-        assert time.monotonic() < deadline, "the vision node never heard the new arm pose"
-        time.sleep(0.05)
+    _wait_until_heard(rig, q)
     res = rig.call(
         CheckAlignment,
         ros_names.VISION_CHECK_ALIGNMENT,
@@ -423,6 +411,65 @@ def test_a_cross_frame_held_at_its_place_is_aligned_from_the_d405s(rig):
     assert res.pose.keypoint_groups_visible == 2  # a corner joint in each D405
     p = res.pose.pose.position
     assert np.linalg.norm([p.x, p.y, p.z] - target.pose[:3, 3]) < 0.003  # held where the ARS aims
+
+
+def _wait_until_heard(rig: Rig, q: np.ndarray) -> None:
+    """Until the vision node's latest ARS X joint states are ``q`` (a fixed wait was too short on a
+    loaded CI machine, and the D405s were placed from the old pose)."""
+
+    def heard() -> bool:
+        try:
+            now = rig.vision.rig.joints.get(arm_joint_names("ars_x"), 0.0, math.inf)
+            return np.allclose(now, q, atol=1e-3)
+        except FrameUnavailable:  # none heard yet
+            return False
+
+    deadline = time.monotonic() + 20.0
+    while not heard():
+        assert time.monotonic() < deadline, "the vision node never heard the new arm pose"
+        time.sleep(0.05)
+
+
+def test_a_rivet_taken_at_the_feeder_is_seen_in_the_gun_and_the_feeders_are_not_posed(rig, monkeypatch):
+    """InspectPart of a rivet gun that took a rivet, as the ARS asks it (after Withdraw Gun): the
+    D405 beside the gun sees the feeder's tray full of rivets too; only those near the muzzle are
+    posed."""
+    mission = rig.twin.scene.mission
+    feeder = next(n for n, d in mission.dispensers.items() if d.part_kind == "rivet" and n.endswith("_x"))
+    cfg = load_scene_config()
+    kw = dict(placed=set(), bay=1, carrying=None)
+    free = build_scene(cfg, "ars_x", mission, contact=False, **kw)
+    contact = build_scene(cfg, "ars_x", mission, contact=True, **kw)
+    resolution = cfg.planning["dense_check_resolution"]
+    for target in dispenser_targets(cfg, mission, feeder, "ars_x"):  # the gun from any side
+        try:
+            q_out, q = reach_target(free, contact, target, cfg.home("ars_x"), resolution)
+            break
+        except TargetUnreachable:
+            continue
+
+    def take_rivet(scene: Scene) -> bool:
+        scene.pose_arm("ars_x", q)
+        scene.set_joint_state(names.width_joint("ars_x"), 0.0)
+        mujoco.mj_forward(scene.model, scene.data)
+        loaded = scene.load_rivet("ars_x", "a")
+        scene.pose_arm("ars_x", q_out)
+        return loaded
+
+    assert rig.twin.do(take_rivet)
+    _wait_until_heard(rig, q_out)
+    request = InspectPart.Request(member_id="ars_x/rivet_gun_0", part_kind="rivet", camera="ars_x/d405")
+    report = rig.call(InspectPart, ros_names.VISION_INSPECT_PART, request).report
+    assert report.passed, list(report.reasons)
+    assert [p.object_class for p in report.poses] == ["rivet"] and report.poses[0].certified
+    # With the muzzle configured 10 cm further out, the rivet in the gun is one seen elsewhere:
+    # not posed, and the report says so.
+    cam = rig.vision.rig.ee["ars_x/d405_a"]
+    moved = replace(cam, gun_position=cam.gun_position + np.array([0.0, 0.0, 0.1]))
+    monkeypatch.setitem(rig.vision.rig.ee, "ars_x/d405_a", moved)
+    report = rig.call(InspectPart, ros_names.VISION_INSPECT_PART, request).report
+    assert not report.passed and not report.poses
+    assert any("seen farther from the muzzle, not posed" in r for r in report.reasons), list(report.reasons)
 
 
 def test_no_frame_in_time_answers_with_the_reason(rig):
