@@ -447,6 +447,8 @@ def test_a_rivet_taken_at_the_feeder_is_seen_in_the_gun_and_the_feeders_are_not_
             break
         except TargetUnreachable:
             continue
+    else:
+        pytest.fail(f"the planner reaches {feeder} from no side")
 
     def take_rivet(scene: Scene) -> bool:
         scene.pose_arm("ars_x", q)
