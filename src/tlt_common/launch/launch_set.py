@@ -17,6 +17,7 @@ starts, so a typo never leaves half a system running. Example::
         required: true           # if it dies for good, the whole set stops with a non-zero exit
         wait_for_path: /tmp/tlt/lifter  # start only once this exists (an emulator's pty link)
         host: crs                # run inside this emulated host (see hosts below)
+        nice: 5                  # lower CPU priority (0-19; every thread the process starts)
       - name: exercise
         executable: python
         args: [-m, some.job]
@@ -89,6 +90,8 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "startup_s": opt("float", 3.0, minimum=0.0,
                      doc="an exit within this long after start is reported as a failure to start"),
     "host": opt("str", None, doc="the emulated host (a name under hosts:) the process runs in"),
+    "nice": opt("int", 0, minimum=0, maximum=19,
+                doc="niceness the process starts with: it yields the CPU to processes of lower niceness"),
 }
 
 HOST_SCHEMA: dict[str, Field] = {
@@ -129,6 +132,7 @@ class ProcessSpec:
     wait_for_path: str | None = None
     wait_timeout_s: float = 30.0
     host: str | None = None
+    nice: int = 0
 
 
 @dataclass(frozen=True)
@@ -247,6 +251,7 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
             wait_timeout_s=proc["wait_timeout_s"],
             startup_s=proc["startup_s"],
             host=proc["host"],
+            nice=proc["nice"],
         ))
     if _including:
         return LaunchSet(name=data["name"] or path.stem, source=source,

@@ -45,12 +45,27 @@ def _die_with_parent() -> None:
         _prctl(1, signal.SIGTERM)
 
 
-def _in_host(namespace: str) -> Callable[[], None]:
-    """A preexec_fn: die with the launcher, and run inside the host's network namespace."""
+def _lower_priority(nice: int) -> None:
+    """Runs in the child after it became a session leader: ``nice`` for its threads, and for its
+    autogroup. With the kernel's autogroups (``kernel.sched_autogroup_enabled``, on in Debian's
+    kernels) the scheduler first shares the CPU equally between groups, one per session, and a
+    thread's niceness only counts inside its group: every launched process leads a session of its
+    own, so without the group's niceness a niced process would still get as much CPU as any other."""
+    os.nice(nice)
+    with contextlib.suppress(OSError), open("/proc/self/autogroup", "w") as group:  # none: no autogroups
+        group.write(str(nice))
+
+
+def _preexec(namespace: str | None, nice: int) -> Callable[[], None]:
+    """A preexec_fn: die with the launcher, run inside the host's network namespace if given, and
+    at the given niceness (set before exec, so every thread the process starts inherits it)."""
 
     def preexec() -> None:
         _die_with_parent()
-        enter_namespace(namespace)
+        if namespace:
+            enter_namespace(namespace)
+        if nice:
+            _lower_priority(nice)
     return preexec
 
 
@@ -179,11 +194,11 @@ class Supervisor:
     def _start(self, proc: _Proc) -> None:
         spec = proc.spec
         env = {**os.environ, **spec.env}
-        preexec = _die_with_parent
+        namespace = None
         if spec.host:
             assert self._profile is not None
             env = host_environment(self._profile, env)
-            preexec = _in_host(namespace_name(self.run_name, spec.host))
+            namespace = namespace_name(self.run_name, spec.host)
         elif proc.restarts:
             # Fast DDS 2.14 can leave the shared-memory port of a process that died (SIGKILL) so
             # that its restarted successor matches every topic and receives nothing on some
@@ -202,7 +217,7 @@ class Supervisor:
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 start_new_session=True,
-                preexec_fn=preexec,
+                preexec_fn=_preexec(namespace, spec.nice),
             )
         except (OSError, subprocess.SubprocessError) as exc:
             proc.popen = None

@@ -75,7 +75,7 @@ def test_defaults(tmp_path):
     """))
     (proc,) = launch_set.processes
     assert launch_set.name == "set"
-    assert (proc.restart, proc.required, proc.argv) == ("never", False, (sys.executable,))
+    assert (proc.restart, proc.required, proc.argv, proc.nice) == ("never", False, (sys.executable,), 0)
 
 
 @pytest.mark.parametrize(("body", "message"), [
@@ -104,6 +104,10 @@ def test_defaults(tmp_path):
      "processes: at most one process may have on_exit: shutdown"),
     ("processes:\n  - {name: a, executable: python, cwd: /no/such/dir}",
      "processes[0].cwd: /no/such/dir is not a directory"),
+    ("processes:\n  - {name: a, executable: python, nice: 20}",
+     "processes[0].nice: expected at most 19, got 20"),
+    ("processes:\n  - {name: a, executable: python, nice: -5}",
+     "processes[0].nice: expected at least 0, got -5"),
     ("processes: [a", "invalid YAML: line 1, column 14: "),
 ])
 def test_bad_sets_are_refused_naming_file_key_and_expectation(tmp_path, body, message):

@@ -271,6 +271,34 @@ def test_a_process_waits_for_its_device_path(tmp_path, launcher):
     assert run.finish() == 0
 
 
+def test_a_process_runs_every_thread_and_its_autogroup_at_its_niceness(tmp_path, launcher):
+    # A thread's niceness is in field 19 of its /proc stat line: the process's own and one it starts.
+    report = ("import os, threading, pathlib; "
+              "nice = lambda tid: int(pathlib.Path(f'/proc/self/task/{tid}/stat').read_text()"
+              ".rsplit(')', 1)[1].split()[16]); "
+              "t = threading.Thread(target=lambda: print('thread', nice(threading.get_native_id()), "
+              "flush=True)); t.start(); t.join(); "
+              "print('main', nice(threading.get_native_id()), flush=True); "
+              "group = pathlib.Path('/proc/self/autogroup'); "
+              "print('group', group.read_text().split()[-1] if group.exists() else 'none', flush=True)")
+    path = write_set(tmp_path, f"""
+        processes:
+          - {{name: yielding, executable: python, args: ["-c", "{report}"], nice: 7}}
+          - {{name: plain, executable: python, args: ["-c", "{report}"]}}
+    """)
+    own = os.nice(0)
+    run = launcher(path)
+    assert run.finish() == 0
+    for name, expected in (("yielding", min(own + 7, 19)), ("plain", own)):
+        run.wait_for(rf"^\[{name}\] thread {expected}$")
+        run.wait_for(rf"^\[{name}\] main {expected}$")
+    if Path("/proc/self/autogroup").exists():
+        # Each process leads a session, so an autogroup, of its own: the group's niceness is
+        # what the scheduler weighs against the other processes.
+        run.wait_for(r"^\[yielding\] group 7$")
+        run.wait_for(r"^\[plain\] group 0$")
+
+
 def test_a_device_path_that_never_appears_fails_a_required_process(tmp_path, launcher):
     path = write_set(tmp_path, f"""
         processes:
