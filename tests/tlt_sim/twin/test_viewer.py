@@ -231,8 +231,8 @@ print("window ok", view.syncs)
 
 
 def test_a_real_window_opens_syncs_and_closes_under_xvfb(tmp_path):
-    """With Xvfb installed (not part of the project's environment: skipped without it), MuJoCo's
-    own viewer window opens on a display, takes synced frames and closes."""
+    """Under Xvfb (scripts/setup.sh installs it; skipped where it is missing), MuJoCo's own viewer
+    window opens on a display, takes synced frames and closes."""
     import shutil
     import subprocess
     import sys
