@@ -219,7 +219,7 @@ class ArsContext:
         finishing = self.finishes(request)
         if finishing:
             self.data = self.unfinished
-            self.data.request, self.data.parts_discarded = request, 0  # reported with the failure
+            self.data.request, self.data.discarded_from = request, []  # reported with the failure
         else:
             held = self.data
             self.data = RequestData(

@@ -45,7 +45,7 @@ import argparse
 import sys
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -122,7 +122,7 @@ class ActiveGoal:
     outcome: tuple[str, str] | None = None  # ("succeeded" | "aborted" | "canceled", reason)
     cancel_requested: bool = False
     stopping_since: float | None = None
-    parts_discarded: int = 0
+    discarded_from: list[str] = field(default_factory=list)  # the dispenser of each part discarded
     successor: ActiveGoal | None = None  # the newer goal for the same request that took the job over
     feedback: tuple[str, float] | None = None  # the step and progress last sent to the CRS
 
@@ -300,8 +300,9 @@ class ArsNode(LeanNode):
         result = result_type()
         result.success = state == "succeeded"
         result.reason = reason
-        if hasattr(result, "parts_discarded"):
-            result.parts_discarded = goal.parts_discarded
+        if hasattr(result, "discarded_from"):
+            result.parts_discarded = len(goal.discarded_from)
+            result.discarded_from = list(goal.discarded_from)
         if state == "succeeded":
             handle.succeed()
         elif state == "canceled" and handle.is_cancel_requested:
@@ -314,7 +315,7 @@ class ArsNode(LeanNode):
         """Called from the tick (Report Result, or a build failure)."""
         while goal.successor is not None:  # the job was taken over by a newer goal
             goal = goal.successor
-        goal.parts_discarded = self.ctx.data.parts_discarded
+        goal.discarded_from = list(self.ctx.data.discarded_from)
         self.ctx.end(goal.request)
         goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
         with self._lock:
@@ -432,7 +433,7 @@ class ArsNode(LeanNode):
     def _end(self, goal: ActiveGoal | None, state: str, reason: str) -> None:
         if goal is None:
             return
-        goal.parts_discarded = self.ctx.data.parts_discarded
+        goal.discarded_from = list(self.ctx.data.discarded_from)
         self.ctx.end(goal.request)
         goal.outcome = (state, reason)
         if self.active is goal:

@@ -56,7 +56,7 @@ class RequestData:
     member: Member | None = None
     holding: str | None = None  # part kind in the gripper, for the collision scene
     dispenser: str | None = None  # the dispenser the held part came from
-    parts_discarded: int = 0
+    discarded_from: list[str] = field(default_factory=list)  # the dispenser of each part discarded
     targets: dict[str, Any] = field(default_factory=dict)  # approach name -> chosen Target
     recorded: str = ""  # what the request set in the mission state: placed, affixed, riveted
     rivet_in_gun: bool = False  # seen loaded (Verify Rivet Loaded) and not fired since
@@ -66,6 +66,10 @@ class RequestData:
     setting_q: tuple[float, ...] | None = None
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
+
+    @property
+    def parts_discarded(self) -> int:
+        return len(self.discarded_from)
 
     def worth_keeping(self) -> bool:
         """Whether a restart must know of this request: it holds a part or a rivet, or has set

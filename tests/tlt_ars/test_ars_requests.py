@@ -254,7 +254,11 @@ def test_a_part_and_a_rivet_left_by_a_failed_request_are_dealt_with_before_the_n
     assert np.linalg.norm(stack.world.part_pose[:3, 3] - discard[:3, 3]) < 0.05  # let go of there
     assert state.discarded["vertical_dispenser_x"] == discarded + 1 and stack.ars.ctx.data.holding is None
     handle.cancel_goal_async()
-    assert stack.result(handle).status == GoalStatus.STATUS_CANCELED
+    result = stack.result(handle)
+    assert result.status == GoalStatus.STATUS_CANCELED
+    # the CRS counts the held part against the dispenser the result names
+    assert list(result.result.discarded_from) == ["vertical_dispenser_x"]
+    assert result.result.parts_discarded == 1
     state.remaining["vertical_dispenser_x"] = stack.world.remaining["vertical_dispenser_x"] = 3  # refilled
 
 

@@ -29,7 +29,7 @@ def _set_request() -> RequestData:
         dispenser="diagonal_dispenser_x",
         targets={"place": Target("from +x", pose, pre)},
         recorded="placed",
-        parts_discarded=1,
+        discarded_from=["diagonal_dispenser_x"],
     )
 
 

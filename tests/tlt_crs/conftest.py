@@ -73,6 +73,12 @@ class Recorder:
             ]
 
 
+def _count_discards(result: Any, held: list[str], failed: int) -> None:
+    if hasattr(result, "discarded_from"):
+        result.parts_discarded = len(held) + failed
+        result.discarded_from = held + [""] * failed
+
+
 class ArsStandIn:
     """One ARS's action servers and GroundCommand service (see module docstring)."""
 
@@ -87,6 +93,9 @@ class ArsStandIn:
         self.present_parts = True
         self.call_timeout_s = 5.0  # an inspection call unanswered this long is given up, the part shown again
         self.max_parts = 3
+        # A part an earlier request left in the gripper, from this dispenser: the next AddMember or
+        # AddCrossFrame discards it first and names its dispenser in the result.
+        self.held_from: str | None = None
         self.paused = threading.Event()
         self.commands: list[int] = []
         self.inspect = node.create_client(InspectPart, ros_names.CRS_INSPECT_PART, callback_group=group)
@@ -128,7 +137,10 @@ class ArsStandIn:
         member = getattr(goal, "member_id", "") or getattr(goal, "joint_id", "")
         record = self.recorder.add(Request(self.ars, request, member, time.monotonic()))
         result = kind.Result()
-        discarded = 0
+        discarded = 0  # parts failed at inspection, of the member's dispenser, which is not named
+        held = []
+        if request in ("add_cross_frame", "add_member") and self.held_from:
+            held, self.held_from = [self.held_from], None
         feedback = kind.Feedback(step="working", progress=0.5)
         handle.publish_feedback(feedback)
         if request in ("add_cross_frame", "add_member") and self.present_parts:
@@ -155,8 +167,7 @@ class ArsStandIn:
                 discarded += 1
             if not passed:
                 result.success, result.reason = False, f"no part passed inspection ({discarded} discarded)"
-                if hasattr(result, "parts_discarded"):
-                    result.parts_discarded = discarded
+                _count_discards(result, held, discarded)
                 record.outcome = "failed"
                 handle.abort() if not handle.is_cancel_requested else handle.canceled()
                 return result
@@ -167,8 +178,7 @@ class ArsStandIn:
                 handle.canceled()
                 return result
             time.sleep(0.01)
-        if hasattr(result, "parts_discarded"):
-            result.parts_discarded = discarded
+        _count_discards(result, held, discarded)
         if member in self.fail:
             result.success, result.reason = False, self.fail[member]
             record.outcome = "failed"

@@ -77,6 +77,22 @@ def test_failed_parts_are_discarded_and_counted(rig, crs, tmp_path):
     assert ctx.model.discarded["diagonal_dispenser_x"] == 1
 
 
+def test_a_part_left_held_is_counted_against_the_dispenser_it_came_from(rig, crs, tmp_path):
+    """ARS X still holds a vertical an earlier request took (its cross frame went to ARS Y after a
+    fault, say); it discards the vertical before it fetches the diagonal asked for: the vertical's
+    dispenser counts it, the diagonal's only the diagonal placed."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    remaining = ctx.model.remaining
+    verticals, diagonals = remaining["vertical_dispenser_x"], remaining["diagonal_dispenser_x"]
+    rig.ars["ars_x"].held_from = "vertical_dispenser_x"
+    assert crs.tick_until(add_diagonal(ctx, member)) == Status.SUCCESS
+    assert remaining["vertical_dispenser_x"] == verticals - 1
+    assert ctx.model.discarded["vertical_dispenser_x"] == 1
+    assert remaining["diagonal_dispenser_x"] == diagonals - 1
+    assert ctx.model.discarded["diagonal_dispenser_x"] == 0
+
+
 def test_a_verdict_reaches_the_ars_that_gave_its_call_up_and_presented_the_part_again(rig, crs, tmp_path):
     """Vision takes longer than the ARS waits for an answer (as when a fault holds the CRS mid-
     inspection): the ARS presents the part again, and the verdict goes to that call, not the one

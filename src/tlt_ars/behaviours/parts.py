@@ -171,10 +171,10 @@ class PartPassed(Condition):
 
 class CountDiscard(Action):
     """Record the part just dropped at the discard pose (the Release before it wrote the state
-    file). Writes the dispenser's ``discarded`` count, ``RequestData.parts_discarded`` and
-    ``.holding`` (none). After a failed inspection (``reason_of``, the verdict), FAILS the attempt
-    with that reason; for a part an earlier request left in the gripper (``reason_of`` None),
-    SUCCEEDS."""
+    file). Writes the dispenser's ``discarded`` count, ``RequestData.discarded_from`` (the part's
+    dispenser, which the request's result names to the CRS) and ``.holding`` (none). After a
+    failed inspection (``reason_of``, the verdict), FAILS the attempt with that reason; for a part
+    an earlier request left in the gripper (``reason_of`` None), SUCCEEDS."""
 
     def __init__(self, name: str, ctx: ArsContext, reason_of: py_trees.behaviour.Behaviour | None) -> None:
         super().__init__(name)
@@ -184,7 +184,7 @@ class CountDiscard(Action):
         data = self.ctx.data
         if data.dispenser is not None:
             self.ctx.state.count_discard(data.dispenser)
-        data.parts_discarded += 1
+        data.discarded_from.append(data.dispenser or "")
         data.holding = None
         if self.reason_of is not None:
             reason = self.reason_of.feedback_message or "inspection failed"

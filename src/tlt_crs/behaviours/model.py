@@ -10,6 +10,7 @@ the ARS result describes what physically happened.
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
 
 from py_trees.common import Status
@@ -159,14 +160,25 @@ def _apply(ctx: CrsContext, change: Any, *args: Any) -> None:
         ctx.event(2, "MODEL_DISAGREES", f"tower model refused an update after an ARS result: {exc.reason}")
 
 
+def discarded_dispensers(member: Member, result: Any) -> Counter[str]:
+    """How many parts the ARS discarded from each dispenser while it worked on ``member``. The
+    result names each part's dispenser: a part a failed request left in the gripper, discarded
+    first by the next request, need not be of that request's member. A part counted and not named
+    (an empty name, or an ARS whose result has no names) is taken to be from the member's."""
+    named = [d for d in getattr(result, "discarded_from", ()) or () if d]
+    unnamed = int(getattr(result, "parts_discarded", 0) or 0) - len(named)
+    return Counter(named + [member.dispenser] * max(0, unnamed))
+
+
 def record_parts(ctx: CrsContext, member: Member, result: Any, ok: bool) -> None:
-    """Parts the ARS took for ``member`` (the placed one if ``ok``, plus the discarded ones)."""
-    discarded = int(getattr(result, "parts_discarded", 0) or 0)
-    taken = discarded + (1 if ok else 0)
-    if taken:
-        _apply(ctx, ctx.model.take_part, member.dispenser, taken)
-    if discarded:
-        _apply(ctx, ctx.model.discard_part, member.dispenser, discarded)
+    """Parts the ARS took for ``member``: the placed one if ``ok``, from the member's dispenser,
+    and each discarded one, taken and discarded from its own dispenser."""
+    discarded = discarded_dispensers(member, result)
+    taken = discarded + Counter({member.dispenser: 1} if ok else {})
+    for dispenser, count in taken.items():
+        _apply(ctx, ctx.model.take_part, dispenser, count)
+    for dispenser, count in discarded.items():
+        _apply(ctx, ctx.model.discard_part, dispenser, count)
 
 
 def record_rivets(ctx: CrsContext, member: Member, step: str) -> None:
