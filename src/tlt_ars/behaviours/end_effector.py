@@ -42,10 +42,13 @@ def _trajectory_ok(result: Any) -> tuple[bool, str]:
 class MoveGrasp(ActionGoal):
     """Open or close the grasp joints through the EE's trajectory controller.
 
-    Reads/writes nothing on the blackboard. RUNNING while the jaws move; SUCCESS when the driver
-    reports the trajectory done; FAILURE on rejection (e.g. not calibrated), abort or timeout.
-    No path tolerance, and no goal tolerance when closing: jaws closing on a part stop short of
-    their goal by design, and grasp and release are judged from the servo load instead.
+    Reads EndEffectorState (``calibrated``); writes nothing on the blackboard. RUNNING while the
+    EE is not calibrated yet (its driver refuses every motion until the width joint is zeroed on
+    its limit switch: after power-up, or after it rebooted a servo), at most ``timeouts.width_s``
+    (the calibration moves the width joint), then while the jaws move; SUCCESS when the driver
+    reports the trajectory done; FAILURE when the EE stays uncalibrated, on rejection, abort or
+    timeout. No path tolerance, and no goal tolerance when closing: jaws closing on a part stop
+    short of their goal by design, and grasp and release are judged from the servo load instead.
     """
 
     def __init__(self, name: str, ctx: ArsContext, *, close: bool) -> None:
@@ -63,6 +66,27 @@ class MoveGrasp(ActionGoal):
             result_ok=_trajectory_ok,
             clock=ctx.clock,
         )
+
+    def initialise(self) -> None:
+        super().initialise()
+        self._calibrated = False
+
+    def update(self) -> Status:
+        if not self._calibrated:
+            entry = self.ctx.cache.latest(self.ctx.ee_topic)
+            # a faulted EE is left to refuse the goal, with its driver's reason
+            if entry is None or entry[0].calibrated or entry[0].fault:
+                self._calibrated = True
+                self._started = self.clock()  # the server's wait starts now
+            elif self.clock() - self._started > self.ctx.config.timeouts["width_s"]:
+                return self.fail(
+                    f"end effector not calibrated within {self.ctx.config.timeouts['width_s']:g} s"
+                    " (its width joint is zeroed on the limit switch before any motion)"
+                )
+            else:
+                self.feedback_message = "waiting for the end effector to calibrate"
+                return Status.RUNNING
+        return super().update()
 
     def _make_goal(self) -> Any:
         ee = self.ctx.config.ee
