@@ -174,9 +174,29 @@ def read_motions(recording: Path) -> list[Motion]:
     return motions
 
 
-def read_placements(recording: Path, mission_path: Path) -> list[tuple[str, str, float]]:
-    """(member id, part, metres off) for every placed member of the mission, from the recording's
-    last twin ground truth; empty when the recording has none (a run on the hardware)."""
+def placed_members(run_dir: Path, mission_path: Path) -> set[str] | None:
+    """The members the run's tower model (``tower_model.json``) says stand, or None without a
+    model to read (every member is then looked for)."""
+    from tlt_common.mission.schema import load_mission
+    from tlt_common.mission.tower_model import PLACED, TowerModel, TowerModelError
+
+    path = run_dir / "tower_model.json"
+    if not path.is_file():
+        return None
+    try:
+        model = TowerModel.load(load_mission(mission_path), path)
+    except TowerModelError as exc:
+        print(f"build bench: {exc}; looking for every member's part", file=sys.stderr)
+        return None
+    return {member for member, state in model.states.items() if state >= PLACED}
+
+
+def read_placements(
+    recording: Path, mission_path: Path, placed: set[str] | None = None
+) -> list[tuple[str, str, float]]:
+    """(member id, part, metres off) for each member of the mission that is in ``placed`` (every
+    member when None), from the recording's last twin ground truth; empty when the recording has
+    none (a run on the hardware)."""
     import numpy as np
 
     from tlt_common.mission.schema import load_mission
@@ -192,6 +212,8 @@ def read_placements(recording: Path, mission_path: Path) -> list[tuple[str, str,
     out = []
     for member in load_mission(mission_path).members:
         if member.kind == "foundation_rivet" or not member.joints:
+            continue
+        if placed is not None and member.id not in placed:
             continue
         place = last["tower"] + np.asarray(member.joints[0][1])
         parts = {k: v for k, v in last.items() if k.startswith(f"part/{member.dispenser}/")}
@@ -264,7 +286,12 @@ def report(run_dir: Path, job_wall_s: float | None = None, mission: str | None =
         worst = max((r.ratio for r in bays if r.ratio is not None), default=None)
         print(f"\nsim time per bay / motion lower bound, worst bay: {_ratio(worst, RATIO_GOAL)}")
     if mission is not None:
-        _print_placements(read_placements(recording, ROOT / "missions" / f"{mission}.yaml"))
+        mission_path = ROOT / "missions" / f"{mission}.yaml"
+        placed = placed_members(run_dir, mission_path)
+        if placed is not None and not placed:
+            print("\nplacement: no member placed in this run")  # the parts in the dispensers are no result
+        else:
+            _print_placements(read_placements(recording, mission_path, placed))
     return 0 if rows else 1
 
 

@@ -176,6 +176,19 @@ def test_each_members_part_is_measured_against_its_place_from_the_twins_ground_t
     assert "9 members, median 0.0 mm, worst 22.8 mm (bay1/vertical/x0_y0)" in out, out
     assert "  bay1/vertical/x0_y0: part/vertical_dispenser_x/" in out
 
+    # With the run's tower model, only the members it says stand are measured: a build that
+    # faulted early leaves the others' parts in their dispensers, metres from their places.
+    from tlt_common.mission.tower_model import TowerModel
+
+    model = TowerModel(mission, run_dir / "tower_model.json")  # nothing placed
+    bench.report(run_dir, mission="one_bay")
+    out = capsys.readouterr().out
+    assert "placement: no member placed in this run" in out and "members, median" not in out, out
+    model.place("bay1/cross_frame")
+    model.place("bay1/vertical/x0_y0")
+    bench.report(run_dir, mission="one_bay")
+    assert "2 members, median 22.8 mm, worst 22.8 mm (bay1/vertical/x0_y0)" in capsys.readouterr().out
+
 
 def test_a_recording_without_ground_truth_says_so(bench, run_dir, capsys):
     assert bench.report(run_dir, mission="one_bay") == 0
