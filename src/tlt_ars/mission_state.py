@@ -7,7 +7,8 @@ a member counts as placed once this ARS placed it or the CRS reports it placed; 
 count is the lowest of this ARS's own count and the CRS's (parts are only ever taken).
 
 :meth:`MissionState.check_request` answers ``None`` for a request to carry out, or the reason to
-refuse it: unknown member, a member of another kind or bay, a request for another ARS, a bay not
+refuse it: unknown member, a member of another kind or bay, a request for another ARS or for a
+strut or foundation rivet the mission gives the other ARS, a bay not
 yet started (bay n starts when the CRS says its current bay is n, or when every member of bay n-1
 stands), a member already placed (or already affixed / riveted), a member to affix that is not
 placed yet. Nothing here talks to ROS.
@@ -44,6 +45,8 @@ class Request:
 
 
 _KIND_CODES = {"vertical": 1, "diagonal": 2}
+# The requests only the member's own ARS may carry out, and what each does to it.
+_OWN_WORK = {"add_member": "add", "affix_member": "affix", "foundation_rivet": "rivet"}
 
 
 class MissionState:
@@ -155,6 +158,11 @@ class MissionState:
             return f"member '{member.id}' is at '{member.position}', not '{req.position}'"
         if req.bay and member.kind != "foundation_rivet" and req.bay != member.bay:
             return f"member '{member.id}' belongs to bay {member.bay}, not bay {req.bay}"
+        # A strut's parts and rivets come from its ARS's own dispensers, within its own reach; a
+        # cross frame may go to either ARS (the CRS's writable cross_frame_ars).
+        owner = member.affix_ars if req.request == "affix_member" else member.add_ars
+        if req.request in _OWN_WORK and owner is not None and owner != self.ars:
+            return f"member '{member.id}' is for '{owner}' to {_OWN_WORK[req.request]}, not '{self.ars}'"
         with self._lock:
             if not self._bay_started(member.bay):
                 return f"bay {member.bay} has not started (bay {member.bay - 1} is not complete)"

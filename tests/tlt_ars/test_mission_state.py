@@ -34,7 +34,10 @@ def test_valid_requests_pass(state):
         (add("bay1/vertical/x0_y0", position="x1_y1"), "at 'x0_y0', not 'x1_y1'"),
         (add("bay1/vertical/x0_y0", bay=2), "belongs to bay 1, not bay 2"),
         (add("bay2/vertical/x0_y0", bay=2), "bay 2 has not started"),
-        (Request("affix_member", "bay1/vertical/x0_y1", "ars_x", bay=1), "not placed yet"),
+        (Request("affix_member", "bay1/vertical/x0_y0", "ars_x", bay=1), "not placed yet"),
+        (add("bay1/vertical/x1_y1"), "member 'bay1/vertical/x1_y1' is for 'ars_y' to add, not 'ars_x'"),
+        (Request("affix_member", "bay1/vertical/x0_y1", "ars_x", bay=1), "is for 'ars_y' to affix"),
+        (Request("foundation_rivet", "foundation/x1_y0", "ars_x"), "is for 'ars_y' to rivet, not 'ars_x'"),
         (Request("affix_member", "bay1/diagonal/face_x0", "ars_x", bay=1), "not placed yet"),
         (Request("foundation_rivet", "foundation/x0_y0", "ars_x"), "bay 2 has not started"),
     ],
@@ -69,7 +72,7 @@ def test_dispenser_counts_go_down_and_refuse_when_empty(state):
 def test_crs_progress_merges_and_only_ever_adds_knowledge(state):
     progress = MissionProgress(mission="two_bay", current_bay=2)
     progress.members = [
-        MemberState(member_id="bay1/vertical/x0_y1", kind=1, bay=1, state=MemberState.STATE_RIVETED)
+        MemberState(member_id="bay1/vertical/x0_y0", kind=1, bay=1, state=MemberState.STATE_RIVETED)
     ]
     progress.dispensers = [
         DispenserState(name="rivet_dispenser_x", part_kind="rivet", remaining=3),
@@ -77,8 +80,8 @@ def test_crs_progress_merges_and_only_ever_adds_knowledge(state):
     ]
     before = state.remaining["vertical_dispenser_x"]
     assert state.apply_progress(progress)
-    assert state.is_placed("bay1/vertical/x0_y1")
-    assert "already affixed" in state.check_request(Request("affix_member", "bay1/vertical/x0_y1", "ars_x"))
+    assert state.is_placed("bay1/vertical/x0_y0")
+    assert "already affixed" in state.check_request(Request("affix_member", "bay1/vertical/x0_y0", "ars_x"))
     assert state.bay_started(2)
     assert state.remaining["rivet_dispenser_x"] == 3
     assert state.remaining["vertical_dispenser_x"] == before  # a higher count never adds parts
