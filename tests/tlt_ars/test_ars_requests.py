@@ -515,6 +515,36 @@ def test_a_shot_in_doubt_is_fired_again_where_it_was_fired_and_the_member_never_
     assert (state.remaining["vertical_dispenser_x"], state.remaining["rivet_dispenser_x"]) == left
 
 
+def test_an_affix_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack):
+    """The same for AffixMember: the gun's output does not switch off after the affix rivet of bay
+    2's vertical x0_y0 fired, and the ARS is restarted; its state file says the gun was told to
+    fire, and from where. The CRS's retry does not load another rivet for a hole that may be
+    riveted: with the arm still there the gun fires again (empty), the member is recorded affixed,
+    and the arm retreats."""
+    member = "bay2/vertical/x0_y0"  # ARS X's near vertical, which it affixes itself
+    stack.tell(stack.ars.ctx.state.placed() | {member})  # placed, as far as the ARS is concerned
+    fields = strut(member, bay=2)
+    fired = len(stack.gpio.fired)
+    stack.gpio.failing_offs = 1
+    result = stack.result(stack.send("affix_member", None, **fields), timeout=180)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert "Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded
+
+    stack.restart_ars(unheard="")  # the CRS knows the member placed; only the affix went unheard
+    state, data = stack.ars.ctx.state, stack.ars.ctx.data
+    assert (data.setting, data.holding) == ("affixed", None)  # from the state file alone
+    rivets = state.remaining["rivet_dispenser_x"]
+    feedback = []
+    again = stack.result(stack.send("affix_member", feedback, **fields))
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
+    steps = [f.step for f in feedback]
+    assert {s.split("/")[0] for s in steps} == {"Finish Affix Member"}, steps
+    assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Load Rivet" in s for s in steps)
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
+    assert state.remaining["rivet_dispenser_x"] == rivets
+
+
 def test_stop_shuts_the_ars_down(stack):
     assert stack.ground_command(GroundCommand.Request.STOP).accepted
     stack.wait(stack.ars.finished.is_set, "the ARS shut down", timeout=10)
