@@ -8,10 +8,10 @@ count is the lowest of this ARS's own count and the CRS's (parts are only ever t
 
 :meth:`MissionState.check_request` answers ``None`` for a request to carry out, or the reason to
 refuse it: unknown member, a member of another kind or bay, a request for another ARS or for a
-strut or foundation rivet the mission gives the other ARS, a bay not
-yet started (bay n starts when the CRS says its current bay is n, or when every member of bay n-1
-stands), a member already placed (or already affixed / riveted), a member to affix that is not
-placed yet. Nothing here talks to ROS.
+strut or foundation rivet the mission gives the other ARS, a bay not yet started (bay n starts
+when the CRS says its current bay is n, or when every member of bay n-1 stands), a member already
+placed (or already affixed / riveted), a member to affix that is not placed yet. Nothing here
+talks to ROS.
 """
 
 from __future__ import annotations
