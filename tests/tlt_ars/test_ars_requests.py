@@ -443,6 +443,22 @@ def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
     assert np.allclose(ctx.arm_q(), q, atol=1e-3)
 
 
+def resend_after_restart(stack, unheard: str, kept: tuple[str, str | None], request: str, fields: dict):
+    """Restart the ARS (the CRS never heard ``unheard``'s result), check that its state file kept
+    ``kept`` (what the step left in doubt sets, the part held), and send ``request`` again: it
+    succeeds by its Finish branch alone. Returns the result and the steps its feedback named."""
+    stack.restart_ars(unheard=unheard)
+    data = stack.ars.ctx.data
+    assert (data.setting, data.holding) == kept  # from the state file alone
+    feedback = []
+    again = stack.result(stack.send(request, feedback, **fields))
+    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
+    steps = [f.step for f in feedback]
+    finish = "Finish " + " ".join(word.capitalize() for word in request.split("_"))
+    assert {s.split("/")[0] for s in steps} == {finish}, steps
+    return again, steps
+
+
 def test_a_cross_frame_let_go_of_in_doubt_is_looked_for_again_and_never_fetched_again(stack):
     """Bay 2's cross frame is let go of at its place, and the EE cameras then read it 2 cm off: the
     request fails with the frame in the tower, unrecorded. The ARS is then restarted (as if killed
@@ -464,17 +480,11 @@ def test_a_cross_frame_let_go_of_in_doubt_is_looked_for_again_and_never_fetched_
     assert "Let Go At Place/Placed?: misaligned: 2" in result.result.reason, result.result.reason
     assert stack.world.held is None and not state.is_placed(member)
     released_at = stack.world.part_pose.copy()
-
-    stack.restart_ars(unheard=member)
-    state, data = stack.ars.ctx.state, stack.ars.ctx.data
-    assert (data.setting, data.holding) == ("placed", None)  # from the state file alone
     left = state.remaining["cross_frame_dispenser"]
-    feedback = []
-    again = stack.result(stack.send("add_cross_frame", feedback, **fields))
-    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
-    steps = [f.step for f in feedback]
-    assert {s.split("/")[0] for s in steps} == {"Finish Add Cross Frame"}, steps
+
+    _, steps = resend_after_restart(stack, member, ("placed", None), "add_cross_frame", fields)
     assert any("/Let Go At Place/Verify Placement/" in s for s in steps)
+    state = stack.ars.ctx.state
     assert state.is_placed(member) and state.remaining["cross_frame_dispenser"] == left
     np.testing.assert_allclose(stack.world.part_pose, released_at)  # untouched since it was let go of
 
@@ -487,28 +497,23 @@ def test_a_shot_in_doubt_is_fired_again_where_it_was_fired_and_the_member_never_
     fetches another: with the arm still there, the gun fires again (empty), the member is recorded,
     let go of where it stands, and the arm retreats."""
     member = "bay2/vertical/x1_y0"
+    fields = strut(member, bay=2)
     state = stack.ars.ctx.state
     fired = len(stack.gpio.fired)
     stack.gpio.failing_offs = 1
-    result = stack.result(add_member(stack, member, VERTICAL), timeout=180)
+    result = stack.result(stack.send("add_member", None, **fields), timeout=180)
     assert result.status == GoalStatus.STATUS_ABORTED
     assert "Rivet Member/Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded  # riveted
     assert stack.world.held == "vertical_dispenser_x" and not state.is_placed(member)
     fired_from = stack.world.tool()
-
-    stack.restart_ars(unheard=member)
-    state, data = stack.ars.ctx.state, stack.ars.ctx.data
-    assert (data.setting, data.holding) == ("placed", "vertical")  # from the state file alone
     left = (state.remaining["vertical_dispenser_x"], state.remaining["rivet_dispenser_x"])
-    feedback = []
-    again = stack.result(add_member(stack, member, VERTICAL, feedback))
-    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
-    steps = [f.step for f in feedback]
-    assert {s.split("/")[0] for s in steps} == {"Finish Add Member"}, steps
+
+    again, steps = resend_after_restart(stack, member, ("placed", "vertical"), "add_member", fields)
     assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Discard" in s for s in steps)
     assert again.result.parts_discarded == 0
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
+    state = stack.ars.ctx.state
     assert state.is_placed(member) and stack.ars.ctx.data.holding is None
     assert stack.world.held is None  # let go of where it was riveted:
     assert np.linalg.norm(stack.world.part_pose[:3, 3] - fired_from[:3, 3]) < 0.005
@@ -530,19 +535,13 @@ def test_an_affix_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack)
     assert result.status == GoalStatus.STATUS_ABORTED
     assert "Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded
+    rivets = stack.ars.ctx.state.remaining["rivet_dispenser_x"]
 
-    stack.restart_ars(unheard="")  # the CRS knows the member placed; only the affix went unheard
-    state, data = stack.ars.ctx.state, stack.ars.ctx.data
-    assert (data.setting, data.holding) == ("affixed", None)  # from the state file alone
-    rivets = state.remaining["rivet_dispenser_x"]
-    feedback = []
-    again = stack.result(stack.send("affix_member", feedback, **fields))
-    assert again.status == GoalStatus.STATUS_SUCCEEDED, again.result.reason
-    steps = [f.step for f in feedback]
-    assert {s.split("/")[0] for s in steps} == {"Finish Affix Member"}, steps
+    # the CRS knows the member placed; only the affix went unheard
+    _, steps = resend_after_restart(stack, "", ("affixed", None), "affix_member", fields)
     assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Load Rivet" in s for s in steps)
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
-    assert state.remaining["rivet_dispenser_x"] == rivets
+    assert stack.ars.ctx.state.remaining["rivet_dispenser_x"] == rivets
 
 
 def test_stop_shuts_the_ars_down(stack):
