@@ -78,17 +78,17 @@ def test_failed_parts_are_discarded_and_counted(rig, crs, tmp_path):
 
 
 def test_a_part_left_held_is_counted_against_the_dispenser_it_came_from(rig, crs, tmp_path):
-    """ARS X still holds a vertical an earlier request took (its cross frame went to ARS Y after a
-    fault, say); it discards the vertical before it fetches the diagonal asked for: the vertical's
-    dispenser counts it, the diagonal's only the diagonal placed."""
+    """ARS X still holds a cross frame from a request that failed (the operator then gave the cross
+    frame to ARS Y through cross_frame_ars); it discards the frame before it fetches the diagonal
+    asked for: the frames' dispenser counts it, the diagonals' only the diagonal placed."""
     ctx = crs.make_context(rig, crs.fast_config(tmp_path))
     member = _member(ctx, "bay1/diagonal/face_x0")
     remaining = ctx.model.remaining
-    verticals, diagonals = remaining["vertical_dispenser_x"], remaining["diagonal_dispenser_x"]
-    rig.ars["ars_x"].held_from = "vertical_dispenser_x"
+    frames, diagonals = remaining["cross_frame_dispenser"], remaining["diagonal_dispenser_x"]
+    rig.ars["ars_x"].held_from = "cross_frame_dispenser"
     assert crs.tick_until(add_diagonal(ctx, member)) == Status.SUCCESS
-    assert remaining["vertical_dispenser_x"] == verticals - 1
-    assert ctx.model.discarded["vertical_dispenser_x"] == 1
+    assert remaining["cross_frame_dispenser"] == frames - 1
+    assert ctx.model.discarded["cross_frame_dispenser"] == 1
     assert remaining["diagonal_dispenser_x"] == diagonals - 1
     assert ctx.model.discarded["diagonal_dispenser_x"] == 0
 
