@@ -139,6 +139,14 @@ class MissionState:
 
     def check_request(self, req: Request) -> str | None:
         """``None`` when ``req`` may run, else why it is refused."""
+        refusal = self.mission_refusal(req)
+        if refusal is not None:
+            return refusal
+        return self._progress_refusal(req, self.mission.member(req.member_id))
+
+    def mission_refusal(self, req: Request) -> str | None:
+        """Why the mission alone refuses ``req`` (``None`` when it does not): the wrong ARS, member,
+        kind, position or bay. No MissionProgress can change this answer."""
         if req.ars and req.ars != self.ars:
             return f"request addressed to '{req.ars}', this is '{self.ars}'"
         member = self.member(req.member_id)
@@ -163,6 +171,10 @@ class MissionState:
         owner = member.affix_ars if req.request == "affix_member" else member.add_ars
         if req.request in _OWN_WORK and owner is not None and owner != self.ars:
             return f"member '{member.id}' is for '{owner}' to {_OWN_WORK[req.request]}, not '{self.ars}'"
+        return None
+
+    def _progress_refusal(self, req: Request, member: Member) -> str | None:
+        """Why the tower's progress refuses ``req`` for ``member`` (``None`` when it does not)."""
         with self._lock:
             if not self._bay_started(member.bay):
                 return f"bay {member.bay} has not started (bay {member.bay - 1} is not complete)"

@@ -249,10 +249,11 @@ class ArsNode(LeanNode):
 
     def _accepted(self, kind: str, handle: Any) -> None:
         request = request_of(kind, handle.request)
-        if self.ctx.check_request(request) is not None:
+        if self.ctx.check_request(request) is not None and self.ctx.state.mission_refusal(request) is None:
             # The CRS sends a request right after the model change that allows it (an affix after
             # the placement), and the MissionProgress carrying that change travels on its own
-            # topic: the mission check is made on a progress message newer than the goal.
+            # topic: the mission check is made on a progress message newer than the goal. What the
+            # mission alone refuses no progress changes, and is refused at once.
             self._await_progress(FRESH_PROGRESS_WAIT_S)
         started = False
         with self._lock:

@@ -25,25 +25,29 @@ def test_valid_requests_pass(state):
 
 
 @pytest.mark.parametrize(
-    ("request_", "reason"),
+    ("request_", "reason", "from_mission"),
     [
-        (add("bay1/vertical/nope"), "unknown member 'bay1/vertical/nope' in mission 'two_bay'"),
-        (add("bay1/vertical/x0_y0", ars="ars_y"), "addressed to 'ars_y', this is 'ars_x'"),
-        (add("bay1/cross_frame"), "is a cross_frame"),
-        (add("bay1/vertical/x0_y0", kind=2), "the request says kind 2"),
-        (add("bay1/vertical/x0_y0", position="x1_y1"), "at 'x0_y0', not 'x1_y1'"),
-        (add("bay1/vertical/x0_y0", bay=2), "belongs to bay 1, not bay 2"),
-        (add("bay2/vertical/x0_y0", bay=2), "bay 2 has not started"),
-        (Request("affix_member", "bay1/vertical/x0_y0", "ars_x", bay=1), "not placed yet"),
-        (add("bay1/vertical/x1_y1"), "member 'bay1/vertical/x1_y1' is for 'ars_y' to add, not 'ars_x'"),
-        (Request("affix_member", "bay1/vertical/x0_y1", "ars_x", bay=1), "is for 'ars_y' to affix"),
-        (Request("foundation_rivet", "foundation/x1_y0", "ars_x"), "is for 'ars_y' to rivet, not 'ars_x'"),
-        (Request("affix_member", "bay1/diagonal/face_x0", "ars_x", bay=1), "not placed yet"),
-        (Request("foundation_rivet", "foundation/x0_y0", "ars_x"), "bay 2 has not started"),
+        (add("bay1/vertical/nope"), "unknown member 'bay1/vertical/nope' in mission 'two_bay'", True),
+        (add("bay1/vertical/x0_y0", ars="ars_y"), "addressed to 'ars_y', this is 'ars_x'", True),
+        (add("bay1/cross_frame"), "is a cross_frame", True),
+        (add("bay1/vertical/x0_y0", kind=2), "the request says kind 2", True),
+        (add("bay1/vertical/x0_y0", position="x1_y1"), "at 'x0_y0', not 'x1_y1'", True),
+        (add("bay1/vertical/x0_y0", bay=2), "belongs to bay 1, not bay 2", True),
+        (add("bay2/vertical/x0_y0", bay=2), "bay 2 has not started", False),
+        (Request("affix_member", "bay1/vertical/x0_y0", "ars_x", bay=1), "not placed yet", False),
+        (add("bay1/vertical/x1_y1"), "member 'bay1/vertical/x1_y1' is for 'ars_y' to add, not 'ars_x'", True),
+        (Request("affix_member", "bay1/vertical/x0_y1", "ars_x", bay=1), "is for 'ars_y' to affix", True),
+        (Request("foundation_rivet", "foundation/x1_y0", "ars_x"), "is for 'ars_y' to rivet", True),
+        (Request("affix_member", "bay1/diagonal/face_x0", "ars_x", bay=1), "not placed yet", False),
+        (Request("foundation_rivet", "foundation/x0_y0", "ars_x"), "bay 2 has not started", False),
     ],
 )
-def test_bad_requests_say_why(state, request_, reason):
+def test_bad_requests_say_why(state, request_, reason, from_mission):
     assert reason in state.check_request(request_)
+    # The node refuses what the mission alone refuses at once, and waits for fresher progress
+    # before refusing the rest.
+    refusal = state.mission_refusal(request_)
+    assert (refusal is not None and reason in refusal) if from_mission else refusal is None
 
 
 def test_placed_members_cannot_be_added_again_and_bays_start_when_the_one_above_stands(state):
