@@ -544,6 +544,28 @@ def test_an_affix_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack)
     assert stack.ars.ctx.state.remaining["rivet_dispenser_x"] == rivets
 
 
+def test_a_foundation_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack):
+    """The same for Foundation Rivet: both bays stand, the gun's output does not switch off after
+    the rivet of foundation joint x0_y1 fired, and the ARS is restarted. The retry fires again
+    (empty) from where it fired, loads no rivet, and records the joint riveted."""
+    joint = "foundation/x0_y1"  # x0_y0 was riveted by its subtree above
+    stack.tell({m.id for bay in (1, 2) for m in stack.mission.bay_members(bay)})  # the tower stands
+    fields = dict(joint_id=joint, ars="ars_x")
+    fired = len(stack.gpio.fired)
+    stack.gpio.failing_offs = 1
+    result = stack.result(stack.send("foundation_rivet", None, **fields), timeout=180)
+    assert result.status == GoalStatus.STATUS_ABORTED
+    assert "Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded
+    rivets = stack.ars.ctx.state.remaining["rivet_dispenser_x"]
+
+    _, steps = resend_after_restart(stack, "", ("riveted", None), "foundation_rivet", fields)
+    assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Load Rivet" in s for s in steps)
+    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
+    assert stack.ars.ctx.state.remaining["rivet_dispenser_x"] == rivets
+    assert stack.ars.ctx.state.is_riveted(joint)
+
+
 def test_stop_shuts_the_ars_down(stack):
     assert stack.ground_command(GroundCommand.Request.STOP).accepted
     stack.wait(stack.ars.finished.is_set, "the ARS shut down", timeout=10)
