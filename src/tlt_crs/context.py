@@ -153,6 +153,20 @@ class CrsContext:
         }
         for topic, msg_type in self._hardware_topics.values():
             self.cache.watch(topic, msg_type)
+        from sensor_msgs.msg import JointState
+        from tlt_interfaces.msg import EndEffectorState, HardwareStatus
+
+        # Each ARS's end effector and arm, which the ARS cannot work without: read for Start only
+        # (the ARS itself waits on them mid-build), and by the ground bridge for housekeeping.
+        self._ars_hardware_topics = {}
+        for ars in ros_names.ARS_AGENTS:
+            ee, ur = ros_names.ee(ars), ros_names.ur(ars)
+            self._ars_hardware_topics[ee] = (ros_names.state_topic(ee), EndEffectorState)
+            self._ars_hardware_topics[ur] = (ros_names.joint_states_topic(ur), JointState)
+            self.cache.watch(ros_names.hardware_status_topic(ur), HardwareStatus)
+        for topic, msg_type in self._ars_hardware_topics.values():
+            self.cache.watch(topic, msg_type)
+        self._arm_active = HardwareStatus.LIFECYCLE_ACTIVE
         self._servers = self._build_server_checks()
 
     def device_topics(self) -> list[str]:
@@ -188,9 +202,35 @@ class CrsContext:
 
     def not_ready(self) -> str:
         """Why a build cannot start now ('' when it can): a CRS driver whose state is missing or
-        older than ``timeouts.sensor_max_age_s``, a lifter whose link is down, or an ARS or vision
-        server not up yet. Start is refused while this says anything."""
-        return "; ".join(filter(None, (self.hardware_not_ready(), self._servers_not_up())))
+        older than ``timeouts.sensor_max_age_s``, a lifter whose link is down, an ARS's end
+        effector or arm not ready (:meth:`ars_hardware_not_ready`), or an ARS or vision server not
+        up yet. Start is refused while this says anything."""
+        return "; ".join(filter(None, (self.hardware_not_ready(), self.ars_hardware_not_ready(),
+                                       self._servers_not_up())))
+
+    def ars_hardware_not_ready(self) -> str:
+        """Why an ARS's end effector or arm cannot be trusted to build now ('' when they can): a
+        state missing or older than ``timeouts.sensor_max_age_s``, an end effector not calibrated
+        yet (its driver refuses every motion until the width joint is zeroed on its limit switch)
+        or faulted, an arm whose driver says it is not active."""
+        troubles = []
+        for name, (topic, _) in self._ars_hardware_topics.items():
+            why = self._state_trouble(topic)
+            if not why and name.startswith("ee_"):
+                state = self.cache.latest(topic)[0]
+                if state.fault:
+                    why = f"fault ({state.fault_reason or 'no reason'})"
+                elif not state.calibrated:
+                    why = "width joint not calibrated yet"
+            if not why and name.startswith("ur_"):
+                # Sent on change only: a status never heard says nothing, the joint states do.
+                entry = self.cache.latest(ros_names.hardware_status_topic(name))
+                if entry is not None and entry[0].lifecycle_state != self._arm_active:
+                    status = entry[0]
+                    why = f"arm not active ({status.fault or f'lifecycle state {status.lifecycle_state}'})"
+            if why:
+                troubles.append(f"{name}: {why}")
+        return "; ".join(troubles)
 
     def _servers_not_up(self) -> str:
         down = [what for what, is_up in self._servers if not is_up()]
@@ -213,13 +253,18 @@ class CrsContext:
         """Why driver ``name``'s state cannot be trusted now ('' when it can): none yet, one older
         than ``timeouts.sensor_max_age_s``, or (the lifter) the driver reporting its link down."""
         topic = self._hardware_topics[name][0]
-        age, entry = self.cache.age(topic), self.cache.latest(topic)
-        if age is None or entry is None:
+        why = self._state_trouble(topic)
+        if not why and name == ros_names.LIFTER and not self.cache.latest(topic)[0].link_ok:
+            return f"link down ({self.cache.latest(topic)[0].fault or 'no reason'})"
+        return why
+
+    def _state_trouble(self, topic: str) -> str:
+        """'has no state yet' or 'state ... s old' for a state topic not fresh, else ''."""
+        age = self.cache.age(topic)
+        if age is None:
             return "has no state yet"
         if age > self.config.timeouts.sensor_max_age_s:
             return f"state {age:.1f} s old"
-        if name == ros_names.LIFTER and not entry[0].link_ok:
-            return f"link down ({entry[0].fault or 'no reason'})"
         return ""
 
     # ----- blackboard -----

@@ -33,7 +33,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from tlt_common import ros_names
 from tlt_common.bt.status_codec import encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
-from tlt_common.direct_executor import QuickCallbackGroup
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
 from tlt_common.periodic_timer import create_periodic_timer
@@ -72,8 +71,6 @@ class GroundBridge:
             link.send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
         except Exception as exc:
             _log.warning("CRS_UP not sent to the ground: %s", exc)
-        self._own: dict[str, Any] = {}  # topic -> latest message, of the topics subscribed here
-        self._cached: set[str] = set()  # topics read from the CRS's topic cache
         self._watch_devices()
         # Telemetry has its own group: in the node's default one it waited behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status never went out.
@@ -125,32 +122,12 @@ class GroundBridge:
         self.node.commands.submit(command.name, command.params, on_ack)
 
     def _watch_devices(self) -> None:
-        """Keep the latest state of every mechanism the housekeeping packets report. The lifter's
-        and the grippers' states come from the CRS's topic cache, which the tree reads too: one
-        subscription per topic in the process (each message wakes the CRS's executor)."""
-        from sensor_msgs.msg import JointState
-        from tlt_interfaces.msg import EndEffectorState, GripperState, HardwareStatus, LifterState, TreeStatus
+        """Forward the ARSs' encoded tree statuses to the ground as they come, part by part. The
+        devices' states the housekeeping packets report come from the CRS's topic cache, which the
+        tree and the Start check read too: one subscription per topic in the process (each message
+        wakes the CRS's executor)."""
+        from tlt_interfaces.msg import TreeStatus
 
-        cache = self.node.ctx.cache
-        for msg_type, topic in (
-            (LifterState, ros_names.state_topic(ros_names.LIFTER)),
-            (GripperState, ros_names.state_topic(ros_names.TOP_GRIPPERS)),
-            (GripperState, ros_names.state_topic(ros_names.ACTIVE_GRIPPERS)),
-        ):
-            cache.watch(topic, msg_type)
-            self._cached.add(topic)
-        stores = QuickCallbackGroup()
-        for ars in ros_names.ARS_AGENTS:
-            for msg_type, topic in (
-                (EndEffectorState, ros_names.state_topic(ros_names.ee(ars))),
-                (JointState, ros_names.joint_states_topic(ros_names.ur(ars))),
-                (HardwareStatus, ros_names.hardware_status_topic(ros_names.ur(ars))),
-            ):
-                self.node.create_subscription(
-                    msg_type, topic, lambda m, t=topic: self._own.__setitem__(t, m), 10,
-                    callback_group=stores,
-                )
-        # The ARSs' encoded tree statuses go to the ground as they come, part by part.
         for ars in ros_names.ARS_AGENTS:
             self.node.create_subscription(
                 TreeStatus, ros_names.tree_status_topic(ars), self.forward_tree_status, 10
@@ -158,10 +135,8 @@ class GroundBridge:
 
     def _latest(self, topic: str) -> Any:
         """The newest message on a device topic, or None before the first."""
-        if topic in self._cached:
-            entry = self.node.ctx.cache.latest(topic)
-            return None if entry is None else entry[0]
-        return self._own.get(topic)
+        entry = self.node.ctx.cache.latest(topic)
+        return None if entry is None else entry[0]
 
     def _send(self, kind: str, values: dict[str, Any]) -> None:
         try:

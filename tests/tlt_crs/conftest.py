@@ -1,10 +1,10 @@
 """Stand-ins for what the CRS talks to, on real ROS interfaces, and helpers to tick CRS subtrees.
 
 * ``ArsStandIn``: action servers of one ARS (add_cross_frame, add_member, affix_member,
-  foundation_rivet) and its GroundCommand service. It records every request it gets, presents
-  parts to ``/crs/inspect_part`` as the ARS of §V.C.3 does (fetching another part after a failed
-  inspection), and can be told to fail, to be slow, or to honour Pause. These are what the ARS
-  issue replaces.
+  foundation_rivet), its GroundCommand service, and its end effector's and arm's states. It
+  records every request it gets, presents parts to ``/crs/inspect_part`` as the ARS of §V.C.3
+  does (fetching another part after a failed inspection), and can be told to fail, to be slow, or
+  to honour Pause. These are what the ARS issue replaces.
 * ``VisionStandIn``: ``/vision/inspect_part`` and ``/vision/inspect_bay`` with scripted verdicts.
 * ``LifterStandIn``, ``GripperStandIn``, ``CameraStandIn``: small stand-ins for the driver nodes'
   topics, services and trajectory actions (``LifterState`` with encoder positions and the
@@ -83,7 +83,9 @@ class ArsStandIn:
     """One ARS's action servers and GroundCommand service (see module docstring)."""
 
     def __init__(self, node: Node, ars: str, recorder: Recorder, group: ReentrantCallbackGroup) -> None:
+        from sensor_msgs.msg import JointState
         from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
+        from tlt_interfaces.msg import EndEffectorState
         from tlt_interfaces.srv import GroundCommand, InspectPart
 
         self.node, self.ars, self.recorder = node, ars, recorder
@@ -122,6 +124,21 @@ class ArsStandIn:
         self.service = node.create_service(
             GroundCommand, ros_names.ground_command_service(ars), self._on_command, callback_group=group
         )
+        self.ee_calibrated = True  # what its end effector's driver says of the width joint
+        self._ee_pub = node.create_publisher(EndEffectorState, ros_names.state_topic(ros_names.ee(ars)), 10)
+        self._arm_pub = node.create_publisher(JointState, ros_names.joint_states_topic(ros_names.ur(ars)), 10)
+        self._hardware_timer = node.create_timer(0.1, self._publish_hardware, callback_group=group)
+
+    def _publish_hardware(self) -> None:
+        """The states of the ARS's end effector and arm drivers, which the CRS's Start checks."""
+        ee, ur = ros_names.ee(self.ars), ros_names.ur(self.ars)
+        self._ee_pub.publish(self._ee_pub.msg_type(
+            ars=self.ars, joint_names=[f"{ee}_grasp_left", f"{ee}_grasp_right", f"{ee}_width"],
+            position=[0.0, 0.0, 0.1], velocity=[0.0] * 3, effort=[0.0] * 3, calibrated=self.ee_calibrated,
+        ))
+        joints = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
+        names = [f"{ur}_{j}_joint" for j in joints]
+        self._arm_pub.publish(self._arm_pub.msg_type(name=names, position=[0.0] * 6))
 
     def _on_command(self, request: Any, response: Any) -> Any:
         self.commands.append(request.command)
@@ -193,6 +210,7 @@ class ArsStandIn:
         for server in self.servers:
             server.destroy()
         self.node.destroy_service(self.service)
+        self.node.destroy_timer(self._hardware_timer)
 
 
 # The lifter ZED each ARS presents its parts to (config/ars/ars_*.yaml cameras.inspection).

@@ -96,6 +96,34 @@ def test_start_is_refused_while_a_driver_is_silent_and_taken_once_it_reports(rig
     assert final[0] == AckStage.COMPLETED, final[1]
 
 
+def test_start_is_refused_until_each_ars_has_a_calibrated_end_effector_and_an_active_arm(rig, crs, crs_node):
+    """An ARS's end effector refuses every motion until its width joint is zeroed on the limit
+    switch, and an arm in protective stop moves nothing: the operator is told at Start, not by a
+    request failing mid-bay."""
+    from tlt_interfaces.msg import HardwareStatus
+
+    rig.ars["ars_y"].ee_calibrated = False
+    crs.wait_for(lambda: "ee_y" in crs_node.ctx.not_ready(), what="ee_y reported uncalibrated")
+    refused = _submit(crs_node, crs, "start")
+    assert refused.rejected and "ee_y: width joint not calibrated yet" in refused.stages[0][1]
+    rig.ars["ars_y"].ee_calibrated = True
+    crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="ee_y calibrated")
+
+    status = rig.node.create_publisher(HardwareStatus, ros_names.hardware_status_topic("ur_x"), 10)
+
+    def arm(lifecycle: int, fault: str) -> None:
+        status.publish(HardwareStatus(component="ur_x", lifecycle_state=lifecycle, fault=fault))
+
+    crs.wait_for(lambda: arm(HardwareStatus.LIFECYCLE_ERROR, "protective stop")
+                 or "ur_x" in crs_node.ctx.not_ready(), what="ur_x reported in error")
+    refused = _submit(crs_node, crs, "start")
+    assert refused.rejected and "ur_x: arm not active (protective stop)" in refused.stages[0][1]
+    assert not crs_node.ctx.started and rig.recorder.requests == []
+    crs.wait_for(lambda: arm(HardwareStatus.LIFECYCLE_ACTIVE, "")
+                 or not crs_node.ctx.not_ready(), what="ur_x active")
+    assert _start(crs_node, crs).final[0] == AckStage.COMPLETED
+
+
 def test_pause_holds_the_build_and_resume_continues_where_it_paused(rig, crs, crs_node):
     rig.ars["ars_x"].hold_s = 0.3
     rig.lifter.trajectories.time_scale = 0.02  # 75 s raise at 1 cm/s -> 1.5 s
