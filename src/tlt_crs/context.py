@@ -223,7 +223,7 @@ class CrsContext:
                 elif not state.calibrated:
                     why = "width joint not calibrated yet"
             if not why and name.startswith("ur_"):
-                # Sent on change only: a status never heard says nothing, the joint states do.
+                # Twice a second, against 50 Hz joint states: those say whether the driver is up.
                 entry = self.cache.latest(ros_names.hardware_status_topic(name))
                 if entry is not None and entry[0].lifecycle_state != self._arm_active:
                     status = entry[0]
