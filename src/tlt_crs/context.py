@@ -254,8 +254,10 @@ class CrsContext:
         than ``timeouts.sensor_max_age_s``, or (the lifter) the driver reporting its link down."""
         topic = self._hardware_topics[name][0]
         why = self._state_trouble(topic)
-        if not why and name == ros_names.LIFTER and not self.cache.latest(topic)[0].link_ok:
-            return f"link down ({self.cache.latest(topic)[0].fault or 'no reason'})"
+        if not why and name == ros_names.LIFTER:
+            state = self.cache.latest(topic)[0]
+            if not state.link_ok:
+                return f"link down ({state.fault or 'no reason'})"
         return why
 
     def _state_trouble(self, topic: str) -> str:

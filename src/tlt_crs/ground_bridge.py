@@ -71,7 +71,7 @@ class GroundBridge:
             link.send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
         except Exception as exc:
             _log.warning("CRS_UP not sent to the ground: %s", exc)
-        self._watch_devices()
+        self._forward_ars_tree_statuses()
         # Telemetry has its own group: in the node's default one it waited behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status never went out.
         telemetry = MutuallyExclusiveCallbackGroup()
@@ -121,7 +121,7 @@ class GroundBridge:
 
         self.node.commands.submit(command.name, command.params, on_ack)
 
-    def _watch_devices(self) -> None:
+    def _forward_ars_tree_statuses(self) -> None:
         """Forward the ARSs' encoded tree statuses to the ground as they come, part by part. The
         devices' states the housekeeping packets report come from the CRS's topic cache, which the
         tree and the Start check read too: one subscription per topic in the process (each message
