@@ -43,13 +43,14 @@ import numpy as np
 import torch
 
 from tlt_common.mission.schema import load_mission
+from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.certificate import visible_groups
 from tlt_vision.pose.errors import add_s, rotation_error_deg
-from tlt_vision.segmentation.depth_split import split_by_depth
+from tlt_vision.segmentation.depth_split import radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.train.dataset import ImageSet, instance_model
@@ -173,6 +174,7 @@ def main() -> int:
     frame_pipeline = PartPipeline({cls: estimators[instance_model(cls, "")] for cls in POSED}, **opts)
     min_score = config.raw["segmentation"]["min_score"]
     depth_split = config.depth_split
+    radii = radii_by_label(classes, thin_part_radii())
 
     with tempfile.TemporaryDirectory(prefix="tlt_bench_vision_") as tmp:
         root = args.images
@@ -194,7 +196,7 @@ def main() -> int:
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
             pred = rgb_only if depth_split is None else split_by_depth(
-                rgb_only, s.depth, model.cfg.semantic_labels, depth_split, s.intrinsics)
+                rgb_only, s.depth, model.cfg.semantic_labels, depth_split, s.intrinsics, radii)
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work.

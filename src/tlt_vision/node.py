@@ -61,6 +61,7 @@ from tlt_common.stamps import set_stamp
 from tlt_common.stop_signals import stop_on_signals
 from tlt_vision import inspection
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
+from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
@@ -126,7 +127,7 @@ class VisionNode(LeanNode):
             from tlt_vision.node_config import repo_path
 
             self.segmenter: Any = MaskRcnnSegmenter(
-                repo_path(seg["weights"]), self.config.score_floor, self.config.depth_split
+                repo_path(seg["weights"]), self.config.score_floor, self.config.depth_split, thin_part_radii()
             )
         else:
             self.segmenter = TwinLabels(lambda: self.labels.wait(0.0))

@@ -47,6 +47,10 @@ def _vec(n: int) -> Field:
     )
 
 
+def _band(v: list[float]) -> str | None:
+    return None if len(v) == 2 and v[0] < v[1] else "expected [low, high] with low < high"
+
+
 _POSE = Field("dict", schema={"position": _vec(3), "rpy": _vec(3)})
 _POSITIVE = {"minimum": 1e-6}
 
@@ -80,6 +84,12 @@ SCHEMA = {
                     "join_angle_deg": opt("float", 5.0, minimum=0.0, maximum=90.0),
                     "join_offset": opt("float", 0.015, minimum=0.0),
                     "join_gap": opt("float", 0.3, minimum=0.0),
+                    "width_band": opt(
+                        "list", None, item=Field("float", minimum=0.0),
+                        check=_band,
+                        doc="a piece's mean image width over its part's, outside which it is scored down",
+                    ),
+                    "width_penalty": opt("float", 0.3, minimum=0.0, maximum=1.0),
                 },
             ),
         },
@@ -295,7 +305,10 @@ class VisionConfig:
     def depth_split(self) -> DepthSplit | None:
         """How Mask R-CNN's thin-part regions are cut where the depth jumps; None: not cut."""
         raw = self.raw["segmentation"]["depth_split"]
-        return DepthSplit(**raw) if raw else None
+        if not raw:
+            return None
+        band = raw["width_band"]
+        return DepthSplit(**{**raw, "width_band": tuple(band) if band else None})
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

@@ -9,8 +9,9 @@
   the weights' manifest records (``segmentation.inference``). Weights that are missing or do not
   fit the model are refused when it is built (:class:`~tlt_vision.weights.WeightsError` names the
   path and the tensor shape expected). Given a :class:`~tlt_vision.segmentation.depth_split.DepthSplit`,
-  its thin-part regions are cut where the frame's depth jumps and pieces of one straight part
-  joined again (node.yaml ``segmentation.depth_split``).
+  its thin-part regions are cut where the frame's depth jumps, pieces of one straight part
+  joined again, and, given the parts' radii, pieces not as wide as their part scored down
+  (node.yaml ``segmentation.depth_split``).
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
 labels received, no image). Mask R-CNN also answers ``detect_in(frame, region, scale)``: the
@@ -20,7 +21,7 @@ place, :mod:`tlt_vision.part_inspection`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ import numpy as np
 from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
-from tlt_vision.segmentation.depth_split import DepthSplit, split_by_depth
+from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
 
 MASK_RCNN_KIND = "mask_rcnn"
 
@@ -70,7 +71,8 @@ class TwinLabels:
 class MaskRcnnSegmenter:
     streams = ("rgb",)
 
-    def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None) -> None:
+    def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
+                 radii: Mapping[str, float] | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
         # The configuration and the image size come from the weights' manifest, as trained.
@@ -79,6 +81,7 @@ class MaskRcnnSegmenter:
         self.max_size: int | None = manifest["settings"].get("max_size")
         self.min_score = min_score
         self.depth_split = depth_split
+        self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -89,7 +92,7 @@ class MaskRcnnSegmenter:
         result = detect_rgb(self.model, rgb, self.max_size)
         if self.depth_split is not None:
             result = split_by_depth(result, frame.get("depth"), self.cfg.semantic_labels, self.depth_split,
-                                    frame.camera_matrix)
+                                    frame.camera_matrix, self.radii)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
     def detect_in(

@@ -523,6 +523,11 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "segmentation.depth_split.jump" in err and "-0.02" in err
+    wrong["segmentation"]["depth_split"].update(jump=0.02, width_band=[1.3, 0.6])
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.depth_split.width_band" in err and "low < high" in err
     wrong = vision_config()
     wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
     path.write_text(__import__("yaml").safe_dump(wrong))

@@ -134,6 +134,13 @@ def load_parts(path: str | Path = PARTS_FILE) -> dict[str, Any]:
     return data
 
 
+def thin_part_radii(parts: dict[str, Any] | None = None) -> dict[str, float]:
+    """The radius of each thin class Mask R-CNN's semantic head segments (a strut's tube, a cross
+    frame's sides), m: what their regions' widths are checked against."""
+    parts = parts if parts is not None else load_parts()
+    return {"strut_tube": parts["tube_radius"], "cross_frame": parts["cross_frame_tube_radius"]}
+
+
 def load_keypoints(path: str | Path = KEYPOINTS_FILE) -> dict[str, dict[str, Any]]:
     """The validated keypoint annotations; every group member must name a keypoint of its class."""
     data = load_validated(path, KEYPOINTS_SCHEMA)["classes"]

@@ -3,7 +3,14 @@ import pytest
 import torch
 
 from tlt_vision.ops.boxes import boxes_from_masks
-from tlt_vision.segmentation.depth_split import DepthSplit, depth_pieces, join_collinear, split_by_depth
+from tlt_vision.pointcloud import Intrinsics, back_project
+from tlt_vision.segmentation.depth_split import (
+    DepthSplit,
+    depth_pieces,
+    join_collinear,
+    split_by_depth,
+    width_ratio,
+)
 
 SPLIT = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40)
 TUBE, FITTING = 1, 2
@@ -121,10 +128,58 @@ def test_pieces_of_one_straight_part_are_joined_and_others_not():
     far = np.zeros_like(left)
     far[3:6, 2:37] = True
     depth[3:6, 2:37] = 1.5
-    masks, scores = join_collinear([left, right, beside, far], [0.8, 0.5, 0.9, 0.7], depth, K, SPLIT)
+    masks, scores, _ = join_collinear([left, right, beside, far], [0.8, 0.5, 0.9, 0.7], depth, K, SPLIT)
     assert len(masks) == 3
     assert np.array_equal(masks[0], left | right) and scores[0] == pytest.approx((0.8 * 39 + 0.5 * 48) / 87)
     assert np.array_equal(masks[1], beside) and np.array_equal(masks[2], far)
     result = _result([left, right, beside], [TUBE, TUBE, TUBE], [0.8, 0.5, 0.9])
     assert len(split_by_depth(result, depth, (TUBE,), SPLIT)["masks"]) == 3  # no camera matrix: no join
     assert len(split_by_depth(result, depth, (TUBE,), SPLIT, K)["masks"]) == 2
+
+
+def _band_at(angle_deg: float, width_px: float, shape=(120, 160)) -> np.ndarray:
+    """A straight band ``width_px`` wide, 100 px long, through the image's centre at ``angle_deg``."""
+    ys, xs = np.mgrid[: shape[0], : shape[1]].astype(float)
+    ys, xs = ys - shape[0] / 2, xs - shape[1] / 2
+    a = np.radians(angle_deg)
+    along, across = xs * np.cos(a) + ys * np.sin(a), -xs * np.sin(a) + ys * np.cos(a)
+    return (np.abs(along) < 50) & (np.abs(across) < width_px / 2)
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 90.0])
+def test_a_tube_is_as_wide_in_the_image_as_its_radius_at_its_depth(angle):
+    """12.5 mm radius at 1 m with fx 500: 12.5 px wide, whichever way it lies in the image."""
+    k = np.array([[500.0, 0.0, 80.0], [0.0, 500.0, 60.0], [0.0, 0.0, 1.0]])
+    depth = np.full((120, 160), 1.0)
+
+    def ratio(width_px: float, z: np.ndarray) -> float | None:
+        ys, xs = np.nonzero(_band_at(angle, width_px))
+        return width_ratio(back_project(xs, ys, z[ys, xs], Intrinsics.from_matrix(k)), k, 0.0125)
+
+    assert ratio(12.5, depth) == pytest.approx(1.0, abs=0.08)
+    assert ratio(12.5, depth * 2) == pytest.approx(2.0, abs=0.16)  # as far, twice too wide
+    assert ratio(40.0, depth) == pytest.approx(3.2, abs=0.3)
+    assert width_ratio(np.ones((5, 3)), k, 0.0125) is None
+
+
+def test_pieces_not_as_wide_as_their_part_are_scored_down():
+    """One region of two tube pieces at 1 m: the one as wide as a tube (12 px) keeps its score, the
+    one three times as wide (a panel of the machine) is scored width_penalty times lower. Without
+    the parts' radii, or without a band, nothing is checked."""
+    k = np.array([[500.0, 0.0, 80.0], [0.0, 500.0, 60.0], [0.0, 0.0, 1.0]])
+    depth = np.full((120, 160), 1.0)
+    tube, panel = np.zeros(depth.shape, dtype=bool), np.zeros(depth.shape, dtype=bool)
+    tube[20:32, 10:110] = True
+    panel[50:90, 30:130] = True
+    split = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40,
+                       width_band=(0.6, 1.3), width_penalty=0.3)
+    result = _result([tube | panel], [TUBE], [0.8])
+
+    def scores(*args):
+        out = split_by_depth(result, depth, (TUBE,), *args)
+        pairs = zip(out["scores"], out["masks"], strict=True)
+        return sorted((round(float(s), 3), int(m.sum())) for s, m in pairs)
+
+    assert scores(split, k, {TUBE: 0.0125}) == [(0.24, 4000), (0.8, 1200)]
+    assert [s for s, _ in scores(split, k)] == [0.8, 0.8]
+    assert [s for s, _ in scores(SPLIT, k, {TUBE: 0.0125})] == [0.8, 0.8]

@@ -17,9 +17,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.node_config import load_config
-from tlt_vision.segmentation.depth_split import depth_pieces, join_collinear, split_by_depth
+from tlt_vision.segmentation.depth_split import depth_pieces, join_collinear, radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
@@ -50,6 +51,7 @@ def results(held_out) -> dict[str, dict]:
     assert held_out.classes == list(model.cfg.classes)
     split = load_config().depth_split
     assert split is not None, "config/vision/node.yaml has no segmentation.depth_split"
+    radii = radii_by_label(model.cfg.classes, thin_part_radii())
     ap = {"rgb": MaskAP(len(held_out.classes)), "cut": MaskAP(len(held_out.classes))}
     for i in range(len(held_out)):
         sample = held_out[i]
@@ -59,7 +61,7 @@ def results(held_out) -> dict[str, dict]:
         }
         found = detect_rgb(model, sample.rgb, manifest["settings"]["max_size"])
         ap["rgb"].add(found, truth)
-        cut = split_by_depth(found, sample.depth, model.cfg.semantic_labels, split, sample.intrinsics)
+        cut = split_by_depth(found, sample.depth, model.cfg.semantic_labels, split, sample.intrinsics, radii)
         ap["cut"].add(cut, truth)
     out = {kind: acc.result() for kind, acc in ap.items()}
     print(f"{WEIGHTS.name}: mask AP50 on {len(held_out)} fresh images: {out}")
@@ -103,7 +105,7 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
     as the head drew them, some holding two parts or more."""
     config = load_config()
     split = config.depth_split
-    seg = MaskRcnnSegmenter(WEIGHTS, config.score_floor, split)
+    seg = MaskRcnnSegmenter(WEIGHTS, config.score_floor, split, thin_part_radii())
     thin = ("strut_tube", "cross_frame")
     merged = 0
     for i in range(6):
