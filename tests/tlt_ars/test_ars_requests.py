@@ -520,50 +520,40 @@ def test_a_shot_in_doubt_is_fired_again_where_it_was_fired_and_the_member_never_
     assert (state.remaining["vertical_dispenser_x"], state.remaining["rivet_dispenser_x"]) == left
 
 
-def test_an_affix_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack):
-    """The same for AffixMember: the gun's output does not switch off after the affix rivet of bay
-    2's vertical x0_y0 fired, and the ARS is restarted; its state file says the gun was told to
-    fire, and from where. The CRS's retry does not load another rivet for a hole that may be
-    riveted: with the arm still there the gun fires again (empty), the member is recorded affixed,
-    and the arm retreats."""
-    member = "bay2/vertical/x0_y0"  # ARS X's near vertical, which it affixes itself
-    stack.tell(stack.ars.ctx.state.placed() | {member})  # placed, as far as the ARS is concerned
-    fields = strut(member, bay=2)
+@pytest.mark.parametrize(
+    ("request_", "member", "record"),
+    [
+        ("affix_member", "bay2/vertical/x0_y0", "affixed"),  # ARS X's near vertical, affixed by itself
+        ("foundation_rivet", "foundation/x0_y1", "riveted"),  # x0_y0 was riveted by its subtree above
+    ],
+)
+def test_a_rivet_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack, request_, member, record):
+    """The same for AffixMember and Foundation Rivet: the gun's output does not switch off after
+    the rivet fired, and the ARS is restarted; its state file says the gun was told to fire, and
+    from where. The CRS's retry does not load another rivet for a hole that may be riveted: with
+    the arm still there the gun fires again (empty), the member is recorded, and the arm retreats."""
+    state = stack.ars.ctx.state
+    if request_ == "affix_member":
+        stack.tell(state.placed() | {member})  # placed, as far as the ARS is concerned
+        fields = strut(member, bay=2)
+    else:
+        stack.tell({m.id for bay in (1, 2) for m in stack.mission.bay_members(bay)})  # the tower stands
+        fields = dict(joint_id=member, ars="ars_x")
     fired = len(stack.gpio.fired)
     stack.gpio.failing_offs = 1
-    result = stack.result(stack.send("affix_member", None, **fields), timeout=180)
+    result = stack.result(stack.send(request_, None, **fields), timeout=180)
     assert result.status == GoalStatus.STATUS_ABORTED
     assert "Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded
-    rivets = stack.ars.ctx.state.remaining["rivet_dispenser_x"]
+    rivets = state.remaining["rivet_dispenser_x"]
 
-    # the CRS knows the member placed; only the affix went unheard
-    _, steps = resend_after_restart(stack, "", ("affixed", None), "affix_member", fields)
+    # the CRS knows the member placed; only the rivet went unheard
+    _, steps = resend_after_restart(stack, "", (record, None), request_, fields)
     assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Load Rivet" in s for s in steps)
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
-    assert stack.ars.ctx.state.remaining["rivet_dispenser_x"] == rivets
-
-
-def test_a_foundation_shot_in_doubt_is_fired_again_and_no_rivet_loaded_for_it(stack):
-    """The same for Foundation Rivet: both bays stand, the gun's output does not switch off after
-    the rivet of foundation joint x0_y1 fired, and the ARS is restarted. The retry fires again
-    (empty) from where it fired, loads no rivet, and records the joint riveted."""
-    joint = "foundation/x0_y1"  # x0_y0 was riveted by its subtree above
-    stack.tell({m.id for bay in (1, 2) for m in stack.mission.bay_members(bay)})  # the tower stands
-    fields = dict(joint_id=joint, ars="ars_x")
-    fired = len(stack.gpio.fired)
-    stack.gpio.failing_offs = 1
-    result = stack.result(stack.send("foundation_rivet", None, **fields), timeout=180)
-    assert result.status == GoalStatus.STATUS_ABORTED
-    assert "Fire Rivet Gun: rivet gun refused" in result.result.reason, result.result.reason
-    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] and not stack.world.rivet_loaded
-    rivets = stack.ars.ctx.state.remaining["rivet_dispenser_x"]
-
-    _, steps = resend_after_restart(stack, "", ("riveted", None), "foundation_rivet", fields)
-    assert any(s.endswith("/Fire Rivet Gun") for s in steps) and not any("Load Rivet" in s for s in steps)
-    assert stack.gpio.fired[fired:] == ["rivet_gun_left"] * 2  # the second shot, with no rivet
-    assert stack.ars.ctx.state.remaining["rivet_dispenser_x"] == rivets
-    assert stack.ars.ctx.state.is_riveted(joint)
+    state = stack.ars.ctx.state
+    assert state.remaining["rivet_dispenser_x"] == rivets
+    assert "already" in state.check_request(Request(request_, member, "ars_x"))  # recorded: affixed, set
 
 
 def test_stop_shuts_the_ars_down(stack):
