@@ -62,8 +62,8 @@ from py_trees.common import Status
 from tlt_ars.behaviours.end_effector import (
     CommandWidth,
     FireRivetGun,
+    KeepData,
     MoveGrasp,
-    RivetInGun,
     SetWidth,
     grasp,
     release,
@@ -395,7 +395,7 @@ class SubtreeBuilder:
                 TakePart("Take Rivet", ctx, dispenser, None),
                 self._move("Withdraw Gun", lambda: back_out(ctx, "rivet")),
                 verify_rivet_loaded(ctx),
-                RivetInGun("Rivet In Gun", ctx),
+                KeepData("Rivet In Gun", ctx, rivet_in_gun=True),
             ],
         )
         if not ctx.data.rivet_in_gun:

@@ -1,6 +1,6 @@
 """Tree mechanics of the ARS without ROS: failure reasons, feedback step and progress, the
-replace-after-discard decorator, pausing a motion so that it is planned again, and where a step
-left in doubt may be done again."""
+replace-after-discard decorator, pausing a motion so that it is planned again, where a step
+left in doubt may be done again, and request data kept for a restart."""
 
 from __future__ import annotations
 
@@ -8,9 +8,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import py_trees
+import pytest
 from py_trees.common import Status
 
+from tlt_ars.behaviours.end_effector import KeepData
 from tlt_ars.behaviours.parts import ReplaceDiscarded
+from tlt_ars.request_data import RequestData
 from tlt_ars.subtrees import ArmStillThere
 from tlt_ars.tree import failure_reason, progress, running_step
 from tlt_common.bt.nodes import Action
@@ -125,3 +128,23 @@ def test_a_step_left_in_doubt_is_done_again_only_from_where_it_began():
     arm["q"] = None  # no fresh joint state
     there.tick_once()
     assert there.status == F and there.feedback_message == "no fresh joint state"
+
+
+def test_keep_data_writes_the_request_data_then_keeps_it_or_fails_saying_why():
+    kept: list[tuple[str | None, bool]] = []
+    why = {"text": None}
+
+    def keep():
+        kept.append((ctx.data.holding, ctx.data.rivet_in_gun))
+        return why["text"]
+
+    ctx = SimpleNamespace(data=RequestData(holding="vertical"), keep=keep)
+    KeepData("Rivet In Gun", ctx, rivet_in_gun=True).tick_once()
+    released = KeepData("Part Released", ctx, holding=None)
+    why["text"] = "the state file /s/ars_x.json cannot be written: No space left on device"
+    released.tick_once()
+    assert kept == [("vertical", True), (None, True)]  # written before it is kept
+    assert released.status == F
+    assert released.feedback_message == why["text"]
+    with pytest.raises(ValueError, match="Part Dropped: RequestData has no field held"):
+        KeepData("Part Dropped", ctx, held=None)

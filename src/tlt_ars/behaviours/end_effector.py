@@ -24,6 +24,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_ars.context import ArsContext
 from tlt_ars.motion import duration_msg
+from tlt_ars.request_data import RequestData
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal, shared_service_client
@@ -167,37 +168,31 @@ def release(ctx: ArsContext) -> py_trees.composites.Sequence:
     """``Sequence[Open Grasp, Verify Released]``; the held part is forgotten once released."""
     seq = py_trees.composites.Sequence("Release", memory=True)
     seq.add_children(
-        [MoveGrasp("Open Grasp", ctx, close=False), verify_released(ctx), DropHeld("Part Released", ctx)]
+        [
+            MoveGrasp("Open Grasp", ctx, close=False),
+            verify_released(ctx),
+            KeepData("Part Released", ctx, holding=None),
+        ]
     )
     return seq
 
 
-class RivetInGun(Action):
-    """Note the rivet Verify Rivet Loaded saw in the gun, so that a request after a failed one
-    does not load another. Writes ``RequestData.rivet_in_gun`` and the state file. SUCCESS at
-    once; FAILURE when the state file cannot be written."""
+class KeepData(Action):
+    """Write ``fields`` into ``RequestData`` and keep them in the state file, so that a restarted
+    ARS knows them: Rivet In Gun notes the rivet Verify Rivet Loaded saw in the gun (a request
+    after a failed one loads no other), Part Released forgets the held part after a verified
+    release. SUCCESS at once; FAILURE when the state file cannot be written."""
 
-    def __init__(self, name: str, ctx: ArsContext) -> None:
+    def __init__(self, name: str, ctx: ArsContext, **fields: object) -> None:
         super().__init__(name)
-        self.ctx = ctx
+        unknown = sorted(set(fields) - set(RequestData.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"{name}: RequestData has no field {', '.join(unknown)}")
+        self.ctx, self.fields = ctx, fields
 
     def update(self) -> Status:
-        self.ctx.data.rivet_in_gun = True
-        if (why := self.ctx.keep()) is not None:
-            return self.fail(why)
-        return Status.SUCCESS
-
-
-class DropHeld(Action):
-    """Forget the held part (after a verified release). Writes ``RequestData.holding`` and the
-    state file. SUCCESS at once; FAILURE when the state file cannot be written."""
-
-    def __init__(self, name: str, ctx: ArsContext) -> None:
-        super().__init__(name)
-        self.ctx = ctx
-
-    def update(self) -> Status:
-        self.ctx.data.holding = None
+        for key, value in self.fields.items():
+            setattr(self.ctx.data, key, value)
         if (why := self.ctx.keep()) is not None:
             return self.fail(why)
         return Status.SUCCESS
@@ -369,10 +364,9 @@ class FireRivetGun(Action):
 __all__ = [
     "AwaitEeState",
     "CommandWidth",
-    "DropHeld",
     "FireRivetGun",
+    "KeepData",
     "MoveGrasp",
-    "RivetInGun",
     "SetWidth",
     "grasp",
     "release",
