@@ -158,14 +158,11 @@ class CrsContext:
 
         # Each ARS's end effector and arm, which the ARS cannot work without: read for Start only
         # (the ARS itself waits on them mid-build), and by the ground bridge for housekeeping.
-        self._ars_hardware_topics = {}
         for ars in ros_names.ARS_AGENTS:
             ee, ur = ros_names.ee(ars), ros_names.ur(ars)
-            self._ars_hardware_topics[ee] = (ros_names.state_topic(ee), EndEffectorState)
-            self._ars_hardware_topics[ur] = (ros_names.joint_states_topic(ur), JointState)
+            self.cache.watch(ros_names.state_topic(ee), EndEffectorState)
+            self.cache.watch(ros_names.joint_states_topic(ur), JointState)
             self.cache.watch(ros_names.hardware_status_topic(ur), HardwareStatus)
-        for topic, msg_type in self._ars_hardware_topics.values():
-            self.cache.watch(topic, msg_type)
         self._arm_active = HardwareStatus.LIFECYCLE_ACTIVE
         self._servers = self._build_server_checks()
 
@@ -214,23 +211,31 @@ class CrsContext:
         yet (its driver refuses every motion until the width joint is zeroed on its limit switch)
         or faulted, an arm whose driver says it is not active."""
         troubles = []
-        for name, (topic, _) in self._ars_hardware_topics.items():
-            why = self._state_trouble(topic)
-            if not why and name.startswith("ee_"):
-                state = self.cache.latest(topic)[0]
-                if state.fault:
-                    why = f"fault ({state.fault_reason or 'no reason'})"
-                elif not state.calibrated:
-                    why = "width joint not calibrated yet"
-            if not why and name.startswith("ur_"):
-                # Twice a second, against 50 Hz joint states: those say whether the driver is up.
-                entry = self.cache.latest(ros_names.hardware_status_topic(name))
-                if entry is not None and entry[0].lifecycle_state != self._arm_active:
-                    status = entry[0]
-                    why = f"arm not active ({status.fault or f'lifecycle state {status.lifecycle_state}'})"
-            if why:
-                troubles.append(f"{name}: {why}")
+        for ars in ros_names.ARS_AGENTS:
+            for name, trouble in ((ros_names.ee(ars), self._end_effector_trouble),
+                                  (ros_names.ur(ars), self._arm_trouble)):
+                if why := trouble(name):
+                    troubles.append(f"{name}: {why}")
         return "; ".join(troubles)
+
+    def _end_effector_trouble(self, ee: str) -> str:
+        topic = ros_names.state_topic(ee)
+        if why := self._state_trouble(topic):
+            return why
+        state = self.cache.latest(topic)[0]
+        if state.fault:
+            return f"fault ({state.fault_reason or 'no reason'})"
+        return "" if state.calibrated else "width joint not calibrated yet"
+
+    def _arm_trouble(self, ur: str) -> str:
+        if why := self._state_trouble(ros_names.joint_states_topic(ur)):
+            return why
+        # Twice a second, against 50 Hz joint states: those say whether the driver is up.
+        entry = self.cache.latest(ros_names.hardware_status_topic(ur))
+        if entry is None or entry[0].lifecycle_state == self._arm_active:
+            return ""
+        status = entry[0]
+        return f"arm not active ({status.fault or f'lifecycle state {status.lifecycle_state}'})"
 
     def _servers_not_up(self) -> str:
         down = [what for what, is_up in self._servers if not is_up()]
