@@ -157,14 +157,11 @@ def detector(kind: str, weights: str | None = None, config: VisionConfig | None 
     ``config`` (by default config/vision/node.yaml) sets it up."""
     if kind == "twin":
         return Segmentation()
-    from tlt_vision.cad.models import thin_part_radii
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     config = config or load_config()
-    seg = config.raw["segmentation"]
-    closer = seg["second_look_closer"]
-    segmenter = MaskRcnnSegmenter(weights or seg["weights"], config.score_floor, config.depth_split,
-                                  thin_part_radii())
+    closer = config.raw["segmentation"]["second_look_closer"]
+    segmenter = MaskRcnnSegmenter.from_config(config, weights)
     return Segmentation(segmenter, closer["scale"] if closer else None)
 
 

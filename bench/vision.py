@@ -43,16 +43,15 @@ import numpy as np
 import torch
 
 from tlt_common.mission.schema import load_mission
-from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.certificate import visible_groups
 from tlt_vision.pose.errors import add_s, rotation_error_deg
-from tlt_vision.segmentation.depth_split import radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
-from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
+from tlt_vision.segmentation.inference import detect_rgb
+from tlt_vision.segmentation_source import MaskRcnnSegmenter
 from tlt_vision.train.dataset import ImageSet, instance_model
 from tlt_vision.train.render_dataset import RenderSettings, render_set
 
@@ -161,11 +160,11 @@ def main() -> int:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
-    model, manifest = load_mask_rcnn(args.weights)
-    max_size = manifest["settings"].get("max_size")
-    classes = list(model.cfg.classes)
     mission = load_mission(args.mission)
     config = load_config(args.config, args.mission)
+    segmenter = MaskRcnnSegmenter.from_config(config, args.weights)
+    model, max_size = segmenter.model, segmenter.max_size
+    classes = list(model.cfg.classes)
     estimators = load_estimators(config, mission)
     opts = {**config.pipeline_options, "merge": ()}
     pipelines = {name: PartPipeline({estimators[name].model.object_class: e}, **opts)
@@ -173,8 +172,6 @@ def main() -> int:
     # A frame's parts of every kind posed in one call, as the node does (tubes as verticals).
     frame_pipeline = PartPipeline({cls: estimators[instance_model(cls, "")] for cls in POSED}, **opts)
     min_score = config.raw["segmentation"]["min_score"]
-    depth_split = config.depth_split
-    radii = radii_by_label(classes, thin_part_radii())
 
     with tempfile.TemporaryDirectory(prefix="tlt_bench_vision_") as tmp:
         root = args.images
@@ -195,8 +192,7 @@ def main() -> int:
             intrinsics = Intrinsics.from_matrix(s.intrinsics)
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
-            pred = rgb_only if depth_split is None else split_by_depth(
-                rgb_only, s.depth, model.cfg.semantic_labels, depth_split, s.intrinsics, radii)
+            pred = segmenter.refine(rgb_only, s.depth, s.intrinsics)
             t1 = time.perf_counter()
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work.
@@ -234,7 +230,10 @@ def main() -> int:
 
     print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
           f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads")
-    cut = "cut where the depth jumps" if depth_split else "not cut by depth (no segmentation.depth_split)"
+    cut = ("cut where the depth jumps" if segmenter.depth_split
+           else "not cut by depth (no segmentation.depth_split)")
+    if segmenter.trim is not None:
+        cut += f", {', '.join(segmenter.trim.classes)} trimmed of thin parts' pixels"
     for title, acc in ((f"as the node segments ({cut})", ap), ("the model alone, RGB", ap_rgb)):
         result = acc.result()
         per_class = {classes[k - 1]: v for k, v in result["per_class"].items()}

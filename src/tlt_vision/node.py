@@ -61,7 +61,6 @@ from tlt_common.stamps import set_stamp
 from tlt_common.stop_signals import stop_on_signals
 from tlt_vision import inspection
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
-from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.camera_frames import CameraFrame, FrameGrabber, NoFrame, SegmentationLabels
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
@@ -124,11 +123,7 @@ class VisionNode(LeanNode):
         self.labels = SegmentationLabels(self, raw["topics"]["segmentation_labels"], sensors)
         seg = raw["segmentation"]
         if seg["source"] == "mask_rcnn":
-            from tlt_vision.node_config import repo_path
-
-            self.segmenter: Any = MaskRcnnSegmenter(
-                repo_path(seg["weights"]), self.config.score_floor, self.config.depth_split, thin_part_radii()
-            )
+            self.segmenter: Any = MaskRcnnSegmenter.from_config(self.config)
         else:
             self.segmenter = TwinLabels(lambda: self.labels.wait(0.0))
         self.grabber = FrameGrabber(self, raw["topics"]["image"])

@@ -23,7 +23,9 @@ from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
 from tlt_vision.pose.axial_slide import AxialSlide
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
+from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.depth_split import DepthSplit
+from tlt_vision.segmentation.semantic_trim import SemanticTrim
 
 # Parts about as long as they are wide, seen whole or hardly at all.
 COMPACT = ("end_fitting", "corner_joint", "rivet")
@@ -90,6 +92,14 @@ SCHEMA = {
                         doc="a piece's mean image width over its part's, outside which it is scored down",
                     ),
                     "width_penalty": opt("float", 0.3, minimum=0.0, maximum=1.0),
+                },
+            ),
+            "semantic_trim": opt(
+                "dict",
+                None,
+                schema={
+                    "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks trimmed"),
+                    "above": Field("float", minimum=0.0, maximum=1.0, doc="a thin part's probability"),
                 },
             ),
         },
@@ -309,6 +319,12 @@ class VisionConfig:
             return None
         band = raw["width_band"]
         return DepthSplit(**{**raw, "width_band": tuple(band) if band else None})
+
+    @property
+    def semantic_trim(self) -> SemanticTrim | None:
+        """Which box-branch masks lose the pixels the semantic head holds to be a thin part."""
+        raw = self.raw["segmentation"]["semantic_trim"]
+        return SemanticTrim(tuple(raw["classes"]), raw["above"]) if raw else None
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

@@ -11,7 +11,10 @@
   path and the tensor shape expected). Given a :class:`~tlt_vision.segmentation.depth_split.DepthSplit`,
   its thin-part regions are cut where the frame's depth jumps, pieces of one straight part
   joined again, and, given the parts' radii, pieces not as wide as their part scored down
-  (node.yaml ``segmentation.depth_split``).
+  (node.yaml ``segmentation.depth_split``). Given a
+  :class:`~tlt_vision.segmentation.semantic_trim.SemanticTrim`, the masks of its classes lose the
+  pixels the semantic head holds to be a thin part (``segmentation.semantic_trim``).
+  :meth:`MaskRcnnSegmenter.from_config` builds it as the vision node does.
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
 labels received, no image). Mask R-CNN also answers ``detect_in(frame, region, scale)``: the
@@ -24,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -33,6 +36,11 @@ from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
 from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
+from tlt_vision.segmentation.semantic_trim import SemanticTrim, trim_by_semantic
+from tlt_vision.weights import WeightsError
+
+if TYPE_CHECKING:
+    from tlt_vision.node_config import VisionConfig
 
 MASK_RCNN_KIND = "mask_rcnn"
 
@@ -72,7 +80,7 @@ class MaskRcnnSegmenter:
     streams = ("rgb",)
 
     def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
-                 radii: Mapping[str, float] | None = None) -> None:
+                 radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
         # The configuration and the image size come from the weights' manifest, as trained.
@@ -82,6 +90,19 @@ class MaskRcnnSegmenter:
         self.min_score = min_score
         self.depth_split = depth_split
         self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
+        self.trim = trim
+        if trim is not None and (thin := sorted(set(trim.classes) & set(self.cfg.semantic_classes))):
+            raise WeightsError(weights, f"its semantic head segments {', '.join(thin)}, which "
+                               "segmentation.semantic_trim.classes may not name (it trims box masks)")
+
+    @classmethod
+    def from_config(cls, config: VisionConfig, weights: str | Path | None = None) -> MaskRcnnSegmenter:
+        """The segmenter of a vision node run with ``config`` (with other ``weights`` if given)."""
+        from tlt_vision.cad.models import thin_part_radii
+        from tlt_vision.node_config import repo_path
+
+        return cls(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
+                   config.depth_split, thin_part_radii(), config.semantic_trim)
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -89,11 +110,24 @@ class MaskRcnnSegmenter:
         rgb = frame.get("rgb")
         if rgb is None:
             raise ValueError("no RGB image")
-        result = detect_rgb(self.model, rgb, self.max_size)
-        if self.depth_split is not None:
-            result = split_by_depth(result, frame.get("depth"), self.cfg.semantic_labels, self.depth_split,
-                                    frame.camera_matrix, self.radii)
+        result = self.refine(detect_rgb(self.model, rgb, self.max_size), frame.get("depth"),
+                             frame.camera_matrix)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
+
+    def refine(self, result: dict[str, Any], depth: np.ndarray | None,
+               camera_matrix: np.ndarray | None) -> dict[str, Any]:
+        """The model's ``result`` for one frame with its thin parts cut by depth and its box-branch
+        masks trimmed, as configured."""
+        if self.depth_split is not None:
+            result = split_by_depth(result, depth, self.cfg.semantic_labels, self.depth_split,
+                                    camera_matrix, self.radii)
+        return self._trimmed(result)
+
+    def _trimmed(self, result: dict[str, Any]) -> dict[str, Any]:
+        if self.trim is None:
+            return result
+        return trim_by_semantic(result, self.trim.labels(self.cfg.classes), self.cfg.semantic_labels,
+                                self.trim.above)
 
     def detect_in(
         self, frame: CameraFrame, region: tuple[int, int, int, int], scale: float
@@ -114,7 +148,7 @@ class MaskRcnnSegmenter:
         size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
         result = detect_rgb(self.model, cv2.resize(crop, size, interpolation=cv2.INTER_LINEAR), None)
         out = []
-        for d in detections_from_mask_rcnn(result, self.cfg.classes, self.min_score):
+        for d in detections_from_mask_rcnn(self._trimmed(result), self.cfg.classes, self.min_score):
             small = cv2.resize(d.mask.astype(np.uint8), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
             mask = np.zeros(rgb.shape[:2], dtype=bool)
             mask[y0:y1, x0:x1] = small >= 0.5

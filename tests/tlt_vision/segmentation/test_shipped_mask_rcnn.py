@@ -23,9 +23,11 @@ from tlt_vision.node_config import load_config
 from tlt_vision.segmentation.depth_split import depth_pieces, join_collinear, radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
+from tlt_vision.segmentation.semantic_trim import SemanticTrim
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
 from tlt_vision.train.dataset import ImageSet
 from tlt_vision.train.render_dataset import RenderSettings, render_set
+from tlt_vision.weights import WeightsError
 
 ROOT = Path(__file__).resolve().parents[3]
 WEIGHTS = ROOT / "models" / "vision" / "mask_rcnn.pt"
@@ -105,7 +107,7 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
     as the head drew them, some holding two parts or more."""
     config = load_config()
     split = config.depth_split
-    seg = MaskRcnnSegmenter(WEIGHTS, config.score_floor, split, thin_part_radii())
+    seg = MaskRcnnSegmenter.from_config(config)
     thin = ("strut_tube", "cross_frame")
     merged = 0
     for i in range(6):
@@ -119,3 +121,8 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
         merged += sum(_parts_in(d.mask, sample.depth, sample.intrinsics, split) > 1
                       for d in seg.detect(without) if d.object_class in thin)
     assert merged > 0
+
+
+def test_a_trim_of_a_class_the_semantic_head_segments_is_refused_naming_the_weights():
+    with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments strut_tube.*semantic_trim"):
+        MaskRcnnSegmenter(WEIGHTS, 0.3, trim=SemanticTrim(("end_fitting", "strut_tube"), 0.3))
