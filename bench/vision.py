@@ -5,8 +5,9 @@ Renders ``--count`` images of the twin with a seed the training sets do not use 
 detected part, and prints against the issue's goals:
 
 * mask AP50 per class and mean (goal >= 0.90) of the detections the node poses (the model's,
-  with the thin parts' regions cut where the depth jumps, node.yaml ``segmentation.depth_split``),
-  and of the model's own on the RGB image alone;
+  with the thin parts' regions cut where the depth jumps, node.yaml ``segmentation.depth_split``,
+  and the end fittings' masks trimmed, ``segmentation.semantic_trim``), and of the model's own on
+  the RGB image alone;
 * C-3PO on the parts both the model and the twin segment (a detection matched to a ground-truth
   instance of its class at mask IoU >= 0.5): the fraction certified (goal >= 95 %), of the certified
   the fraction with ADD-S under 2 % of the part's size (goal >= 95 %), their median rotation error
