@@ -21,9 +21,10 @@ def test_parts_of_four_kinds_together_are_posed_as_alone():
     mission = ROOT / "missions" / "one_bay.yaml"
     config = load_config(ROOT / "config/vision/node.yaml", mission)
     estimators = load_estimators(config, load_mission(mission))
-    # Each kind refines from its own starts: the end fitting's two turned ones too, the corner
-    # joint's six tilted ones besides its own (a batch pads the others' and leaves the padding out).
-    assert [len(estimators[k].starts) for k in KINDS] == [7, 4, 2, 2]
+    # Each kind refines from its own starts: the end fitting's and the rivet's two turned ones too,
+    # the corner joint's six tilted ones besides its own (a batch pads the others' and leaves the
+    # padding out).
+    assert [len(estimators[k].starts) for k in KINDS] == [7, 4, 4, 2]
     rng = np.random.default_rng(11)
     jobs = []
     for kind in KINDS:
