@@ -228,11 +228,12 @@ class Supervisor:
             self._after_exit(proc, early=True)
             return
         proc.started_at = time.monotonic()
+        where = f" on host {spec.host}" if spec.host else ""
+        # Said before its output is relayed, so that no line of the process comes before it.
+        self._say(f"started {spec.name} (pid {proc.popen.pid}){where}")
         proc.reader = threading.Thread(target=self._pump, args=(proc, proc.popen), daemon=True,
                                        name=f"launch-{spec.name}")
         proc.reader.start()
-        where = f" on host {spec.host}" if spec.host else ""
-        self._say(f"started {spec.name} (pid {proc.popen.pid}){where}")
 
     def _pump(self, proc: _Proc, popen: subprocess.Popen[bytes]) -> None:
         assert popen.stdout is not None
