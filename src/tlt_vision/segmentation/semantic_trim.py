@@ -5,9 +5,9 @@ An end fitting sits on the end of its tube, at the tube's depth, and its mask fr
 end fittings seen well enough to certify whose pose was not certified had masks whose clouds fail
 the certificate even at the fitting's true pose (30-200 pixels of tube in a 60-650 pixel mask). No
 depth cut separates them, but the semantic head, which classifies every pixel, knows tube from
-fitting there. :func:`trim_by_semantic` takes from the masks of the ``labels`` given the pixels
-where the head's probability of any of its classes (other than the mask's own) is above
-``above``. An instance left with no pixel is dropped.
+fitting there. :func:`trim_by_semantic` takes from the masks of the ``labels`` given (box-branch
+classes, none of the head's own) the pixels where the head's probability of any of its classes is
+above ``above``. An instance left with no pixel is dropped.
 """
 
 from __future__ import annotations
@@ -42,12 +42,9 @@ def trim_by_semantic(
     chosen = torch.isin(result["labels"], torch.tensor(list(labels), dtype=result["labels"].dtype))
     if not bool(chosen.any()):
         return result
+    thin = probs[list(semantic_labels)].amax(dim=0) > above  # once a frame, for every mask
     masks = masks.clone()
-    for i in torch.nonzero(chosen).flatten().tolist():
-        own = int(result["labels"][i])
-        others = [label for label in semantic_labels if label != own]
-        if others:
-            masks[i] &= ~(probs[others].amax(dim=0) > above)
+    masks[chosen] &= ~thin
     kept = masks.flatten(1).any(dim=1)
     out = dict(result)
     for key in ("boxes", "labels", "scores"):
