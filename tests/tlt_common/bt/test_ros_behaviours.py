@@ -23,6 +23,7 @@ from tlt_interfaces.msg import GripperState
 from tlt_interfaces.srv import SetBlackboardValue
 
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCache, TopicCondition, TopicData
+from tlt_common.spin_loop import spin
 
 
 class FakeClock:
@@ -105,13 +106,17 @@ def ros():
     executor = MultiThreadedExecutor(num_threads=4, context=context)
     executor.add_node(server_node)
     executor.add_node(client_node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
+    # Executor.spin goes on building wait sets after shutdown() returns: the nodes destroyed under
+    # it failed the thread with InvalidHandle (a warning in clean-clone runs). This loop ends, and
+    # is joined, before anything is destroyed.
+    stop = threading.Event()
+    thread = threading.Thread(target=spin, args=(executor, context, stop.is_set), daemon=True)
     thread.start()
     yield server_node, client_node
-    executor.shutdown(timeout_sec=2.0)
-    # The spin thread may still be building a wait set from the nodes' entities: destroyed under
-    # it, one failed the thread with InvalidHandle (a warning in a clean-clone run).
+    stop.set()
     thread.join(timeout=5.0)
+    assert not thread.is_alive(), "the spin thread did not end"
+    executor.shutdown(timeout_sec=2.0)
     server_node.destroy_node()
     client_node.destroy_node()
     rclpy.shutdown(context=context)
