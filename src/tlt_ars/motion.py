@@ -95,6 +95,13 @@ class MotionPlanner:
         self.sample_period = sample_period
         self.time_limit = time_limit
 
+    @property
+    def search_time(self) -> float:
+        """The OMPL search time of one plan, s: ``time_limit``, or the scene's ``planning_time_s``."""
+        if self.time_limit is not None:
+            return float(self.time_limit)
+        return float(self.scene.planning["planning_time_s"])
+
     def plan(
         self,
         start: np.ndarray,
@@ -105,15 +112,19 @@ class MotionPlanner:
         carrying: str | None,
         other_q: np.ndarray | None,
         width: Width = 0.0,
+        search_time: float | None = None,
     ) -> PlannedMotion:
         """A checked, time-parameterised trajectory from ``start`` to ``goal`` with the EE ``width``
-        wide (or moving between a ``(from, to)`` pair); PlanningFailed if none."""
+        wide (or moving between a ``(from, to)`` pair), searching at most ``search_time`` s
+        (:attr:`search_time`) for each candidate; PlanningFailed if none. A goal whose every usable
+        candidate ran out of search time fails as ``timeout``: more time may find a path."""
+        limit = self.search_time if search_time is None else search_time
         kwargs = dict(placed=placed, bay=bay, other_arm_q=other_q, carrying=carrying, width=width)
         scene = build_scene(self.scene, self.arm, self.mission, contact=goal.contact, **kwargs)
         planner = Planner.from_config(scene, self.scene.planning, home=self.scene.home(self.arm))
         chosen = None
         if goal.joints is not None:
-            plan = planner.plan_to_joints(start, goal.joints, self.time_limit)
+            plan = planner.plan_to_joints(start, goal.joints, limit)
         elif goal.straight:
             # Not the joint-space line between the ends: on a 0.7 m approach that line swings a
             # carried cross frame into the lifter's posts, where the tool's straight line is free.
@@ -126,7 +137,7 @@ class MotionPlanner:
                 raise PlanningFailed("ik", "no candidate pose to move to")
             free = build_scene(self.scene, self.arm, self.mission, contact=False, **kwargs)
             contact = build_scene(self.scene, self.arm, self.mission, contact=True, **kwargs)
-            reasons = []
+            reasons, searched_out = [], False
             for target in goal.targets:
                 # A candidate counts only when its pose, its pre-pose and the straight move between
                 # them are all free: the coarse approach must not commit to a dead end. The arm then
@@ -139,17 +150,17 @@ class MotionPlanner:
                     reasons.append(f"{target.label}: {exc}")
                     continue
                 try:
-                    plan = planner.plan_to_joints(
-                        start, q_pre if goal.use == "pre_pose" else q, self.time_limit
-                    )
+                    plan = planner.plan_to_joints(start, q_pre if goal.use == "pre_pose" else q, limit)
                 except PlanningFailed as exc:
                     reasons.append(f"{target.label}: {exc.reason}")
+                    searched_out |= exc.kind == "timeout"
                     continue
                 chosen = target
                 break
             else:
                 raise PlanningFailed(
-                    "ik", f"none of {len(goal.targets)} candidate(s) is usable: " + "; ".join(reasons)
+                    "timeout" if searched_out else "ik",
+                    f"none of {len(goal.targets)} candidate(s) is usable: " + "; ".join(reasons),
                 )
         traj = time_parameterise(plan.path, self.velocity, self.acceleration)
         return PlannedMotion(self.to_msg(traj), traj.duration, chosen)
@@ -189,11 +200,14 @@ class PlanMotion(Action):
     still moves (an aborted motion decelerating: a plan from a moving start would not match where
     the arm is when it is sent), while its joint state is stale (a gap of a second under load is no
     fault), while the EE's width is not known (no fresh state, or not calibrated since a fault) and
-    while planning, together at most ``timeouts.planning_s``. While the width slide moves (Extend
-    Width beside the approach) the motion is checked over the rest of the slide's move; when no
-    path clears that, RUNNING until the slide stands (at most ``timeouts.width_s`` more), then it
-    is planned again. SUCCESS with a checked trajectory. FAILURE when no fresh arm state or
-    calibrated width comes in time, when the goal cannot be built, or with the planner's reason.
+    while planning, together at most ``timeouts.planning_s``. A search that ran out of its time
+    (``arm.planning_time_s``: wall-clock, so a loaded machine gives it less CPU) is run again from
+    the same start with twice the time, while that still fits in ``timeouts.planning_s``. While the
+    width slide moves (Extend Width beside the approach) the motion is checked over the rest of the
+    slide's move; when no path clears that, RUNNING until the slide stands (at most
+    ``timeouts.width_s`` more), then it is planned again. SUCCESS with a checked trajectory.
+    FAILURE when no fresh arm state or calibrated width comes in time, when the goal cannot be
+    built, or with the planner's reason.
     """
 
     def __init__(self, name: str, ctx: ArsContext, planner: MotionPlanner, goal: Callable[[], MotionGoal],
@@ -203,14 +217,17 @@ class PlanMotion(Action):
         self._future = None
         self._started = 0.0
         self._goal: MotionGoal | None = None
+        self._start_q: np.ndarray | None = None
         self._width: Width | None = None
         self._sweep_blocked = False
+        self._search_time = planner.search_time
 
     def initialise(self) -> None:
         self.slot.motion = None
         self._future = None
         self._started = self.ctx.clock()
         self._sweep_blocked = False
+        self._search_time = self.planner.search_time
 
     def update(self) -> Status:
         if self._future is None:
@@ -240,19 +257,7 @@ class PlanMotion(Action):
                 self._goal = self.goal()
             except Exception as exc:
                 return self.fail(f"cannot tell where to go: {exc}")
-            data = self.ctx.data
-            bay = data.member.bay if data.member is not None else 1
-            self._future = self.ctx.planning_pool.submit(
-                self.planner.plan,
-                start,
-                self._goal,
-                placed=self.ctx.state.placed(),
-                bay=bay,
-                carrying=data.holding,
-                other_q=self.ctx.other_arm_q(),
-                width=width,
-            )
-            self._width = width
+            self._submit(start, width)
             self.feedback_message = "planning"
             return Status.RUNNING
         if not self._future.done():
@@ -271,6 +276,18 @@ class PlanMotion(Action):
                 self._started = self.ctx.clock()
                 self.feedback_message = f"no path clears the moving width ({exc.reason}): waiting for it"
                 return Status.RUNNING
+            longer = 2.0 * self._search_time
+            spent = self.ctx.clock() - self._started
+            if exc.kind == "timeout" and spent + longer <= self.ctx.config.timeouts["planning_s"]:
+                # The arm has not moved: the same start, with more time.
+                self.ctx.node.get_logger().warning(
+                    f"{self.name}: the search ran out of its {self._search_time:g} s ({exc.reason}); "
+                    f"searching again for {longer:g} s"
+                )
+                self._search_time = longer
+                self._submit(self._start_q, self._width)
+                self.feedback_message = f"planning again with {longer:g} s to search"
+                return Status.RUNNING
             return self.fail(f"planning failed ({exc.kind}): {exc.reason}")
         except Exception as exc:  # a planner bug must fail the request, not kill the tick
             return self.fail(f"planning failed: {exc!r}")
@@ -280,6 +297,21 @@ class PlanMotion(Action):
             self.ctx.data.targets[goal.key] = motion.target
         self.feedback_message = f"planned {motion.duration:.2f} s"
         return Status.SUCCESS
+
+    def _submit(self, start: np.ndarray, width: Width) -> None:
+        data = self.ctx.data
+        self._future = self.ctx.planning_pool.submit(
+            self.planner.plan,
+            start,
+            self._goal,
+            placed=self.ctx.state.placed(),
+            bay=data.member.bay if data.member is not None else 1,
+            carrying=data.holding,
+            other_q=self.ctx.other_arm_q(),
+            width=width,
+            search_time=self._search_time,
+        )
+        self._start_q, self._width = start, width
 
     def _arm_stopped(self) -> bool:
         velocity = self.ctx.arm_velocity()

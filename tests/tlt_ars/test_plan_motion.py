@@ -30,6 +30,7 @@ class Arm:
         self.data = SimpleNamespace(member=None, holding=None, targets={})
         self.state = SimpleNamespace(placed=lambda: [])
         self.planning_pool = ThreadPoolExecutor(max_workers=1)
+        self.node = SimpleNamespace(get_logger=lambda: rclpy.logging.get_logger("ars_x"))
 
     def clock(self) -> float:
         return self.now
@@ -51,23 +52,35 @@ class Arm:
 
 
 class Planner:
-    def __init__(self, blocked_while_moving: bool = False) -> None:
+    """A search that finds its path only with ``needs`` seconds or more to search."""
+
+    search_time = 2.0
+
+    def __init__(self, blocked_while_moving: bool = False, needs: float = 0.0) -> None:
         self.starts: list[np.ndarray] = []
         self.widths: list = []
+        self.search_times: list[float] = []
         self.blocked_while_moving = blocked_while_moving
+        self.needs = needs
 
-    def plan(self, start, goal, *, width, **_):
+    def plan(self, start, goal, *, width, search_time, **_):
         self.starts.append(start)
         self.widths.append(width)
+        self.search_times.append(search_time)
         if self.blocked_while_moving and isinstance(width, tuple):
             raise PlanningFailed("collision", "gun b's bracket would sweep through the tag post")
+        if search_time < self.needs:
+            raise PlanningFailed("timeout", f"no path within {search_time:.3f} s")
         return SimpleNamespace(duration=1.0, target=None)
 
 
-def _run(b: PlanMotion, arm: Arm, t: float) -> Status:
+def _run(b: PlanMotion, arm: Arm, t: float, searches: int = 1) -> Status:
+    """Tick at mission time ``t`` until ``searches`` plans have ended (or it stops planning)."""
     arm.now = t
     b.tick_once()
-    if b.status == Status.RUNNING and b._future is not None:
+    for _ in range(searches):
+        if b.status != Status.RUNNING or b._future is None:
+            break
         b._future.exception()  # waits: the plan itself is instant here
         b.tick_once()
     return b.status
@@ -126,6 +139,32 @@ def test_a_motion_planned_while_the_width_moves_is_checked_over_the_move_or_wait
     assert _run(b, arm, 130.0) == Status.RUNNING
     assert _run(b, arm, 136.0) == Status.FAILURE
     assert "the end-effector width did not reach 0.2500 m within 135 s" in b.feedback_message
+
+
+def test_a_search_out_of_time_is_run_again_from_the_same_start_with_twice_the_time():
+    """The search's time is wall-clock: on a loaded machine it gets less CPU. The arm has not
+    moved, so the same start is searched again with 4 s, then 8 s, while that fits in planning_s."""
+    arm, slot = Arm(), TrajectorySlot()
+    planner = Planner(needs=5.0)
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), slot)
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert b.feedback_message == "planning again with 4 s to search"
+    arm.q = np.full(6, 0.3)  # a later joint state is not where the first search started
+    assert _run(b, arm, 2.0, searches=2) == Status.SUCCESS and slot.motion is not None
+    assert planner.search_times == [2.0, 4.0, 8.0]
+    assert all(np.allclose(s, 0.0) for s in planner.starts)
+
+    # The next motion starts again from the configured search time.
+    assert _run(b, arm, 20.0) == Status.RUNNING and planner.search_times[3:] == [2.0]
+    assert b.feedback_message == "planning again with 4 s to search"
+
+    # No more time than planning_s: 2 s + 4 s searched, 8 s more would end at 14 s of 10.
+    arm.config.timeouts["planning_s"] = 10.0
+    planner = Planner(needs=100.0)
+    b = PlanMotion("Plan", arm, planner, lambda: MotionGoal(joints=np.ones(6)), TrajectorySlot())
+    assert _run(b, arm, 0.0) == Status.RUNNING
+    assert _run(b, arm, 6.0, searches=2) == Status.FAILURE and planner.search_times == [2.0, 4.0]
+    assert b.feedback_message == "planning failed (timeout): no path within 4.000 s"
 
 
 def test_without_a_fresh_joint_state_within_planning_s_it_fails_naming_the_topic():
@@ -234,3 +273,24 @@ def test_execute_waits_for_the_arm_to_be_active_again_before_it_sends_the_goal(d
     arm.now, arm.down = 1.2, None  # the driver reconnected
     _tick_until(b, lambda: b.status == Status.SUCCESS)
     assert len(driver.goals) == 1
+
+
+def test_a_pose_goal_whose_candidates_all_ran_out_of_search_time_fails_as_a_timeout():
+    """PlanMotion searches again only after a timeout: a pose goal tried over its candidates must
+    say so when each of them ran out of time, not that none can be reached."""
+    from tlt_ars.motion import MotionPlanner
+    from tlt_ars.planning.targets import inspection_targets
+    from tlt_ars.planning.world import load_scene_config
+    from tlt_common.mission.schema import load_mission
+
+    cfg = load_scene_config()
+    planner = MotionPlanner(cfg, "ars_x", load_mission("missions/one_bay.yaml"), [f"j{i}" for i in range(6)],
+                            velocity_scale=0.5, sample_period=0.05)  # fmt: skip
+    assert planner.search_time == cfg.planning["planning_time_s"]
+    # Home to the inspection pose with a vertical held: no straight line, a search is needed.
+    goal = MotionGoal(targets=inspection_targets(cfg, "ars_x"))
+    kwargs = dict(placed=set(), bay=1, carrying="vertical_dispenser_x", other_q=None)
+    with pytest.raises(PlanningFailed) as err:
+        planner.plan(cfg.home("ars_x"), goal, search_time=1e-6, **kwargs)
+    assert err.value.kind == "timeout" and "none of 2 candidate(s) is usable" in err.value.reason
+    assert planner.plan(cfg.home("ars_x"), goal, **kwargs).target.label.startswith("inspection")

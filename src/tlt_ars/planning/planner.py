@@ -445,7 +445,8 @@ class Planner:
     ) -> list[np.ndarray]:
         if budget <= 0:
             raise PlanningFailed(
-                "timeout", f"no path within {self.planning_time_s:.3f} s (time spent before search)"
+                "timeout",
+                "no path within the time limit: it ran out before the search (goals, detours, vias)",
             )
         space = ob.RealVectorStateSpace(6)
         bounds = ob.RealVectorBounds(6)
