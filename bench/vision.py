@@ -6,7 +6,8 @@ detected part, and prints against the issue's goals:
 
 * mask AP50 per class and mean (goal >= 0.90) of the detections the node poses (the model's,
   with the thin parts' regions cut where the depth jumps, node.yaml ``segmentation.depth_split``,
-  and the end fittings' masks trimmed, ``segmentation.semantic_trim``), and of the model's own on
+  the end fittings' masks trimmed, ``segmentation.semantic_trim``, and those of end fittings and
+  rivets made exclusive, ``segmentation.exclusive_overlaps``), and of the model's own on
   the RGB image alone;
 * C-3PO on the parts both the model and the twin segment (a detection matched to a ground-truth
   instance of its class at mask IoU >= 0.5): the fraction certified (goal >= 95 %), of the certified
@@ -235,6 +236,8 @@ def main() -> int:
            else "not cut by depth (no segmentation.depth_split)")
     if segmenter.trim is not None:
         cut += f", {', '.join(segmenter.trim.classes)} trimmed of thin parts' pixels"
+    if segmenter.overlaps is not None:
+        cut += f", {', '.join(segmenter.overlaps.classes)} masks exclusive"
     for title, acc in ((f"as the node segments ({cut})", ap), ("the model alone, RGB", ap_rgb)):
         result = acc.result()
         per_class = {classes[k - 1]: v for k, v in result["per_class"].items()}

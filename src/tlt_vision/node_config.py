@@ -25,6 +25,7 @@ from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.depth_split import DepthSplit
+from tlt_vision.segmentation.overlap import ExclusiveOverlaps
 from tlt_vision.segmentation.semantic_trim import SemanticTrim
 
 # Parts about as long as they are wide, seen whole or hardly at all.
@@ -100,6 +101,15 @@ SCHEMA = {
                 schema={
                     "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks trimmed"),
                     "above": Field("float", minimum=0.0, maximum=1.0, doc="a thin part's probability"),
+                },
+            ),
+            "exclusive_overlaps": opt(
+                "dict",
+                None,
+                schema={
+                    "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks made exclusive"),
+                    "duplicate": Field("float", minimum=0.0, maximum=1.0,
+                                       doc="share of the smaller mask above which two are one part's"),
                 },
             ),
         },
@@ -325,6 +335,12 @@ class VisionConfig:
         """Which box-branch masks lose the pixels the semantic head holds to be a thin part."""
         raw = self.raw["segmentation"]["semantic_trim"]
         return SemanticTrim(tuple(raw["classes"]), raw["above"]) if raw else None
+
+    @property
+    def exclusive_overlaps(self) -> ExclusiveOverlaps | None:
+        """Which box-branch classes' masks give the pixels they share to the more probable one."""
+        raw = self.raw["segmentation"]["exclusive_overlaps"]
+        return ExclusiveOverlaps(tuple(raw["classes"]), raw["duplicate"]) if raw else None
 
     def detector_path(self, model: str) -> Path:
         return repo_path(self.raw["detectors"][model])

@@ -13,7 +13,9 @@
   joined again, and, given the parts' radii, pieces not as wide as their part scored down
   (node.yaml ``segmentation.depth_split``). Given a
   :class:`~tlt_vision.segmentation.semantic_trim.SemanticTrim`, the masks of its classes lose the
-  pixels the semantic head holds to be a thin part (``segmentation.semantic_trim``).
+  pixels the semantic head holds to be a thin part (``segmentation.semantic_trim``). Given
+  :class:`~tlt_vision.segmentation.overlap.ExclusiveOverlaps`, two masks of one of its classes
+  share no pixel but as duplicates of one part (``segmentation.exclusive_overlaps``).
   :meth:`MaskRcnnSegmenter.from_config` builds it as the vision node does.
 
 Both answer ``detect(frame) -> list[Detection]`` or raise ``ValueError`` with the reason (no
@@ -36,6 +38,7 @@ from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
 from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
+from tlt_vision.segmentation.overlap import ExclusiveOverlaps, resolve_overlaps
 from tlt_vision.segmentation.semantic_trim import SemanticTrim, trim_by_semantic
 from tlt_vision.weights import WeightsError
 
@@ -80,7 +83,8 @@ class MaskRcnnSegmenter:
     streams = ("rgb",)
 
     def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
-                 radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None) -> None:
+                 radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None,
+                 overlaps: ExclusiveOverlaps | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
         # The configuration and the image size come from the weights' manifest, as trained.
@@ -90,10 +94,11 @@ class MaskRcnnSegmenter:
         self.min_score = min_score
         self.depth_split = depth_split
         self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
-        self.trim = trim
-        if trim is not None and (thin := sorted(set(trim.classes) & set(self.cfg.semantic_classes))):
-            raise WeightsError(weights, f"its semantic head segments {', '.join(thin)}, which "
-                               "segmentation.semantic_trim.classes may not name (it trims box masks)")
+        self.trim, self.overlaps = trim, overlaps
+        for key, named in (("semantic_trim", trim), ("exclusive_overlaps", overlaps)):
+            if named is not None and (thin := sorted(set(named.classes) & set(self.cfg.semantic_classes))):
+                raise WeightsError(weights, f"its semantic head segments {', '.join(thin)}, which "
+                                   f"segmentation.{key}.classes may not name (it acts on box masks)")
 
     @classmethod
     def from_config(cls, config: VisionConfig, weights: str | Path | None = None) -> MaskRcnnSegmenter:
@@ -102,7 +107,7 @@ class MaskRcnnSegmenter:
         from tlt_vision.node_config import repo_path
 
         return cls(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
-                   config.depth_split, thin_part_radii(), config.semantic_trim)
+                   config.depth_split, thin_part_radii(), config.semantic_trim, config.exclusive_overlaps)
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -116,12 +121,20 @@ class MaskRcnnSegmenter:
 
     def refine(self, result: dict[str, Any], depth: np.ndarray | None,
                camera_matrix: np.ndarray | None) -> dict[str, Any]:
-        """The model's ``result`` for one frame with its thin parts cut by depth and its box-branch
-        masks trimmed, as configured."""
+        """The model's ``result`` for one frame with its box-branch masks made exclusive, its thin
+        parts cut by depth and its box-branch masks trimmed, as configured."""
+        result = self._exclusive(result)
         if self.depth_split is not None:
             result = split_by_depth(result, depth, self.cfg.semantic_labels, self.depth_split,
                                     camera_matrix, self.radii)
         return self._trimmed(result)
+
+    def _exclusive(self, result: dict[str, Any]) -> dict[str, Any]:
+        """``result`` with the configured overlaps resolved, and without its ``mask_probs``: what
+        comes after selects and cuts masks, and would leave them behind."""
+        if self.overlaps is not None:
+            result = resolve_overlaps(result, self.overlaps.labels(self.cfg.classes), self.overlaps.duplicate)
+        return {key: value for key, value in result.items() if key != "mask_probs"}
 
     def _trimmed(self, result: dict[str, Any]) -> dict[str, Any]:
         if self.trim is None:
@@ -148,7 +161,8 @@ class MaskRcnnSegmenter:
         size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
         result = detect_rgb(self.model, cv2.resize(crop, size, interpolation=cv2.INTER_LINEAR), None)
         out = []
-        for d in detections_from_mask_rcnn(self._trimmed(result), self.cfg.classes, self.min_score):
+        for d in detections_from_mask_rcnn(self._trimmed(self._exclusive(result)), self.cfg.classes,
+                                           self.min_score):
             small = cv2.resize(d.mask.astype(np.uint8), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
             mask = np.zeros(rgb.shape[:2], dtype=bool)
             mask[y0:y1, x0:x1] = small >= 0.5

@@ -535,6 +535,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "segmentation.semantic_trim.classes" in err and "'fitting'" in err
     wrong = vision_config()
+    wrong["segmentation"]["exclusive_overlaps"] = {"classes": ["end_fitting"], "duplicate": 1.5}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.exclusive_overlaps.duplicate" in err and "1.5" in err
+    wrong = vision_config()
     wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2

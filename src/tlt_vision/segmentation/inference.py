@@ -63,7 +63,8 @@ def rgb_to_tensor(rgb: np.ndarray) -> torch.Tensor:
 @torch.no_grad()
 def detect_rgb(model: MaskRCNN, rgb: np.ndarray, max_size: int | None) -> dict[str, torch.Tensor]:
     """Detections of one uint8 RGB image (H, W, 3): ``boxes``, ``labels``, ``scores`` and
-    ``masks`` (D, H, W) at the image's own size, however small the model saw it, and with a
+    ``masks`` (D, H, W) at the image's own size, however small the model saw it, the probabilities
+    they were thresholded from (``mask_probs``, 1 on a semantic head's regions) and with a
     semantic head its ``semantic_probs`` (C, H, W) at that size too; on the CPU whatever device
     the model is on."""
     model.eval()
@@ -81,6 +82,9 @@ def detect_rgb(model: MaskRCNN, rgb: np.ndarray, max_size: int | None) -> dict[s
             out["masks"] = big[:, 0] >= 0.5
         else:
             out["masks"] = torch.zeros((0, h, w), dtype=torch.bool)
+        if len(out.get("mask_probs", ())):
+            out["mask_probs"] = F.interpolate(out["mask_probs"][:, None], size=(h, w), mode="bilinear",
+                                              align_corners=False)[:, 0]
         if "semantic_probs" in out:
             out["semantic_probs"] = F.interpolate(out["semantic_probs"][None], size=(h, w), mode="bilinear",
                                                   align_corners=False)[0]

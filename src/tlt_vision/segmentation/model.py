@@ -72,6 +72,8 @@ class MaskRCNN(nn.Module):
         probs = torch.softmax(upsample_logits(logits, size), dim=1)
         for r, p in zip(results, probs, strict=True):
             found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area)
+            # A region's pixels are its instance's without a mask head's doubt.
+            found["mask_probs"] = found["masks"].to(r["mask_probs"].dtype)
             for key in r:
                 r[key] = torch.cat([r[key], found[key].to(r[key].dtype)])
             r["semantic_probs"] = p

@@ -197,7 +197,8 @@ class RoIHeads(nn.Module):
             start += n
             rows = torch.arange(n, device=lg.device)
             small = torch.sigmoid(lg[rows, r["labels"]]) if n else lg.new_zeros((0, side, side))
-            r["masks"] = paste_masks(small, r["boxes"], image_size) >= 0.5
+            r["mask_probs"] = paste_masks(small, r["boxes"], image_size)
+            r["masks"] = r["mask_probs"] >= 0.5
         return results
 
 

@@ -23,6 +23,7 @@ from tlt_vision.node_config import load_config
 from tlt_vision.segmentation.depth_split import depth_pieces, join_collinear, radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
+from tlt_vision.segmentation.overlap import ExclusiveOverlaps
 from tlt_vision.segmentation.semantic_trim import SemanticTrim
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
 from tlt_vision.train.dataset import ImageSet
@@ -123,6 +124,35 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
     assert merged > 0
 
 
-def test_a_trim_of_a_class_the_semantic_head_segments_is_refused_naming_the_weights():
+def test_the_nodes_segmenter_leaves_no_pixel_in_two_end_fittings_but_duplicates(held_out):
+    """As node.py builds it, the segmenter makes end-fitting masks exclusive: on the model's masks
+    of these frames, which do share pixels, two end fittings then share none unless they share
+    more than ``duplicate`` of the smaller (one fitting found twice)."""
+    config = load_config()
+    rule = config.exclusive_overlaps
+    assert rule is not None and "end_fitting" in rule.classes
+    seg = MaskRcnnSegmenter.from_config(config)
+    assert seg.overlaps == rule
+    label = seg.cfg.classes.index("end_fitting") + 1
+    shared_before, changed = 0, 0
+    for i in range(12):
+        sample = held_out[i]
+        found = detect_rgb(seg.model, sample.rgb, seg.max_size)
+        out = seg._exclusive(found)
+        assert "mask_probs" not in out  # what comes after would leave them behind
+        masks = out["masks"][out["labels"] == label].to(torch.float32).flatten(1)
+        own = found["masks"][found["labels"] == label].to(torch.float32).flatten(1)
+        shared, before = masks @ masks.T, own @ own.T
+        smaller = torch.minimum(own.sum(1)[:, None], own.sum(1)[None, :])
+        for a, b in torch.triu(shared, diagonal=1).nonzero().tolist():
+            assert before[a, b] > rule.duplicate * smaller[a, b], (i, a, b)  # a duplicate, left alone
+        shared_before += int(torch.triu(before, diagonal=1).sum())
+        changed += not torch.equal(out["masks"], found["masks"])
+    assert shared_before > 0 and changed > 0  # else these frames never asked for the rule
+
+
+def test_a_trim_or_overlap_rule_of_a_class_the_semantic_head_segments_is_refused_naming_the_weights():
     with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments strut_tube.*semantic_trim"):
         MaskRcnnSegmenter(WEIGHTS, 0.3, trim=SemanticTrim(("end_fitting", "strut_tube"), 0.3))
+    with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments cross_frame.*exclusive_overlaps"):
+        MaskRcnnSegmenter(WEIGHTS, 0.3, overlaps=ExclusiveOverlaps(("rivet", "cross_frame"), 0.6))
