@@ -36,6 +36,10 @@ def crs_node(rig, crs, tmp_path):
     node = build_node(crs.fast_config(tmp_path))
     rig.add(node)
     crs.wait_for(lambda: not node.ctx.not_ready(), what="driver states")
+    # The tree's first tick initialises the blackboard: a test that reads it before (a clean-clone
+    # run on a loaded machine did) reads every key unset.
+    crs.wait_for(lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0,
+                 what="the blackboard initialised")
     yield node
     node.interrupt()
     node.destroy_node()
