@@ -137,6 +137,14 @@ SCHEMA = {
                     "angle_deg": opt("float", 30.0, minimum=1.0, maximum=90.0),
                 },
             ),
+            "trim": opt(
+                "dict",
+                {"classes": [], "fraction": 0.1},
+                schema={
+                    "classes": opt("list", [], item=Field("str", choices=CLASSES)),
+                    "fraction": opt("float", 0.1, minimum=0.0, maximum=0.5),
+                },
+            ),
         },
     ),
     "free_space": opt(

@@ -74,6 +74,7 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
     settings = dict(config.raw["corrector"])
     turned = set(settings.pop("turned_starts"))
     tilted = settings.pop("tilted_starts")
+    trim = settings.pop("trim")
     corrector = CorrectorConfig(**settings)
     out = {}
     for name in config.raw["detectors"]:
@@ -87,6 +88,7 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
             model, load_detector(path, model, width), thresholds[model.object_class], corrector,
             turned_starts=model.object_class in turned,
             tilted_deg=tilted["angle_deg"] if model.object_class in tilted["classes"] else 0.0,
+            trim=trim["fraction"] if model.object_class in trim["classes"] else 0.0,
         )
     return out
 

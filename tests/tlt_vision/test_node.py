@@ -564,6 +564,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "corrector.tilted_starts.angle_deg" in err
+    wrong = vision_config()
+    wrong["corrector"]["trim"] = {"classes": ["end_fitting"], "fraction": 0.9}  # the fit left to a tenth
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "corrector.trim.fraction" in err and "0.9" in err
     missing = vision_config()
     missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
     path.write_text(__import__("yaml").safe_dump(missing))

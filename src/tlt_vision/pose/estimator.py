@@ -125,6 +125,7 @@ class PoseEstimator:
         use_corrector: bool = True,
         turned_starts: bool = False,
         tilted_deg: float = 0.0,
+        trim: float = 0.0,
     ) -> None:
         if detector.num_keypoints != len(model.keypoint_names):
             raise ValueError(
@@ -154,6 +155,9 @@ class PoseEstimator:
         # where a start within about 30 degrees of the truth finds the right fit.
         if tilted_deg:
             self.starts += [(turn, 0.0) for turn in tilted_turns(tilted_deg)]
+        # The fraction of its cloud's points farthest from the model the refinement leaves out
+        # (pose/corrector.py refine_pose): a mask spilling onto a neighbour pulls the fit less.
+        self.trim = float(trim)
 
     def _failed(self, reason: str, n: int) -> PoseEstimate:
         return PoseEstimate(
@@ -278,14 +282,17 @@ def _estimate_group(
             obj, rot, t = chamfer_objective(obs, mask, kp, surface, model_kp, weights)
     if config.refine_iterations > 0:
         offsets, turns, use = _starts(estimators)
-        rot, t, obj = refine_pose(obs, mask, rot, t, surface, config.refine_iterations, offsets, turns, use)
+        trim = torch.tensor([e.trim for e in estimators])
+        rot, t, obj = refine_pose(
+            obs, mask, rot, t, surface, config.refine_iterations, offsets, turns, use, trim
+        )
         known = [b for b, c in enumerate(group) if c.prior is not None]
         if known:  # both objectives then the refined Chamfer
             start = torch.as_tensor(np.stack([group[b].prior for b in known]), dtype=rot.dtype)
             p_rot, p_t, p_obj = refine_pose(
                 obs[known], mask[known], start[:, :3, :3], start[:, :3, 3],
                 SurfaceDistance.stacked([estimators[b].surface for b in known]),
-                config.refine_iterations, offsets[known], turns[known], use[known],
+                config.refine_iterations, offsets[known], turns[known], use[known], trim[known],
             )  # fmt: skip
             for i, b in enumerate(known):
                 if p_obj[i] < obj[b]:

@@ -146,3 +146,29 @@ def test_a_corner_joint_fitted_tilted_comes_back_from_the_tilted_starts():
     assert off_mm(r_stuck) > 10.0 and float(stuck[0]) > 10 * float(fit[0])
     assert off_mm(r) < 1.0
     assert np.linalg.norm(tt[0].double().numpy() - t) < 0.001
+
+
+def test_the_trim_leaves_out_a_neighbours_points_that_pull_the_fit_off():
+    """An end fitting's cloud with a piece of the fitting beside it (8 % of the points, a mask that
+    spilled over): the least-squares fit is pulled towards the neighbour; trimmed of the 10 % of
+    points farthest from the model (node.yaml ``corrector.trim``) it stays at the part's pose, and
+    an element's trim is its own (a batch of a trimmed and an untrimmed one)."""
+    m = build_models(0.75, {"vertical": 0.75})["end_fitting"]
+    rot = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]) @ _turn_z(30.0)
+    t = np.array([0.05, -0.02, 0.6])
+    rng = np.random.default_rng(3)
+    own = synthetic_view(m, rot, t, 276, rng, noise=0.0003)
+    nearby = t + np.array([0.0, float(m.diameter) * 0.6, 0.0])
+    beside = synthetic_view(m, rot, nearby, 600, rng, noise=0.0003)
+    spill = beside[beside[:, 1] < beside[:, 1].min() + 0.006][:24]  # its near edge
+    assert len(spill) == 24
+    obs = torch.tensor(np.concatenate([own, spill]), dtype=torch.float32)[None].repeat(2, 1, 1)
+    mask = torch.ones(obs.shape[:2], dtype=torch.bool)
+    start = torch.tensor(rot, dtype=torch.float32)[None].repeat(2, 1, 1)
+    t0 = torch.tensor(t + np.array([0.001, 0.001, 0.001]), dtype=torch.float32)[None].repeat(2, 1)
+    _, tt, _ = refine_pose(obs, mask, start, t0, m.surface, 10, (0.0,), trim=torch.tensor([0.0, 0.1]))
+    pulled, kept = (float(np.linalg.norm(tt[i].double().numpy() - t)) for i in range(2))
+    assert pulled > 0.001, pulled  # 1.5 mm
+    assert kept < 0.0003, kept  # 0.1 mm
+    _, alone, _ = refine_pose(obs[1:], mask[1:], start[1:], t0[1:], m.surface, 10, (0.0,), trim=0.1)
+    assert float(torch.linalg.vector_norm(alone[0] - tt[1])) < 1e-4
