@@ -292,11 +292,16 @@ class _Observed:
 
     def nearest(self, d2: torch.Tensor) -> torch.Tensor:
         """(B, N) 1 for the ``kept`` points of least ``d2`` (squared distances), 0 for the rest."""
-        if bool((self.kept >= self.count).all()):
+        trimmed = (self.kept < self.count).nonzero()[:, 0]
+        if not len(trimmed):
             return self.m
-        ranked = torch.where(self.m > 0, d2, torch.inf).sort(-1).values
-        cut = ranked.gather(-1, (self.kept.long() - 1)[:, None])
-        return ((d2 <= cut) & (self.m > 0)).to(d2.dtype)
+        # Only the trimmed elements' distances are ranked: a batch's tubes and rivets keep all.
+        out = self.m.clone()
+        valid = self.m[trimmed] > 0
+        ranked = torch.where(valid, d2[trimmed], torch.inf).sort(-1).values
+        cut = ranked.gather(-1, (self.kept[trimmed].long() - 1)[:, None])
+        out[trimmed] = ((d2[trimmed] <= cut) & valid).to(d2.dtype)
+        return out
 
     def chamfer(self, surface: SurfaceDistance, r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
         d2 = surface(model_frame(self.observed, r, tt)).pow(2)
