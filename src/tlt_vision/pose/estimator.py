@@ -89,7 +89,7 @@ class PoseEstimate:
     keypoints: np.ndarray  # (K, 3) corrected, camera frame
     certificate: Certificate
     num_points: int
-    objective: float  # corrector objective after correction, m^2
+    objective: float  # fit objective after correction and refinement (trimmed where trimmed), m^2
 
     @property
     def certified(self) -> bool:
