@@ -290,27 +290,28 @@ class _Observed:
         fields = ("observed", "m", "count", "front", "centre", "kept")
         return _Observed(*(getattr(self, f)[rows] for f in fields))
 
-    def nearest(self, d2: torch.Tensor) -> torch.Tensor:
-        """(B, N) 1 for the ``kept`` points of least ``d2`` (squared distances), 0 for the rest."""
-        trimmed = (self.kept < self.count).nonzero()[:, 0]
-        if not len(trimmed):
-            return self.m
-        # Only the trimmed elements' distances are ranked: a batch's tubes and rivets keep all.
-        out = self.m.clone()
-        valid = self.m[trimmed] > 0
-        ranked = torch.where(valid, d2[trimmed], torch.inf).sort(-1).values
-        cut = ranked.gather(-1, (self.kept[trimmed].long() - 1)[:, None])
-        out[trimmed] = ((d2[trimmed] <= cut) & valid).to(d2.dtype)
-        return out
-
     def chamfer(self, surface: SurfaceDistance, r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
         d2 = surface(model_frame(self.observed, r, tt)).pow(2)
-        return (d2 * self.nearest(d2)).sum(-1) / self.kept
+        return (d2 * _nearest(d2, self.m, self.count, self.kept)).sum(-1) / self.kept
 
     def total(self, surface: SurfaceDistance, r: torch.Tensor, tt: torch.Tensor) -> torch.Tensor:
         """The refinement's objective: the Chamfer one plus the free-space term."""
         inside = torch.relu(-surface.signed(model_frame(self.front, r, tt))).pow(2)
         return self.chamfer(surface, r, tt) + (inside * self.m).sum(-1) / self.count
+
+
+def _nearest(d2: torch.Tensor, m: torch.Tensor, count: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
+    """(B, N) 1 for each element's ``kept`` points (``m`` 1) of least ``d2``, 0 for the rest."""
+    trimmed = (kept < count).nonzero()[:, 0]
+    if not len(trimmed):
+        return m
+    # Only the trimmed elements' distances are ranked: a batch's tubes and rivets keep all.
+    out = m.clone()
+    valid = m[trimmed] > 0
+    ranked = torch.where(valid, d2[trimmed], torch.inf).sort(-1).values
+    cut = ranked.gather(-1, (kept[trimmed].long() - 1)[:, None])
+    out[trimmed] = ((d2[trimmed] <= cut) & valid).to(d2.dtype)
+    return out
 
 
 def _levenberg_marquardt(
@@ -330,7 +331,6 @@ def _levenberg_marquardt(
             return x if rows is None else x[rows]
 
         on = surface if rows is None else surface.select(rows)
-        mine = cloud if rows is None else cloud.rows(rows)
         # A slight pull to the start: along a direction the cloud leaves open (a tube along its
         # axis, its ends hidden in the fittings) the pose stays as corrected, not drifted.
         value = PROXIMAL * moved.pow(2).sum(-1)
@@ -339,7 +339,8 @@ def _levenberg_marquardt(
         terms = ((observed, arms[0], False, scales[0]), (front, arms[1], True, scales[1]))
         for points, arm, free, scale in terms:
             res, dres = _residuals(on, own(points), r, tt, free)
-            counted = mine.m if free else mine.nearest(res.pow(2))
+            m = own(cloud.m)
+            counted = m if free else _nearest(res.pow(2), m, own(cloud.count), own(cloud.kept))
             weight = counted.sqrt() * own(scale)[:, None]
             # d(residual)/d(rotation w about the centre) = -(arm x dres); d/d(translation mm) = -dres mm.
             jac = torch.cat([-torch.linalg.cross(own(arm), dres), -_MM * dres], -1) * weight[..., None]
