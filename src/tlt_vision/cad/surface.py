@@ -105,6 +105,77 @@ class SurfaceDistance:
             parts.append(outside + inside)
         return torch.cat(parts, dim=-1).min(dim=-1).values
 
+    def signed_with_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Signed distance (..., N) and its gradient (..., N, 3) with respect to the points, in
+        closed form and without autograd: the corrector and the refinement need both at every
+        step. The gradient is that of the nearest primitive (a unit vector, away from its
+        surface), as autograd gives for :meth:`signed` almost everywhere."""
+        with torch.no_grad():
+            nearest = None
+            for kind in (self._segments_with_gradient, self._boxes_with_gradient):
+                value, grad = kind(points)
+                if value is None:
+                    continue
+                if value.shape[-1] > 1:
+                    which = value.argmin(dim=-1, keepdim=True)
+                    grad = grad.gather(-2, which[..., None].expand(*which.shape, 3))
+                    value = value.gather(-1, which)
+                value, grad = value[..., 0], grad[..., 0, :]
+                if nearest is not None:
+                    closer = value < nearest[0]
+                    value = torch.where(closer, value, nearest[0])
+                    grad = torch.where(closer[..., None], grad, nearest[1])
+                nearest = value, grad
+            return nearest
+
+    def _segments_with_gradient(
+        self, points: torch.Tensor
+    ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """Each segment primitive's signed distance (..., N, S) and gradient (..., N, S, 3), or
+        none without segments. Every gradient is ``c_r * radial + c_u * u``: the scalars are
+        chosen per case, and only the last step works on vectors."""
+        if not self.seg_len.numel():
+            return None, None
+        rel = points[..., None, :] - self.seg_a.to(points.dtype)
+        u = self.seg_u.to(points.dtype)
+        s = (rel * u).sum(-1)
+        length, r = self.seg_len.to(points.dtype), self.seg_r.to(points.dtype)
+        radial = rel - s[..., None] * u
+        rho = torch.sqrt((radial * radial).sum(-1) + 1e-18)
+        # Capsule: away from the nearest point of the axis segment.
+        beyond = s - torch.minimum(torch.clamp(s, min=0.0), length)
+        dist = torch.sqrt(rho * rho + beyond * beyond + 1e-18)
+        caps, caps_r, caps_u = dist - r, 1.0 / dist, beyond / dist
+        # Closed cylinder: the 2-D (radial, axial) box; outside, towards the box's nearest point,
+        # inside, away from the nearer face.
+        dx = rho - r
+        half = s - length / 2
+        dz = half.abs() - length / 2
+        ox, oz = dx.clamp(min=0), dz.clamp(min=0)
+        out = torch.sqrt(ox * ox + oz * oz + 1e-18)
+        cyl = out + torch.minimum(torch.maximum(dx, dz), torch.zeros_like(dx))
+        outside, radial_face = (dx > 0) | (dz > 0), dx > dz
+        cyl_r = torch.where(outside, ox / (out * rho), torch.where(radial_face, 1.0 / rho, 0.0))
+        cyl_u = torch.sign(half) * torch.where(outside, oz / out, torch.where(radial_face, 0.0, 1.0))
+        flat = self.seg_flat
+        c_r, c_u = torch.where(flat, cyl_r, caps_r), torch.where(flat, cyl_u, caps_u)
+        return torch.where(flat, cyl, caps), c_r[..., None] * radial + c_u[..., None] * u
+
+    def _boxes_with_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """Each box primitive's signed distance (..., N, X) and gradient (..., N, X, 3), or none
+        without boxes."""
+        if not self.box_h.numel():
+            return None, None
+        rel = points[..., None, :] - self.box_c.to(points.dtype)
+        q = rel.abs() - self.box_h.to(points.dtype)
+        positive = q.clamp(min=0)
+        out = torch.sqrt((positive * positive).sum(-1) + 1e-18)
+        deepest = q.max(dim=-1, keepdim=True).values
+        outside = deepest > 0
+        # Outside, towards the nearest point; inside, away from the nearest face.
+        grad = torch.where(outside, positive / out[..., None], (q >= deepest).to(q.dtype))
+        return out + torch.minimum(deepest[..., 0], torch.zeros_like(out)), torch.sign(rel) * grad
+
     def __call__(self, points: torch.Tensor) -> torch.Tensor:
         return self.signed(points).abs()
 

@@ -91,6 +91,41 @@ def test_surface_distance_hand_computed(models):
     assert fitting.surface(p).item() == pytest.approx(0.05, abs=1e-6)
 
 
+def test_surface_gradient_hand_computed(models):
+    # The corrector's and the refinement's closed-form gradient: the unit direction away from the
+    # nearest surface point, outside and inside each kind of primitive.
+    tube, cube, fitting = models["strut_tube/vertical"], models["corner_joint"], models["end_fitting"]
+    cases = [
+        (tube, [0.1, 0.0, 0.0], 0.0875, [1.0, 0.0, 0.0]),  # beside the axis
+        (tube, [0.0, 0.03, 0.4], np.hypot(0.03, 0.1) - 0.0125, [0.0, 0.03 / np.hypot(0.03, 0.1),
+                                                              0.1 / np.hypot(0.03, 0.1)]),  # past an end
+        (cube, [0.125, 0.0, 0.0], 0.1, [1.0, 0.0, 0.0]),  # beyond a face
+        (cube, [0.035, -0.035, 0.0], 0.01 * np.sqrt(2), [0.5 ** 0.5, -(0.5 ** 0.5), 0.0]),  # an edge
+        (cube, [0.0, 0.0, -0.02], -0.005, [0.0, 0.0, -1.0]),  # inside, nearest the -z face
+        (fitting, [0.05, 0.0, 0.065], 0.05, [0.6, 0.0, 0.8]),  # outside the rim
+        (fitting, [0.0, 0.015, 0.0], -0.005, [0.0, 1.0, 0.0]),  # inside, nearest the side
+        (fitting, [0.001, 0.0, -0.022], -0.003, [0.0, 0.0, -1.0]),  # inside, nearest the -z face
+    ]
+    for model, point, value, grad in cases:
+        sdf, g = model.surface.signed_with_gradient(torch.tensor([point]))
+        assert sdf.item() == pytest.approx(value, abs=1e-6), (model.name, point)
+        assert g[0].tolist() == pytest.approx(grad, abs=1e-5), (model.name, point)
+
+
+def test_surface_gradient_is_the_signed_distances_gradient(models):
+    from tlt_vision.cad.surface import SurfaceDistance
+
+    names = ["corner_joint", "cross_frame", "end_fitting", "rivet", "strut_tube/vertical"]
+    points = torch.tensor(np.random.default_rng(4).normal(0.0, 0.2, (len(names), 500, 3))).float()
+    for surface in [models[n].surface for n in names] + [SurfaceDistance.stacked([models[n].surface
+                                                                                  for n in names])]:
+        q = points.clone().requires_grad_(True)
+        (expected,) = torch.autograd.grad(surface.signed(q).sum(), q)
+        sdf, grad = surface.signed_with_gradient(points)
+        assert torch.allclose(sdf, surface.signed(points), atol=1e-7)
+        assert torch.allclose(grad, expected, atol=1e-5)
+        assert torch.allclose(torch.linalg.vector_norm(grad, dim=-1), torch.ones(sdf.shape), atol=1e-4)
+
 
 def test_a_stacked_surface_measures_each_element_against_its_own_model(models):
     """Several models in one batch (a frame's parts posed together): a model with fewer segments or
