@@ -127,6 +127,7 @@ SCHEMA = {
             "patience": Field("int", minimum=1),
             "tolerance": opt("float", 1e-4, minimum=0.0, maximum=1.0),
             "refine_iterations": opt("int", 0, minimum=0, maximum=500),
+            "points": opt("int", 0, minimum=0),
             # Parts round about their model's z axis and about as long as wide.
             "turned_starts": opt("list", [], item=Field("str", choices=("end_fitting", "rivet"))),
             "tilted_starts": opt(

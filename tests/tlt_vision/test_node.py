@@ -570,6 +570,11 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "corrector.trim.fraction" in err and "0.9" in err
+    wrong = vision_config()
+    wrong["corrector"]["points"] = -1
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    assert "corrector.points" in capsys.readouterr().err
     missing = vision_config()
     missing["detectors"]["rivet"] = str(tmp_path / "none.pt")
     path.write_text(__import__("yaml").safe_dump(missing))

@@ -46,6 +46,7 @@ class CorrectorConfig:
     tolerance: float = 1e-4
     patience: int = 10
     refine_iterations: int = 0  # at most this many refine_pose steps per start (0: no refinement)
+    points: int = 0  # the corrector fits at most this many of each cloud's points (0: all of them)
 
 
 _ADAM_BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults

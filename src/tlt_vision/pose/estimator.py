@@ -242,6 +242,14 @@ def estimate_together(
     return [[e for e in row if e is not None] for row in out]
 
 
+def _spread(points: np.ndarray, count: int) -> np.ndarray:
+    """At most ``count`` of ``points``, evenly spaced through them (a cloud of a mask's pixels in
+    raster order keeps its extent)."""
+    if len(points) <= count:
+        return points
+    return points[np.linspace(0, len(points) - 1, count).round().astype(int)]
+
+
 def _starts(estimators: Sequence[PoseEstimator]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Each element's refinement starts, padded to the most any has: depth offsets (B, S), turns
     (B, S, 3, 3) and which of them it has (B, S)."""
@@ -275,7 +283,10 @@ def _estimate_group(
     surface = SurfaceDistance.stacked([e.surface for e in estimators])
     if use_corrector:
         scale = torch.tensor([e.scale for e in estimators])
-        res = correct(obs, kp, surface, model_kp, scale, mask, config, weights)
+        few_obs, few_mask = obs, mask
+        if config.points and obs.shape[1] > config.points:
+            few_obs, few_mask = padded_batch([_spread(c.points, config.points) for c in group])
+        res = correct(few_obs, kp, surface, model_kp, scale, few_mask, config, weights)
         rot, t, obj = res.rotation, res.translation, res.objective_after
     else:
         with torch.no_grad():

@@ -1,6 +1,8 @@
 """estimate_together: a frame's parts of several kinds posed in one batch get the poses and
 certificates they get in their own model's batch."""
 
+import copy
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -46,3 +48,29 @@ def test_parts_of_four_kinds_together_are_posed_as_alone():
             if est.model.name == "corner_joint":  # the others turn freely about their axis
                 turn = rotation_angle(torch.as_tensor(a.rotation), torch.as_tensor(b.rotation))
                 assert np.degrees(float(turn)) < 1.0
+
+
+def test_the_corrector_on_a_spread_of_each_cloud_poses_as_on_the_whole_of_it():
+    # node.yaml `corrector.points`: the corrector fits evenly spaced points of a large cloud; the
+    # refinement and the certificate still read every point.
+    mission = ROOT / "missions" / "one_bay.yaml"
+    config = load_config(ROOT / "config/vision/node.yaml", mission)
+    assert config.raw["corrector"]["points"] == 256
+    estimators = load_estimators(config, load_mission(mission))
+    rng = np.random.default_rng(12)
+    for kind in ("end_fitting", "strut_tube/vertical", "corner_joint"):
+        est = estimators[kind]
+        truth = [(random_rotation(rng), np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), 0.9]))
+                 for _ in range(3)]  # fmt: skip
+        clouds = [synthetic_view(est.model, r, t, 1200, rng, noise=0.0003) for r, t in truth]
+        spread = est.estimate_batch(clouds)
+        all_points = copy.copy(est)
+        all_points.corrector = dataclasses.replace(est.corrector, points=0)
+        whole = all_points.estimate_batch(clouds)
+        assert [p.num_points for p in spread] == [1200] * 3
+        assert [p.certified for p in spread] == [p.certified for p in whole]
+        assert sum(p.certified for p in spread) >= 2, [p.certificate.reason for p in spread]
+        for (_, t), a, b in zip(truth, spread, whole, strict=True):
+            if a.certified:  # within the goal's 3 mm, and as near the truth as the whole cloud's
+                assert np.linalg.norm(a.translation - t) < 0.003
+                assert np.linalg.norm(a.translation - t) < np.linalg.norm(b.translation - t) + 0.001
