@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -76,20 +78,28 @@ class MaskHead(nn.Module):
 
 
 def paste_masks(probs: torch.Tensor, boxes: torch.Tensor, image_size: tuple[int, int]) -> torch.Tensor:
-    """Mask probabilities (D, M, M) in their boxes -> (D, H, W) over the whole image."""
+    """Mask probabilities (D, M, M) in their boxes -> (D, H, W) over the whole image.
+
+    Each mask is sampled (bilinear, zero outside the mask) over its box and a margin of one mask
+    cell and a pixel, beyond which every sample is zero: sampling a frame's thirty masks over
+    the whole image took a tenth of its segmentation time."""
     h, w = image_size
-    if probs.shape[0] == 0:
-        return probs.new_zeros((0, h, w))
-    ys = torch.arange(h, dtype=probs.dtype, device=probs.device) + 0.5
-    xs = torch.arange(w, dtype=probs.dtype, device=probs.device) + 0.5
-    bw = (boxes[:, 2] - boxes[:, 0]).clamp(min=1e-3)
-    bh = (boxes[:, 3] - boxes[:, 1]).clamp(min=1e-3)
-    gx = (xs[None, :] - boxes[:, 0:1]) / bw[:, None] * 2 - 1  # (D, W)
-    gy = (ys[None, :] - boxes[:, 1:2]) / bh[:, None] * 2 - 1  # (D, H)
-    grid = torch.stack(
-        [gx[:, None, :].expand(-1, h, -1), gy[:, :, None].expand(-1, -1, w)], dim=-1
-    )  # (D, H, W, 2)
-    return F.grid_sample(probs[:, None], grid, align_corners=False, padding_mode="zeros")[:, 0]
+    out = probs.new_zeros((probs.shape[0], h, w))
+    cells = probs.shape[-1]
+    for i, (x0, y0, x1, y1) in enumerate(boxes.tolist()):
+        bw, bh = max(x1 - x0, 1e-3), max(y1 - y0, 1e-3)
+        c0, c1 = max(math.floor(x0 - bw / cells - 1), 0), min(math.ceil(x1 + bw / cells + 1), w)
+        r0, r1 = max(math.floor(y0 - bh / cells - 1), 0), min(math.ceil(y1 + bh / cells + 1), h)
+        if c1 <= c0 or r1 <= r0:
+            continue
+        xs = torch.arange(c0, c1, dtype=probs.dtype, device=probs.device) + 0.5
+        ys = torch.arange(r0, r1, dtype=probs.dtype, device=probs.device) + 0.5
+        gx = (xs - x0) / bw * 2 - 1
+        gy = (ys - y0) / bh * 2 - 1
+        grid = torch.stack([gx[None, :].expand(r1 - r0, -1), gy[:, None].expand(-1, c1 - c0)], dim=-1)
+        out[i, r0:r1, c0:c1] = F.grid_sample(probs[i, None, None], grid[None], align_corners=False,
+                                             padding_mode="zeros")[0, 0]
+    return out
 
 
 class RoIHeads(nn.Module):

@@ -54,6 +54,26 @@ def test_level_assignment_and_mask_paste():
     assert torch.equal(pasted[0], expected)
 
 
+def test_pasting_in_the_box_gives_what_sampling_the_whole_image_gives():
+    # Masks pasted only over their boxes (and a margin) lose nothing: the bilinear samples
+    # beyond it are zero, including boxes at the image's edges, sub-pixel and fractional ones.
+    torch.manual_seed(0)
+    h, w = 40, 52
+    boxes = torch.tensor([[3.2, 4.7, 20.1, 11.3], [0.0, 0.0, 52.0, 40.0], [40.5, 30.2, 52.0, 40.0],
+                          [10.2, 10.3, 10.8, 10.9], [-2.0, 35.0, 5.0, 41.0]])
+    probs = torch.rand(len(boxes), 14, 14)
+    ys, xs = torch.arange(h) + 0.5, torch.arange(w) + 0.5
+    gx = (xs[None] - boxes[:, :1]) / (boxes[:, 2:3] - boxes[:, :1]) * 2 - 1
+    gy = (ys[None] - boxes[:, 1:2]) / (boxes[:, 3:4] - boxes[:, 1:2]) * 2 - 1
+    grid = torch.stack([gx[:, None, :].expand(-1, h, -1), gy[:, :, None].expand(-1, -1, w)], dim=-1)
+    whole = torch.nn.functional.grid_sample(probs[:, None], grid, align_corners=False)[:, 0]
+    pasted = paste_masks(probs, boxes, (h, w))
+    assert pasted.shape == (len(boxes), h, w)
+    assert torch.allclose(pasted, whole, atol=1e-6)
+    assert float(pasted[3].sum()) > 0  # the sub-pixel box still leaves its trace
+    assert paste_masks(probs[:0], boxes[:0], (h, w)).shape == (0, h, w)
+
+
 def test_training_losses_backward_and_a_few_steps_reduce_the_loss():
     torch.manual_seed(0)
     model = MaskRCNN(TINY)
