@@ -75,7 +75,7 @@ def depth_pieces(mask: np.ndarray, depth: np.ndarray, split: DepthSplit) -> list
     whose depths differ by at most the jump, pieces under ``split.min_area`` pixels left out."""
     ys, xs = np.nonzero(mask)
     n = len(ys)
-    if n == 0:
+    if n < split.min_area:  # no piece can be large enough
         return []
     h, w = mask.shape
     index = np.full(mask.shape, -1, dtype=np.int64)
