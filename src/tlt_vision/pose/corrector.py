@@ -3,10 +3,10 @@
 For keypoints ``y + d``, registration of the CAD keypoints onto them gives ``R(d), t(d)``; the
 corrector minimises the one-sided Chamfer objective ``mean_i dist(x_i, R S + t)^2`` of the observed
 points ``x`` against the posed CAD surface ``S`` (exact point-to-surface distances, the limit of a
-dense CAD sample) over the corrections ``d``, by gradient descent (Adam) through the registration
-(the objective's gradient with respect to the pose in closed form, from the surface's own, and
-autograd only from the pose back to the keypoints: autograd through the whole objective, its
-overhead on a frame's few thousand points, made a frame's poses take a quarter longer).
+dense CAD sample) over the corrections ``d``, by gradient descent (Adam) through the registration.
+The gradient is written out, not recorded by autograd: the objective's with respect to the pose
+from the surface's own, then the registration's back to the keypoints (autograd's bookkeeping on
+a frame's few thousand points made its poses take a third longer).
 It is batched, each element on its own: an element stops after ``max_iterations`` or when it has
 not improved by more than ``tolerance`` (relative) for ``patience`` iterations, and keeps its best
 iterate, so the objective it returns is never above the one it started from.
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import torch
 
 from tlt_vision.cad.surface import SurfaceDistance
-from tlt_vision.ops.registration import register
+from tlt_vision.ops.registration import register, register_with_vjp
 
 
 @dataclass(frozen=True)
@@ -129,15 +129,12 @@ def correct(
         kp: torch.Tensor, d: torch.Tensor, rows: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The objective of the elements ``rows`` at keypoints ``kp + d * unit`` and its gradient
-        with respect to ``d``: autograd runs through the registration only (a few keypoints per
-        element), the Chamfer term's gradient with respect to the pose is in closed form."""
-        d = d.requires_grad_(True)
+        with respect to ``d``, in closed form: the Chamfer term's with respect to the pose, then
+        the registration's back to the keypoints."""
         weights = None if keypoint_weights is None else keypoint_weights[rows]
-        rot, t = register(model_keypoints[rows], kp + d * unit[rows], weights)
-        obj, d_rot, d_t = _chamfer_pose_gradient(observed[rows], points[rows], rot.detach(), t.detach(),
-                                                 surface.select(rows))
-        (grad,) = torch.autograd.grad((rot * d_rot).sum() + (t * d_t).sum(), d)
-        return obj, grad
+        rot, t, back = register_with_vjp(model_keypoints[rows], kp + d * unit[rows], weights)
+        obj, d_rot, d_t = _chamfer_pose_gradient(observed[rows], points[rows], rot, t, surface.select(rows))
+        return obj, back(d_rot, d_t) * unit[rows]
 
     with torch.no_grad():
         start, _, _ = chamfer_objective(observed, mask, keypoints, surface, model_keypoints, keypoint_weights)
