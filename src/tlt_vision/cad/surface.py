@@ -80,29 +80,8 @@ class SurfaceDistance:
 
     def signed(self, points: torch.Tensor) -> torch.Tensor:
         """Signed distance (..., N): negative inside the part."""
-        parts = []
-        if self.seg_len.numel():
-            rel = points[..., None, :] - self.seg_a.to(points.dtype)  # (..., N, S, 3)
-            u = self.seg_u.to(points.dtype)
-            s = (rel * u).sum(-1)  # axial coordinate from a
-            length = self.seg_len.to(points.dtype)
-            r = self.seg_r.to(points.dtype)
-            radial = rel - s[..., None] * u
-            rho = torch.sqrt((radial * radial).sum(-1) + 1e-18)
-            # Capsule: distance to the axis segment minus the radius.
-            sc = torch.minimum(torch.clamp(s, min=0.0), length)
-            caps = torch.sqrt(rho.pow(2) + (s - sc).pow(2) + 1e-18) - r
-            # Closed cylinder: the standard 2-D (radial, axial) box distance.
-            dx = rho - r
-            dz = (s - length / 2).abs() - length / 2
-            out = torch.sqrt(dx.clamp(min=0).pow(2) + dz.clamp(min=0).pow(2) + 1e-18)
-            cyl = out + torch.minimum(torch.maximum(dx, dz), torch.zeros_like(dx))
-            parts.append(torch.where(self.seg_flat, cyl, caps))
-        if self.box_h.numel():
-            q = (points[..., None, :] - self.box_c.to(points.dtype)).abs() - self.box_h.to(points.dtype)
-            outside = torch.sqrt(q.clamp(min=0).pow(2).sum(-1) + 1e-18)
-            inside = torch.minimum(q.max(dim=-1).values, torch.zeros_like(outside))
-            parts.append(outside + inside)
+        parts = [value for value, _ in (self._segments(points, False), self._boxes(points, False))
+                 if value is not None]
         return torch.cat(parts, dim=-1).min(dim=-1).values
 
     def signed_with_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -112,8 +91,7 @@ class SurfaceDistance:
         surface), as autograd gives for :meth:`signed` almost everywhere."""
         with torch.no_grad():
             nearest = None
-            for kind in (self._segments_with_gradient, self._boxes_with_gradient):
-                value, grad = kind(points)
+            for value, grad in (self._segments(points, True), self._boxes(points, True)):
                 if value is None:
                     continue
                 if value.shape[-1] > 1:
@@ -128,42 +106,47 @@ class SurfaceDistance:
                 nearest = value, grad
             return nearest
 
-    def _segments_with_gradient(
-        self, points: torch.Tensor
+    def _segments(
+        self, points: torch.Tensor, gradient: bool
     ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        """Each segment primitive's signed distance (..., N, S) and gradient (..., N, S, 3), or
-        none without segments. Every gradient is ``c_r * radial + c_u * u``: the scalars are
-        chosen per case, and only the last step works on vectors."""
+        """Each segment primitive's signed distance (..., N, S) and, with ``gradient``, its
+        gradient (..., N, S, 3); none without segments. Every gradient is
+        ``c_r * radial + c_u * u``: the scalars are chosen per case, and only the last step works
+        on vectors."""
         if not self.seg_len.numel():
             return None, None
-        rel = points[..., None, :] - self.seg_a.to(points.dtype)
+        rel = points[..., None, :] - self.seg_a.to(points.dtype)  # (..., N, S, 3)
         u = self.seg_u.to(points.dtype)
-        s = (rel * u).sum(-1)
+        s = (rel * u).sum(-1)  # axial coordinate from a
         length, r = self.seg_len.to(points.dtype), self.seg_r.to(points.dtype)
         radial = rel - s[..., None] * u
         rho = torch.sqrt((radial * radial).sum(-1) + 1e-18)
-        # Capsule: away from the nearest point of the axis segment.
+        # Capsule: the distance to the axis segment minus the radius.
         beyond = s - torch.minimum(torch.clamp(s, min=0.0), length)
         dist = torch.sqrt(rho * rho + beyond * beyond + 1e-18)
-        caps, caps_r, caps_u = dist - r, 1.0 / dist, beyond / dist
-        # Closed cylinder: the 2-D (radial, axial) box; outside, towards the box's nearest point,
-        # inside, away from the nearer face.
+        caps = dist - r
+        # Closed cylinder: the standard 2-D (radial, axial) box distance.
         dx = rho - r
         half = s - length / 2
         dz = half.abs() - length / 2
         ox, oz = dx.clamp(min=0), dz.clamp(min=0)
         out = torch.sqrt(ox * ox + oz * oz + 1e-18)
         cyl = out + torch.minimum(torch.maximum(dx, dz), torch.zeros_like(dx))
+        flat = self.seg_flat
+        value = torch.where(flat, cyl, caps)
+        if not gradient:
+            return value, None
+        # Capsule: away from the nearest point of the axis segment. Cylinder: outside, from the
+        # box's nearest point; inside, away from the nearer face.
         outside, radial_face = (dx > 0) | (dz > 0), dx > dz
         cyl_r = torch.where(outside, ox / (out * rho), torch.where(radial_face, 1.0 / rho, 0.0))
         cyl_u = torch.sign(half) * torch.where(outside, oz / out, torch.where(radial_face, 0.0, 1.0))
-        flat = self.seg_flat
-        c_r, c_u = torch.where(flat, cyl_r, caps_r), torch.where(flat, cyl_u, caps_u)
-        return torch.where(flat, cyl, caps), c_r[..., None] * radial + c_u[..., None] * u
+        c_r, c_u = torch.where(flat, cyl_r, 1.0 / dist), torch.where(flat, cyl_u, beyond / dist)
+        return value, c_r[..., None] * radial + c_u[..., None] * u
 
-    def _boxes_with_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        """Each box primitive's signed distance (..., N, X) and gradient (..., N, X, 3), or none
-        without boxes."""
+    def _boxes(self, points: torch.Tensor, gradient: bool) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """Each box primitive's signed distance (..., N, X) and, with ``gradient``, its gradient
+        (..., N, X, 3); none without boxes."""
         if not self.box_h.numel():
             return None, None
         rel = points[..., None, :] - self.box_c.to(points.dtype)
@@ -171,10 +154,12 @@ class SurfaceDistance:
         positive = q.clamp(min=0)
         out = torch.sqrt((positive * positive).sum(-1) + 1e-18)
         deepest = q.max(dim=-1, keepdim=True).values
-        outside = deepest > 0
-        # Outside, towards the nearest point; inside, away from the nearest face.
-        grad = torch.where(outside, positive / out[..., None], (q >= deepest).to(q.dtype))
-        return out + torch.minimum(deepest[..., 0], torch.zeros_like(out)), torch.sign(rel) * grad
+        value = out + torch.minimum(deepest[..., 0], torch.zeros_like(out))
+        if not gradient:
+            return value, None
+        # Outside, away from the nearest point; inside, away from the nearest face.
+        grad = torch.where(deepest > 0, positive / out[..., None], (q >= deepest).to(q.dtype))
+        return value, torch.sign(rel) * grad
 
     def __call__(self, points: torch.Tensor) -> torch.Tensor:
         return self.signed(points).abs()
