@@ -70,7 +70,7 @@ def test_nearest_rotation_gradient_matches_numeric_and_is_finite_when_degenerate
 
 
 def test_the_written_out_gradient_is_the_registrations():
-    # The corrector's gradient back through the registration, against autograd's and numeric,
+    # The corrector's gradient back through the registration, against autograd's,
     # weighted and batched; finite for collinear points (an axial part's keypoints).
     torch.manual_seed(3)
     a = torch.randn(4, 6, 3, dtype=torch.float64)
