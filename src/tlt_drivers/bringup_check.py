@@ -52,9 +52,10 @@ class Result:
 class BringupCheck(LeanNode):
     """Runs the checks; ROS callbacks are served by an executor thread."""
 
-    def __init__(self, timeout_s: float) -> None:
+    def __init__(self, timeout_s: float, startup_timeout_s: float) -> None:
         super().__init__("bringup_check")
         self.timeout_s = timeout_s
+        self.startup_timeout_s = startup_timeout_s
         self._latest: dict[str, Any] = {}
         self._changed = threading.Condition()
         self.results: list[Result] = []
@@ -143,12 +144,19 @@ class BringupCheck(LeanNode):
         return ok
 
     def hardware_active(self, component: str) -> str:
+        """The driver's first status with its interface active and link up.
+
+        Waits the start-up allowance, not a step's timeout: the check is started with the drivers,
+        and a driver process still starting (imports, its link's handshake) on a loaded machine
+        has not failed.
+        """
         topic = ros_names.hardware_status_topic(component)
         self.watch(HardwareStatus, topic)
         msg = self.wait_for(
             topic,
             lambda m: m.lifecycle_state == HardwareStatus.LIFECYCLE_ACTIVE and m.link_ok,
             "hardware interface active with its link up",
+            timeout_s=self.startup_timeout_s,
         )
         return f"active, {msg.errors} error(s) so far"
 
@@ -381,6 +389,12 @@ def main(argv: list[str] | None = None) -> int:
         "--components", default=",".join(COMPONENTS), help=f"comma-separated, from {', '.join(COMPONENTS)}"
     )
     parser.add_argument("--timeout", type=float, default=15.0, help="seconds to wait for each step")
+    parser.add_argument(
+        "--startup-timeout",
+        type=float,
+        default=60.0,
+        help="seconds to wait for each driver to come up (active, its link up)",
+    )
     args = parser.parse_args(rclpy.utilities.remove_ros_args(["prog", *argv])[1:])
     components = [c for c in args.components.split(",") if c]
     unknown = sorted(set(components) - set(COMPONENTS))
@@ -388,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown component(s) {', '.join(unknown)}")
 
     rclpy.init(args=["prog", *argv])
-    node = BringupCheck(args.timeout)
+    node = BringupCheck(args.timeout, args.startup_timeout)
     executor = MultiThreadedExecutor()
     executor.add_node(node)
     spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
