@@ -85,6 +85,14 @@ class CameraStreams:
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._labels = node.create_publisher(String, topics.SEGMENTATION_LABELS, latched)
         self._labels_sent = False
+        # The renderers every camera's frames need, made now, before the device links are served:
+        # making one holds the interpreter lock for a third of a second (longer on a loaded
+        # machine), and made on the first frame mid-run it starved the pty threads past every
+        # serial driver's packet timeout at once. Rendering itself lets go of the lock.
+        width = max(settings.camera_size(camera)[0] for camera in names.cameras())
+        height = max(settings.camera_size(camera)[1] for camera in names.cameras())
+        for antialias in {False, settings.camera_antialias}:  # depth and ids come from single samples
+            scene.renderer(width, height, antialias)
 
     def _publish_labels(self) -> None:
         labels = self.scene.renderer(antialias=self.settings.camera_antialias).labels

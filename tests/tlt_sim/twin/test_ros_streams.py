@@ -106,3 +106,30 @@ def test_ground_truth_poses_match_the_model(make_twin, ros):
     # All objects of one instant in one message.
     assert len(messages[0].transforms) == len(expected)
     assert len({tf.header.stamp.nanosec for tf in messages[0].transforms}) == 1
+
+
+def test_every_renderer_is_made_before_the_first_frame(make_twin, ros, monkeypatch):
+    # Making a renderer holds the interpreter lock for a third of a second or more: mid-run it kept
+    # the twin's pty threads from answering every serial driver at once. Frames only render.
+    from tlt_sim.model import cameras
+
+    made = []
+    real_init = cameras.CameraRenderer.__init__
+
+    def counting_init(self, *args, **kwargs):
+        made.append(kwargs.get("antialias", args[3] if len(args) > 3 else True))
+        real_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(cameras.CameraRenderer, "__init__", counting_init)
+    twin_node, probe, executor = ros
+    twin = make_twin()
+    cams = CameraStreams(twin_node, twin.scene, twin.settings.replace(camera_rate_hz=10.0))
+    assert sorted(made) == [False, True], "the multisampled renderer for colour, the exact one for depth"
+    made.clear()
+
+    got: list = []
+    for camera, stream in (("zed_1", "rgb"), ("zed_1", "depth"), ("ars_x/d405_a", "segmentation")):
+        probe.create_subscription(Image, topics.camera_topic(camera, stream), got.append, 10)
+    _run(twin, [cams], executor, lambda: len(got) >= 6)
+    assert cams.renders["zed_1"] and cams.renders["ars_x/d405_a"]
+    assert made == [], "no renderer made while the links are served"
