@@ -29,9 +29,12 @@ member's first joint (the mission file), and the part nearest that joint from th
 dispenser is taken as the member's. Members more than ``PLACE_WARN_M`` off are listed.
 
 Usage:
-  python bench/build.py [--mission two_bay] [--rtf R]   # run scripts/main.sh into a fresh run
+  python bench/build.py [--mission two_bay] [--rtf R] [--arm-speed S]
+                                                      # run scripts/main.sh into a fresh run
                                                       # folder (the twin at real-time factor R: 0 no
-                                                      # limit; the main job's 1 if not given), report
+                                                      # limit; the main job's 1 if not given; the arms
+                                                      # at S of their speed limits, the ARS files'
+                                                      # 0.5 if not given), report
   python bench/build.py --run-dir DIR [--mission NAME]   # report on a finished run (archive and
                                                       # recording; the mission for the placements)
 """
@@ -295,11 +298,15 @@ def report(run_dir: Path, job_wall_s: float | None = None, mission: str | None =
     return 0 if rows else 1
 
 
-def run_job(mission: str, run_dir: Path, rtf: float | None = None) -> tuple[int, float]:
+def run_job(
+    mission: str, run_dir: Path, rtf: float | None = None, arm_speed: float | None = None
+) -> tuple[int, float]:
     """Run the main job on ``mission`` into ``run_dir``, its output shown as it comes."""
     env = dict(os.environ, TLT_RUN_DIR=str(run_dir))
     if rtf is not None:
         env["TLT_TWIN_RTF"] = f"{rtf:g}"
+    if arm_speed is not None:
+        env["TLT_ARM_VELOCITY_SCALE"] = f"{arm_speed:g}"
     started = time.monotonic()
     status = subprocess.call(["bash", str(ROOT / "scripts" / "main.sh"), "--mission", mission], env=env)
     return status, time.monotonic() - started
@@ -310,13 +317,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--mission", default="two_bay", help="mission to build (missions/NAME.yaml)")
     parser.add_argument("--run-dir", type=Path, help="report on this finished run instead of running one")
     parser.add_argument("--rtf", type=float, help="the twin's real-time factor (0: as fast as it can)")
+    parser.add_argument("--arm-speed", type=float,
+                        help="the arms' speed as a fraction of their limits (the ARS files' if not given)")
     args = parser.parse_args(argv)
     if args.run_dir is not None:
         return report(args.run_dir, mission=args.mission)
     run_dir = Path(tempfile.mkdtemp(prefix="tlt-bench-build."))
-    status, wall = run_job(args.mission, run_dir, args.rtf)
-    rtf = "" if args.rtf is None else f" (twin real-time factor {args.rtf:g})"
-    print(f"\nbuild bench: main job on {args.mission}{rtf} exited {status} after {wall:.0f} s\n")
+    status, wall = run_job(args.mission, run_dir, args.rtf, args.arm_speed)
+    settings = [f"twin real-time factor {args.rtf:g}"] if args.rtf is not None else []
+    settings += [f"arms at {args.arm_speed:g} of their speed limits"] if args.arm_speed is not None else []
+    described = f" ({', '.join(settings)})" if settings else ""
+    print(f"\nbuild bench: main job on {args.mission}{described} exited {status} after {wall:.0f} s\n")
     return report(run_dir, wall, args.mission) or status
 
 

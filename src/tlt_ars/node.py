@@ -458,8 +458,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="where a held part, a rivet and a request that set its member are kept for a restart"
         " (overrides the ARS file)",
     )
+    p.add_argument(
+        "--velocity-scale", type=_optional_float, metavar="FRACTION",
+        help="the arm's speed as a fraction of its limits (overrides arm.velocity_scale; empty: the"
+        " ARS file's)",
+    )
     p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
     return p
+
+
+def _optional_float(text: str) -> float | None:
+    # A launch set passes an unset variable as an empty argument: the ARS file's value then.
+    return float(text) if text.strip() else None
+
+
+def config_from_args(args: argparse.Namespace) -> ArsConfig:
+    """The ARS file with the command line's overrides, validated; :class:`ConfigError` names the
+    file (and the option), the key and the reason."""
+    path = args.config or default_config_path(args.ars)
+    overrides: dict[str, Any] = {
+        key: str(value.resolve())
+        for key, value in (("mission", args.mission), ("state_file", args.state_file))
+        if value is not None
+    }
+    raw = load_yaml(path)
+    source = str(path)
+    if args.velocity_scale is not None:
+        arm = raw.get("arm")
+        overrides["arm"] = {**(arm if isinstance(arm, dict) else {}), "velocity_scale": args.velocity_scale}
+        source += f" with --velocity-scale {args.velocity_scale:g}"
+    config = ars_config_from_dict({**raw, **overrides}, source) if overrides else load_ars_config(path)
+    if config.ars != args.ars:
+        raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
+    return config
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -468,19 +499,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     full = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(["ars", *full])[1:])
-    path = args.config or default_config_path(args.ars)
     try:
-        overrides = {
-            key: str(value.resolve())
-            for key, value in (("mission", args.mission), ("state_file", args.state_file))
-            if value is not None
-        }
-        if overrides:
-            config = ars_config_from_dict({**load_yaml(path), **overrides}, str(path))
-        else:
-            config = load_ars_config(path)
-        if config.ars != args.ars:
-            raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
+        config = config_from_args(args)
     except (ConfigError, OSError) as exc:
         print(f"ars: {exc}", file=sys.stderr)
         return 2

@@ -9,7 +9,9 @@ says so (``<run>/tower_model.json``, as the CRS would have persisted it: the mem
 riveted, their parts and rivets taken), so the run begins late in the bay. With ``hosts`` the
 launch set is config/launch/system_hosts_twin.yaml instead: every computer of the EDU an emulated
 host (a network namespace, docs/deployment.md), and the test's ground station on the ground host.
-The launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
+The arms move at their full speed limits (``TLT_ARM_VELOCITY_SCALE`` 1, as the ARS tests
+run them): the build's steps are the same as at the ARS files' 0.5, in less sim time. The
+launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
 CRS's ``hk_mission`` telemetry arrives over the ground link, and ``start_build()`` until an
 authenticated Start is accepted (the CRS refuses Start with "not ready: ..." until its
 drivers report; it is sent again until it is not).
@@ -151,6 +153,7 @@ class SystemRun:
             "TLT_GROUND_CRS_PORT": str(self.crs_port),
             "TLT_GROUND_GSW_PORT": str(self.gsw_port),
             "TLT_TWIN_SCENARIO": scenario_file,
+            "TLT_ARM_VELOCITY_SCALE": "1",
             **({"TLT_HOSTS_RUN": self.hosts_run} if hosts else {}),
             **({"TLT_MISSION": mission} if mission else {}),
             **({"TLT_TWIN_RTF": str(rtf)} if rtf is not None else {}),

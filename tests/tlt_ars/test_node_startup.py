@@ -22,7 +22,7 @@ from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.config import ars_config_from_dict, default_config_path
 from tlt_ars.mission_state import Request
-from tlt_ars.node import ArsNode, main
+from tlt_ars.node import ArsNode, build_parser, config_from_args, main
 from tlt_ars.planning.reachability import UnreachableMember
 from tlt_ars.planning.targets import Target
 from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
@@ -44,6 +44,19 @@ def test_main_refuses_a_bad_config_with_file_key_and_reason(tmp_path, capsys):
     assert str(bad) in err and "arm.velocity_scale" in err
     assert main(["--ars", "ars_y", "--config", str(default_config_path("ars_x"))]) == 2
     assert "file is for 'ars_x', not 'ars_y'" in capsys.readouterr().err
+
+
+def test_the_command_line_sets_the_arm_speed_and_a_bad_one_is_refused_naming_the_option(capsys):
+    def speed(*extra: str) -> float:
+        args = build_parser().parse_args(["--ars", "ars_y", *extra])
+        return config_from_args(args).arm["velocity_scale"]
+
+    shipped = load_yaml(default_config_path("ars_y"))["arm"]["velocity_scale"]
+    assert speed() == speed("--velocity-scale", "") == shipped
+    assert speed("--velocity-scale", "0.8") == 0.8 != shipped
+    assert main(["--ars", "ars_y", "--velocity-scale", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "ars_y.yaml with --velocity-scale 3: arm.velocity_scale" in err
 
 
 def test_a_member_out_of_reach_stops_the_start(tmp_path):
