@@ -64,7 +64,6 @@ from tlt_ars.config import (
     ars_config_from_dict,
     check_against_mission,
     default_config_path,
-    load_ars_config,
 )
 from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
@@ -487,7 +486,7 @@ def config_from_args(args: argparse.Namespace) -> ArsConfig:
         arm = raw.get("arm")
         overrides["arm"] = {**(arm if isinstance(arm, dict) else {}), "velocity_scale": args.velocity_scale}
         source += f" with --velocity-scale {args.velocity_scale:g}"
-    config = ars_config_from_dict({**raw, **overrides}, source) if overrides else load_ars_config(path)
+    config = ars_config_from_dict({**raw, **overrides}, source)
     if config.ars != args.ars:
         raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
     return config
