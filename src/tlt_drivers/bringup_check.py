@@ -4,6 +4,8 @@ What an engineer runs after powering up a Jetson's share of the unit (or the emu
 for each component it waits for the driver to come up, then moves each mechanism a little and
 back through the same interfaces the CRS and ARS use, and checks the motion in the state that
 comes back from the device. It leaves the lifter in Safe. Exit code 0 when every check passed.
+A driver gets ``--startup-timeout`` (60 s) to come up, since the check starts with the drivers;
+each step after that ``--timeout`` (15 s).
 
     tlt-bringup-check --components lifter,top_grippers,ee_x
 """
