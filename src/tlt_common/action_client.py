@@ -19,8 +19,10 @@ class SerialisedActionClient(ActionClient):
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
+        # Before the base class adds this client to its node: an executor already spinning that
+        # node may take data from it at once (a clean clone's spin thread died on the missing lock).
         self._serial = threading.RLock()
+        super().__init__(*args, **kwargs)
 
     def send_goal_async(self, *args: Any, **kwargs: Any) -> Any:
         with self._serial:

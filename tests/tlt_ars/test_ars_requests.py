@@ -412,6 +412,9 @@ def test_foundation_rivet_subtree_ticks_on_its_own(stack):
 
 def test_a_trajectory_planned_from_elsewhere_is_never_sent(stack):
     ctx = stack.ars.ctx
+    # Where the arm stands, not where the last test's motion still carries it (a clean clone's
+    # loaded arm moved on 7 mrad after this was read).
+    stack.wait(stack.arm_standing_still, "the arm settled", timeout=10)
     q = ctx.arm_q()
     stale = None
     # A short move that starts away from the arm; which way is free depends on where the tests
