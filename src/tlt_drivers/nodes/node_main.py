@@ -70,7 +70,8 @@ def chain_driver(
 ) -> Driver:
     """A Dynamixel or MightyZAP chain driver from its arguments: ``--config`` (default
     ``config/hardware/<default_config>``), ``--port`` (the YAML's port replaced, e.g. by an
-    emulated chain's pty), ``--latency-timer-ms``. Raises :class:`DriverStartError`."""
+    emulated chain's pty), ``--latency-timer-ms`` (Dynamixel), ``--response-timeout-s`` (MightyZAP).
+    Raises :class:`DriverStartError`."""
     parser = argparse.ArgumentParser(prog=name, description=f"TLT {name} driver node")
     parser.add_argument(
         "--config", type=Path, default=HARDWARE_CONFIG_DIR / default_config, help="hardware YAML"
@@ -80,6 +81,11 @@ def chain_driver(
         "--latency-timer-ms", type=float,
         help="Dynamixel chains: the latency the packet timeout allows for, instead of the YAML's (comm."
         "latency_timer_ms); on the twin the far end is a process sharing the CPU, not a USB adapter",
+    )
+    parser.add_argument(
+        "--response-timeout-s", type=float,
+        help="MightyZAP chains: how long a request waits for feedback, instead of the YAML's (comm."
+        "response_timeout_s); on the twin the far end is a process sharing the CPU, not an actuator",
     )
     parsed = parser.parse_args(list(args))
     try:
@@ -92,6 +98,14 @@ def chain_driver(
         if "latency_timer_ms" not in config.get("comm", {}):
             raise DriverStartError("--latency-timer-ms applies to Dynamixel chains only")
         config["comm"]["latency_timer_ms"] = parsed.latency_timer_ms
+    if parsed.response_timeout_s is not None:
+        if "response_timeout_s" not in config.get("comm", {}):
+            raise DriverStartError("--response-timeout-s applies to MightyZAP chains only")
+        if not 0.001 <= parsed.response_timeout_s <= 1.0:  # the YAML's bounds
+            raise DriverStartError(
+                f"--response-timeout-s must be 0.001 to 1 s, not {parsed.response_timeout_s}"
+            )
+        config["comm"]["response_timeout_s"] = parsed.response_timeout_s
     return Driver(config["component"], lambda: build(config))
 
 
