@@ -9,9 +9,9 @@ Every binding has two halves the twin calls once per sync period, from its one s
   shaft (a jaw closing on a tube, the width carriage on its end stop, a latch on a frame), the
   shaft is put where the joint stopped and an obstacle is set there, so the servo reports the
   stopped position and the current it presses with; the obstacle follows the joint and lifts once
-  the goal no longer presses into it or the joint moves on. A count that jumps by more than a servo
-  can turn in one period (a reboot keeps only the position within one turn) moves the binding's
-  offset, not the joint.
+  the goal no longer presses into it, or the joint runs on towards the goal. A count that jumps by
+  more than a servo can turn in one period (a reboot keeps only the position within one turn)
+  moves the binding's offset, not the joint.
 * :class:`LifterBinding`: the firmware's motor velocities drive the lifter joints; encoders are the
   joints' positions (counts = m x counts_per_m), so the limit switches follow the positions.
 * :class:`URArmBinding`: the UR controller's motion generator (stepped on sim time, in its own
@@ -88,9 +88,10 @@ class ServoJointBinding:
     def sense(self, scene: Scene, dt: float) -> None:
         q = scene.position(self.joint)
         ticks = self.to_ticks(q) - self.offset
+        velocity = scene.velocity(self.joint)
+        slow = abs(velocity) < 0.1 * scene.max_velocity(self.joint)
         if self.blocked is None:
             lag = self._physical(self.shaft.position) - q
-            slow = abs(scene.velocity(self.joint)) < 0.1 * scene.max_velocity(self.joint)
             self._stalled = self._stalled + dt if abs(lag) > self.tolerance and slow else 0.0
             if self._stalled >= self.stall_s:
                 self.blocked = "upper" if self.shaft.position > ticks else "lower"
@@ -99,7 +100,12 @@ class ServoJointBinding:
         goal = self.goal_ticks()
         pressing = goal > ticks if self.blocked == "upper" else goal < ticks
         reached = abs(self._physical(goal) - q) <= self.tolerance
-        if not pressing or reached:
+        # A joint that runs on towards the goal is no longer held: the shaft takes it over again.
+        # Left blocked, it would run on at the model's rated speed while the servo, held where it
+        # stopped, pressed at its current limit into an overload (the width carriage: six times the
+        # servo's speed, an overload within the second, a whole-system run's EE fault).
+        moving_on = not slow and (self._physical(goal) - q) * velocity > 0
+        if not pressing or reached or moving_on:
             self.blocked, self._stalled = None, 0.0
             self.shaft.set_obstacle()
             self.shaft.position = self._last_count = ticks

@@ -11,11 +11,12 @@ import time
 
 import numpy as np
 import pytest
+from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD, DynamixelServo
 from tlt_sim.emulators.gpio_chip import EmulatedGpioChip, EmulatedLines
 from tlt_sim.model import ik, names
 from tlt_sim.model.geometry import frame_from_axes
 from tlt_sim.model.scene import Scene
-from tlt_sim.twin.bindings import URArmBinding
+from tlt_sim.twin.bindings import ServoJointBinding, URArmBinding
 
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
@@ -160,6 +161,76 @@ def test_the_width_carriage_stops_on_its_end_stop_and_the_servo_sees_it(make_twi
     width = twin.scene.position(names.width_joint("ars_x"))
     assert width == pytest.approx(0.0, abs=0.0005)
     assert servo.get("present_position") == pytest.approx(start - 0.005 / 0.02 * 4096, abs=15)
+
+
+
+class Carriage:
+    """A model joint as the scene moves it, in one dimension: towards its setpoint at its rated
+    speed, unless something holds it (``held``)."""
+
+    def __init__(self, max_velocity: float) -> None:
+        self.q = self.v = self.target = 0.0
+        self.vmax = max_velocity
+        self.held = False
+
+    def command_position(self, joint: str, position: float) -> None:
+        self.target = position
+
+    def position(self, joint: str) -> float:
+        return self.q
+
+    def velocity(self, joint: str) -> float:
+        return self.v
+
+    def max_velocity(self, joint: str) -> float:
+        return self.vmax
+
+    def advance(self, dt: float) -> None:
+        step = 0.0 if self.held else float(np.clip(self.target - self.q, -self.vmax * dt, self.vmax * dt))
+        self.q, self.v = self.q + step, step / dt
+
+
+def test_a_carriage_held_for_a_moment_goes_on_at_the_servos_speed_without_an_overload():
+    """The width carriage stopped for a moment while its servo drives it (a whole-system run saw it
+    when its arm moved): once free it follows the shaft again. It used to be sent on to the goal
+    at the model's rated speed, six times the servo's, while the servo, held, pressed at its
+    current limit and tripped its overload within a second."""
+    ticks_per_m = 4096 / 0.02  # the width lead screw: 20 mm a turn
+    servo = DynamixelServo(3, position_ticks=0.0)
+    _write(servo, TORQUE, 0, 1)
+    _write(servo, OPERATING_MODE, 4, 1)  # extended position, as config/hardware/ee_x.yaml
+    _write(servo, TORQUE, 1, 1)
+    _write(servo, GOAL_POSITION, round(0.25 * ticks_per_m), 4)
+    carriage = Carriage(max_velocity=0.1)  # config/twin/edu.yaml width_max_velocity
+    binding = ServoJointBinding(
+        "width", servo, lambda m: m * ticks_per_m, lambda t: t / ticks_per_m,
+        lambda: float(servo.get("goal_position")), tolerance=0.002,
+    )
+    dt = 0.002
+
+    def run(seconds: float) -> list[float]:
+        positions = []
+        for _ in range(round(seconds / dt)):
+            servo.step(dt)
+            binding.drive(carriage, dt)
+            carriage.advance(dt)
+            binding.sense(carriage, dt)
+            positions.append(carriage.q)
+        return positions
+
+    free = run(1.0)
+    servo_speed = (free[-1] - free[len(free) // 2]) / 0.5
+    assert 0.005 < servo_speed < 0.05
+    carriage.held = True
+    run(0.3)
+    assert binding.blocked == "upper", "the stall reads as an obstacle"
+    carriage.held = False
+    after = run(1.5)
+    assert binding.blocked is None
+    assert not servo.get("hardware_error_status") & HW_OVERLOAD
+    speed = (after[-1] - after[len(after) // 3]) / 1.0
+    assert speed == pytest.approx(servo_speed, rel=0.05), "the shaft drives the carriage again"
+    assert abs(servo.get("present_current")) < 0.1 * servo.get("current_limit")
 
 
 def test_ur_controller_motion_moves_the_model_arm(make_twin):
