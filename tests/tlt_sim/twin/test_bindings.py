@@ -163,7 +163,6 @@ def test_the_width_carriage_stops_on_its_end_stop_and_the_servo_sees_it(make_twi
     assert servo.get("present_position") == pytest.approx(start - 0.005 / 0.02 * 4096, abs=15)
 
 
-
 class Carriage:
     """A model joint as the scene moves it, in one dimension: towards its setpoint at its rated
     speed, unless something holds it (``held``)."""
