@@ -10,7 +10,9 @@ riveted, their parts and rivets taken), so the run begins late in the bay. With 
 launch set is config/launch/system_hosts_twin.yaml instead: every computer of the EDU an emulated
 host (a network namespace, docs/deployment.md), and the test's ground station on the ground host.
 The arms move at their full speed limits (``TLT_ARM_VELOCITY_SCALE`` 1, as the ARS tests
-run them): the build's steps are the same as at the ARS files' 0.5, in less sim time. The
+run them): the build's steps are the same as at the ARS files' 0.5, in less sim time (a test
+that times a twin fault against a step passes ``env={"TLT_ARM_VELOCITY_SCALE": ""}`` for the
+files' speed). The
 launcher's output goes to ``<run>/launch.log``. ``start()`` waits until the
 CRS's ``hk_mission`` telemetry arrives over the ground link, and ``start_build()`` until an
 authenticated Start is accepted (the CRS refuses Start with "not ready: ..." until its
