@@ -121,9 +121,12 @@ def test_add_member_diagonal_extends_width_and_replaces_a_part_that_fails_inspec
     assert state.discarded["diagonal_dispenser_x"] == 1
     assert stack.inspections[-2:] == ["bay1/diagonal/face_x0"] * 2
     assert max(widths) == pytest.approx(0.02, abs=0.002)  # extended before the grasp
-    # ... while the jaws open and the arm approaches the dispenser: the EE was still narrow then.
+    # ... commanded ahead, so it extends while the rivet is loaded: narrow as the loading began,
+    # out by the time the jaws opened and the arm approached the dispenser.
+    loading = [w for step, w in steps if "/Load Rivet/" in step and w is not None]
+    assert loading and loading[0] < 0.005 and max(loading) > 0.015, steps
     beside = [w for step, w in steps if "/Grab Member/Extend Width Beside Approach/Approach/" in step]
-    assert beside and beside[0] is not None and beside[0] < 0.01, steps
+    assert beside and beside[0] is not None and beside[0] > 0.015, steps
     # Retracted after the rivet: commanded as the request's last step, and not waited for.
     stack.wait(lambda: abs(stack.width()) <= 0.002, "the width retracted after the request")
     middle = (stack.world.part_pose @ part_in_tool(stack.mission, "diagonal"))[:3, 3]
