@@ -14,7 +14,8 @@ placed once.
 Scenario 6: the CRS process is killed mid-build and restarted. The CRS is killed while ARS X's arm
 moves on the first foundation rivet; the launch set restarts it, it comes back idle with the
 tower model it persisted (the bay built), the operator starts it again, and it sends the rivet
-in flight again: ARS X's running job is taken over by the new goal, not started afresh.
+in flight again: ARS X's running job is taken over by the new goal, not started afresh (where
+ARS X finished it first, the new goal is answered from its state file, not riveted again).
 
 Then the build goes on to ``tower_built``: every member placed and riveted, the diagonal's part at
 its place in the twin, one AddMember and one FoundationRivet per foundation joint that succeeded
