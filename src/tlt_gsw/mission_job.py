@@ -88,7 +88,10 @@ class Progress:
     def _sim(self, fields: dict[str, Any]) -> str:
         sim = float(fields["sim_time"])
         if self.sim_start is None:
+            # Recordings, events and the summary's faults carry the CRS's own ROS time; say once
+            # where this job's clock starts on it so a line here can be found there.
             self.sim_start = sim
+            self.say(f"sim times below are from the CRS's ROS time {sim:.2f} s")
         return f"[sim {sim - self.sim_start:8.2f} s]"
 
     def packet(self, packet: Packet, now: float) -> None:

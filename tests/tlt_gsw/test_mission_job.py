@@ -458,3 +458,27 @@ def test_progress_names_the_running_node_with_a_tree_definition_and_counts_witho
         stranger.packet(packet, now=5.0)
     (line,) = stranger.out.getvalue().splitlines()  # said once
     assert line.startswith("  tree: cannot decode (status of agent 'crs' is for tree shape")
+
+
+def test_progress_times_are_from_the_first_step_and_say_where_that_is_on_the_crs_clock():
+    """A progress line's sim time can be found in a recording: the job says its origin once."""
+    from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
+
+    defs = load_definitions()
+
+    def step(sim: float, bay: int, name: str):
+        raw = encode_telemetry(defs, "mission_step", {
+            "sim_time": sim, "run_state": "running", "bay": bay, "member": name, "step": name,
+            "bays_built": bay - 1, "members_placed": 0, "parts_discarded": 0,
+        }, seq_count=1)  # fmt: skip
+        return parse_datagram(raw, defs, expect="tm")
+
+    progress = mission_job.Progress(io.StringIO())
+    for packet in (step(19.5, 1, "Add Cross Frame"), step(30.0, 1, "Index Payload 2")):
+        progress.packet(packet, now=0.0)
+    assert progress.out.getvalue().splitlines() == [
+        "sim times below are from the CRS's ROS time 19.50 s",
+        "[sim     0.00 s] bay 1 (bays built 0)",
+        "[sim     0.00 s]   running Add Cross Frame  (placed 0, discarded 0)",
+        "[sim    10.50 s]   running Index Payload 2  (placed 0, discarded 0)",
+    ]
