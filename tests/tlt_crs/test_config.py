@@ -5,12 +5,14 @@ from __future__ import annotations
 import pytest
 import yaml
 
+from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_common.mission.tower_model import TowerModelError
 from tlt_crs.config import REPO_CONFIG, load_config
 from tlt_crs.context import MissionClock
 from tlt_crs.index_record import IndexRecord
+from tlt_drivers.lifter.config import load_lifter_config
 
 
 def test_shipped_configuration_loads_with_paths_relative_to_it():
@@ -23,6 +25,15 @@ def test_shipped_configuration_loads_with_paths_relative_to_it():
     edu = load_yaml(REPO_CONFIG.parents[1] / "twin" / "edu.yaml")
     assert config.lifter.lowered_m == edu["lifter"]["build_position"]
     assert config.lifter.raised_m is None and config.lifter.indexed_at_start
+
+
+def test_the_ground_cannot_ask_the_lifter_for_more_than_its_lead_screws_give():
+    """The writable ``lifter_speed`` stops at the lead screws' limit, on the EDU and in the twin."""
+    config = load_config(REPO_CONFIG)
+    speed = WritableBlackboard.load(config.writable_blackboard).keys["lifter_speed"]
+    screws = min(j.max_velocity_m_s for j in load_lifter_config().joints)
+    twin = load_yaml(REPO_CONFIG.parents[1] / "twin" / "edu.yaml")["lifter"]["max_velocity"]
+    assert speed.default <= speed.maximum <= screws == twin
 
 
 def test_overrides_are_relative_to_the_working_directory(tmp_path, monkeypatch):

@@ -331,7 +331,7 @@ class Actuators:
         def goal() -> Any:
             now = self._lifter_positions()
             target = targets(now)
-            speed = float(self.ctx.board.get("lifter_speed", 0.01))
+            speed = float(self.ctx.board.get("lifter_speed", 0.02))
             distance = max(abs(t - p) for t, p in zip(target, now, strict=True))
             return trajectory_goal(setup.joints, target, distance / speed)
 

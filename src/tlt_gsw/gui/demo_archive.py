@@ -205,7 +205,7 @@ def write_demo_archive(
                     seq = w.tc(name, params, t)
                     if name == "set_blackboard_value":
                         pending.append((t + 0.01, name, seq, "rejected", "bad_parameter_range",
-                                        "lifter_speed: 0.5 is above the maximum 0.02"))  # fmt: skip
+                                        "lifter_speed: 0.5 is above the maximum 0.05"))  # fmt: skip
                         continue
                     pending.append((t + 0.01, name, seq, "accepted", "none", ""))
                     pending.append((t + 1.5, name, seq, "completed", "none", ""))
