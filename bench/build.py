@@ -302,9 +302,7 @@ def report(run_dir: Path, job_wall_s: float | None = None, mission: str | None =
     return 0 if rows else 1
 
 
-def run_job(
-    mission: str, run_dir: Path, rtf: float, arm_speed: float
-) -> tuple[int, float]:
+def run_job(mission: str, run_dir: Path, rtf: float, arm_speed: float) -> tuple[int, float]:
     """Run the main job on ``mission`` into ``run_dir``, its output shown as it comes."""
     env = dict(
         os.environ, TLT_RUN_DIR=str(run_dir), TLT_TWIN_RTF=f"{rtf:g}", TLT_ARM_VELOCITY_SCALE=f"{arm_speed:g}"
