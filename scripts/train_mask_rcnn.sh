@@ -5,8 +5,10 @@
 #
 # Settings (environment): COUNT training images (6000), SHARDS render processes (nproc - 1), VAL
 # validation images (80, seed 1: the validation set of models/vision/README.md), DEVICE (cuda),
-# WORKERS loader processes (8), BUDGET_MIN minutes of training (the epochs that fit; 8), EPOCHS at
-# most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
+# RANKS training processes on the device, each on BATCH images of every step, their gradients
+# averaged (1; the per-image Python leaves a GPU mostly idle, so several fill it), WORKERS loader
+# processes for each (8), THREADS torch CPU threads for each (4), BUDGET_MIN minutes of training
+# (the epochs that fit; 8), EPOCHS at most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
 # have is used (240), and MODEL: the trainer's options for the model (default the shipped model's:
 # full-size images, 56x56 masks, anchors 16-128, the semantic head for tubes and frame sides;
 # models/vision/README.md). PYTHON (python3) must import the project
@@ -29,7 +31,9 @@ COUNT=${COUNT:-6000}
 SHARDS=${SHARDS:-$(( $(nproc) > 1 ? $(nproc) - 1 : 1 ))}
 VAL=${VAL:-80}
 DEVICE=${DEVICE:-cuda}
+RANKS=${RANKS:-1}
 WORKERS=${WORKERS:-8}
+THREADS=${THREADS:-4}
 BUDGET_MIN=${BUDGET_MIN:-8}
 EPOCHS=${EPOCHS:-40}
 BATCH=${BATCH:-8}
@@ -47,7 +51,8 @@ log() { echo "[train_mask_rcnn $(date -u +%H:%M:%S)] $*"; }
 smoke_train() {
     # shellcheck disable=SC2086
     "$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" \
-        --out "$out/smoke_out/w.pt" --epochs 1 --batch 2 --device "$DEVICE" $MODEL > "$out/smoke.log"
+        --out "$out/smoke_out/w.pt" --epochs 1 --batch 1 --ranks $(( RANKS > 1 ? 2 : 1 )) \
+        --device "$DEVICE" $MODEL > "$out/smoke.log"
     rm -rf "$out/smoke_out"
     log "smoke test passed"
 }
@@ -101,7 +106,7 @@ log "training on $DEVICE for at most $BUDGET_MIN min"
 # shellcheck disable=SC2086
 "$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
-    --workers "$WORKERS" --threads 4 --time-budget-min "$BUDGET_MIN" --log-every 50 $MODEL \
+    --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" --log-every 50 $MODEL \
     ${INIT:+--init "$INIT"} \
     2>&1 | tee "$out/train.log"
 rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships

@@ -16,6 +16,8 @@ which the vision node scores the pieces it cuts those regions into
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import nn
 
@@ -85,13 +87,18 @@ def train_step(
     optimizer: torch.optim.Optimizer,
     images: torch.Tensor,
     targets: list[dict[str, torch.Tensor]],
+    before_step: Callable[[], None] | None = None,
 ) -> dict[str, float]:
-    """One optimisation step on a batch; returns each loss term and their ``total``."""
+    """One optimisation step on a batch; returns each loss term and their ``total``.
+    ``before_step`` runs between the backward pass and the step (data-parallel training averages
+    the gradients there)."""
     model.train()
     losses = model(images, targets)
     total = sum(losses.values())
     optimizer.zero_grad()
     total.backward()
+    if before_step is not None:
+        before_step()
     optimizer.step()
     out = {k: float(v.detach()) for k, v in losses.items()}
     out["total"] = float(total.detach())

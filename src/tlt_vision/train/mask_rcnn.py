@@ -60,6 +60,7 @@ from tlt_vision.segmentation.inference import (
     weights_settings,
 )
 from tlt_vision.segmentation.model import MaskRCNN, train_step
+from tlt_vision.train.data_parallel import Ranks, run_ranks
 from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets
 from tlt_vision.weights import WeightsError, read_manifest, save_weights
 
@@ -168,6 +169,10 @@ class TrainingImages(torch.utils.data.Dataset):
 
 def _as_list(batch: list[Any]) -> list[Any]:
     return batch
+
+
+def _silent(*_args: Any, **_kwargs: Any) -> None:
+    """``print`` for the processes that are not the leader."""
 
 
 def _one_thread(_worker: int) -> None:
@@ -420,7 +425,21 @@ def init_from(model: MaskRCNN, path: Path, classes: Sequence[str]) -> list[str]:
     return sorted(set(own) - set(given))
 
 
-def train(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class Inputs:
+    """What a training run reads, opened and checked."""
+
+    cfg: MaskRCNNConfig
+    settings: dict[str, Any]
+    train_set: ImageSets
+    val_set: ImageSet | None
+    device: torch.device
+    out: Path
+
+
+def open_inputs(args: argparse.Namespace) -> Inputs:
+    """The run's inputs; InputError for the first that cannot be used. With ``--ranks`` the
+    command calls this before it starts the processes, so that a bad input is refused once."""
     cfg = build_config(parse_overrides(args.config))
     settings = weights_settings(cfg, args.max_size)
     train_set = open_sets(args.train, cfg.classes)
@@ -429,20 +448,39 @@ def train(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".pt":
         raise InputError(f"{out}: --out must end in .pt")
+    if len(train_set) < args.batch * args.ranks:
+        raise InputError(f"{', '.join(map(str, train_set.roots))}: {len(train_set)} images, fewer than "
+                         f"--batch {args.batch} times --ranks {args.ranks}")
+    if args.init:
+        init_from(MaskRCNN(cfg), Path(args.init), cfg.classes)
+    if args.resume:
+        _load_checkpoint(Path(args.resume), settings, cfg.classes)
+    return Inputs(cfg, settings, train_set, val_set, device, out)
+
+
+def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
+    """Train as ``args`` say; with ``ranks`` as one of several processes (``--ranks``), each on its
+    share of every step's batch, the leader alone printing, validating and saving."""
+    ranks = ranks or Ranks()
+    say = print if ranks.leader else _silent
+    inputs = open_inputs(args)
+    cfg, settings, train_set, val_set, device, out = (
+        inputs.cfg, inputs.settings, inputs.train_set, inputs.val_set, inputs.device, inputs.out)
     paths = output_paths(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    if ranks.leader:
+        out.parent.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
     model = MaskRCNN(cfg)
     if args.init:
         fresh = init_from(model, Path(args.init), cfg.classes)
-        print(f"initialised from {args.init}" + (f"; {len(fresh)} tensors fresh, from {fresh[0]}"
-                                                  if fresh else ""), flush=True)
+        say(f"initialised from {args.init}" + (f"; {len(fresh)} tensors fresh, from {fresh[0]}"
+                                                if fresh else ""), flush=True)
     model.to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment()
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
-    steps_per_epoch = math.ceil(len(train_set) / args.batch)
+    steps_per_epoch = len(ranks.batches(range(len(train_set)), args.batch))
     epochs = args.epochs  # lowered by --time-budget-min once an epoch's duration is known
     total_steps = epochs * steps_per_epoch
     history: list[dict[str, Any]] = []
@@ -455,14 +493,19 @@ def train(args: argparse.Namespace) -> int:
         torch.set_rng_state(ckpt["torch_rng"])
         history, step_losses = ckpt["history"], ckpt["step_losses"]
         best_map, start_epoch, seconds_before = ckpt["best_map"], ckpt["epoch"], ckpt["seconds"]
-        print(f"resuming {args.resume} after epoch {start_epoch}", flush=True)
+        say(f"resuming {args.resume} after epoch {start_epoch}", flush=True)
         if start_epoch >= epochs:
-            print(f"nothing to do: the checkpoint has {start_epoch} epochs, --epochs is {epochs}")
-    print(f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
-          + (f", val {val_set.root} ({len(val_set)} images)" if val_set else ", no validation set")
-          + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
-          f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
-          f"device {device}; {args.workers} loader workers", flush=True)
+            say(f"nothing to do: the checkpoint has {start_epoch} epochs, --epochs is {epochs}")
+    ranks.same_as_leader(model)
+    if ranks.size > 1:
+        torch.manual_seed(args.seed + ranks.rank)  # each process samples its own anchors and RoIs
+    say(f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
+        + (f", val {val_set.root} ({len(val_set)} images)" if val_set else ", no validation set")
+        + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
+        f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
+        f"device {device}; {args.workers} loader workers"
+        + (f"; {ranks.size} processes of {args.batch} images a step each" if ranks.size > 1 else ""),
+        flush=True)
     data = TrainingImages(train_set, args.max_size, args.min_area, aug, args.seed)
     t_start = time.perf_counter()
     steps_done = 0
@@ -472,7 +515,7 @@ def train(args: argparse.Namespace) -> int:
         order = np.random.default_rng([args.seed, epoch]).permutation(len(train_set)).tolist()
         data.epoch = epoch
         loader = torch.utils.data.DataLoader(
-            data, batch_sampler=[order[k:k + args.batch] for k in range(0, len(order), args.batch)],
+            data, batch_sampler=ranks.batches(order, args.batch),
             num_workers=args.workers, collate_fn=_as_list, worker_init_fn=_one_thread,
             prefetch_factor=4 if args.workers else None)
         t_epoch = t_window = time.perf_counter()
@@ -488,24 +531,28 @@ def train(args: argparse.Namespace) -> int:
                 group["lr"] = learning_rate(global_step, total_steps, args.lr)
             images = torch.stack([b[0] for b in batch]).to(device)
             targets = [{k: v.to(device) for k, v in b[1].items()} for b in batch]
-            losses = train_step(model, optimizer, images, targets)
+            losses = ranks.mean(train_step(model, optimizer, images, targets,
+                                           before_step=lambda: ranks.average_gradients(model)))
             if not math.isfinite(losses["total"]):
-                print(f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
-                      "try a lower --lr", file=sys.stderr)
+                say(f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
+                    "try a lower --lr", file=sys.stderr)
                 return 1
             step_losses.append(losses)
             epoch_losses.append(losses)
             steps_done += 1
-            window_images += len(batch)
+            window_images += len(batch) * ranks.size
             if (step + 1) % args.log_every == 0 or step + 1 == steps_per_epoch:
                 now = time.perf_counter()
                 rate = window_images / max(now - t_window, 1e-9)
                 left = (now - t_start) / steps_done * (total_steps - global_step - 1)
                 terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in loss_keys)
-                print(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
+                say(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
                       f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
                       f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
                 t_window, window_images = now, 0
+        if not ranks.replicas_agree(model):
+            say(f"error: the {ranks.size} processes' weights differ after epoch {epoch + 1}", file=sys.stderr)
+            return 1
         record: dict[str, Any] = {
             "epoch": epoch + 1,
             "train_losses": {k: float(np.mean([s[k] for s in epoch_losses])) for k in (*loss_keys, "total")},
@@ -514,18 +561,18 @@ def train(args: argparse.Namespace) -> int:
             "val_ap50": {},
         }
         improved = True
-        if val_set is not None:
+        if val_set is not None and ranks.leader:
             result = evaluate(model, val_set, args.max_size, args.val_limit)
             record.update(val_map=result["map"], val_ap50=result["per_class"],
                           val_seconds_per_image=result["seconds_per_image"])
             improved = result["map"] > best_map
-            print(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
+            say(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
                   f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
                   f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
                   flush=True)
         history.append(record)
         seconds = seconds_before + time.perf_counter() - t_start
-        if improved:
+        if improved and ranks.leader:
             best_map = record["val_map"] if record["val_map"] is not None else best_map
             figures = {
                 "epochs": epoch + 1,
@@ -539,28 +586,33 @@ def train(args: argparse.Namespace) -> int:
                 "val_map": record["val_map"],
                 "val_ap50": record["val_ap50"],
                 "seconds": round(seconds, 1),
-                "batch": args.batch, "lr": args.lr, "seed": args.seed, "min_area": args.min_area,
+                "batch": args.batch, "processes": ranks.size, "lr": args.lr, "seed": args.seed,
+                "min_area": args.min_area,
                 "device": str(device),
                 "augment": asdict(aug),
                 "history": history,
             }
             save_weights(model, out, KIND, VERSION, cfg.classes, settings, {"figures": figures})
-            print(f"saved {out} (epoch {epoch + 1})", flush=True)
-        _save_checkpoint(paths["checkpoint"], {
-            "kind": f"{KIND}_checkpoint", "classes": list(cfg.classes), "settings": settings,
-            "epoch": epoch + 1, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-            "torch_rng": torch.get_rng_state(), "history": history, "step_losses": step_losses,
-            "best_map": best_map, "seconds": seconds,
-        })
-        plot_curves(paths["curves"], step_losses, history, cfg.classes)
+            say(f"saved {out} (epoch {epoch + 1})", flush=True)
+        if ranks.leader:
+            _save_checkpoint(paths["checkpoint"], {
+                "kind": f"{KIND}_checkpoint", "classes": list(cfg.classes), "settings": settings,
+                "epoch": epoch + 1, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                "torch_rng": torch.get_rng_state(), "history": history, "step_losses": step_losses,
+                "best_map": best_map, "seconds": seconds,
+            })
+            plot_curves(paths["curves"], step_losses, history, cfg.classes)
         epoch += 1
         if args.time_budget_min is not None:
-            fit = epochs_within(args.time_budget_min * 60.0, time.perf_counter() - t_start,
-                                epoch - start_epoch, epoch, epochs)
+            # The leader's clock decides, so that every process trains the same epochs.
+            fit = ranks.from_leader(epochs_within(args.time_budget_min * 60.0, time.perf_counter() - t_start,
+                                                  epoch - start_epoch, epoch, epochs))
             if fit < epochs:
-                print(f"time budget {args.time_budget_min:g} min: {fit} epochs fit, not {epochs}; "
-                      "the learning rate decays over those", flush=True)
+                say(f"time budget {args.time_budget_min:g} min: {fit} epochs fit, not {epochs}; "
+                    "the learning rate decays over those", flush=True)
                 epochs, total_steps = fit, fit * steps_per_epoch
+    if not ranks.leader:
+        return 0
     if not out.is_file():
         raise InputError(f"{out}: no weights written (no epoch was trained)")
     best, _ = load_mask_rcnn(out, cfg.classes)  # the saved file, checked as the node will load it
@@ -608,7 +660,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--device", default="cpu",
                    help="torch device to train and evaluate on (cpu, cuda, cuda:1)")
     p.add_argument("--workers", type=int, default=0,
-                   help="processes loading and augmenting training images (0: the training process)")
+                   help="processes loading and augmenting training images (0: the training process); "
+                        "with --ranks, each training process's")
+    p.add_argument("--ranks", type=int, default=1,
+                   help="training processes on the device, each on --batch images of every step, their "
+                        "gradients averaged (the step's batch is --batch times --ranks)")
     p.add_argument("--max-size", type=int, default=None,
                    help="downscale images so the longest side is at most this (pixels); recorded in the "
                         "manifest so inference uses the same size (default: full size)")
@@ -627,7 +683,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--evaluate", metavar="WEIGHTS",
                    help="evaluate these weights on --val instead of training")
     args = p.parse_args(argv)
-    for name in ("epochs", "batch", "threads", "log_every"):
+    for name in ("epochs", "batch", "threads", "log_every", "ranks"):
         if getattr(args, name) < 1:
             p.error(f"--{name.replace('_', '-')} must be at least 1")
     if args.workers < 0:
@@ -648,7 +704,11 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        return evaluate_command(args) if args.evaluate else train(args)
+        if args.evaluate:
+            return evaluate_command(args)
+        if args.ranks > 1:
+            open_inputs(args)  # refused here once, not by every process
+        return run_ranks(train, args.ranks, args)
     except (InputError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -14,6 +14,7 @@ from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.segmentation.model import MaskRCNN
+from tlt_vision.train.data_parallel import Ranks
 from tlt_vision.train.dataset import ImageSet, Sample, write_index, write_sample
 from tlt_vision.train.mask_rcnn import (
     Augment,
@@ -302,3 +303,34 @@ def test_the_loader_drops_instances_under_the_minimum_area_and_takes_an_image_wi
     _, target = load_sample(images, 1, None, min_area=4)
     assert target["labels"].tolist() == [BLOCK]
     assert target["boxes"].tolist() == [[10.0, 10.0, 20.0, 20.0]]
+
+
+def test_each_process_takes_its_own_share_of_every_step():
+    order = list(range(100, 118))  # 18 images
+    shares = [Ranks(r, 2).batches(order, 4) for r in range(2)]
+    assert shares[0] == [[100, 101, 102, 103], [108, 109, 110, 111]]
+    assert shares[1] == [[104, 105, 106, 107], [112, 113, 114, 115]]
+    # Two images would leave one process without a whole batch: they wait for another epoch.
+    assert len(shares[0]) == len(shares[1]) == 2
+    alone = Ranks().batches(order, 4)
+    assert [i for b in alone for i in b] == order and alone[-1] == [116, 117]
+
+
+def test_several_processes_train_one_model_on_their_shares_of_each_step(trained, tmp_path, capfd):
+    # Two processes of two images a step each: four a step, as the one-process run's --batch 4, and
+    # the replicas' weights checked equal after every epoch (else the run fails).
+    out = tmp_path / "w.pt"
+    args = ["--train", str(trained["train"]), "--val", str(trained["val"]), "--out", str(out),
+            "--epochs", str(EPOCHS), "--batch", "2", "--ranks", "2", "--lr", "5e-3", "--seed", str(SEED),
+            "--threads", "1", "--log-every", "2", *CONFIG_ARGS]  # fmt: skip
+    assert main(args) == 0
+    text = capfd.readouterr().out
+    assert text.count("(16 images)") == 1  # only the leader prints
+    assert "2 processes of 2 images a step each" in text and f"epoch {EPOCHS}/{EPOCHS} step 4/4" in text
+    figures = read_manifest(out)["extra"]["figures"]
+    assert figures["processes"] == 2 and figures["batch"] == 2
+    history = figures["history"]
+    assert history[-1]["train_losses"]["total"] < 0.7 * history[0]["train_losses"]["total"]
+    assert max(h["val_map"] for h in history) >= trained["before"] + 0.5
+    assert main([*args[:-len(CONFIG_ARGS)], "--batch", "9", *CONFIG_ARGS]) == 2
+    assert "16 images, fewer than --batch 9 times --ranks 2" in capfd.readouterr().err
