@@ -38,7 +38,7 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import LookCloser, PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
-from tlt_vision.self_filter import EeSelfFilter, drop_inside
+from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.train.render_dataset import ARMS, inspection_joints
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -203,9 +203,10 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 depth = without_own_ee(scene, frame, ee_filter) if args.self_filter else frame.depth
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
+                own = own_pixels(frame.depth, depth)
                 report, _ = inspector.inspect(
-                    f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb,
-                    detect.closer(frame, camera),
+                    f"bench/{kind}", kind, off_own_ee(detect(frame, camera), own, ee_filter.own_share), depth,
+                    frame.intrinsics, frame.rgb, detect.closer(frame, camera),
                 )
                 defect = defect_label(scen.defects.get(name))
                 results.append(Presented(name, arm, defect, report.passed, tuple(report.reasons)))

@@ -68,7 +68,7 @@ from tlt_vision.part_inspection import STRUT_KINDS, LookCloser, PartInspector
 from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
-from tlt_vision.self_filter import EeSelfFilter, drop_inside
+from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
@@ -297,9 +297,10 @@ class VisionNode(LeanNode):
             detections = self._segment(frame, doubtful=True)
         except NoFrame as exc:
             return self._failed(member_id, kind, str(exc))
+        depth = self._without_own_ee(frame)
+        detections = off_own_ee(detections, own_pixels(frame.get("depth"), depth), self.ee_filter.own_share)
         report, obs = self.inspector.inspect(
-            member_id, kind, detections, self._without_own_ee(frame), frame.intrinsics, frame.get("rgb"),
-            self._closer(frame),
+            member_id, kind, detections, depth, frame.intrinsics, frame.get("rgb"), self._closer(frame)
         )
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return self._report_msg(report, frame.stamp, frame.frame_id, ids)

@@ -183,9 +183,11 @@ SCHEMA = {
     ),
     "ee_self_filter": opt(
         "dict",
-        {"margin": 0.01, "boxes": {}},
+        {"margin": 0.01, "boxes": {}, "own_share": 0.9},
         schema={
             "margin": opt("float", 0.01, minimum=0.0, maximum=0.1),
+            # Under a half, a part's mask that took in a gun beside it would be set aside as the gun.
+            "own_share": opt("float", 0.9, minimum=0.5, maximum=1.0),
             "boxes": opt(
                 "map",
                 {},

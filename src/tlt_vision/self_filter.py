@@ -7,7 +7,9 @@ the tube), and no depth cut can tell a gun from the fitting at its side. The arm
 say where every EE body is, so, as robots filter their own bodies out of their sensors, the pixels
 whose depth falls inside an EE body (grown by ``margin``) are given no depth: nothing of them
 reaches a cloud, and the free-space check (:mod:`tlt_vision.pose.free_space`) does not count them
-either.
+either. A detection lying almost wholly on those pixels is of the end effector itself (a rivet gun
+taken for an end fitting, whose mask kept a fringe of depth at its edge and failed a good strut for
+"no depth"): :func:`off_own_ee` sets it aside before the part is chosen (``own_share``).
 
 The bodies are configured in the flange frame with the width joint at 0 (node.yaml
 ``ee_self_filter``): boxes for the rigid ones, and a capsule for each jaw, turned about its hinge
@@ -17,13 +19,14 @@ cameras on it do (:mod:`tlt_vision.frames`).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from tlt_ars.planning.kinematics import rot_x
+from tlt_vision.pipeline import Detection
 from tlt_vision.pointcloud import PinholeIntrinsics, back_project
 
 
@@ -97,6 +100,7 @@ class EeSelfFilter:
     boxes: tuple[EeBox, ...]
     jaws: tuple[EeJaw, ...]
     margin: float
+    own_share: float = 0.9  # of a detection's pixels on the end effectors: a detection of them
 
     @classmethod
     def from_config(cls, raw: Mapping[str, Any]) -> EeSelfFilter:
@@ -110,7 +114,7 @@ class EeSelfFilter:
                   bool(e["on_width_slide"]))
             for side, e in raw.get("jaws", {}).items()
         )
-        return cls(boxes, jaws, float(raw["margin"]))
+        return cls(boxes, jaws, float(raw["margin"]), float(raw["own_share"]))
 
     @property
     def empty(self) -> bool:
@@ -190,4 +194,27 @@ def _window(
     return (v0, v1, u0, u1), (z_lo, z_hi)
 
 
-__all__ = ["EeBox", "EeJaw", "EeSelfFilter", "PlacedBox", "PlacedCapsule", "drop_inside"]
+def own_pixels(depth: np.ndarray | None, filtered: np.ndarray | None) -> np.ndarray | None:
+    """The pixels :func:`drop_inside` took out: a depth in ``depth``, none in ``filtered``."""
+    if depth is None or filtered is None:
+        return None
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(depth) & (depth > 0) & ~(filtered > 0)
+
+
+def off_own_ee(detections: Sequence[Detection], own: np.ndarray | None, share: float) -> list[Detection]:
+    """The ``detections`` with less than ``share`` of their mask's pixels among ``own`` (the end
+    effectors' pixels, :func:`own_pixels`): the others are of the end effectors themselves. A part's
+    mask that strays onto a gun beside it keeps most of its pixels off the gun, and stays."""
+    if own is None or not own.any():
+        return list(detections)
+    kept = []
+    for d in detections:
+        pixels = np.count_nonzero(d.mask)
+        if pixels == 0 or np.count_nonzero(d.mask & own) < share * pixels:
+            kept.append(d)
+    return kept
+
+
+__all__ = ["EeBox", "EeJaw", "EeSelfFilter", "PlacedBox", "PlacedCapsule", "drop_inside", "off_own_ee",
+           "own_pixels"]

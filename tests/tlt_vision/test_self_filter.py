@@ -8,8 +8,18 @@ import pytest
 
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_vision.node_config import load_config
+from tlt_vision.pipeline import Detection
 from tlt_vision.pointcloud import Intrinsics, back_project
-from tlt_vision.self_filter import EeBox, EeJaw, EeSelfFilter, PlacedBox, PlacedCapsule, drop_inside
+from tlt_vision.self_filter import (
+    EeBox,
+    EeJaw,
+    EeSelfFilter,
+    PlacedBox,
+    PlacedCapsule,
+    drop_inside,
+    off_own_ee,
+    own_pixels,
+)
 
 K = Intrinsics(fx=100.0, fy=100.0, cx=50.0, cy=50.0)  # a 100 x 100 image
 NO_JAWS = {"a": 0.0, "b": 0.0}
@@ -161,3 +171,34 @@ def test_the_configured_bodies_are_the_twins_end_effector_at_any_width_and_grasp
                 np.testing.assert_allclose(start, near, atol=1e-3, err_msg=jaw.side)
                 np.testing.assert_allclose(end, far, atol=1e-3, err_msg=jaw.side)
                 assert radius == pytest.approx(m.geom_size[g][0], abs=1e-9)
+
+
+def test_a_detection_almost_wholly_on_the_end_effectors_is_set_aside_and_a_part_beside_them_stays():
+    depth = np.full((100, 100), 1.0, dtype=np.float32)
+    depth[90:, :] = 0.0  # no return there, before any filter
+    filtered = depth.copy()
+    filtered[20:60, 20:60] = 0.0  # a gun, taken out
+    own = own_pixels(depth, filtered)
+    assert own.sum() == 40 * 40 and not own[90:].any()  # a pixel never seen is not the gun's
+
+    def det(rows, cols):
+        mask = np.zeros((100, 100), dtype=bool)
+        mask[rows, cols] = True
+        return Detection("end_fitting", mask, 0.4)
+
+    on_gun = det(slice(21, 60), slice(20, 62))  # 39 x 42: a fringe of 2 columns off the gun
+    beside = det(slice(30, 50), slice(50, 80))  # half on the gun: a fitting whose mask took it in
+    unseen = det(slice(92, 98), slice(0, 10))  # in the depth's hole: left to fail for "no depth"
+    kept = off_own_ee([on_gun, beside, unseen], own, share=0.9)
+    assert kept == [beside, unseen]
+    assert off_own_ee([on_gun], None, 0.9) == [on_gun]  # no filter applied: nothing is known
+    assert own_pixels(None, filtered) is None
+
+
+def test_the_share_that_makes_a_detection_the_end_effectors_is_validated(tmp_path):
+    path = Path(__file__).resolve().parents[2] / "config" / "vision" / "node.yaml"
+    assert EeSelfFilter.from_config(load_config(path).raw["ee_self_filter"]).own_share == 0.9
+    bad = tmp_path / "node.yaml"
+    bad.write_text(path.read_text().replace("own_share: 0.9", "own_share: 0.3"))
+    with pytest.raises(Exception, match=r"own_share.*0\.5"):
+        load_config(bad)
