@@ -5,8 +5,8 @@ Train (``--train`` one or more sets, read as one, and optionally ``--val``, in t
 
     python -m tlt_vision.train.mask_rcnn --train DIR [DIR ...] [--val DIR] --out build/vision/mask_rcnn.pt \\
         [--epochs 20] [--batch 4] [--lr 1e-3] [--seed 0] [--threads 2] [--max-size 320] \\
-        [--device cpu|cuda] [--workers N] [--time-budget-min M] [--config key=value ...] [--resume CKPT]
-        [--init WEIGHTS]
+        [--device cpu|cuda] [--workers N] [--ranks N] [--time-budget-min M] [--config key=value ...]
+        [--resume CKPT] [--init WEIGHTS]
 
 Every ``--log-every`` steps it prints the epoch, step, images per second, the five losses and the
 time left; after each epoch the validation mask AP50 per class and mean. It keeps the weights of
