@@ -8,10 +8,10 @@
 # RANKS training processes on the device, each on BATCH images of every step, their gradients
 # averaged (1; the per-image Python leaves a GPU mostly idle, so several fill it), WORKERS loader
 # processes for each (8), THREADS torch CPU threads for each (4), BUDGET_MIN minutes of training
-# (the epochs that fit; 8), EPOCHS at most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the shards may render before what they
-# have is used (240), and MODEL: the trainer's options for the model (default the shipped model's:
-# full-size images, 56x56 masks, anchors 16-128, the semantic head for tubes and frame sides;
-# models/vision/README.md). PYTHON (python3) must import the project
+# (the epochs that fit; 8), EPOCHS at most (40), BATCH (8), LR (2e-3), RENDER_LIMIT_S seconds the
+# shards may render before what they have is used (240), and MODEL: the trainer's options for the
+# model (default the shipped model's: full-size images, 56x56 masks, anchors 16-128, the semantic
+# head for tubes and frame sides; models/vision/README.md). PYTHON (python3) must import the project
 # (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
 # INIT: weights to start from (the trainer's --init; INIT=models/vision/mask_rcnn.pt continues the
 # shipped model, so each lent machine's minutes add to the last's). SCENES: the training images'
@@ -106,7 +106,8 @@ log "training on $DEVICE for at most $BUDGET_MIN min"
 # shellcheck disable=SC2086
 "$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
-    --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" --log-every 50 $MODEL \
+    --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" \
+    --log-every 50 $MODEL \
     ${INIT:+--init "$INIT"} \
     2>&1 | tee "$out/train.log"
 rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships

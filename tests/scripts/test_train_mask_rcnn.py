@@ -1,6 +1,7 @@
 """scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards (with the seeds and
 scene mix asked for) and the validation set, trains within its budget and leaves the weights,
-figures and logs; a second run trains on the first one's images from its weights; a device it
+figures and logs; a second run trains on the first one's images from its weights, in two processes
+sharing each step; a device it
 cannot use stops it at the smoke test, before anything is rendered at scale."""
 
 from __future__ import annotations
@@ -40,14 +41,17 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert [r["seed"] for r in figures["train_recipes"]] == [1500, 1501]
     assert all(r["scenes"] == {"held": 0.5, "feeder": 0.5} for r in figures["train_recipes"])
     assert "epoch 1/1 val mask AP50" in (out / "train.log").read_text()
-    # A second run on the same images renders nothing and starts from the first run's weights.
+    # A second run on the same images renders nothing and starts from the first run's weights; its
+    # two processes (RANKS) take two images each of the step, and its smoke test trains with two.
     again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
                            timeout=300, env={**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"),
-                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt")})
+                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt"), "RANKS": "2"})
     assert again.returncode == 0, again.stdout + again.stderr
     assert "rendering 4 images" not in again.stdout
     assert "rendered 4 training images in 2 shards" in again.stdout
-    assert f"initialised from {out / 'mask_rcnn.pt'}" in (tmp_path / "again" / "train.log").read_text()
+    log = (tmp_path / "again" / "train.log").read_text()
+    assert f"initialised from {out / 'mask_rcnn.pt'}" in log and "2 processes of 2 images a step each" in log
+    assert "2 processes of 1 images a step each" in (tmp_path / "again" / "smoke.log").read_text()
 
 
 def test_a_device_it_cannot_use_stops_it_at_the_smoke_test(tmp_path):
