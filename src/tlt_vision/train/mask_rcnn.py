@@ -365,6 +365,25 @@ def epochs_within(budget_s: float, elapsed_s: float, epochs_run: int, epochs_don
     return max(epochs_done, min(epochs, epochs_done + more))
 
 
+def epochs_at_pace(budget_s: float, seconds_per_epoch: float, epochs_done: int, epochs: int) -> int:
+    """How many epochs (at most ``epochs``, at least one more than ``epochs_done``, those before this
+    run) fit in ``budget_s`` at ``seconds_per_epoch``, judged early in the run's first epoch."""
+    fit = math.floor(budget_s / seconds_per_epoch) if seconds_per_epoch > 0 else epochs
+    return max(epochs_done + 1, min(epochs, epochs_done + fit))
+
+
+def pace_probe_step(steps_per_epoch: int) -> int:
+    """The step of a run's first epoch after which ``--time-budget-min`` first judges the epochs
+    that fit (0: none, a one-step epoch): 5 % of the epoch, or 20 steps if more, so that an epoch
+    longer than the budget decays the learning rate over itself instead of holding it at its peak."""
+    return max(steps_per_epoch // 20, min(20, steps_per_epoch - 1))
+
+
+def _budget_line(minutes: float, fit: int, epochs: int, how: str = "") -> str:
+    return (f"time budget {minutes:g} min: {fit} epochs fit, not {epochs}{how}; "
+            "the learning rate decays over those")
+
+
 def _duration(seconds: float) -> str:
     seconds = round(seconds)
     h, rem = divmod(seconds, 3600)
@@ -507,6 +526,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         + (f"; {ranks.size} processes of {args.batch} images a step each" if ranks.size > 1 else ""),
         flush=True)
     data = TrainingImages(train_set, args.max_size, args.min_area, aug, args.seed)
+    probe = pace_probe_step(steps_per_epoch) if args.time_budget_min is not None else 0
     t_start = time.perf_counter()
     steps_done = 0
     epoch = start_epoch
@@ -540,6 +560,15 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
             step_losses.append(losses)
             epoch_losses.append(losses)
             steps_done += 1
+            if steps_done == probe:
+                pace = (time.perf_counter() - t_start) / steps_done * steps_per_epoch
+                # The leader's clock decides, so that every process trains the same epochs.
+                budget_s = args.time_budget_min * 60.0
+                fit = ranks.from_leader(epochs_at_pace(budget_s, pace, start_epoch, epochs))
+                if fit < epochs:
+                    how = f" (from the first {steps_done} steps)"
+                    say(_budget_line(args.time_budget_min, fit, epochs, how), flush=True)
+                    epochs, total_steps = fit, fit * steps_per_epoch
             window_images += len(batch) * ranks.size
             if (step + 1) % args.log_every == 0 or step + 1 == steps_per_epoch:
                 now = time.perf_counter()
@@ -608,8 +637,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
             fit = ranks.from_leader(epochs_within(args.time_budget_min * 60.0, time.perf_counter() - t_start,
                                                   epoch - start_epoch, epoch, epochs))
             if fit < epochs:
-                say(f"time budget {args.time_budget_min:g} min: {fit} epochs fit, not {epochs}; "
-                    "the learning rate decays over those", flush=True)
+                say(_budget_line(args.time_budget_min, fit, epochs), flush=True)
                 epochs, total_steps = fit, fit * steps_per_epoch
     if not ranks.leader:
         return 0

@@ -20,11 +20,14 @@ from tlt_vision.train.mask_rcnn import (
     Augment,
     augment,
     build_config,
+    epochs_at_pace,
     epochs_within,
     evaluate,
+    learning_rate,
     load_sample,
     main,
     open_set,
+    pace_probe_step,
     parse_overrides,
 )
 from tlt_vision.weights import WeightsError, read_manifest
@@ -278,6 +281,24 @@ def test_a_time_budget_trains_the_epochs_that_fit(tmp_path, capsys):
     assert main(args) == 0
     assert "time budget 1e-06 min: 1 epochs fit, not 5" in capsys.readouterr().out
     assert torch.load(out.parent / "w_checkpoint.pt", weights_only=True)["epoch"] == 1
+
+
+def test_an_epoch_longer_than_the_budget_decays_the_learning_rate_over_itself(tmp_path, capsys):
+    # Judged only after the first epoch, an epoch longer than the budget ran at the peak rate and
+    # ended there (a lent H200's first 3.6-minute epoch of 2026-12-04); early in it, it decays.
+    assert pace_probe_step(375) == 20 and pace_probe_step(1000) == 50 and pace_probe_step(8) == 7
+    assert pace_probe_step(1) == 0  # a one-step epoch is judged at its end, as before
+    assert epochs_at_pace(360.0, 219.0, 0, 40) == 1  # that run: one epoch fits
+    assert epochs_at_pace(360.0, 100.0, 0, 40) == 3 and epochs_at_pace(360.0, 100.0, 0, 2) == 2
+    assert epochs_at_pace(360.0, 1000.0, 4, 40) == 5  # resumed after 4: at least one more
+    images = write_set(tmp_path / "set", 16, seed=1)
+    args = ["--train", str(images), "--out", str(tmp_path / "w.pt"), "--epochs", "5", "--batch", "2",
+            "--lr", "5e-3", "--time-budget-min", "1e-6", "--threads", "1", "--log-every", "8", *CONFIG_ARGS]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "time budget 1e-06 min: 1 epochs fit, not 5 (from the first 7 steps)" in text
+    # The last step's rate is the one-epoch schedule's, well under the peak.
+    assert "epoch 1/1 step 8/8 " in text and f"lr {learning_rate(7, 8, 5e-3):.1e}" in text
 
 
 def test_the_loader_drops_instances_under_the_minimum_area_and_takes_an_image_with_none(tmp_path):
