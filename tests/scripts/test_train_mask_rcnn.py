@@ -50,8 +50,9 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert "rendering 4 images" not in again.stdout
     assert "rendered 4 training images in 2 shards" in again.stdout
     log = (tmp_path / "again" / "train.log").read_text()
-    assert f"initialised from {out / 'mask_rcnn.pt'}" in log and "2 processes of 2 images a step each" in log
-    assert "2 processes of 1 images a step each" in (tmp_path / "again" / "smoke.log").read_text()
+    assert f"initialised from {out / 'mask_rcnn.pt'}" in log
+    assert "2 processes sharing each step's 4 images" in log
+    assert "2 processes sharing each step's 2 images" in (tmp_path / "again" / "smoke.log").read_text()
 
 
 def test_a_device_it_cannot_use_stops_it_at_the_smoke_test(tmp_path):

@@ -523,7 +523,8 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
         f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
         f"device {device}; {args.workers} loader workers"
-        + (f"; {ranks.size} processes of {args.batch} images a step each" if ranks.size > 1 else ""),
+        + (f"; {ranks.size} processes sharing each step's {args.batch * ranks.size} images"
+           if ranks.size > 1 else ""),
         flush=True)
     data = TrainingImages(train_set, args.max_size, args.min_area, aug, args.seed)
     probe = pace_probe_step(steps_per_epoch) if args.time_budget_min is not None else 0

@@ -347,7 +347,7 @@ def test_several_processes_train_one_model_on_their_shares_of_each_step(trained,
     assert main(args) == 0
     text = capfd.readouterr().out
     assert text.count("(16 images)") == 1  # only the leader prints
-    assert "2 processes of 2 images a step each" in text and f"epoch {EPOCHS}/{EPOCHS} step 4/4" in text
+    assert "2 processes sharing each step's 4 images" in text and f"epoch {EPOCHS}/{EPOCHS} step 4/4" in text
     figures = read_manifest(out)["extra"]["figures"]
     assert figures["processes"] == 2 and figures["batch"] == 2
     history = figures["history"]
