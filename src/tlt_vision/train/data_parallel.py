@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -115,12 +116,21 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+REFUSED = 2  # the run's exit status when a process stops on one of ``refused``
+
+
 def _entry(rank: int, size: int, port: int, fn: Callable[..., int], args: tuple[Any, ...],
-           result: Any) -> None:
+           result: Any, refused: tuple[type[BaseException], ...], was_refused: Any) -> None:
     os.environ["MASTER_ADDR"], os.environ["MASTER_PORT"] = "127.0.0.1", str(port)
     dist.init_process_group("gloo", rank=rank, world_size=size)
     try:
-        code = fn(*args, Ranks(rank, size))
+        try:
+            code = fn(*args, Ranks(rank, size))
+        except refused as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            # Said before the others, left waiting in a collective, fail on the broken group.
+            was_refused.value = 1
+            os._exit(REFUSED)
         if rank == 0:
             result.value = code
         # The others wait for the leader's validation and saving: gloo aborts a process whose
@@ -130,13 +140,23 @@ def _entry(rank: int, size: int, port: int, fn: Callable[..., int], args: tuple[
         dist.destroy_process_group()
 
 
-def run_ranks(fn: Callable[..., int], size: int, *args: Any) -> int:
+def run_ranks(fn: Callable[..., int], size: int, *args: Any,
+              refused: tuple[type[BaseException], ...] = ()) -> int:
     """Run ``fn(*args, ranks)`` in ``size`` processes and return the leader's exit status. A
-    process that raises ends the run, the exception and its traceback raised here."""
+    process that raises one of ``refused`` (a bad input found only while running) prints
+    ``error: <message>`` and ends the run with status 2; any other exception ends it raised here,
+    with its traceback."""
     if size == 1:
         return fn(*args, Ranks())
-    result = mp.get_context("spawn").Value("i", 1)
-    mp.spawn(_entry, args=(size, _free_port(), fn, args, result), nprocs=size, join=True)
+    context = mp.get_context("spawn")
+    result, was_refused = context.Value("i", 1), context.Value("i", 0)
+    try:
+        mp.spawn(_entry, args=(size, _free_port(), fn, args, result, refused, was_refused), nprocs=size,
+                 join=True)
+    except (mp.ProcessExitedException, mp.ProcessRaisedException):
+        if not was_refused.value:
+            raise
+        return REFUSED
     return int(result.value)
 
 

@@ -737,7 +737,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return evaluate_command(args)
         if args.ranks > 1:
             open_inputs(args)  # refused here once, not by every process
-        return run_ranks(train, args.ranks, args)
+        return run_ranks(train, args.ranks, args, refused=(InputError, DatasetError))
     except (InputError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

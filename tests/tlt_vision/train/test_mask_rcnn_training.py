@@ -355,3 +355,25 @@ def test_several_processes_train_one_model_on_their_shares_of_each_step(trained,
     assert max(h["val_map"] for h in history) >= trained["before"] + 0.5
     assert main([*args[:-len(CONFIG_ARGS)], "--batch", "9", *CONFIG_ARGS]) == 2
     assert "16 images, fewer than --batch 9 times --ranks 2" in capfd.readouterr().err
+
+
+def test_a_bad_input_one_process_meets_while_training_ends_the_run_with_status_2(tmp_path, capfd):
+    # Image sizes are only seen when a batch is stacked, inside one of the processes: it says what
+    # is wrong as the one-process command does, and the others are stopped.
+    small = tmp_path / "small"
+    small.mkdir()
+    files = []
+    for i in range(8):
+        rgb = np.zeros((40, 40, 3), np.uint8)
+        write_sample(small / f"{i:05d}.npz", Sample(
+            rgb=rgb, depth=np.ones((40, 40), np.float32), masks=np.zeros((0, 40, 40), bool),
+            labels=np.zeros(0, int), names=np.array([], str), poses=np.zeros((0, 4, 4)),
+            defects=np.array([], str), intrinsics=np.eye(3)))  # fmt: skip
+        files.append(f"{i:05d}.npz")
+    write_index(small, list(CLASSES), 40, 40, files, {"drawn": "nothing"})
+    sets = [str(write_set(tmp_path / "big", 8, seed=1)), str(small)]
+    args = ["--train", *sets, "--out", str(tmp_path / "w.pt"), "--epochs", "1", "--batch", "4",
+            "--ranks", "2", "--threads", "1", *CONFIG_ARGS]  # fmt: skip
+    assert main(args) == 2
+    err = capfd.readouterr().err
+    assert "error: " in err and "images of different sizes" in err and "Traceback" not in err
