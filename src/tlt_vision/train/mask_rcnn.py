@@ -457,8 +457,8 @@ class Inputs:
 
 
 def open_inputs(args: argparse.Namespace) -> Inputs:
-    """The run's inputs; InputError for the first that cannot be used. With ``--ranks`` the
-    command calls this before it starts the processes, so that a bad input is refused once."""
+    """The run's inputs; InputError for the first that cannot be used (``--init`` and ``--resume``
+    are read, and refused, where the run loads them)."""
     cfg = build_config(parse_overrides(args.config))
     settings = weights_settings(cfg, args.max_size)
     train_set = open_sets(args.train, cfg.classes)
@@ -470,11 +470,18 @@ def open_inputs(args: argparse.Namespace) -> Inputs:
     if len(train_set) < args.batch * args.ranks:
         raise InputError(f"{', '.join(map(str, train_set.roots))}: {len(train_set)} images, fewer than "
                          f"--batch {args.batch} times --ranks {args.ranks}")
-    if args.init:
-        init_from(MaskRCNN(cfg), Path(args.init), cfg.classes)
-    if args.resume:
-        _load_checkpoint(Path(args.resume), settings, cfg.classes)
     return Inputs(cfg, settings, train_set, val_set, device, out)
+
+
+def refuse_bad_inputs(args: argparse.Namespace) -> None:
+    """Every InputError the run's inputs give, weights and checkpoint included, raised here: with
+    ``--ranks`` the command calls this before it starts the processes, so that a bad input is
+    refused once, with exit status 2, not by every process."""
+    inputs = open_inputs(args)
+    if args.init:
+        init_from(MaskRCNN(inputs.cfg), Path(args.init), inputs.cfg.classes)
+    if args.resume:
+        _load_checkpoint(Path(args.resume), inputs.settings, inputs.cfg.classes)
 
 
 def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
@@ -500,7 +507,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     aug = Augment()
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
     steps_per_epoch = len(ranks.batches(range(len(train_set)), args.batch))
-    epochs = args.epochs  # lowered by --time-budget-min once an epoch's duration is known
+    epochs = args.epochs  # lowered by --time-budget-min once the run's pace is known
     total_steps = epochs * steps_per_epoch
     history: list[dict[str, Any]] = []
     step_losses: list[dict[str, float]] = []
@@ -577,8 +584,8 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                 left = (now - t_start) / steps_done * (total_steps - global_step - 1)
                 terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in loss_keys)
                 say(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
-                      f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
-                      f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
+                    f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
+                    f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
                 t_window, window_images = now, 0
         if not ranks.replicas_agree(model):
             say(f"error: the {ranks.size} processes' weights differ after epoch {epoch + 1}", file=sys.stderr)
@@ -597,9 +604,9 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                           val_seconds_per_image=result["seconds_per_image"])
             improved = result["map"] > best_map
             say(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
-                  f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
-                  f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
-                  flush=True)
+                f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
+                f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
+                flush=True)
         history.append(record)
         seconds = seconds_before + time.perf_counter() - t_start
         if improved and ranks.leader:
@@ -736,7 +743,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.evaluate:
             return evaluate_command(args)
         if args.ranks > 1:
-            open_inputs(args)  # refused here once, not by every process
+            refuse_bad_inputs(args)
         return run_ranks(train, args.ranks, args, refused=(InputError, DatasetError))
     except (InputError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -355,6 +355,10 @@ def test_several_processes_train_one_model_on_their_shares_of_each_step(trained,
     assert max(h["val_map"] for h in history) >= trained["before"] + 0.5
     assert main([*args[:-len(CONFIG_ARGS)], "--batch", "9", *CONFIG_ARGS]) == 2
     assert "16 images, fewer than --batch 9 times --ranks 2" in capfd.readouterr().err
+    # Weights that cannot be used are refused once, before any process starts.
+    assert main([*args, "--init", str(tmp_path / "none.pt")]) == 2
+    err = capfd.readouterr().err
+    assert err.count("none.pt") == 1 and "Traceback" not in err
 
 
 def test_a_bad_input_one_process_meets_while_training_ends_the_run_with_status_2(tmp_path, capfd):
