@@ -93,6 +93,10 @@ SCHEMA = {
                         doc="a piece's mean image width over its part's, outside which it is scored down",
                     ),
                     "width_penalty": opt("float", 0.3, minimum=0.0, maximum=1.0),
+                    "bend_tolerance": opt(
+                        "float", None, minimum=0.5,
+                        doc="a bent piece is cut into straight ones, points within this many radii of each",
+                    ),
                 },
             ),
             "semantic_trim": opt(
