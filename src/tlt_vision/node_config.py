@@ -97,6 +97,10 @@ SCHEMA = {
                         "float", None, minimum=0.5,
                         doc="a bent piece is cut into straight ones, points within this many radii of each",
                     ),
+                    "depth_noise": opt(
+                        "float", 0.0, minimum=0.0, maximum=0.1,
+                        doc="the depth camera's noise, a fraction of the depth (1 sigma)",
+                    ),
                 },
             ),
             "semantic_trim": opt(

@@ -16,19 +16,32 @@ become a piece; the rest is cut again, until what is left is straight or smaller
 ``min_area`` (then it is kept as it is: the cut must lose no pixel a part may own). A pixel
 without depth goes with the nearest pixel that has one. Each piece is then taken apart into its
 8-connected places, a place smaller than ``min_area`` joining the piece it touches most.
+
+A real depth camera's noise moves a point along its ray, by more than a part's radius at a few
+metres (a ZED's 1 %, 2 cm at 2 m): given ``depth_noise`` (that fraction), a point may lie twice it
+further from its line. On seed 950's images with 1 % Gaussian noise added to each pixel's depth,
+mask AP50 0.798 without the cut, 0.805 with it and no allowance (tubes 0.597 -> 0.559: straight
+tubes cut apart), 0.821 with ``depth_noise`` 0.01 (tubes 0.613, frame sides 0.688 -> 0.785); the
+same setting on the exact depth gives 0.841 against 0.844. Measuring in the image instead, where
+the noise is only a scale, did worse on exact depth (frame sides 0.785 against 0.853): two sides
+seen at a slant lie nearer one line there than in space.
 """
 
 from __future__ import annotations
 
+import heapq
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import binary_dilation, distance_transform_edt
+from scipy.ndimage import distance_transform_edt
 from scipy.ndimage import label as ndimage_label
 
 from tlt_vision.pointcloud import Intrinsics, back_project
 
 _EIGHT = np.ones((3, 3), dtype=bool)
+# Each pixel and its right, lower, lower-right and lower-left neighbours: every 8-neighbour once.
+_NEIGHBOURS = ((0, 1), (1, 0), (1, 1), (1, -1))
 
 
 @dataclass(frozen=True)
@@ -36,11 +49,14 @@ class BendSplit:
     """When a region is bent, and how near its line a point must lie (radii of the part)."""
 
     tolerance: float = 2.0
+    # The camera's depth noise, a fraction of the depth (1 sigma): a point may lie twice that
+    # further from its line. 0 for the twin's exact depth.
+    depth_noise: float = 0.0
     quantile: float = 0.9
     min_area: int = 30
     hypotheses: int = 64
     # Points a line is scored on: a frame side held close is 5000 pixels or more.
-    sample: int = 1500
+    sample: int = 500
 
 
 def _distances(points: np.ndarray, centre: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -53,25 +69,26 @@ def _principal(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.linalg.svd(points - centre, full_matrices=False)[2][0]
 
 
-def _best_line(points: np.ndarray, tol: float, split: BendSplit, rng: np.random.Generator
+def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.random.Generator
                ) -> np.ndarray:
-    """The points (a boolean over ``points``) within ``tol`` of the line most of them lie near."""
-    scored = points if len(points) <= split.sample else points[
-        rng.choice(len(points), split.sample, replace=False)]
-    a = rng.integers(0, len(scored), split.hypotheses)
-    b = rng.integers(0, len(scored), split.hypotheses)
-    best, best_count = None, -1
-    for i, j in zip(a, b, strict=True):
-        direction = scored[j] - scored[i]
-        norm = float(np.linalg.norm(direction))
-        if norm < 2 * tol:  # too short a base to fix a direction
-            continue
-        count = int((_distances(scored, scored[i], direction / norm) <= tol).sum())
-        if count > best_count:
-            best, best_count = (scored[i], direction / norm), count
-    if best is None:
+    """The points (a boolean over ``points``) within their ``tol`` of the line most of them lie
+    near."""
+    scored = np.arange(len(points)) if len(points) <= split.sample else rng.choice(
+        len(points), split.sample, replace=False)
+    a = rng.choice(scored, split.hypotheses)
+    b = rng.choice(scored, split.hypotheses)
+    direction = points[b] - points[a]
+    norm = np.linalg.norm(direction, axis=1)
+    fixed = norm >= 2 * tol[a]  # a base too short fixes no direction
+    if not fixed.any():
         return np.zeros(len(points), dtype=bool)
-    near = _distances(points, *best) <= tol
+    centre, direction = points[a[fixed]], direction[fixed] / norm[fixed, None]
+    # Every line's distance to every scored point at once: (lines, points).
+    offset = points[scored][None, :, :] - centre[:, None, :]
+    along = np.einsum("lpk,lk->lp", offset, direction)
+    distance = np.linalg.norm(offset - along[..., None] * direction[:, None, :], axis=2)
+    best = int((distance <= tol[scored][None, :]).sum(axis=1).argmax())
+    near = _distances(points, centre[best], direction[best]) <= tol
     for _ in range(2):  # the line fitted to its own points, then those near it again
         if near.sum() < 2:
             break
@@ -89,16 +106,16 @@ def straight_pieces(mask: np.ndarray, depth: np.ndarray, camera_matrix: np.ndarr
     z = depth[ys, xs]
     known = np.isfinite(z) & (z > 0)
     points = back_project(xs[known] + left, ys[known] + top, z[known], Intrinsics.from_matrix(camera_matrix))
-    tol = split.tolerance * radius
+    tol = split.tolerance * radius + 2 * split.depth_noise * points[:, 2]
     rng = np.random.default_rng(0)
     label = np.full(len(points), -1)
     left_over = np.arange(len(points))
     count = 0
     while len(left_over) >= split.min_area:
-        rest = points[left_over]
-        if np.quantile(_distances(rest, *_principal(rest)), split.quantile) <= tol:
+        rest, rest_tol = points[left_over], tol[left_over]
+        if np.quantile(_distances(rest, *_principal(rest)) - rest_tol, split.quantile) <= 0:
             break
-        near = _best_line(rest, tol, split, rng)
+        near = _best_line(rest, rest_tol, split, rng)
         if near.sum() < split.min_area or near.all():
             break
         label[left_over[near]] = count
@@ -121,27 +138,55 @@ def straight_pieces(mask: np.ndarray, depth: np.ndarray, camera_matrix: np.ndarr
 def _connected(mask: np.ndarray, grid: np.ndarray, count: int, min_area: int) -> list[np.ndarray]:
     """The labelled pixels' pieces, each 8-connected: a line's points may lie in more than one
     place of the region (the rest of a side past the corner's pixels the other line took), and a
-    piece in two places is not one part. A place under ``min_area`` pixels goes to the piece it
+    piece in two places is not one part. A place under ``min_area`` pixels goes to the place it
     touches most, the smallest first, so that no pixel is lost."""
-    places: list[np.ndarray] = []
+    place = np.full(mask.shape, -1)
+    n = 0
     for k in range(count):
-        found, n = ndimage_label(grid == k, structure=_EIGHT)
-        places += [found == i for i in range(1, n + 1)]
-    merged = True
-    while merged:  # each pass merges one place away, or none and ends
-        merged = False
-        for small in sorted(range(len(places)), key=lambda i: int(places[i].sum())):
-            if places[small].sum() >= min_area:
-                break
-            ring = binary_dilation(places[small], structure=_EIGHT) & mask & ~places[small]
-            contact = [int((ring & p).sum()) if i != small else 0 for i, p in enumerate(places)]
-            into = int(np.argmax(contact))
-            if contact[into]:  # one that touches nothing else stays a piece of its own
-                places[into] = places[into] | places[small]
-                del places[small]
-                merged = True
-                break
-    return places
+        found, m = ndimage_label(grid == k, structure=_EIGHT)
+        place[found > 0] = found[found > 0] - 1 + n
+        n += m
+    sizes = np.bincount(place[mask], minlength=n)
+    # How many neighbouring pixel pairs each two places share.
+    contact: list[Counter[int]] = [Counter() for _ in range(n)]
+    h, w = mask.shape
+    ys, xs = np.nonzero(mask)
+    for dy, dx in _NEIGHBOURS:
+        y2, x2 = ys + dy, xs + dx
+        inside = (y2 < h) & (x2 >= 0) & (x2 < w)
+        a, b = place[ys[inside], xs[inside]], place[y2[inside], x2[inside]]
+        differ = (b >= 0) & (a != b)
+        pairs, counts = np.unique(np.stack([a[differ], b[differ]], axis=1), axis=0, return_counts=True)
+        for (i, j), c in zip(pairs.tolist(), counts.tolist(), strict=True):
+            contact[i][j] += c
+            contact[j][i] += c
+    into = list(range(n))
+    small = [(int(sizes[i]), i) for i in range(n) if sizes[i] < min_area]
+    heapq.heapify(small)
+    while small:
+        size, i = heapq.heappop(small)
+        if into[i] != i or size != sizes[i] or not contact[i]:
+            continue  # merged away, grown since, or touching nothing: a piece of its own
+        j = max(contact[i], key=contact[i].__getitem__)
+        into[i] = j
+        sizes[j] += sizes[i]
+        for k, c in list(contact[i].items()):
+            del contact[k][i]
+            if k != j:
+                contact[j][k] += c
+                contact[k][j] += c
+        contact[i] = Counter()
+        if sizes[j] < min_area:
+            heapq.heappush(small, (int(sizes[j]), j))
 
+    def root(i: int) -> int:
+        while into[i] != i:
+            i = into[i]
+        return i
+
+    final = np.array([root(i) for i in range(n)])
+    owner = np.full(mask.shape, -1)
+    owner[mask] = final[place[mask]]
+    return [owner == r for r in sorted(set(final.tolist()))]
 
 __all__ = ["BendSplit", "straight_pieces"]

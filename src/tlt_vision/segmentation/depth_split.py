@@ -76,6 +76,8 @@ class DepthSplit:
     # A piece bent in space cut into straight ones, points within this many of its part's radius
     # of their line (needs ``radii``; :mod:`tlt_vision.segmentation.bend_split`); None: not cut.
     bend_tolerance: float | None = None
+    # The depth camera's noise, a fraction of the depth (1 sigma), which the bend cut allows for.
+    depth_noise: float = 0.0
 
 
 def depth_pieces(mask: np.ndarray, depth: np.ndarray, split: DepthSplit) -> list[np.ndarray]:
@@ -230,7 +232,7 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
     pieces: dict[int, tuple[list[np.ndarray], list[float], list[np.ndarray]]] = {
         label: ([], [], []) for label in labels}
     regions = torch.nonzero(thin).flatten()
-    bend = (BendSplit(tolerance=split.bend_tolerance, min_area=split.min_area)
+    bend = (BendSplit(tolerance=split.bend_tolerance, depth_noise=split.depth_noise, min_area=split.min_area)
             if split.bend_tolerance is not None else None)
     # Within each mask's own box: a thin part is a sliver of the frame, and whole-frame arrays for
     # each region took 38 ms a frame, against 21 ms so.

@@ -7,7 +7,7 @@ finds the thin parts the box branch missed (strut tubes 0.02 and cross-frame sid
 images with the model it replaced), so those classes have floors of their own. The vision node
 cuts those regions where the depth jumps and where they bend in space, and joins the pieces of one
 straight part (node.yaml ``segmentation.depth_split``): on these images that takes the mean from
-0.65 to 0.82, tubes 0.26 -> 0.57, frame sides 0.31 -> 0.83 (0.79, 0.54 and 0.70 without the cut
+0.65 to 0.82, tubes 0.26 -> 0.56, frame sides 0.31 -> 0.83 (0.79, 0.54 and 0.70 without the cut
 where they bend), with floors of its own.
 """
 
@@ -39,7 +39,7 @@ IMAGES = 30
 AP50_FLOOR = 0.40
 THIN_FLOORS = {1: 0.05, 3: 0.12}  # strut tubes 0.26, cross-frame sides 0.31 measured on these
 CUT_AP50_FLOOR = 0.55
-CUT_THIN_FLOORS = {1: 0.20, 3: 0.40}  # 0.57 and 0.83 measured
+CUT_THIN_FLOORS = {1: 0.20, 3: 0.40}  # 0.56 and 0.83 measured
 # Frame sides meeting at a corner joint were one region: 0.70 -> 0.83 measured with the bend cut.
 BEND_GAIN_FLOOR = 0.06
 
