@@ -20,6 +20,10 @@ detected part, and prints against the issue's goals:
 * segmentation and pose of every detected part of a 640x480 frame, median and p95 over the frames
   (goal <= 500 ms on 2 CPU cores).
 
+The twin's depth is exact. ``--depth-noise F`` adds Gaussian noise of F times each pixel's depth
+(a stereo camera's, about 0.01 at a few metres; drawn the same for each image every run), to see
+what of the figures holds on a real camera's depth.
+
 Cross frames are left out of the pose figures: the twin labels each side as an instance while the
 pose model is the whole square, which the node assembles from the sides of the one part it
 inspects. Tubes are posed with the model of their kind (vertical or diagonal, as the node knows
@@ -27,12 +31,13 @@ from the request; here from the twin's instance name); an unmatched tube detecti
 vertical one.
 
     .venv/bin/python bench/vision.py [--weights models/vision/mask_rcnn.pt] [--count 40]
-        [--seed 900] [--images DIR] [--threads 2]
+        [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import sys
 import tempfile
@@ -54,7 +59,7 @@ from tlt_vision.pose.errors import add_s, rotation_error_deg
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
-from tlt_vision.train.dataset import ImageSet, instance_model
+from tlt_vision.train.dataset import ImageSet, Sample, instance_model
 from tlt_vision.train.render_dataset import RenderSettings, render_set
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -151,6 +156,13 @@ def report_poses(title: str, tally: PoseTally) -> None:
         print(line)
 
 
+def with_depth_noise(sample: Sample, fraction: float, index: int) -> Sample:
+    """``sample`` with Gaussian noise of ``fraction`` times each pixel's depth, the same each run."""
+    rng = np.random.default_rng(1000 + index)
+    noise = 1 + fraction * rng.standard_normal(sample.depth.shape)
+    return dataclasses.replace(sample, depth=(sample.depth * noise).astype(sample.depth.dtype))
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--weights", type=Path, default=ROOT / "models/vision/mask_rcnn.pt")
@@ -160,7 +172,11 @@ def main() -> int:
     p.add_argument("--mission", type=Path, default=ROOT / "missions/one_bay.yaml")
     p.add_argument("--config", type=Path, default=ROOT / "config/vision/node.yaml")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--depth-noise", type=float, default=0.0,
+                   help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
     args = p.parse_args()
+    if not 0.0 <= args.depth_noise < 0.5:
+        p.error(f"--depth-noise {args.depth_noise}: a fraction of the depth from 0 to 0.5")
     torch.set_num_threads(args.threads)
     mission = load_mission(args.mission)
     config = load_config(args.config, args.mission)
@@ -191,6 +207,8 @@ def main() -> int:
         frame_s, seg_s, parts = [], [], []
         for i in range(len(images)):
             s = images[i]
+            if args.depth_noise:
+                s = with_depth_noise(s, args.depth_noise, i)
             intrinsics = Intrinsics.from_matrix(s.intrinsics)
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
@@ -231,7 +249,8 @@ def main() -> int:
                   f"frame {frame_s[-1]:.2f} s", flush=True)
 
     print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
-          f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads")
+          f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
+          + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else ""))
     cut = ("cut where the depth jumps" if segmenter.depth_split
            else "not cut by depth (no segmentation.depth_split)")
     if segmenter.trim is not None:

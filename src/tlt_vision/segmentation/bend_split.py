@@ -189,4 +189,5 @@ def _connected(mask: np.ndarray, grid: np.ndarray, count: int, min_area: int) ->
     owner[mask] = final[place[mask]]
     return [owner == r for r in sorted(set(final.tolist()))]
 
+
 __all__ = ["BendSplit", "straight_pieces"]

@@ -1,0 +1,33 @@
+"""The vision benchmark's depth noise: a fraction of each pixel's depth, the same every run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tlt_vision.train.dataset import Sample
+
+
+@pytest.fixture(scope="module")
+def bench(load_bench):
+    return load_bench("vision")
+
+
+def _sample(depth: np.ndarray) -> Sample:
+    h, w = depth.shape
+    return Sample(rgb=np.zeros((h, w, 3), np.uint8), depth=depth, masks=np.zeros((0, h, w), bool),
+                  labels=np.zeros(0, np.int64), names=np.array([], dtype=str), poses=np.zeros((0, 4, 4)),
+                  defects=np.array([], dtype=str), intrinsics=np.eye(3))
+
+
+def test_depth_noise_is_a_fraction_of_each_pixels_depth_and_the_same_every_run(bench):
+    depth = np.concatenate([np.full((100, 100), 1.0), np.full((100, 100), 4.0)]).astype(np.float32)
+    noisy = bench.with_depth_noise(_sample(depth), 0.01, index=3)
+    assert noisy.depth.dtype == np.float32 and noisy.depth.shape == depth.shape
+    spread = (noisy.depth - depth) / depth
+    assert spread.std() == pytest.approx(0.01, rel=0.05)
+    near, far = abs(noisy.depth - depth)[:100].mean(), abs(noisy.depth - depth)[100:].mean()
+    assert far == pytest.approx(4 * near, rel=0.1)  # four times as deep, four times the noise
+    again = bench.with_depth_noise(_sample(depth), 0.01, index=3)
+    assert np.array_equal(noisy.depth, again.depth)
+    assert not np.array_equal(noisy.depth, bench.with_depth_noise(_sample(depth), 0.01, index=4).depth)
