@@ -37,11 +37,9 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 from scipy.ndimage import label as ndimage_label
 
-from tlt_vision.pointcloud import Intrinsics, back_project
+from tlt_vision.segmentation.region_pixels import RegionPoints, neighbour_pairs
 
 _EIGHT = np.ones((3, 3), dtype=bool)
-# Each pixel and its right, lower, lower-right and lower-left neighbours: every 8-neighbour once.
-_NEIGHBOURS = ((0, 1), (1, 0), (1, 1), (1, -1))
 
 
 @dataclass(frozen=True)
@@ -96,16 +94,16 @@ def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.ra
     return near
 
 
-def straight_pieces(mask: np.ndarray, depth: np.ndarray, camera_matrix: np.ndarray, radius: float,
-                    split: BendSplit, top: int = 0, left: int = 0) -> list[np.ndarray]:
+def straight_pieces(mask: np.ndarray, seen: RegionPoints, radius: float, split: BendSplit
+                    ) -> list[np.ndarray]:
     """``mask`` (H, W) cut into the pieces that each lie along one line in space (boolean masks of
-    its shape; ``[mask]`` when it is straight already). ``depth`` is the frame's depth over the
-    same pixels; ``mask`` and ``depth`` may be a crop whose first pixel is (``top``, ``left``) of
-    the image ``camera_matrix`` is for. ``radius`` is the part's, m."""
+    its shape; ``[mask]`` when it is straight already). ``seen`` holds the points its pixels see,
+    over the same pixels (a region ``mask`` is part of, or ``mask`` itself). ``radius`` is the
+    part's, m."""
     ys, xs = np.nonzero(mask)
-    z = depth[ys, xs]
-    known = np.isfinite(z) & (z > 0)
-    points = back_project(xs[known] + left, ys[known] + top, z[known], Intrinsics.from_matrix(camera_matrix))
+    rows = seen.index[ys, xs]
+    known = rows >= 0
+    points = seen.points[rows[known]]
     tol = split.tolerance * radius + 2 * split.depth_noise * points[:, 2]
     rng = np.random.default_rng(0)
     label = np.full(len(points), -1)
@@ -149,12 +147,9 @@ def _connected(mask: np.ndarray, grid: np.ndarray, count: int, min_area: int) ->
     sizes = np.bincount(place[mask], minlength=n)
     # How many neighbouring pixel pairs each two places share.
     contact: list[Counter[int]] = [Counter() for _ in range(n)]
-    h, w = mask.shape
     ys, xs = np.nonzero(mask)
-    for dy, dx in _NEIGHBOURS:
-        y2, x2 = ys + dy, xs + dx
-        inside = (y2 < h) & (x2 >= 0) & (x2 < w)
-        a, b = place[ys[inside], xs[inside]], place[y2[inside], x2[inside]]
+    for first, y2, x2 in neighbour_pairs(ys, xs, mask.shape):
+        a, b = place[ys[first], xs[first]], place[y2, x2]
         differ = (b >= 0) & (a != b)
         pairs, counts = np.unique(np.stack([a[differ], b[differ]], axis=1), axis=0, return_counts=True)
         for (i, j), c in zip(pairs.tolist(), counts.tolist(), strict=True):

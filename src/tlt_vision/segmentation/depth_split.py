@@ -51,12 +51,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from tlt_vision.ops.boxes import boxes_from_masks
-from tlt_vision.pointcloud import Intrinsics, back_project
 from tlt_vision.segmentation.bend_split import BendSplit, straight_pieces
-
-# Each pixel linked to its right, lower, lower-right and lower-left neighbours: 8-connectivity,
-# as the head's regions.
-_NEIGHBOURS = ((0, 1), (1, 0), (1, 1), (1, -1))
+from tlt_vision.segmentation.region_pixels import RegionPoints, neighbour_pairs
 
 
 @dataclass(frozen=True)
@@ -87,17 +83,13 @@ def depth_pieces(mask: np.ndarray, depth: np.ndarray, split: DepthSplit) -> list
     n = len(ys)
     if n < split.min_area:  # no piece can be large enough
         return []
-    h, w = mask.shape
     index = np.full(mask.shape, -1, dtype=np.int64)
     index[ys, xs] = np.arange(n)
     z = depth[ys, xs].astype(np.float64)
     known = np.isfinite(z) & (z > 0)
     firsts, seconds = [], []
-    for dy, dx in _NEIGHBOURS:
-        y2, x2 = ys + dy, xs + dx
-        inside = (y2 < h) & (x2 >= 0) & (x2 < w)
-        a = np.flatnonzero(inside)
-        b = index[y2[inside], x2[inside]]
+    for a, y2, x2 in neighbour_pairs(ys, xs, mask.shape):
+        b = index[y2, x2]
         a, b = a[b >= 0], b[b >= 0]
         za, zb = z[a], z[b]
         with np.errstate(invalid="ignore"):
@@ -123,15 +115,6 @@ class _Axis:
     centre: np.ndarray
     direction: np.ndarray
     half_length: float
-
-
-def _points(mask: np.ndarray, depth: np.ndarray, k: np.ndarray, top: int = 0, left: int = 0) -> np.ndarray:
-    """A piece's pixels with depth, back-projected (N, 3) in the camera frame; ``mask`` and ``depth``
-    may be a crop whose first pixel is (``top``, ``left``) of the image."""
-    ys, xs = np.nonzero(mask)
-    z = depth[ys, xs]
-    ok = np.isfinite(z) & (z > 0)
-    return back_project(xs[ok] + left, ys[ok] + top, z[ok], Intrinsics.from_matrix(k))
 
 
 def _axis(points: np.ndarray) -> _Axis | None:
@@ -163,7 +146,7 @@ def join_collinear(masks: list[np.ndarray], scores: list[float], depth: np.ndarr
     pass until no two are; a joined piece's score is its pieces' mean weighted by area. ``points``,
     each piece's back-projected pixels, if the caller has them already; returned joined too."""
     masks, scores = list(masks), list(scores)
-    points = list(points) if points is not None else [_points(m, depth, k) for m in masks]
+    points = list(points) if points is not None else [RegionPoints.of(m, depth, k).points for m in masks]
     areas = [int(m.sum()) for m in masks]
     axes = [_axis(p) for p in points]
     joined = True
@@ -241,11 +224,13 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
         box = np.s_[y0:y1, x0:x1]
         label = int(result["labels"][i])
         own = probs[label][box].cpu().numpy() if probs is not None else None
-        smalls = depth_pieces(masks[i][box].cpu().numpy(), depth[box], split)
+        region = masks[i][box].cpu().numpy()
+        smalls = depth_pieces(region, depth[box], split)
+        seen = (RegionPoints.of(region, depth[box], camera_matrix, y0, x0)
+                if camera_matrix is not None else None)
         radius = (radii or {}).get(label)
-        if bend is not None and camera_matrix is not None and radius is not None:
-            smalls = [straight for small in smalls
-                      for straight in straight_pieces(small, depth[box], camera_matrix, radius, bend, y0, x0)
+        if bend is not None and seen is not None and radius is not None:
+            smalls = [straight for small in smalls for straight in straight_pieces(small, seen, radius, bend)
                       if straight.sum() >= split.min_area]
         for small in smalls:
             piece = np.zeros(masks.shape[-2:], dtype=bool)
@@ -253,8 +238,8 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
             score = float(own[small].mean()) if own is not None else float(result["scores"][i])
             pieces[label][0].append(piece)
             pieces[label][1].append(score * min(1.0, small.sum() / split.full_score_area))
-            if camera_matrix is not None:
-                pieces[label][2].append(_points(small, depth[box], camera_matrix, y0, x0))
+            if seen is not None:
+                pieces[label][2].append(seen.of_pixels(small))
     new_masks, new_labels, new_scores = [], [], []
     for label, (class_masks, class_scores, class_points) in pieces.items():
         if camera_matrix is not None:
