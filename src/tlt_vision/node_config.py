@@ -181,12 +181,17 @@ SCHEMA = {
     ),
     "detached": opt(
         "dict",
-        {"link": DETACHED.link, "below": DETACHED.below, "largest_only": []},
+        {"link": DETACHED.link, "below": DETACHED.below, "largest_only": [], "links": {}},
         schema={
             "link": opt("float", DETACHED.link, minimum=0.001, maximum=0.5),
             "below": opt("float", DETACHED.below, minimum=0.0, maximum=0.5),
             # Compact parts only: a tube or a frame side cut by what stands in front is two pieces.
             "largest_only": opt("list", [], item=Field("str", choices=COMPACT)),
+            # A compact part's own link: its points lie closer together than a tube's, and so do
+            # its neighbours.
+            "links": opt("map", {}, item=Field("float", minimum=0.001, maximum=0.5),
+                         check=lambda v: None if set(v) <= set(COMPACT)
+                         else f"keys are compact part classes ({', '.join(COMPACT)})"),
         },
     ),
     "ee_self_filter": opt(
@@ -338,7 +343,8 @@ class VisionConfig:
     def detached(self) -> Detached:
         """Which pieces of a part's cloud are dropped before its pose."""
         raw = self.raw["detached"]
-        return Detached(**{**raw, "largest_only": tuple(raw["largest_only"])})
+        return Detached(**{**raw, "largest_only": tuple(raw["largest_only"]),
+                           "links": tuple(sorted(raw["links"].items()))})
 
     @property
     def depth_split(self) -> DepthSplit | None:

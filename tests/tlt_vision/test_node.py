@@ -561,6 +561,13 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "detached.largest_only" in err and "strut_tube" in err
+    for links, named in (({"strut_tube": 0.01}, "compact part classes"), ({"rivet": 0.0}, "0.0")):
+        wrong = vision_config()
+        wrong["detached"] = {"links": links}
+        path.write_text(__import__("yaml").safe_dump(wrong))
+        assert main(["--config", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert "detached.links" in err and named in err
     wrong = vision_config()
     wrong["corrector"]["turned_starts"] = ["strut_tube"]  # a tube turned end-on is no start
     path.write_text(__import__("yaml").safe_dump(wrong))

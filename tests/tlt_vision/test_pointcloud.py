@@ -149,3 +149,19 @@ def test_a_compact_part_keeps_only_its_largest_piece_when_its_class_asks():
     assert not detached_pieces(cloud, detached).any()
     # One piece is the part whatever the class.
     assert not detached_pieces(fitting, detached, "corner_joint").any()
+
+
+def test_a_class_with_a_link_of_its_own_parts_from_neighbours_nearer_than_the_common_link():
+    """Two rivets of a feeder's tray side by side, 13 mm apart (25 mm pitch, 12 mm across), the
+    neighbour a third of the cloud: a 2 cm link joins them, the rivets' own 1 cm parts them; every
+    other class keeps the common link."""
+    rng = np.random.default_rng(4)
+    rivet = rng.uniform([-0.006, -0.012, 0.5], [0.006, 0.012, 0.505], (200, 3))
+    neighbour = rivet[:100] + np.array([0.025, 0.0, 0.0])
+    cloud = np.vstack([neighbour, rivet])
+    common = Detached(link=0.02, below=0.05, largest_only=("rivet",))
+    assert not detached_pieces(cloud, common, "rivet").any()
+    own = Detached(link=0.02, below=0.05, largest_only=("rivet",), links=(("rivet", 0.01),))
+    assert own.link_of("rivet") == 0.01 and own.link_of("end_fitting") == 0.02 and own.link_of(None) == 0.02
+    assert detached_pieces(cloud, own, "rivet").tolist() == [True] * 100 + [False] * 200
+    assert not detached_pieces(cloud, own, "end_fitting").any()
