@@ -55,14 +55,11 @@ class RegionPoints:
         points = back_project(xs[known] + left, ys[known] + top, z[known], intrinsics)
         return cls(points, index)
 
-    def rows(self, mask: np.ndarray) -> np.ndarray:
-        """The rows of ``points`` of ``mask``'s pixels that have one, in the pixels' raster order."""
-        rows = self.index[mask]
-        return rows[rows >= 0]
-
     def of_pixels(self, mask: np.ndarray) -> np.ndarray:
-        """The points (M, 3) of ``mask``'s pixels (a mask of the region's shape) that have one."""
-        return self.points[self.rows(mask)]
+        """The points (M, 3) of ``mask``'s pixels (a mask of the region's shape) that have one, in
+        the pixels' raster order."""
+        rows = self.index[mask]
+        return self.points[rows[rows >= 0]]
 
 
 __all__ = ["RegionPoints", "neighbour_pairs"]
