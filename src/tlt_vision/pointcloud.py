@@ -93,7 +93,7 @@ class Detached:
 
     def link_of(self, object_class: str | None) -> float:
         """The link (m) of ``object_class``'s clouds."""
-        return dict(self.links).get(object_class, self.link) if object_class is not None else self.link
+        return dict(self.links).get(object_class, self.link)
 
 
 DEFAULT_DETACHED = Detached()
