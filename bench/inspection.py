@@ -129,8 +129,9 @@ def without_own_ee(scene, frame, ee_filter: EeSelfFilter) -> np.ndarray:
 @dataclass(frozen=True)
 class Segmentation:
     """Detections of a rendered frame as the vision node makes them for InspectPart: the twin's
-    labels, or Mask R-CNN down to the configuration's score floor, with its closer look at a
-    region of the frame (``segmentation.second_look_closer``)."""
+    labels, or Mask R-CNN down to the configuration's score floor, its thin parts cut and joined on
+    the frame's depth (``segmentation.depth_split``: the node's frames carry their depth), with its
+    closer look at a region of the frame (``segmentation.second_look_closer``)."""
 
     segmenter: Any = None  # MaskRcnnSegmenter; None for the twin's labels
     scale: float | None = None
@@ -149,7 +150,8 @@ class Segmentation:
     @staticmethod
     def _frame(frame, camera: str) -> CameraFrame:
         k = frame.intrinsics
-        return CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, {"rgb": frame.rgb})
+        images = {"rgb": frame.rgb, "depth": frame.depth}
+        return CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images)
 
 
 def detector(kind: str, weights: str | None = None, config: VisionConfig | None = None) -> Segmentation:

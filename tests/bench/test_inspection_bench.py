@@ -108,3 +108,33 @@ def test_figures_and_wrong_decisions(bench, capsys):
     wrong = out.split("wrong decisions:")[1].split("\n\n")[0].strip().splitlines()
     assert [line.split()[0] for line in wrong] == ["v/49", "d/1"]
     assert "bent_tube 3 deg" in out and "defective parts caught: 75.0% of 4" in out
+
+
+def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_depth(bench):
+    """The node's frames carry their depth, and its segmenter cuts and joins the thin parts' regions
+    on it (node.yaml ``segmentation.depth_split``): the bench's detections are those, not the RGB
+    alone's (before 2026-12-04 the bench gave the segmenter no depth, and judged a held diagonal
+    whose tube the jaws cross by two pieces the node would have joined)."""
+    scene_mod = pytest.importorskip("tlt_sim.model.scene")
+    from tlt_vision.segmentation_source import CameraFrame
+
+    config = load_config()
+    assert config.raw["segmentation"]["depth_split"], "node.yaml cuts no thin part on the depth"
+    mission = load_mission(ROOT / "missions" / "two_bay.yaml")
+    detect = bench.detector("mask_rcnn")
+    name = next(n for n, kind in bench.struts(mission) if kind == "diagonal")
+    with scene_mod.Scene(mission=mission, scenario=bench.scenario(mission, [8.0])) as scene:
+        frame = bench.present(scene, scene.part(name), "ars_x", bench.inspection_joints()["ars_x"],
+                              np.random.default_rng(1200), bench.Jitter())
+    camera = bench.CAMERAS["ars_x"]
+    k = frame.intrinsics
+
+    def masks(detections):
+        return [(d.object_class, round(d.score, 4), int(d.mask.sum())) for d in detections]
+
+    rgb_only = CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, {"rgb": frame.rgb})
+    with_depth = CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix,
+                             {"rgb": frame.rgb, "depth": frame.depth})
+    bench_masks = masks(detect(frame, camera))
+    assert bench_masks == masks(detect.segmenter.detect(with_depth))
+    assert bench_masks != masks(detect.segmenter.detect(rgb_only))
