@@ -22,9 +22,14 @@ def test_bringup_check_passes_against_the_twin(tmp_path):
     result = subprocess.run([str(TLT), "launch", str(ROOT / "config/launch/bringup_twin.yaml")],
                             capture_output=True, text=True, timeout=300, env=env)
     output = result.stdout + result.stderr
-    # The failed checks first: the tail of a long run may not reach back to them.
-    failed = "\n".join(line for line in output.splitlines() if "FAIL" in line)
-    assert result.returncode == 0, f"{failed}\n...\n{output[-6000:]}"
+    # The failed checks first, then what their drivers logged: the tail of a long run may not reach
+    # back to them.
+    lines = output.splitlines()
+    failed = [line for line in lines if "FAIL" in line]
+    components = {line.split()[2] for line in failed if line.startswith("[bringup_check]")}
+    own = [line for line in lines if line.split(" ", 1)[0] in {f"[{c}]" for c in components}]
+    assert result.returncode == 0, "\n".join(
+        [*failed, "... what the failed components logged:", *own[-80:], "...", output[-6000:]])
     assert "[bringup_check] bring-up check: 27 of 27 checks passed" in output, output[-6000:]
     for component in ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y",
                       "ur_x", "ur_y"):
