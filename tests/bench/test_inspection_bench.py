@@ -127,14 +127,15 @@ def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_d
         frame = bench.present(scene, scene.part(name), "ars_x", bench.inspection_joints()["ars_x"],
                               np.random.default_rng(1200), bench.Jitter())
     camera = bench.CAMERAS["ars_x"]
-    k = frame.intrinsics
+
+    def node_masks(**images):
+        k = frame.intrinsics
+        node_frame = CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, images)
+        return masks(detect.segmenter.detect(node_frame))
 
     def masks(detections):
         return [(d.object_class, round(d.score, 4), int(d.mask.sum())) for d in detections]
 
-    rgb_only = CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix, {"rgb": frame.rgb})
-    with_depth = CameraFrame(camera, 0.0, f"{camera}_optical", k, k.matrix,
-                             {"rgb": frame.rgb, "depth": frame.depth})
     bench_masks = masks(detect(frame, camera))
-    assert bench_masks == masks(detect.segmenter.detect(with_depth))
-    assert bench_masks != masks(detect.segmenter.detect(rgb_only))
+    assert bench_masks == node_masks(rgb=frame.rgb, depth=frame.depth)
+    assert bench_masks != node_masks(rgb=frame.rgb)

@@ -26,8 +26,8 @@ def test_bringup_check_passes_against_the_twin(tmp_path):
     # back to them.
     lines = output.splitlines()
     failed = [line for line in lines if "FAIL" in line]
-    components = {line.split()[2] for line in failed if line.startswith("[bringup_check]")}
-    own = [line for line in lines if line.split(" ", 1)[0] in {f"[{c}]" for c in components}]
+    prefixes = {f"[{line.split()[2]}]" for line in failed if line.startswith("[bringup_check]")}
+    own = [line for line in lines if line.split(" ", 1)[0] in prefixes]
     assert result.returncode == 0, "\n".join(
         [*failed, "... what the failed components logged:", *own[-80:], "...", output[-6000:]])
     assert "[bringup_check] bring-up check: 27 of 27 checks passed" in output, output[-6000:]
