@@ -16,7 +16,7 @@ figures against the goals.
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
         [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--second-look S]
-        [--no-closer] [--no-self-filter] [--threads 2]
+        [--no-closer] [--no-self-filter] [--threads 2] [--depth-noise 0.005]
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ import torch
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
+from tlt_vision.depth_noise import with_noise
 from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import LookCloser, PartInspector
 from tlt_vision.segmentation_source import CameraFrame, TwinLabels
@@ -174,6 +175,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
     mission = load_mission(ROOT / "missions" / f"{args.mission}.yaml")
     scen = scenario(mission, args.bends)
     config = load_config()
+    # The node is configured with its camera's noise (node.yaml depth_noise); so is the bench.
+    config.raw["depth_noise"]["fraction"] = args.depth_noise
     seg = config.raw["segmentation"]
     if args.min_score is not None:
         seg["min_score"] = args.min_score
@@ -187,6 +190,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
     ee_filter = EeSelfFilter.from_config(config.raw["ee_self_filter"])
     detect = detector(args.segmentation, args.weights, config)
     rng = np.random.default_rng(args.seed)
+    # Its own draw, so that a strut is presented the same with noise and without.
+    noise_rng = np.random.default_rng(args.seed + 1)
     jitter = Jitter(np.radians(args.joint_jitter_deg), args.slide_mm / 1000.0)
     arms = inspection_joints()
     results: list[Presented] = []
@@ -202,6 +207,8 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 part = scene.part(name)
                 home = scene.body_pose(part.body)
                 frame = present(scene, part, arm, arms[arm], rng, jitter)
+                if args.depth_noise:
+                    frame.depth = with_noise(frame.depth, args.depth_noise, noise_rng)
                 depth = without_own_ee(scene, frame, ee_filter) if args.self_filter else frame.depth
                 scene.place_part(name, *home)  # back in its rack, out of the next view
                 camera = CAMERAS[arm]
@@ -271,7 +278,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
                         help="take the end effectors out of the depth first, as the vision node does")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--depth-noise", type=float, default=0.0,
+                        help="Gaussian noise added to each pixel's depth, a fraction of it; the node is "
+                             "told so (node.yaml depth_noise)")
     args = parser.parse_args(argv)
+    if not 0.0 <= args.depth_noise <= 0.1:
+        parser.error(f"--depth-noise {args.depth_noise}: a fraction of the depth from 0 to 0.1")
     torch.set_num_threads(args.threads)
     report(run(args))
     return 0

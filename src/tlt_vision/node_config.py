@@ -17,6 +17,7 @@ import numpy as np
 
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED
 from tlt_vision.pointcloud import Detached
 from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
@@ -97,10 +98,6 @@ SCHEMA = {
                         "float", None, minimum=0.5,
                         doc="a bent piece is cut into straight ones, points within this many radii of each",
                     ),
-                    "depth_noise": opt(
-                        "float", 0.0, minimum=0.0, maximum=0.1,
-                        doc="the depth camera's noise, a fraction of the depth (1 sigma)",
-                    ),
                 },
             ),
             "semantic_trim": opt(
@@ -154,6 +151,19 @@ SCHEMA = {
                     "fraction": opt("float", 0.1, minimum=0.0, maximum=0.5),
                 },
             ),
+        },
+    ),
+    "depth_noise": opt(
+        "dict",
+        {"fraction": EXACT.fraction, "window": EXACT.window, "max_allowance": EXACT.max_allowance},
+        schema={
+            "fraction": opt("float", EXACT.fraction, minimum=0.0, maximum=0.1,
+                            doc="the depth cameras' noise, 1 sigma, a fraction of the depth"),
+            "window": opt("int", EXACT.window, minimum=1, maximum=15,
+                          check=lambda v: None if v % 2 else "must be odd",
+                          doc="pixels of the square whose median depth a point takes"),
+            "max_allowance": opt("float", EXACT.max_allowance, minimum=0.0, maximum=0.5,
+                                 doc="the most allowed for noise, a fraction of the part's size"),
         },
     ),
     "free_space": opt(
@@ -313,6 +323,10 @@ class VisionConfig:
         return name if name in self.cameras else None
 
     @property
+    def depth_noise(self) -> DepthNoise:
+        return DepthNoise(**self.raw["depth_noise"])
+
+    @property
     def free_space(self) -> FreeSpace:
         return FreeSpace(**self.raw["free_space"])
 
@@ -331,6 +345,7 @@ class VisionConfig:
             "free_space": self.free_space,
             "detached": self.detached,
             "axial_slide": self.axial_slide,
+            "depth_noise": self.depth_noise,
         }
 
     @property
@@ -353,7 +368,8 @@ class VisionConfig:
         if not raw:
             return None
         band = raw["width_band"]
-        return DepthSplit(**{**raw, "width_band": tuple(band) if band else None})
+        return DepthSplit(**{**raw, "width_band": tuple(band) if band else None,
+                             "depth_noise": self.depth_noise.fraction})
 
     @property
     def semantic_trim(self) -> SemanticTrim | None:

@@ -23,6 +23,10 @@ seen from the side, the cloud leaves that open. Every certified pose is then che
 whole depth image (``free_space``, :mod:`tlt_vision.pose.free_space`): a pose that puts the model
 where the camera saw past it is not certified.
 
+Given a real camera's depth noise (``depth_noise``; the twin's depth is exact), each cloud point
+takes the median depth of its mask's pixels about it, and each certificate allows for the noise
+left, or certifies nothing where the depth cannot place the part (:mod:`tlt_vision.depth_noise`).
+
 A mask's border pixels are dropped (their depth may be what lies behind the part), except on a
 mask smaller than ``keep_border_below`` pixels: on a small corner joint (100-300 pixels at a metre)
 the border is most of the mask, and without it the cube's corners go unseen, so a good joint read
@@ -40,6 +44,7 @@ import cv2
 import numpy as np
 import torch
 
+from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.inspection import Observation
 from tlt_vision.pointcloud import (
     DEFAULT_DETACHED,
@@ -51,6 +56,7 @@ from tlt_vision.pointcloud import (
     masked_point_cloud,
 )
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
+from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
@@ -148,8 +154,10 @@ class PartPipeline:
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
         detached: Detached | None = DEFAULT_DETACHED,
         axial_slide: AxialSlide | None = None,
+        depth_noise: DepthNoise = EXACT,
     ) -> None:
         self.estimators = dict(estimators)
+        self.depth_noise = depth_noise
         self.free_space = free_space
         self.detached = detached
         self.axial_slide = axial_slide
@@ -182,6 +190,7 @@ class PartPipeline:
             rng=self.rng,
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
+            smooth=0 if self.depth_noise.exact else self.depth_noise.window,
         )
         if not cloud.ok or self.detached is None or detection.object_class in self.in_pieces:
             return cloud
@@ -231,6 +240,8 @@ class PartPipeline:
             near = nearest_depth(depth, self.free_space.window)
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
+                if not self.depth_noise.exact:
+                    e = replace(e, certificate=self._certificate(cls, points, e.rotation, e.translation))
                 if depth is not None:
                     e = self._slid(e, points, dets[i].mask, depth, intrinsics)
                 if near is not None:
@@ -260,8 +271,31 @@ class PartPipeline:
         )
         if by == 0.0:
             return estimate
-        certificate = self.estimators[cls].certify_at(points, moved.rotation, moved.translation)
+        certificate = self._certificate(cls, points, moved.rotation, moved.translation)
         return replace(moved, certificate=certificate) if certificate.certified else estimate
+
+    def _certificate(
+        self, object_class: str, points: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+    ) -> Certificate:
+        """The certificate of a pose of ``object_class`` for ``points``, allowing for the depth's
+        noise at their depth; not certified where the noise left is over the bound on the part's
+        size (:mod:`tlt_vision.depth_noise`)."""
+        estimator = self.estimators[object_class]
+        if self.depth_noise.exact:
+            return estimator.certify_at(points, rotation, translation)
+        depth = float(np.median(points[:, 2]))
+        allowance = self.depth_noise.allowance(depth)
+        certificate = estimator.certify_at(points, rotation, translation, allowance)
+        size = estimator.model.diameter
+        if not self.depth_noise.too_noisy(depth, size):
+            return certificate
+        reason = (
+            f"depth too noisy to certify at {depth:.2f} m: the noise left in the cloud "
+            f"({allowance * 1000:.1f} mm) is over {self.depth_noise.max_allowance:.0%} of the part's "
+            f"size ({self.depth_noise.max_allowance * size * 1000:.1f} mm)"
+        )
+        return replace(certificate, certified=False,
+                       reason="; ".join(r for r in (reason, certificate.reason) if r))
 
     def _surface(self, object_class: str) -> np.ndarray:
         """The free-space check's fixed surface sample of the class's model."""

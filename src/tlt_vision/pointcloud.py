@@ -40,6 +40,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from tlt_vision.depth_noise import window_median
+
 MIN_POINTS = 32
 
 
@@ -130,9 +132,12 @@ def masked_point_cloud(
     rng: np.random.Generator | None = None,
     erode: int = 1,
     extent: float | None = None,
+    smooth: int = 0,
 ) -> MaskedCloud:
     """Back-project the masked pixels with valid depth; ``max_points`` draws a random subset;
-    ``extent`` (m), the part's size, drops pixels further than that from the median depth."""
+    ``extent`` (m), the part's size, drops pixels further than that from the median depth;
+    ``smooth`` (pixels, odd), when over 1, gives each point the median depth of the valid pixels
+    in that square about it (:func:`tlt_vision.depth_noise.window_median`)."""
     if depth is None:
         return _failed("no depth image")
     mask = np.asarray(mask)
@@ -173,7 +178,7 @@ def masked_point_cloud(
     if max_points is not None and n > max_points:
         pick = (rng or np.random.default_rng(0)).choice(n, max_points, replace=False)
         v, u = v[pick], u[pick]
-    z = depth[v, u].astype(np.float64)
+    z = window_median(depth, valid, v, u, smooth) if smooth > 1 else depth[v, u].astype(np.float64)
     v, u = v + top, u + left
     pts = back_project(u, v, z, intrinsics).astype(np.float32)
     colours = np.asarray(rgb)[v, u].astype(np.uint8) if rgb is not None else None

@@ -533,10 +533,16 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "segmentation.depth_split.bend_tolerance" in err and "0.2" in err
-    wrong["segmentation"]["depth_split"].update(bend_tolerance=2.0, depth_noise=1.0)
+    wrong["segmentation"]["depth_split"].update(bend_tolerance=2.0)
+    wrong["depth_noise"] = {"fraction": 1.0}
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2
-    assert "segmentation.depth_split.depth_noise" in capsys.readouterr().err
+    assert "depth_noise.fraction" in capsys.readouterr().err
+    wrong["depth_noise"] = {"fraction": 0.01, "window": 4}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "depth_noise.window" in err and "must be odd" in err
     wrong = vision_config()
     wrong["segmentation"]["semantic_trim"] = {"classes": ["fitting"], "above": 0.3}
     path.write_text(__import__("yaml").safe_dump(wrong))

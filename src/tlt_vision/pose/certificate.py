@@ -6,10 +6,14 @@ threshold (the mission's ``inspection.chamfer_thresholds``). *Non-degeneracy*: a
 ``groups_required`` keypoint groups are visible, a keypoint being visible when ``min_points``
 observed points lie within ``visibility radius`` of it once posed (config/vision/keypoints.yaml).
 A pose is certified when both hold; otherwise ``reason`` says which failed and by how much.
+
+On a noisy depth camera the threshold grows by an ``allowance`` for the noise, added in quadrature
+(:mod:`tlt_vision.depth_noise`); the certificate reports the threshold it was judged against.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -65,9 +69,12 @@ def certify(
     visibility: Visibility,
     threshold: float,
     percentile: float = PERCENTILE,
+    allowance: float = 0.0,
 ) -> Certificate:
     """Certificate of one pose from the observed points (N, 3), their distances (N,) to the posed
-    model (the Chamfer distances) and the posed keypoints (K, 3)."""
+    model (the Chamfer distances) and the posed keypoints (K, 3); ``allowance`` (m) for the depth's
+    noise grows the threshold in quadrature."""
+    threshold = math.hypot(threshold, allowance)
     if observed.shape[0] == 0:
         return not_certified("no observed points", threshold, visibility)
     dist = distances.detach()

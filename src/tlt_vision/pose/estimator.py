@@ -172,16 +172,16 @@ class PoseEstimator:
         )
 
     def certify_at(self, points: np.ndarray | torch.Tensor, rotation: np.ndarray | torch.Tensor,
-                   translation: np.ndarray | torch.Tensor) -> Certificate:
+                   translation: np.ndarray | torch.Tensor, allowance: float = 0.0) -> Certificate:
         """The certificate of the pose ``rotation, translation`` (camera frame) for the observed
-        ``points`` (N, 3)."""
+        ``points`` (N, 3), the threshold grown by ``allowance`` (m) for the depth's noise."""
         seen = torch.as_tensor(points, dtype=torch.float32)
         rot = torch.as_tensor(rotation, dtype=torch.float32)
         t = torch.as_tensor(translation, dtype=torch.float32)
         with torch.no_grad():
             dist = self.surface(model_frame(seen[None], rot[None], t[None]))[0]
         posed = transform(self.model_keypoints, rot, t)
-        return certify(seen, dist, posed, self.model.visibility, self.threshold)
+        return certify(seen, dist, posed, self.model.visibility, self.threshold, allowance=allowance)
 
     def estimate(self, points: np.ndarray) -> PoseEstimate:
         """Pose and certificate of the part from its observed points (N, 3), camera frame, m."""

@@ -45,6 +45,19 @@ def test_p90_hand_computed(models):
     assert not c2.certified and "8.1 mm > threshold 8.0 mm" in c2.reason
 
 
+def test_an_allowance_for_the_depths_noise_grows_the_threshold_in_quadrature(models):
+    m = models["rivet"]
+    kp = torch.tensor(m.keypoints, dtype=torch.float32)
+    obs = kp[:1].repeat(10, 1)
+    dist = torch.arange(10, dtype=torch.float32) / 1000.0  # p90 8.1 mm, as above
+    assert not certify(obs, dist, kp, m.visibility, 0.006).certified
+    # hypot(6, 6) = 8.49 mm: what the certificate was judged against is what it reports.
+    c = certify(obs, dist, kp, m.visibility, 0.006, allowance=0.006)
+    assert c.certified and c.chamfer_threshold == pytest.approx(math.hypot(0.006, 0.006))
+    c2 = certify(obs, dist, kp, m.visibility, 0.006, allowance=0.005)  # hypot: 7.8 mm
+    assert not c2.certified and "8.1 mm > threshold 7.8 mm" in c2.reason
+
+
 def test_true_pose_certified_wrong_pose_rejected(models):
     m = models["strut_tube/vertical"]
     rot, t = _rx(1.2), np.array([0.02, -0.05, 1.0])

@@ -1,0 +1,64 @@
+"""The depth camera's noise: the window median, what noise it leaves, and where a part is out of
+the certificate's reach."""
+
+import math
+
+import numpy as np
+import pytest
+
+from tlt_vision.depth_noise import EXACT, DepthNoise, window_median, with_noise
+
+
+def test_window_median_takes_only_the_valid_pixels_in_its_square_hand_computed():
+    depth = np.arange(25, dtype=np.float32).reshape(5, 5)
+    valid = np.ones((5, 5), dtype=bool)
+    valid[1, 1] = False  # the 6 is not the part's
+    # Centre (2, 2), 3x3: 7 8 11 12 13 16 17 18 -> median 12.5.
+    # Corner (0, 0), 3x3: only 0 1 5 lie in the image and 6 is not valid -> median 1.
+    got = window_median(depth, valid, np.array([2, 0]), np.array([2, 0]), 3)
+    assert got.tolist() == [12.5, 1.0]
+    # A window of 1 is the pixel itself.
+    assert window_median(depth, valid, np.array([3]), np.array([4]), 1).tolist() == [19.0]
+
+
+def test_what_noise_is_left_and_the_certificates_allowance_hand_computed():
+    noise = DepthNoise(fraction=0.01, window=5)
+    # 1 % of 1 m, over 25 pixels' median: 10 mm * sqrt(pi / 2) / 5 = 2.507 mm; its 90th
+    # percentile distance 1.645 times that.
+    assert noise.residual(1.0) == pytest.approx(0.01 * math.sqrt(math.pi / 2) / 5)
+    assert noise.allowance(1.0) == pytest.approx(1.6449 * 0.0025066, rel=1e-4)
+    assert noise.allowance(0.5) == pytest.approx(noise.allowance(1.0) / 2)
+    assert EXACT.exact and EXACT.allowance(3.0) == 0.0 and not EXACT.too_noisy(3.0, 0.03)
+
+
+def test_a_small_part_is_out_of_reach_nearer_than_a_large_one():
+    """The allowance must stay under 2 % of the part's size: an end fitting (75.5 mm) at 1 % noise
+    up to 0.366 m, a tube (0.625 m) to 3 m and more."""
+    noise = DepthNoise(fraction=0.01, window=5, max_allowance=0.02)
+    fitting, tube = 0.0755, 0.625
+    reach = 0.02 * fitting / noise.allowance(1.0)
+    assert reach == pytest.approx(0.366, abs=0.001)
+    assert not noise.too_noisy(0.99 * reach, fitting) and noise.too_noisy(1.01 * reach, fitting)
+    assert not noise.too_noisy(3.0, tube)
+
+
+def test_added_noise_is_the_fraction_of_each_pixels_depth_and_no_depth_stays_none():
+    depth = np.full((200, 200), 2.0, dtype=np.float32)
+    depth[:10] = 0.0
+    noisy = with_noise(depth, 0.01, np.random.default_rng(0))
+    assert noisy.dtype == np.float32 and (noisy[:10] == 0).all()
+    assert np.std(noisy[10:]) == pytest.approx(0.02, rel=0.05)
+    assert np.mean(noisy[10:]) == pytest.approx(2.0, abs=0.001)
+
+
+def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_cut():
+    from tlt_common.config_schema import load_yaml
+    from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
+
+    raw = load_yaml(DEFAULT_CONFIG)
+    assert config_from_dict(raw).depth_noise.exact  # the twin's depth
+    raw["depth_noise"] = {"fraction": 0.005}
+    config = config_from_dict(raw)
+    assert config.depth_noise == DepthNoise(fraction=0.005, window=5, max_allowance=0.02)
+    assert config.pipeline_options["depth_noise"] == config.depth_noise
+    assert config.depth_split.depth_noise == 0.005
