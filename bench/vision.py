@@ -20,9 +20,11 @@ detected part, and prints against the issue's goals:
 * segmentation and pose of every detected part of a 640x480 frame, median and p95 over the frames
   (goal <= 500 ms on 2 CPU cores).
 
-The twin's depth is exact. ``--depth-noise F`` adds Gaussian noise of F times each pixel's depth
+The twin's images are exact. ``--depth-noise F`` adds Gaussian noise of F times each pixel's depth
 (a stereo camera's, about 0.01 at a few metres; drawn the same for each image every run), to see
-what of the figures holds on a real camera's depth.
+what of the figures holds on a real camera's depth, and tells the node's pipeline so (node.yaml
+``depth_noise``), which then also reports the views within the noise's reach;
+``--image-noise S`` adds S grey levels of Gaussian noise to the colours.
 
 Cross frames are left out of the pose figures: the twin labels each side as an instance while the
 pose model is the whole square, which the node assembles from the sides of the one part it
@@ -31,7 +33,7 @@ from the request; here from the twin's instance name); an unmatched tube detecti
 vertical one.
 
     .venv/bin/python bench/vision.py [--weights models/vision/mask_rcnn.pt] [--count 40]
-        [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01]
+        [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01] [--image-noise 3]
 """
 
 from __future__ import annotations
@@ -176,6 +178,13 @@ def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
         print(line)
 
 
+def with_image_noise(sample: Sample, sigma: float, index: int) -> Sample:
+    """``sample`` with Gaussian noise of ``sigma`` grey levels on each pixel's colours, the same
+    each run."""
+    noise = np.random.default_rng(2000 + index).normal(0.0, sigma, sample.rgb.shape)
+    return dataclasses.replace(sample, rgb=np.clip(sample.rgb + noise, 0, 255).round().astype(np.uint8))
+
+
 def with_depth_noise(sample: Sample, fraction: float, index: int) -> Sample:
     """``sample`` with Gaussian noise of ``fraction`` times each pixel's depth, the same each run."""
     noisy = with_noise(sample.depth, fraction, np.random.default_rng(1000 + index))
@@ -193,7 +202,11 @@ def main() -> int:
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--depth-noise", type=float, default=0.0,
                    help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
+    p.add_argument("--image-noise", type=float, default=0.0,
+                   help="Gaussian noise added to each pixel's colours, in grey levels of 255 (default none)")
     args = p.parse_args()
+    if not 0.0 <= args.image_noise <= 64:
+        p.error(f"--image-noise {args.image_noise}: grey levels from 0 to 64")
     if not 0.0 <= args.depth_noise <= 0.1:
         p.error(f"--depth-noise {args.depth_noise}: a fraction of the depth from 0 to 0.1")
     torch.set_num_threads(args.threads)
@@ -230,6 +243,8 @@ def main() -> int:
             s = images[i]
             if args.depth_noise:
                 s = with_depth_noise(s, args.depth_noise, i)
+            if args.image_noise:
+                s = with_image_noise(s, args.image_noise, i)
             intrinsics = Intrinsics.from_matrix(s.intrinsics)
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
@@ -271,7 +286,8 @@ def main() -> int:
 
     print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
           f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
-          + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else ""))
+          + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else "")
+          + (f", image noise {args.image_noise:g} grey levels" if args.image_noise else ""))
     cut = ("cut where the depth jumps" if segmenter.depth_split
            else "not cut by depth (no segmentation.depth_split)")
     if segmenter.trim is not None:

@@ -1,6 +1,9 @@
-"""The vision benchmark's depth noise: a fraction of each pixel's depth, the same every run."""
+"""The vision benchmark's noise: a fraction of each pixel's depth, grey levels on its colours, the
+same every run."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
@@ -31,3 +34,16 @@ def test_depth_noise_is_a_fraction_of_each_pixels_depth_and_the_same_every_run(b
     again = bench.with_depth_noise(_sample(depth), 0.01, index=3)
     assert np.array_equal(noisy.depth, again.depth)
     assert not np.array_equal(noisy.depth, bench.with_depth_noise(_sample(depth), 0.01, index=4).depth)
+
+
+def test_image_noise_is_grey_levels_on_each_colour_clipped_and_the_same_every_run(bench):
+    sample = _sample(np.ones((200, 200), np.float32))
+    rgb = np.full((200, 200, 3), 128, np.uint8)
+    rgb[:, :10] = 0  # black: the noise below zero is clipped
+    sample = dataclasses.replace(sample, rgb=rgb)
+    noisy = bench.with_image_noise(sample, 4.0, index=3)
+    assert noisy.rgb.dtype == np.uint8 and noisy.rgb.shape == rgb.shape
+    assert (noisy.rgb[:, 10:].astype(float) - 128).std() == pytest.approx(4.0, rel=0.05)
+    assert noisy.rgb[:, :10].min() == 0 and 0 < noisy.rgb[:, :10].mean() < 4
+    assert np.array_equal(noisy.rgb, bench.with_image_noise(sample, 4.0, index=3).rgb)
+    assert np.array_equal(noisy.depth, sample.depth)
