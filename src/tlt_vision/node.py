@@ -111,7 +111,6 @@ class VisionNode(LeanNode):
         self.mission = mission or load_mission(config.mission_path)
         self.inspector = PartInspector(config, self.mission)
         self.parts, self.tol = self.inspector.parts, self.inspector.tol
-        self.estimators, self.pipelines = self.inspector.estimators, self.inspector.pipelines
         self.rig = CameraRig(config)
         self.ee_filter = EeSelfFilter.from_config(raw["ee_self_filter"])
         self._set_up_torch(raw["torch_threads"])
@@ -214,7 +213,8 @@ class VisionNode(LeanNode):
         self, pipeline: str, detections: list[Detection], frame: CameraFrame, prior: Any = None
     ) -> list[inspection.Observation]:
         return self.inspector.observe(
-            pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb"), prior
+            pipeline, detections, frame.get("depth"), frame.intrinsics, frame.get("rgb"), prior,
+            self.config.depth_noise_of(frame.camera),
         )
 
     def _near(
@@ -300,7 +300,8 @@ class VisionNode(LeanNode):
         depth = self._without_own_ee(frame)
         detections = off_own_ee(detections, own_pixels(frame.get("depth"), depth), self.ee_filter.own_share)
         report, obs = self.inspector.inspect(
-            member_id, kind, detections, depth, frame.intrinsics, frame.get("rgb"), self._closer(frame)
+            member_id, kind, detections, depth, frame.intrinsics, frame.get("rgb"), self._closer(frame),
+            self.config.depth_noise_of(frame.camera),
         )
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return self._report_msg(report, frame.stamp, frame.frame_id, ids)

@@ -9,7 +9,7 @@ the reason; nothing is returned half-checked.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -155,7 +155,8 @@ SCHEMA = {
     ),
     "depth_noise": opt(
         "dict",
-        {"fraction": EXACT.fraction, "window": EXACT.window, "max_allowance": EXACT.max_allowance},
+        {"fraction": EXACT.fraction, "window": EXACT.window, "max_allowance": EXACT.max_allowance,
+         "cameras": {}},
         schema={
             "fraction": opt("float", EXACT.fraction, minimum=0.0, maximum=0.1,
                             doc="the depth cameras' noise, 1 sigma, a fraction of the depth"),
@@ -164,6 +165,9 @@ SCHEMA = {
                           doc="pixels of the square whose median depth a point takes"),
             "max_allowance": opt("float", EXACT.max_allowance, minimum=0.0, maximum=0.5,
                                  doc="the most allowed for noise, a fraction of the part's size"),
+            # A ZED's noise is not a D405's: a camera named here has its own fraction.
+            "cameras": opt("map", {}, item=Field("float", minimum=0.0, maximum=0.1),
+                           doc="a configured camera's own noise, a fraction of the depth"),
         },
     ),
     "free_space": opt(
@@ -324,7 +328,14 @@ class VisionConfig:
 
     @property
     def depth_noise(self) -> DepthNoise:
-        return DepthNoise(**self.raw["depth_noise"])
+        """The noise of the cameras ``depth_noise.cameras`` does not name."""
+        raw = self.raw["depth_noise"]
+        return DepthNoise(raw["fraction"], raw["window"], raw["max_allowance"])
+
+    def depth_noise_of(self, camera: str) -> DepthNoise:
+        """The noise of the configured ``camera``'s depth."""
+        default = self.depth_noise
+        return replace(default, fraction=self.raw["depth_noise"]["cameras"].get(camera, default.fraction))
 
     @property
     def free_space(self) -> FreeSpace:
@@ -402,6 +413,9 @@ def _check(raw: dict[str, Any], source: str) -> None:
     for i, name in enumerate(raw["bay_cameras"]):
         if name not in raw["lifter_cameras"]:
             raise ConfigError(source, f"bay_cameras[{i}]", f"{name!r} is not a lifter camera")
+    for name in raw["depth_noise"]["cameras"]:
+        if name not in cameras:
+            raise ConfigError(source, f"depth_noise.cameras.{name}", f"names unknown camera {name!r}")
     near, far = raw["part_depth_range"]
     if not 0 <= near < far:
         raise ConfigError(source, "part_depth_range", f"expected 0 <= near < far, got [{near}, {far}]")

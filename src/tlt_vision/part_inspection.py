@@ -49,6 +49,7 @@ import numpy as np
 from tlt_common.mission.schema import Mission
 from tlt_vision import inspection
 from tlt_vision.cad.models import load_parts, models_for_mission
+from tlt_vision.depth_noise import DepthNoise
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.pipeline import Detection, PartPipeline, detections_near
 from tlt_vision.pointcloud import PinholeIntrinsics, masked_point_cloud
@@ -297,9 +298,12 @@ class PartInspector:
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
         prior: Callable[[str, np.ndarray], np.ndarray | None] | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> list[inspection.Observation]:
+        """The observations of ``pipeline`` (a part kind, "bay" or "rivet") for ``detections``;
+        ``depth_noise``, the camera's, by default node.yaml's for cameras it does not name."""
         with self._locks[pipeline]:
-            return self.pipelines[pipeline].observe(detections, depth, intrinsics, rgb, prior)
+            return self.pipelines[pipeline].observe(detections, depth, intrinsics, rgb, prior, depth_noise)
 
     def select(
         self,
@@ -348,13 +352,15 @@ class PartInspector:
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
         closer: LookCloser | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> tuple[inspection.InspectionReport, list[inspection.Observation]]:
         """InspectPart's decision for a strut (vertical, diagonal) or a cross frame in one frame;
         ``detections`` may hold those scoring under ``min_score`` for the second look, and
-        ``closer`` segments a region of the frame again, enlarged (the module docstring)."""
+        ``closer`` segments a region of the frame again, enlarged (the module docstring);
+        ``depth_noise`` is the camera's (:meth:`observe`)."""
         confident = [d for d in detections if d.score >= self.min_score]
         part = self.select(kind, confident, depth, intrinsics)
-        obs = self.observe(kind, part, depth, intrinsics, rgb)
+        obs = self.observe(kind, part, depth, intrinsics, rgb, depth_noise=depth_noise)
         if kind == "cross_frame":
             report = inspection.inspect_cross_frame(member_id, self.mission.bay_width, obs, self.tol)
             return report, obs
@@ -377,7 +383,7 @@ class PartInspector:
             looks.append(("in a closer look", lambda: [d for r in regions for d in closer(r)]))
         seen: list[inspection.Observation] = []
         for how, look in looks:
-            seen += self._fittings_at(kind, places, look(), depth, intrinsics, rgb)
+            seen += self._fittings_at(kind, places, look(), depth, intrinsics, rgb, depth_noise)
             again = inspection.inspect_strut(member_id, kind, length, [*obs, *seen], self.parts, self.tol)
             # Only to pass a good strut: a failure keeps the reasons of what was seen with confidence.
             if seen and again.passed:
@@ -394,6 +400,7 @@ class PartInspector:
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None,
+        depth_noise: DepthNoise | None,
     ) -> list[inspection.Observation]:
         """Certified end fittings among ``candidates`` whose clouds lie at one of ``places``
         (within ``part_gap`` and the fitting's half size)."""
@@ -401,7 +408,7 @@ class PartInspector:
         fittings = [d for d in candidates if d.object_class == "end_fitting" and d.score >= floor]
         radius = self.config.raw["part_gap"] + self.estimators["end_fitting"].model.diameter / 2
         near = detections_near(fittings, depth, intrinsics, np.eye(4), places, radius)
-        seen = self.observe(kind, near, depth, intrinsics, rgb) if near else []
+        seen = self.observe(kind, near, depth, intrinsics, rgb, depth_noise=depth_noise) if near else []
         return [o for o in seen if o.estimate is not None and o.estimate.certified]
 
     def _region(self, place: np.ndarray, intrinsics: PinholeIntrinsics, depth: np.ndarray | None) -> Region:

@@ -176,8 +176,11 @@ class PartPipeline:
         depth: np.ndarray | None,
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> MaskedCloud:
-        """The point cloud C-3PO is given for one detection (its reason when there is none)."""
+        """The point cloud C-3PO is given for one detection (its reason when there is none), the
+        depth's noise ``depth_noise`` (by default the pipeline's) filtered out."""
+        noise = depth_noise or self.depth_noise
         small = int(detection.mask.sum()) < self.keep_border_below
         estimator = self.estimators.get(detection.object_class)
         cloud = masked_point_cloud(
@@ -190,7 +193,7 @@ class PartPipeline:
             rng=self.rng,
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
-            smooth=0 if self.depth_noise.exact else self.depth_noise.window,
+            smooth=0 if noise.exact else noise.window,
         )
         if not cloud.ok or self.detached is None or detection.object_class in self.in_pieces:
             return cloud
@@ -212,16 +215,19 @@ class PartPipeline:
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
         prior: Callable[[str, np.ndarray], np.ndarray | None] | None = None,
+        depth_noise: DepthNoise | None = None,
     ) -> list[Observation]:
         """Poses of ``detections``; ``prior(object_class, points)``, when given, says where a piece
         with those points (camera frame) is expected (4x4, camera frame) or None
         (:meth:`PoseEstimator.estimate_batch`). Every class's clouds are posed together
-        (:func:`~tlt_vision.pose.estimator.estimate_together`)."""
+        (:func:`~tlt_vision.pose.estimator.estimate_together`). ``depth_noise`` is the camera's,
+        by default the pipeline's."""
+        noise = depth_noise or self.depth_noise
         dets = merge_instances(detections, self.merge)
         out: list[Observation | None] = [None] * len(dets)
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
         for i, d in enumerate(dets):
-            cloud = self.cloud(d, depth, intrinsics, rgb)
+            cloud = self.cloud(d, depth, intrinsics, rgb, noise)
             if not cloud.ok:
                 out[i] = Observation(d.object_class, None, cloud.reason, d.object_id)
             elif d.object_class not in self.estimators:
@@ -240,10 +246,11 @@ class PartPipeline:
             near = nearest_depth(depth, self.free_space.window)
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
-                if not self.depth_noise.exact:
-                    e = replace(e, certificate=self._certificate(cls, points, e.rotation, e.translation))
+                if not noise.exact:  # judged again, allowing for the noise
+                    certificate = self._certificate(cls, points, e.rotation, e.translation, noise)
+                    e = replace(e, certificate=certificate)
                 if depth is not None:
-                    e = self._slid(e, points, dets[i].mask, depth, intrinsics)
+                    e = self._slid(e, points, dets[i].mask, depth, intrinsics, noise)
                 if near is not None:
                     e = checked(e, near, intrinsics, self._surface(cls), self.free_space)
                 out[i] = Observation(cls, e, "", dets[i].object_id)
@@ -256,6 +263,7 @@ class PartPipeline:
         mask: np.ndarray,
         depth: np.ndarray,
         intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
     ) -> PoseEstimate:
         """``estimate`` placed along its axis by its mask, certified again where it moved (the
         Chamfer figures change a little, and the certificate says what they are now). A slide the
@@ -271,28 +279,29 @@ class PartPipeline:
         )
         if by == 0.0:
             return estimate
-        certificate = self._certificate(cls, points, moved.rotation, moved.translation)
+        certificate = self._certificate(cls, points, moved.rotation, moved.translation, noise)
         return replace(moved, certificate=certificate) if certificate.certified else estimate
 
     def _certificate(
-        self, object_class: str, points: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+        self, object_class: str, points: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+        noise: DepthNoise,
     ) -> Certificate:
         """The certificate of a pose of ``object_class`` for ``points``, allowing for the depth's
-        noise at their depth; not certified where the noise left is over the bound on the part's
-        size (:mod:`tlt_vision.depth_noise`)."""
+        ``noise`` at their depth; not certified where the noise left is over the bound on the
+        part's size (:mod:`tlt_vision.depth_noise`)."""
         estimator = self.estimators[object_class]
-        if self.depth_noise.exact:
+        if noise.exact:
             return estimator.certify_at(points, rotation, translation)
         depth = float(np.median(points[:, 2]))
-        allowance = self.depth_noise.allowance(depth)
+        allowance = noise.allowance(depth)
         certificate = estimator.certify_at(points, rotation, translation, allowance)
         size = estimator.model.diameter
-        if not self.depth_noise.too_noisy(depth, size):
+        if not noise.too_noisy(depth, size):
             return certificate
         reason = (
             f"depth too noisy to certify at {depth:.2f} m: the noise left in the cloud "
-            f"({allowance * 1000:.1f} mm) is over {self.depth_noise.max_allowance:.0%} of the part's "
-            f"size ({self.depth_noise.max_allowance * size * 1000:.1f} mm)"
+            f"({allowance * 1000:.1f} mm) is over {noise.max_allowance:.0%} of the part's "
+            f"size ({noise.max_allowance * size * 1000:.1f} mm)"
         )
         return replace(certificate, certified=False,
                        reason="; ".join(r for r in (reason, certificate.reason) if r))

@@ -84,7 +84,8 @@ class MaskRcnnSegmenter:
 
     def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
                  radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None,
-                 overlaps: ExclusiveOverlaps | None = None) -> None:
+                 overlaps: ExclusiveOverlaps | None = None,
+                 camera_noise: Mapping[str, float] | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
         # The configuration and the image size come from the weights' manifest, as trained.
@@ -93,6 +94,9 @@ class MaskRcnnSegmenter:
         self.max_size: int | None = manifest["settings"].get("max_size")
         self.min_score = min_score
         self.depth_split = depth_split
+        # Each camera's depth noise (a fraction of the depth), which the bend cut allows for; a
+        # camera not named has depth_split's own.
+        self.camera_noise = dict(camera_noise or {})
         self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
         self.trim, self.overlaps = trim, overlaps
         for key, named in (("semantic_trim", trim), ("exclusive_overlaps", overlaps)):
@@ -107,7 +111,8 @@ class MaskRcnnSegmenter:
         from tlt_vision.node_config import repo_path
 
         return cls(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
-                   config.depth_split, thin_part_radii(), config.semantic_trim, config.exclusive_overlaps)
+                   config.depth_split, thin_part_radii(), config.semantic_trim, config.exclusive_overlaps,
+                   config.raw["depth_noise"]["cameras"])
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -116,17 +121,20 @@ class MaskRcnnSegmenter:
         if rgb is None:
             raise ValueError("no RGB image")
         result = self.refine(detect_rgb(self.model, rgb, self.max_size), frame.get("depth"),
-                             frame.camera_matrix)
+                             frame.camera_matrix, frame.camera)
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
     def refine(self, result: dict[str, Any], depth: np.ndarray | None,
-               camera_matrix: np.ndarray | None) -> dict[str, Any]:
-        """The model's ``result`` for one frame with its box-branch masks made exclusive, its thin
-        parts cut by depth and its box-branch masks trimmed, as configured."""
+               camera_matrix: np.ndarray | None, camera: str = "") -> dict[str, Any]:
+        """The model's ``result`` for one frame of ``camera`` with its box-branch masks made
+        exclusive, its thin parts cut by depth (allowing for that camera's noise) and its
+        box-branch masks trimmed, as configured."""
         result = self._exclusive(result)
-        if self.depth_split is not None:
-            result = split_by_depth(result, depth, self.cfg.semantic_labels, self.depth_split,
-                                    camera_matrix, self.radii)
+        split = self.depth_split
+        if split is not None:
+            if camera in self.camera_noise:
+                split = replace(split, depth_noise=self.camera_noise[camera])
+            result = split_by_depth(result, depth, self.cfg.semantic_labels, split, camera_matrix, self.radii)
         return self._trimmed(result)
 
     def _exclusive(self, result: dict[str, Any]) -> dict[str, Any]:

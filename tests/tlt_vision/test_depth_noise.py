@@ -51,14 +51,19 @@ def test_added_noise_is_the_fraction_of_each_pixels_depth_and_no_depth_stays_non
     assert np.mean(noisy[10:]) == pytest.approx(2.0, abs=0.001)
 
 
-def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_cut():
-    from tlt_common.config_schema import load_yaml
+def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_cut_camera_by_camera():
+    from tlt_common.config_schema import ConfigError, load_yaml
     from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
 
     raw = load_yaml(DEFAULT_CONFIG)
     assert config_from_dict(raw).depth_noise.exact  # the twin's depth
-    raw["depth_noise"] = {"fraction": 0.005}
+    raw["depth_noise"] = {"fraction": 0.005, "cameras": {"ars_x/d405_a": 0.001}}
     config = config_from_dict(raw)
     assert config.depth_noise == DepthNoise(fraction=0.005, window=5, max_allowance=0.02)
     assert config.pipeline_options["depth_noise"] == config.depth_noise
     assert config.depth_split.depth_noise == 0.005
+    assert config.depth_noise_of("zed_1") == config.depth_noise
+    assert config.depth_noise_of("ars_x/d405_a") == DepthNoise(fraction=0.001, window=5, max_allowance=0.02)
+    raw["depth_noise"]["cameras"] = {"d405": 0.001}  # an alias is not a camera's name
+    with pytest.raises(ConfigError, match=r"depth_noise\.cameras\.d405.*unknown camera"):
+        config_from_dict(raw)

@@ -233,6 +233,30 @@ def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     )
 
 
+def test_inspect_part_allows_for_the_noise_of_the_camera_asked_for(rig):
+    """node.yaml ``depth_noise.cameras``: with 1 % noise given for zed_2, a good strut before zed_1
+    still passes; given for zed_1 (the twin's depth is exact, the node is told otherwise), its end
+    fittings a metre away are out of the noise's reach, and the report says so."""
+    member, request = "bay1/vertical/x0_y1", InspectPart.Request
+    noise = rig.vision.config.raw["depth_noise"]
+    _show(rig, "vertical_dispenser_x/2")
+    try:
+        noise["cameras"] = {"zed_2": 0.01}
+        other = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
+                         request(member_id=member, part_kind="vertical", camera="zed_left")).report
+        assert other.passed, list(other.reasons)
+        noise["cameras"] = {"zed_1": 0.01}
+        noisy = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
+                         request(member_id=member, part_kind="vertical", camera="zed_left")).report
+    finally:
+        noise["cameras"] = {}
+    assert not noisy.passed
+    assert any("depth too noisy to certify" in r for r in noisy.reasons), list(noisy.reasons)
+    fittings = [p for p in noisy.poses if p.object_class == "end_fitting"]
+    assert fittings and not any(p.certified for p in fittings)
+    assert all(p.chamfer_threshold > 0.0025 for p in noisy.poses)  # each allowed for the noise
+
+
 @contextlib.contextmanager
 def _segmenting_with(rig: Rig, segmenter):
     """The node segmenting with ``segmenter`` (as Mask R-CNN would, from the twin's labels), and

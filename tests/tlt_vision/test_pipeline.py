@@ -135,8 +135,9 @@ def test_only_detections_near_a_place_are_kept_and_one_without_depth_is_kept_for
 def test_on_a_noisy_depth_camera_a_near_fitting_is_certified_right_and_a_far_one_is_out_of_reach():
     """An end fitting on a depth camera with 1 % noise, the node's detector and configuration.
     Taking the depth for exact, the noise alone fails its certificate at 0.33 m; told the camera's
-    noise, the pipeline filters the cloud and allows for what noise is left: certified, within the
-    ADD-S goal, and the fitting turned a quarter still is not. At 0.7 m what noise is left is over
+    noise (for the frame, as the node tells it each camera's), the pipeline filters the cloud and
+    allows for what noise is left: certified, within the ADD-S goal, and the fitting turned a
+    quarter still is not. At 0.7 m what noise is left is over
     2 % of the fitting's size, and the certificate says so rather than passing a pose it cannot
     vouch for."""
     from tlt_common.mission.schema import load_mission
@@ -151,25 +152,24 @@ def test_on_a_noisy_depth_camera_a_near_fitting_is_certified_right_and_a_far_one
     c, s = math.cos(1.0), math.sin(1.0)
     rot = _rz(0.3) @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
     noise = DepthNoise(fraction=0.01)
-    exact = PartPipeline({"end_fitting": estimator}, **config.pipeline_options)
-    told = PartPipeline({"end_fitting": estimator}, **{**config.pipeline_options, "depth_noise": noise})
+    pipeline = PartPipeline({"end_fitting": estimator}, **config.pipeline_options)
 
     t = np.array([0.0, 0.0, 0.33])
     depth, ids = _render([(model, rot, t)])
     depth = with_noise(depth, 0.01, np.random.default_rng(1))
     fitting = Detection("end_fitting", ids == 0)
-    taken_exact = exact.observe([fitting], depth, K)[0].estimate
+    taken_exact = pipeline.observe([fitting], depth, K)[0].estimate
     assert not taken_exact.certified and "not observably correct" in taken_exact.certificate.reason
-    e = told.observe([fitting], depth, K)[0].estimate
+    e = pipeline.observe([fitting], depth, K, depth_noise=noise)[0].estimate
     assert e.certified, e.certificate.reason
     assert e.certificate.chamfer_threshold > estimator.threshold
     assert add_s(model, e.rotation, e.translation, rot, t) < 0.02 * model.diameter
-    points = told.cloud(fitting, depth, K).points
+    points = pipeline.cloud(fitting, depth, K, depth_noise=noise).points
     turned = e.rotation @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
     assert not estimator.certify_at(points, turned, e.translation, noise.allowance(0.33)).certified
 
     far = np.array([0.0, 0.0, 0.7])
     depth, ids = _render([(model, rot, far)])
     depth = with_noise(depth, 0.01, np.random.default_rng(1))
-    e = told.observe([Detection("end_fitting", ids == 0)], depth, K)[0].estimate
+    e = pipeline.observe([Detection("end_fitting", ids == 0)], depth, K, depth_noise=noise)[0].estimate
     assert not e.certified and e.certificate.reason.startswith("depth too noisy to certify at 0.6")
