@@ -84,7 +84,7 @@ class PoseTally:
     whole: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     whole_certified: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     # Of those, the views whose depth's noise (node.yaml depth_noise) leaves their part certifiable
-    # at all (pose/../depth_noise.py): on exact depth, every one.
+    # at all (src/tlt_vision/depth_noise.py): on exact depth, every one.
     reach: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     reach_certified: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     no_cloud: int = 0
