@@ -78,6 +78,7 @@ from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
+from tlt_common.node_teardown import destroy_node
 from tlt_common.periodic_timer import create_periodic_timer
 from tlt_common.sim_clock_watch import watch_sim_clock
 from tlt_common.stop_signals import stop_on_signals
@@ -145,6 +146,15 @@ class ArsNode(LeanNode):
 
     def __init__(self, config: ArsConfig, *, context: Any = None, check_reach: bool | None = None) -> None:
         super().__init__(config.ars, context=context)
+        try:
+            self._start(config, check_reach)
+        except BaseException:
+            # A node that failed to start would keep its DDS participant in the graph until the
+            # garbage collector found it: a process that goes on (a launcher, a test) would see it.
+            destroy_node(self)
+            raise
+
+    def _start(self, config: ArsConfig, check_reach: bool | None) -> None:
         self.config = config
         self.ars = config.ars
         mission = load_mission(config.mission_path)

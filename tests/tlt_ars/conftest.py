@@ -52,6 +52,7 @@ from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
 from tlt_common.executor_stop import stop_executor
+from tlt_common.node_teardown import destroy_node
 from tlt_common.spin_loop import spin
 from tlt_drivers.dynamixel.config import validate_chain
 from tlt_drivers.nodes.ee import EndEffectorNode
@@ -423,7 +424,7 @@ class Stack:
         placed, remaining = state.placed() - {unheard}, dict(state.remaining)
         self.executor.remove_node(self.ars)
         self.ars.close()
-        _destroy(self.ars)
+        destroy_node(self.ars)
         self.ars = ArsNode(self.ars_config, context=self.context)
         self.executor.add_node(self.ars)
         self.tell(placed, remaining)
@@ -513,7 +514,7 @@ class Stack:
         self.ee.shutdown()
         self.ur.shutdown()
         for node in (self.ars, self.ee, self.ur, self.client):
-            _destroy(node)
+            destroy_node(node)
         rclpy.try_shutdown(context=self.context)
         self.chain.stop()
         self.emulator.close()
@@ -532,15 +533,6 @@ def crs_progress(mission, placed: Collection[str], remaining: dict[str, int]) ->
     ]
     progress.dispensers = [DispenserState(name=name, remaining=n) for name, n in remaining.items()]
     return progress
-
-
-def _destroy(node: Node) -> None:
-    # destroy_node leaves action servers and clients, which keep the DDS participant (and ARS X's
-    # servers in the graph) alive after the context is shut down.
-    for waitable in list(node.waitables):
-        if hasattr(waitable, "destroy"):
-            waitable.destroy()
-    node.destroy_node()
 
 
 @pytest.fixture

@@ -28,8 +28,10 @@ from tlt_ars.planning.targets import Target
 from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.action_graph import describe_action_server_graph
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
+from tlt_common.node_teardown import destroy_node
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -98,8 +100,8 @@ def _spun_ars(raw: dict):
         executor.shutdown(timeout_sec=5)
         thread.join(timeout=5)
         ars.close()
-        ars.destroy_node()
-        client.destroy_node()
+        destroy_node(ars)
+        destroy_node(client)
         rclpy.try_shutdown(context=context)
 
 
@@ -112,6 +114,14 @@ def idle_ars():
         yield spun
 
 
+def _discovered(client: Node, action_type: type, kind: str) -> SerialisedActionClient:
+    """A client of ARS X's action ``kind`` on node ``client``, once it has found the server."""
+    name = ros_names.ars_action("ars_x", kind)
+    action = SerialisedActionClient(client, action_type, name)
+    assert action.wait_for_server(timeout_sec=DISCOVERY_S), describe_action_server_graph(client, name)
+    return action
+
+
 def _wait(future, timeout=10.0):
     deadline = time.monotonic() + timeout
     while not future.done():
@@ -122,9 +132,8 @@ def _wait(future, timeout=10.0):
 
 def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars):
     ars, client = idle_ars
-    action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
+    action = _discovered(client, AddMember, "add_member")
     ground = client.create_client(GroundCommand, ros_names.ground_command_service("ars_x"))
-    assert action.wait_for_server(timeout_sec=DISCOVERY_S)
     assert ground.wait_for_service(timeout_sec=DISCOVERY_S)
 
     def request(member_id="bay1/vertical/x0_y0"):
@@ -189,9 +198,8 @@ def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):
     arrive just after the goal: the ARS judges the goal on that newer message, not the old one."""
     ars, client = idle_ars
     ars.started = True
-    action = SerialisedActionClient(client, AffixMember, ros_names.ars_action("ars_x", "affix_member"))
+    action = _discovered(client, AffixMember, "affix_member")
     progress = client.create_publisher(MissionProgress, ros_names.CRS_MISSION_PROGRESS, 10)
-    assert action.wait_for_server(timeout_sec=DISCOVERY_S)
     member = "bay1/vertical/x0_y0"
     goal = AffixMember.Goal(kind=1, member_id=member, bay=1, position="x0_y0", ars="ars_x")
 
@@ -214,8 +222,7 @@ def test_a_goal_for_the_running_request_takes_the_job_over(idle_ars):
     request is still refused as busy."""
     ars, client = idle_ars
     ars.started = True
-    action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
-    assert action.wait_for_server(timeout_sec=DISCOVERY_S)
+    action = _discovered(client, AddMember, "add_member")
     goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
     first = _wait(action.send_goal_async(goal))
     deadline = time.monotonic() + 10
@@ -246,8 +253,7 @@ def test_a_request_starts_on_a_tick_when_its_goal_is_accepted_not_at_the_next_pe
     raw.update(started_on_launch=True, check_reach=False, tick_rate_hz=1.0)
     raw["timeouts"].update(server_s=0.2, service_s=0.2, stop_s=0.2, sensor_s=0.2, planning_s=0.2)
     with _spun_ars(raw) as (_ars, client):
-        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
-        assert action.wait_for_server(timeout_sec=DISCOVERY_S)
+        action = _discovered(client, AddMember, "add_member")
         goal = AddMember.Goal(kind=1, bay=1, member_id="bay1/vertical/x0_y0", position="x0_y0", ars="ars_x")
         delays = []
         for _ in range(3):  # were it the timer's tick, each delay would be anywhere up to 1 s
@@ -293,7 +299,7 @@ def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_start
         assert len(TreeShape.of(branch).nodes) > 100 and changes == [1, 1]
     finally:
         ars.close()
-        ars.destroy_node()
+        destroy_node(ars)
         rclpy.try_shutdown(context=context)
 
 
@@ -320,6 +326,9 @@ def test_a_state_file_that_cannot_be_read_stops_the_start(tmp_path):
     try:
         with pytest.raises(RequestFileError, match=f"{path}: ARS state file is not valid JSON"):
             ArsNode(ars_config_from_dict(raw), context=context)
+        probe = Node("ars_probe", context=context)
+        assert "ars_x" not in probe.get_node_names()  # nothing of it left for later nodes to find
+        destroy_node(probe)
     finally:
         rclpy.try_shutdown(context=context)
 
@@ -342,8 +351,7 @@ def test_a_restarted_ars_finishes_the_request_its_state_file_kept_and_drops_it_f
     _kept_diagonal(path, holding="diagonal")
     with _spun_ars(raw) as (ars, client):
         assert ars.ctx.state.is_placed("bay1/diagonal/face_y0")
-        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
-        assert action.wait_for_server(timeout_sec=DISCOVERY_S)
+        action = _discovered(client, AddMember, "add_member")
         assert outcome(action, kept).startswith("Finish Add Member/Release/Open Grasp")
         assert path.exists()  # still kept: it failed
         assert outcome(action, other) == (
@@ -353,8 +361,7 @@ def test_a_restarted_ars_finishes_the_request_its_state_file_kept_and_drops_it_f
 
     _kept_diagonal(path, holding=None)  # let go of; the Retreat failed
     with _spun_ars(raw) as (ars, client):
-        action = SerialisedActionClient(client, AddMember, ros_names.ars_action("ars_x", "add_member"))
-        assert action.wait_for_server(timeout_sec=DISCOVERY_S)
+        action = _discovered(client, AddMember, "add_member")
         assert outcome(action, other).startswith("Add Member/Load Rivet/")
         assert not path.exists()
         assert outcome(action, kept) == "rejected: member 'bay1/diagonal/face_y0' is already placed"

@@ -22,6 +22,7 @@ from tlt_interfaces.action import FollowJointTrajectory
 
 from tlt_common.direct_executor import DirectExecutor, DirectMultiThreadedExecutor, QuickCallbackGroup
 from tlt_common.lean_node import LeanNode
+from tlt_common.node_teardown import destroy_node
 
 TIMEOUT_S = 10.0
 
@@ -42,7 +43,7 @@ class Rig:
 
     def close(self) -> None:
         self.executor.shutdown()
-        self.node.destroy_node()
+        destroy_node(self.node)
         rclpy.try_shutdown(context=self.context)
 
 
@@ -215,5 +216,5 @@ def test_the_multi_threaded_one_calls_clock_and_quick_subscriptions_on_its_spinn
         stop.set()
         spinner.join(TIMEOUT_S)
         executor.shutdown()
-        sim.destroy_node()
-        feeder.destroy_node()
+        destroy_node(sim)
+        destroy_node(feeder)

@@ -36,6 +36,7 @@ from rclpy.node import Node
 
 from tlt_common import ros_names
 from tlt_common.executor_stop import stop_executor
+from tlt_common.node_teardown import destroy_node
 
 REPO = Path(__file__).resolve().parents[2]
 ONE_BAY = REPO / "missions" / "one_bay.yaml"
@@ -504,13 +505,10 @@ class Rig:
             stop_executor(self.executor, 5.0)
             # Destroyed explicitly: a node left to the garbage collector keeps its DDS participant
             # alive after rclpy.shutdown, and later tests' cross-process actions then went unanswered.
-            # So does an action server or client: destroy_node leaves them (the stand-in ARS X
+            # So does an action server or client left by Node.destroy_node (the stand-in ARS X
             # servers of one test were still listed in the next, which found ARS X there).
             for node in [*self.nodes, self.node]:
-                for waitable in list(node.waitables):
-                    if hasattr(waitable, "destroy"):
-                        waitable.destroy()
-                node.destroy_node()
+                destroy_node(node)
             with warnings.catch_warnings():
                 # A goal a stand-in ARS accepted as the test ended: its execute coroutine, queued on
                 # this executor, never ran. Dropped here, not when pytest lets go of the rig.

@@ -23,6 +23,7 @@ from tlt_interfaces.msg import GripperState
 from tlt_interfaces.srv import SetBlackboardValue
 
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCache, TopicCondition, TopicData
+from tlt_common.node_teardown import destroy_node
 from tlt_common.spin_loop import spin
 
 
@@ -117,8 +118,8 @@ def ros():
     thread.join(timeout=5.0)
     assert not thread.is_alive(), "the spin thread did not end"
     executor.shutdown(timeout_sec=2.0)
-    server_node.destroy_node()
-    client_node.destroy_node()
+    destroy_node(server_node)
+    destroy_node(client_node)
     rclpy.shutdown(context=context)
 
 

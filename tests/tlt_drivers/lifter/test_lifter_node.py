@@ -22,6 +22,7 @@ from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirm
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.node_teardown import destroy_node
 from tlt_common.stamps import stamp_seconds
 from tlt_drivers.lifter.config import load_lifter_config
 from tlt_drivers.lifter.node import STATE_TOPIC, STATUS_TOPIC, LifterNode, main
@@ -115,8 +116,8 @@ class Harness:
         self.thread.join(timeout=5)
         self.executor.shutdown()
         self.node.shutdown()
-        self.node.destroy_node()
-        self.client.destroy_node()
+        destroy_node(self.node)
+        destroy_node(self.client)
         rclpy.try_shutdown(context=self.context)
         self.server.stop()
 

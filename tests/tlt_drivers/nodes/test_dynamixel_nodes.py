@@ -30,6 +30,7 @@ from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.node_teardown import destroy_node
 from tlt_common.stamps import stamp_seconds
 from tlt_drivers.dynamixel.config import load_chain, validate_chain
 from tlt_drivers.mightyzap.config import load_mightyzap
@@ -82,8 +83,8 @@ class Harness:
         self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
             node.shutdown()
-            node.destroy_node()
-        self.client.destroy_node()
+            destroy_node(node)
+        destroy_node(self.client)
         rclpy.shutdown(context=self.context)
 
     @staticmethod

@@ -27,6 +27,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
+from tlt_common.node_teardown import destroy_node
 from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
 from tlt_drivers.ur.node import URNode
 
@@ -103,8 +104,8 @@ class Harness:
         self.executor.shutdown()
         self.thread.join(timeout=5)
         self.node.shutdown()
-        self.node.destroy_node()
-        self.client.destroy_node()
+        destroy_node(self.node)
+        destroy_node(self.client)
         rclpy.try_shutdown(context=self.context)
         self.emulator.close()
 
