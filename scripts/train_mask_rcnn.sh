@@ -16,6 +16,8 @@
 # INIT: weights to start from (the trainer's --init; INIT=models/vision/mask_rcnn.pt continues the
 # shipped model, so each lent machine's minutes add to the last's). SCENES: the training images'
 # scene weights (render_dataset's --scenes, e.g. "held=0.2 presented=0.3 ..."; default its own).
+# NOISE grey levels and BLUR pixels: the most sensor noise and blur added to a training image (the
+# trainer's --sensor-noise and --blur; 0, none, as the shipped model trained).
 # SEED_BASE (1000): shard k renders with seed SEED_BASE + k; give each lending's run new seeds.
 # RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
 # "rendered" marker) and trains on them, so two models can train side by side on one device.
@@ -41,6 +43,8 @@ LR=${LR:-2e-3}
 RENDER_LIMIT_S=${RENDER_LIMIT_S:-240}
 RENDER=${RENDER:-1}
 INIT=${INIT:-}
+NOISE=${NOISE:-0}
+BLUR=${BLUR:-0}
 SCENES=${SCENES:-}
 SEED_BASE=${SEED_BASE:-1000}
 MODEL=${MODEL:---config semantic_classes=[\"strut_tube\",\"cross_frame\"] --config mask_pool=28 --config anchor_sizes=[16,32,64,128] --config rpn_fg_iou=0.5}
@@ -107,7 +111,7 @@ log "training on $DEVICE for at most $BUDGET_MIN min"
 "$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
     --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" \
-    --log-every 50 $MODEL \
+    --log-every 50 --sensor-noise "$NOISE" --blur "$BLUR" $MODEL \
     ${INIT:+--init "$INIT"} \
     2>&1 | tee "$out/train.log"
 rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships

@@ -1,8 +1,8 @@
 """scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards (with the seeds and
 scene mix asked for) and the validation set, trains within its budget and leaves the weights,
 figures and logs; a second run trains on the first one's images from its weights, in two processes
-sharing each step; a device it
-cannot use stops it at the smoke test, before anything is rendered at scale."""
+sharing each step, with sensor noise and blur added to its images; a device it cannot use stops it
+at the smoke test, before anything is rendered at scale."""
 
 from __future__ import annotations
 
@@ -45,7 +45,8 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     # two processes (RANKS) take two images each of the step, and its smoke test trains with two.
     again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
                            timeout=300, env={**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"),
-                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt"), "RANKS": "2"})
+                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt"), "RANKS": "2",
+                                             "NOISE": "4", "BLUR": "1.5"})
     assert again.returncode == 0, again.stdout + again.stderr
     assert "rendering 4 images" not in again.stdout
     assert "rendered 4 training images in 2 shards" in again.stdout
@@ -53,6 +54,10 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert f"initialised from {out / 'mask_rcnn.pt'}" in log
     assert "2 processes sharing each step's 4 images" in log
     assert "2 processes sharing each step's 2 images" in (tmp_path / "again" / "smoke.log").read_text()
+    # What a camera adds, as asked, recorded with the weights; the first run's had none.
+    augmented = json.loads((tmp_path / "again" / "mask_rcnn.json").read_text())["extra"]["figures"]["augment"]
+    assert (augmented["noise"], augmented["blur"]) == (4.0, 1.5)
+    assert (figures["augment"]["noise"], figures["augment"]["blur"]) == (0.0, 0.0)
 
 
 def test_a_device_it_cannot_use_stops_it_at_the_smoke_test(tmp_path):

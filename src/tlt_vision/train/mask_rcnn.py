@@ -83,6 +83,11 @@ class Augment:
     flip: float = 0.5  # probability of a horizontal flip
     brightness: float = 0.1  # added, uniform in +-
     contrast: float = 0.2  # factor about the image mean, uniform in 1 +-
+    # A real camera's sensor noise and optics, which the twin's renders lack: each image gets
+    # Gaussian noise of a standard deviation uniform in 0..noise grey levels, and a Gaussian blur
+    # of a sigma uniform in 0..blur pixels (at the size the model sees). 0: off.
+    noise: float = 0.0
+    blur: float = 0.0
 
 
 # ---------------------------------------------------------------------------------------- data
@@ -135,7 +140,9 @@ def load_sample(
 def augment(
     image: torch.Tensor, target: dict[str, torch.Tensor], aug: Augment, rng: np.random.Generator
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """A horizontally flipped (masks and boxes with it) and exposure-jittered copy."""
+    """A horizontally flipped (masks and boxes with it), exposure-jittered, blurred and noisy copy.
+    Only what ``aug`` turns on draws from ``rng``, so a recipe's images do not change when an
+    option is added."""
     target = dict(target)
     if rng.random() < aug.flip:
         w = image.shape[-1]
@@ -146,7 +153,30 @@ def augment(
     c = 1.0 + rng.uniform(-aug.contrast, aug.contrast)
     b = rng.uniform(-aug.brightness, aug.brightness)
     mean = image.mean()
-    return ((image - mean) * c + mean + b).clamp(0.0, 1.0), target
+    image = (image - mean) * c + mean + b
+    if aug.blur > 0.0:
+        image = gaussian_blur(image, rng.uniform(0.0, aug.blur))
+    if aug.noise > 0.0:
+        sigma = rng.uniform(0.0, aug.noise) / 255.0
+        noise = rng.standard_normal(image.shape, dtype=np.float32)
+        image = image + torch.from_numpy(noise).to(image.dtype) * sigma
+    return image.clamp(0.0, 1.0), target
+
+
+def gaussian_blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
+    """``image`` (C, H, W) blurred by a Gaussian of ``sigma`` pixels, the borders mirrored; under
+    0.3 px the kernel is a single tap and the image is returned as is."""
+    radius = int(np.ceil(3.0 * sigma))
+    if sigma < 0.3 or radius < 1:
+        return image
+    x = torch.arange(-radius, radius + 1, dtype=image.dtype)
+    kernel = torch.exp(-0.5 * (x / sigma) ** 2)
+    kernel = kernel / kernel.sum()
+    c = image.shape[0]
+    out = torch.nn.functional.pad(image[None], (radius, radius, radius, radius), mode="reflect")
+    out = torch.nn.functional.conv2d(out, kernel.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
+    out = torch.nn.functional.conv2d(out, kernel.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
+    return out[0]
 
 
 class TrainingImages(torch.utils.data.Dataset):
@@ -504,7 +534,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                                                 if fresh else ""), flush=True)
     model.to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
-    aug = Augment()
+    aug = Augment(noise=args.sensor_noise, blur=args.blur)
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
     steps_per_epoch = len(ranks.batches(range(len(train_set)), args.batch))
     epochs = args.epochs  # lowered by --time-budget-min once the run's pace is known
@@ -706,6 +736,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                         "manifest so inference uses the same size (default: full size)")
     p.add_argument("--min-area", type=int, default=4,
                    help="drop training instances with fewer pixels than this at the model's size")
+    p.add_argument("--sensor-noise", type=float, default=0.0, metavar="GREY_LEVELS",
+                   help="Gaussian colour noise of each training image, 1 sigma uniform in 0..this grey"
+                        " levels of 255, as a real camera's sensor adds (default 0: none)")
+    p.add_argument("--blur", type=float, default=0.0, metavar="PIXELS",
+                   help="Gaussian blur of each training image, sigma uniform in 0..this pixels at the"
+                        " model's size, as real optics add (default 0: none)")
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
                    help="MaskRCNNConfig field (JSON value), e.g. fpn_channels=32; repeatable")
     p.add_argument("--time-budget-min", type=float, default=None,
@@ -726,6 +762,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         p.error("--workers must be at least 0")
     if args.time_budget_min is not None and args.time_budget_min <= 0:
         p.error("--time-budget-min must be positive")
+    if not 0.0 <= args.sensor_noise <= 64.0:
+        p.error(f"--sensor-noise {args.sensor_noise:g}: grey levels from 0 to 64")
+    if not 0.0 <= args.blur <= 5.0:
+        p.error(f"--blur {args.blur:g}: pixels from 0 to 5")
     if args.max_size is not None and args.max_size < 32:
         p.error("--max-size must be at least 32 pixels")
     if args.init and args.resume:

@@ -23,11 +23,13 @@ from tlt_vision.train.mask_rcnn import (
     epochs_at_pace,
     epochs_within,
     evaluate,
+    gaussian_blur,
     learning_rate,
     load_sample,
     main,
     open_set,
     pace_probe_step,
+    parse_args,
     parse_overrides,
 )
 from tlt_vision.weights import WeightsError, read_manifest
@@ -237,6 +239,52 @@ def test_flip_keeps_boxes_on_their_masks_and_full_size_detections_from_a_downsca
     det = detect_rgb(model, (np.random.default_rng(1).random((60, 90, 3)) * 255).astype(np.uint8), 45)
     assert det["masks"].shape[1:] == (60, 90) and len(det["boxes"]) > 0
     assert (det["boxes"][:, 2] <= 90 + 1e-3).all() and (det["boxes"][:, 3] <= 60 + 1e-3).all()
+
+
+def test_a_gaussian_blur_spreads_a_point_as_its_hand_computed_kernel():
+    image = torch.zeros(3, 15, 15)
+    image[:, 7, 7] = 1.0
+    out = gaussian_blur(image, 1.0)
+    taps = 1.0 + 2.0 * sum(np.exp(-0.5 * x * x) for x in (1, 2, 3))  # radius ceil(3 sigma)
+    assert out[0, 7, 7].item() == pytest.approx(1.0 / taps**2, rel=1e-5)
+    assert out[1, 7, 8].item() == pytest.approx(np.exp(-0.5) / taps**2, rel=1e-5)
+    assert out.sum().item() == pytest.approx(3.0, rel=1e-5)  # nothing lost or made
+    assert torch.equal(gaussian_blur(image, 0.2), image)  # under a third of a pixel: one tap
+
+
+def test_sensor_noise_and_blur_change_the_colours_only_and_are_off_by_default():
+    masks = torch.zeros(1, 40, 60, dtype=torch.bool)
+    masks[0, 10:30, 20:40] = True
+    target = {"boxes": boxes_from_masks(masks), "labels": torch.tensor([1]), "masks": masks}
+    image = torch.full((3, 40, 60), 0.3)
+    image[:, :, 30:] = 0.7  # a step edge, far from 0 and 1 so nothing is clipped
+    still = Augment(flip=0.0, brightness=0.0, contrast=0.0)
+
+    noisy, t = augment(image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, noise=8.0),
+                       np.random.default_rng(3))
+    residual = (noisy - image).std().item() * 255.0
+    assert 0.5 < residual < 8.0
+    assert torch.equal(t["masks"], masks) and torch.equal(t["boxes"], target["boxes"])
+    blurred, t = augment(image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, blur=2.0),
+                         np.random.default_rng(3))
+    row = blurred[0, 20]
+    assert 0.3 < row[29].item() < row[30].item() < 0.7  # the edge softened, the flats kept
+    assert row[0].item() == pytest.approx(0.3) and row[-1].item() == pytest.approx(0.7)
+    assert torch.equal(t["masks"], masks)
+
+    # Off, they draw nothing: a recipe's images are those it trained on before the options came.
+    rng, reference = np.random.default_rng(4), np.random.default_rng(4)
+    augmented, _ = augment(image, target, still, rng)
+    reference.random(), reference.uniform(0.0, 0.0), reference.uniform(0.0, 0.0)
+    assert rng.bit_generator.state == reference.bit_generator.state and torch.allclose(augmented, image)
+    assert Augment().noise == Augment().blur == 0.0
+
+
+@pytest.mark.parametrize(("option", "value"), [("--sensor-noise", "100"), ("--blur", "-1")])
+def test_sensor_noise_and_blur_out_of_range_are_refused_naming_the_option(option, value, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        parse_args(["--train", "x", option, value])
+    assert exit_.value.code == 2 and f"{option} {float(value):g}" in capsys.readouterr().err
 
 
 def test_several_training_sets_train_as_one_and_loader_workers_see_the_same_images(tmp_path, capsys):
