@@ -87,6 +87,12 @@ class PoseTally:
     # at all (src/tlt_vision/depth_noise.py): on exact depth, every one.
     reach: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     reach_certified: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    # Of the non-degenerate views not certified, why (the certificate's first reason) and whether
+    # the pose was right all the same (ADD-S within the goal): a right pose refused points at the
+    # certificate or the mask, a wrong one at the estimator.
+    refused: dict[str, dict[tuple[str, bool], int]] = field(
+        default_factory=lambda: defaultdict(lambda: defaultdict(int))
+    )
     no_cloud: int = 0
 
     def total(self, table: dict[str, int]) -> int:
@@ -122,7 +128,12 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
             noise = pipelines[name].depth_noise
             reach = whole and not noise.too_noisy(float(np.median(points[:, 2])), model.diameter)
             tally.reach[cls] += reach
+            right = add_s(model, e.rotation, e.translation, true[:3, :3], true[:3, 3]) < (
+                ADD_S_FRACTION * model.diameter
+            )
             if not e.certified:
+                if reach:
+                    tally.refused[cls][refusal_kind(e.certificate.reason), bool(right)] += 1
                 continue
             tally.certified[cls] += 1
             tally.whole_certified[cls] += whole
@@ -130,8 +141,24 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
             r_err = rotation_error_deg(model, e.rotation, true[:3, :3])
             tally.rotation[cls].append(r_err)
             tally.translation[cls].append(float(np.linalg.norm(e.translation - true[:3, 3])) * 1000)
-            err = add_s(model, e.rotation, e.translation, true[:3, :3], true[:3, 3])
-            tally.add_s_ok[cls] += int(err < ADD_S_FRACTION * model.diameter)
+            tally.add_s_ok[cls] += int(right)
+
+
+# The certificate's reasons (src/tlt_vision/pose/certificate.py, free_space.py, pipeline.py), by
+# the words they start with.
+REFUSALS = (
+    ("not observably correct", "Chamfer over threshold"),
+    ("degenerate view", "degenerate at its pose"),
+    ("posed model where the camera saw past it", "seen past"),
+    ("depth too noisy", "depth too noisy"),
+)
+
+
+def refusal_kind(reason: str) -> str:
+    for start, kind in REFUSALS:
+        if reason.startswith(start):
+            return kind
+    return reason.split(":")[0] or "no reason given"
 
 
 def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
@@ -176,6 +203,15 @@ def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
                      f"{statistics.median(tally.rotation[cls]):5.2f} deg, translation "
                      f"{statistics.median(tally.translation[cls]):5.1f} mm")
         print(line)
+    refused = [(cls, kinds) for cls, kinds in tally.refused.items() if kinds]
+    if refused:
+        print("  not certified though non-degenerate at the true pose (and in the noise's reach), by the"
+              " certificate's reason, [of them with a pose within the ADD-S goal]:")
+    for cls, kinds in sorted(refused):
+        names = sorted({kind for kind, _ in kinds})
+        text = ", ".join(f"{kind} {kinds[kind, True] + kinds[kind, False]} [{kinds[kind, True]}]"
+                         for kind in names)
+        print(f"    {cls:13s} {text}")
 
 
 def with_image_noise(sample: Sample, sigma: float, index: int) -> Sample:
