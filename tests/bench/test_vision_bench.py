@@ -1,5 +1,5 @@
-"""The vision benchmark's noise: a fraction of each pixel's depth, grey levels on its colours, the
-same every run."""
+"""The vision benchmark's noise (a fraction of each pixel's depth, grey levels on its colours, the
+same every run) and its account of the views left uncertified."""
 
 from __future__ import annotations
 
@@ -47,3 +47,26 @@ def test_image_noise_is_grey_levels_on_each_colour_clipped_and_the_same_every_ru
     assert noisy.rgb[:, :10].min() == 0 and 0 < noisy.rgb[:, :10].mean() < 4
     assert np.array_equal(noisy.rgb, bench.with_image_noise(sample, 4.0, index=3).rgb)
     assert np.array_equal(noisy.depth, sample.depth)
+
+
+def test_views_left_uncertified_are_reported_by_the_certificates_reason(bench, capsys):
+    kind = bench.refusal_kind
+    assert kind("not observably correct: 90% Chamfer distance 9.3 mm > threshold 2.5 mm") == (
+        "Chamfer over threshold"
+    )
+    both = "not observably correct: ...; degenerate view: 1 of 2 required keypoint groups visible"
+    assert kind(both) == "Chamfer over threshold"  # the first reason names it
+    assert kind("degenerate view: 1 of 2 required keypoint groups visible") == "degenerate at its pose"
+    assert kind("posed model where the camera saw past it: 30% of its surface ...") == "seen past"
+    assert kind("depth too noisy to certify at 0.84 m: ...") == "depth too noisy"
+    assert kind("something new: details") == "something new"
+
+    tally = bench.PoseTally()
+    tally.estimated["end_fitting"] = tally.whole["end_fitting"] = tally.reach["end_fitting"] = 3
+    tally.refused["end_fitting"]["Chamfer over threshold", True] += 1
+    tally.refused["end_fitting"]["Chamfer over threshold", False] += 1
+    tally.refused["end_fitting"]["seen past", False] += 1
+    bench.report_poses("on masks", tally, 0.02)
+    out = capsys.readouterr().out
+    assert "certified 0/3 = 0.0 %" in out
+    assert "    end_fitting   Chamfer over threshold 2 [1], seen past 1 [0]\n" in out
