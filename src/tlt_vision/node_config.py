@@ -24,6 +24,8 @@ from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
 from tlt_vision.pose.axial_slide import AxialSlide
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace
+from tlt_vision.pose.parting import DEFAULT as PARTING
+from tlt_vision.pose.parting import Parting
 from tlt_vision.segmentation.config import CLASSES
 from tlt_vision.segmentation.depth_split import DepthSplit
 from tlt_vision.segmentation.overlap import ExclusiveOverlaps
@@ -193,6 +195,26 @@ SCHEMA = {
             "min_gain": opt("float", AXIAL_SLIDE.min_gain, minimum=0.0, maximum=1.0),
         },
     ),
+    "parting": opt(
+        "dict",
+        {"classes": [], "min_share": PARTING.min_share, "min_separation": PARTING.min_separation,
+         "in_mask": PARTING.in_mask, "mask_margin": PARTING.mask_margin,
+         "hidden_margin": PARTING.hidden_margin},
+        schema={
+            # Compact parts only: a tube or a frame side is long, and its two halves are one part.
+            "classes": opt("list", [], item=Field("str", choices=COMPACT)),
+            "min_share": opt("float", PARTING.min_share, minimum=0.0, maximum=0.5,
+                             doc="the smaller piece's least share of the cloud's points"),
+            "min_separation": opt("float", PARTING.min_separation, minimum=0.0, maximum=2.0,
+                                  doc="the pieces' centres' least distance, a fraction of the part's size"),
+            "in_mask": opt("float", PARTING.in_mask, minimum=0.0, maximum=1.0,
+                           doc="the least share of the posed model's visible surface in the mask"),
+            "mask_margin": opt("int", PARTING.mask_margin, minimum=0, maximum=10,
+                               doc="pixels the mask is grown by for that share"),
+            "hidden_margin": opt("float", PARTING.hidden_margin, minimum=0.0, maximum=0.1,
+                                 doc="m behind the depth seen at which a model point is hidden"),
+        },
+    ),
     "detached": opt(
         "dict",
         {"link": DETACHED.link, "below": DETACHED.below, "largest_only": [], "links": {}},
@@ -357,6 +379,7 @@ class VisionConfig:
             "detached": self.detached,
             "axial_slide": self.axial_slide,
             "depth_noise": self.depth_noise,
+            "parting": self.parting,
         }
 
     @property
@@ -364,6 +387,12 @@ class VisionConfig:
         """The lowest score a segmenter keeps: ``second_look_score`` when set, else ``min_score``."""
         seg = self.raw["segmentation"]
         return seg["min_score"] if seg["second_look_score"] is None else seg["second_look_score"]
+
+    @property
+    def parting(self) -> Parting | None:
+        """Which refused clouds are posed again on the larger of two pieces; None: none."""
+        raw = self.raw["parting"]
+        return Parting(**{**raw, "classes": tuple(raw["classes"])}) if raw["classes"] else None
 
     @property
     def detached(self) -> Detached:

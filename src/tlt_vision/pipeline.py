@@ -21,7 +21,10 @@ With ``axial_slide`` (node.yaml's is on for end fittings), a certified pose of i
 moved along its own axis to where its mask says the part ends (:mod:`tlt_vision.pose.axial_slide`):
 seen from the side, the cloud leaves that open. Every certified pose is then checked against the
 whole depth image (``free_space``, :mod:`tlt_vision.pose.free_space`): a pose that puts the model
-where the camera saw past it is not certified.
+where the camera saw past it is not certified. With ``parting`` (node.yaml's is on for end
+fittings), a refused cloud of its classes that holds two pieces about two centres is posed again on
+the larger one, taken only when certified and within its mask (:mod:`tlt_vision.pose.parting`): a
+fitting's mask that took in its racked neighbour.
 
 Given a real camera's depth noise (``depth_noise``; the twin's depth is exact), each cloud point
 takes the median depth of its mask's pixels about it, and each certificate allows for the noise
@@ -60,6 +63,7 @@ from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
+from tlt_vision.pose.parting import Parting, larger_piece, visible_share_in_mask
 
 BORDER_DEPTH_MARGIN = 0.01  # m
 
@@ -155,8 +159,10 @@ class PartPipeline:
         detached: Detached | None = DEFAULT_DETACHED,
         axial_slide: AxialSlide | None = None,
         depth_noise: DepthNoise = EXACT,
+        parting: Parting | None = None,
     ) -> None:
         self.estimators = dict(estimators)
+        self.parting = parting
         self.depth_noise = depth_noise
         self.free_space = free_space
         self.detached = detached
@@ -244,17 +250,77 @@ class PartPipeline:
         near = None
         if pending and self.free_space is not None and depth is not None:
             near = nearest_depth(depth, self.free_space.window)
+        refused: dict[str, list[tuple[int, np.ndarray]]] = {}
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
-                if not noise.exact:  # judged again, allowing for the noise
-                    certificate = self._certificate(cls, points, e.rotation, e.translation, noise)
-                    e = replace(e, certificate=certificate)
-                if depth is not None:
-                    e = self._slid(e, points, dets[i].mask, depth, intrinsics, noise)
-                if near is not None:
-                    e = checked(e, near, intrinsics, self._surface(cls), self.free_space)
+                e = self._judged(e, points, dets[i].mask, depth, intrinsics, noise, near)
                 out[i] = Observation(cls, e, "", dets[i].object_id)
+                if not e.certified:
+                    refused.setdefault(cls, []).append((i, points))
+        if self.parting is not None and depth is not None:
+            for i, e in self._parted(refused, dets, depth, intrinsics, noise, near):
+                out[i] = replace(out[i], estimate=e)
         return [o for o in out if o is not None]
+
+    def _judged(
+        self,
+        estimate: PoseEstimate,
+        points: np.ndarray,
+        mask: np.ndarray,
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
+        near: np.ndarray | None,
+    ) -> PoseEstimate:
+        """``estimate`` of ``points`` as the pipeline reports it: certified again allowing for the
+        depth's noise, slid along its axis by its mask, checked against the free space seen."""
+        cls = estimate.object_class
+        if not noise.exact:
+            certificate = self._certificate(cls, points, estimate.rotation, estimate.translation, noise)
+            estimate = replace(estimate, certificate=certificate)
+        if depth is not None:
+            estimate = self._slid(estimate, points, mask, depth, intrinsics, noise)
+        if near is not None:
+            estimate = checked(estimate, near, intrinsics, self._surface(cls), self.free_space)
+        return estimate
+
+    def _parted(
+        self,
+        refused: Mapping[str, list[tuple[int, np.ndarray]]],
+        dets: Sequence[Detection],
+        depth: np.ndarray,
+        intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
+        near: np.ndarray | None,
+    ) -> list[tuple[int, PoseEstimate]]:
+        """For the refused clouds of the parting's classes, ``(index, estimate)`` of those whose
+        larger piece is certified and lies within its mask (:mod:`tlt_vision.pose.parting`); every
+        piece of the frame posed in one batch."""
+        parting = self.parting
+        pieces: dict[str, list[tuple[int, np.ndarray]]] = {}
+        for cls, items in refused.items():
+            if cls not in parting.classes:
+                continue
+            separation = parting.min_separation * self.estimators[cls].model.diameter
+            for i, points in items:
+                keep = larger_piece(points, parting.min_share, separation)
+                if keep is not None and keep.sum() >= self.min_points:
+                    pieces.setdefault(cls, []).append((i, points[keep]))
+        if not pieces:
+            return []
+        jobs = [(self.estimators[cls], [p for _, p in items], None) for cls, items in pieces.items()]
+        taken = []
+        for (cls, items), estimates in zip(pieces.items(), estimate_together(jobs), strict=True):
+            for (i, points), e in zip(items, estimates, strict=True):
+                e = self._judged(e, points, dets[i].mask, depth, intrinsics, noise, near)
+                if not e.certified:
+                    continue
+                surface = self._surface(cls) @ e.rotation.T + e.translation
+                share = visible_share_in_mask(surface, dets[i].mask, depth, intrinsics,
+                                              parting.mask_margin, parting.hidden_margin)
+                if share >= parting.in_mask:
+                    taken.append((i, e))
+        return taken
 
     def _slid(
         self,

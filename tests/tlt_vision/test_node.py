@@ -586,6 +586,16 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "axial_slide.classes" in err and "corner_joint" in err
     wrong = vision_config()
+    wrong["parting"] = {"classes": ["cross_frame"]}  # a frame's sides are pieces of one part
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "parting.classes" in err and "cross_frame" in err
+    wrong["parting"] = {"classes": ["end_fitting"], "in_mask": 1.5}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    assert "parting.in_mask" in capsys.readouterr().err
+    wrong = vision_config()
     wrong["detached"] = {"largest_only": ["strut_tube"]}  # a tube crossed in front is two pieces of it
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2
