@@ -373,10 +373,11 @@ class PartPipeline:
                        reason="; ".join(r for r in (reason, certificate.reason) if r))
 
     def _surface(self, object_class: str) -> np.ndarray:
-        """The free-space check's fixed surface sample of the class's model."""
+        """A fixed surface sample of the class's model, of the free-space check's size."""
         if object_class not in self._surfaces:
             model = self.estimators[object_class].model
-            self._surfaces[object_class] = model.sample(self.free_space.samples, np.random.default_rng(0))[0]
+            samples = (self.free_space or DEFAULT_FREE_SPACE).samples  # the parting's without the check
+            self._surfaces[object_class] = model.sample(samples, np.random.default_rng(0))[0]
         return self._surfaces[object_class]
 
 

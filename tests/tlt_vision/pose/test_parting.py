@@ -103,6 +103,11 @@ def test_a_fitting_whose_mask_took_in_half_its_racked_neighbour_is_posed_on_its_
     assert alone.num_points == _posed(racked, own, parting=None).num_points
 
 
+def test_the_parting_works_without_the_free_space_check(racked):
+    parted = _posed(racked, racked[5], free_space=None)
+    assert parted.certified and _right(racked, parted)
+
+
 def test_a_piece_posed_out_of_its_mask_is_not_taken(racked):
     # The mask check alone refusing: no pose lies wholly within a mask no pixel grows.
     strict = Parting(classes=("end_fitting",), in_mask=1.01)
