@@ -50,6 +50,9 @@ try:  # OMPL logs every solve at INFO on stdout; keep only its errors.
 except ImportError as exc:  # pragma: no cover - ompl is a declared dependency
     raise ImportError("tlt_ars.planning needs the 'ompl' package (OMPL 2 Python bindings)") from exc
 
+# Searches for a segment the dense re-check found in collision, before the plan fails.
+REPAIR_ATTEMPTS = 3
+
 
 class PlanningFailed(RuntimeError):
     """A request that produced no checked path; ``kind`` classifies it, ``reason`` explains it."""
@@ -515,6 +518,18 @@ class Planner:
             if bad is None:
                 out.append(b)
                 continue
+            out.extend(self._repaired(a, b, bad, deadline)[1:])
+        return out
+
+    def _repaired(self, a: np.ndarray, b: np.ndarray, bad: np.ndarray, deadline: float) -> list[np.ndarray]:
+        """A path from ``a`` to ``b`` planned at the dense resolution whose every segment passes the
+        dense re-check. OMPL checks a motion at points an L2 step apart, the re-check at points a
+        joint step apart: a thin contact one set of points misses the other may find (a test's
+        repair failed so, about one plan in a thousand), and another search, randomised, goes
+        elsewhere. ``REPAIR_ATTEMPTS`` searches, each with what is left of the time (at least
+        ``repair_time_s``)."""
+        failed = ""
+        for _ in range(REPAIR_ATTEMPTS):
             budget = max(deadline - time.perf_counter(), self.repair_time_s)
             try:
                 repair = self._rrt(a, [b], budget, self.dense_check_resolution)
@@ -526,14 +541,15 @@ class Planner:
                     f"segment {_fmt(a)} -> {_fmt(b)} touches {what} at {_fmt(bad)} when re-checked at"
                     f" {self.dense_check_resolution} rad, and re-planning it failed: {exc.reason}",
                 ) from exc
-            for x, y in pairwise(repair):
-                if self.scene.segment_collision(x, y, self.dense_check_resolution) is not None:
-                    raise PlanningFailed(
-                        "dense_check",
-                        f"re-planned segment {_fmt(x)} -> {_fmt(y)} fails the dense re-check",
-                    )
-            out.extend(repair[1:])
-        return out
+            failed = next(
+                (f"re-planned segment {_fmt(x)} -> {_fmt(y)} fails the dense re-check"
+                 for x, y in pairwise(repair)
+                 if self.scene.segment_collision(x, y, self.dense_check_resolution) is not None),
+                "",
+            )
+            if not failed:
+                return repair
+        raise PlanningFailed("dense_check", f"{failed} ({REPAIR_ATTEMPTS} searches)")
 
 
 def _interpolate_pose(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:

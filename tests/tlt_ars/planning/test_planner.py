@@ -92,6 +92,34 @@ def test_coarse_search_is_repaired_by_the_dense_recheck():
         assert dense_free(unpadded, plan.path, 0.001)
 
 
+def test_a_repair_the_dense_recheck_still_finds_in_collision_is_searched_again(monkeypatch):
+    """OMPL checks a motion at points an L2 step apart, the dense re-check at points a joint step
+    apart: a repair may pass the one and not the other (once in a clean-clone run). The planner
+    searches again, and fails, naming the segment, only when every search's repair does."""
+    from tlt_ars.planning import planner as planner_module
+
+    scene = make_scene()
+    planner = Planner(scene, check_resolution=0.02, dense_check_resolution=0.005, planning_time_s=5.0)
+    blocked = scene.segment_collision(HOME, GOAL, 0.005)
+    assert blocked is not None  # through the block: the straight line is what the bad repair offers
+    searches = []
+    real = Planner._rrt
+
+    def first_through_the_block(self, start, goals, budget, resolution):
+        searches.append(budget)
+        return [start, goals[0]] if len(searches) == 1 else real(self, start, goals, budget, resolution)
+
+    monkeypatch.setattr(Planner, "_rrt", first_through_the_block)
+    repair = planner._repaired(HOME, GOAL, blocked, deadline=0.0)
+    assert len(searches) == 2 and dense_free(scene, repair, 0.005)
+    assert np.allclose(repair[0], HOME) and np.allclose(repair[-1], GOAL)
+
+    monkeypatch.setattr(Planner, "_rrt", lambda self, start, goals, budget, resolution: [start, goals[0]])
+    every_search = rf"fails the dense re-check \({planner_module.REPAIR_ATTEMPTS} searches\)"
+    with pytest.raises(PlanningFailed, match=every_search):
+        planner._repaired(HOME, GOAL, blocked, deadline=0.0)
+
+
 def test_via_configuration_leads_past_an_obstacle_the_detours_cannot_pass():
     scene = make_scene()
     # A ceiling over the arm: raised straight up (the detour) it touches it; only a low turn with
