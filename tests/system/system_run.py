@@ -32,7 +32,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -49,6 +48,7 @@ from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import Packet
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.reasons import AckStage
+from tlt_common.free_port import free_udp_port
 from tlt_common.launch.hosts import enter_namespace, namespace_name
 from tlt_common.mission.schema import load_mission
 from tlt_common.mission.tower_model import TowerModel
@@ -99,13 +99,6 @@ def late_bay_scenario(mission: Any, last: str) -> dict[str, Any]:
     """A twin scenario with every member of bay 1 but ``last`` built (the run begins with it)."""
     built = [m.id for m in mission.bay_members(1) if m.id != last]
     return {"name": "late_bay", "description": f"bay 1 built but {last}", "built": built, "faults": {}}
-
-
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing holds right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class SystemRun:
@@ -564,4 +557,4 @@ class SystemRun:
             time.sleep(0.2)
 
 
-__all__ = ["UR_X_HOST", "UR_Y_HOST", "SystemRun", "free_udp_port", "late_bay_scenario"]
+__all__ = ["UR_X_HOST", "UR_Y_HOST", "SystemRun", "late_bay_scenario"]

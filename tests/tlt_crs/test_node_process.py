@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tlt_common.free_port import free_udp_port
 from tlt_common.ros_isolation import isolate
 
 
@@ -252,14 +253,6 @@ def test_processes_run_in_a_domain_of_their_own():
     assert PROCESS_ENV["ROS_DOMAIN_ID"] != os.environ["ROS_DOMAIN_ID"]
 
 
-def _free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def _ars_tree_status_reaches_the_ground(gsw, packets) -> None:
     """An ARS's TreeStatus, published in the CRS processes' domain, is forwarded as tree_status."""
     import rclpy
@@ -299,7 +292,7 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
 
     rig_process("--hold-s", "3.0")  # each ARS request takes a while: the build is mid-way throughout
     key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
-    port = _free_udp_port()
+    port = free_udp_port()
     link_yaml = tmp_path / "link.yaml"
     link_yaml.write_text(yaml.safe_dump({
         "key_file": str(key_file), "key_id": 1,

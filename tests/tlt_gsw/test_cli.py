@@ -14,6 +14,7 @@ import yaml
 
 from tlt_common.ccsds.auth import KeyRing, write_key_file
 from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.free_port import free_udp_port
 from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli
 
@@ -141,10 +142,7 @@ def test_missing_key_file_is_a_clear_error(setup, capsys):
 
 
 def test_watch_prints_telemetry_with_limits_and_export_writes_csv(setup):
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = free_udp_port()
     crs = setup["crs"]
     crs.gsw_address = ("127.0.0.1", port)
     result = {}

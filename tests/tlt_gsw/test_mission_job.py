@@ -14,7 +14,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -27,6 +26,7 @@ import yaml
 from tlt_common.ccsds.auth import KeyRing, write_key_file
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.reasons import Reason, Severity
+from tlt_common.free_port import free_udp_port
 from tlt_common.ros_isolation import isolate
 from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli, mission_job
@@ -39,12 +39,6 @@ FAILING_PART = "bay1/vertical/x0_y1"
 # The CRS and stand-in processes get a ROS domain of their own (as in tests/tlt_crs).
 PROCESS_ENV = dict(os.environ)
 isolate(PROCESS_ENV)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def link_yaml(tmp_path: Path, key_file: Path, crs_port: int, gsw_port: int, name: str = "link.yaml") -> Path:
@@ -371,7 +365,9 @@ def test_ctrl_c_exits_130_and_prints_the_summary(tmp_path, keys):
         )  # fmt: skip
         deadline = time.monotonic() + 60
         while crs.commands != ["start"]:
-            assert time.monotonic() < deadline and proc.poll() is None, "the job never sent Start"
+            if proc.poll() is not None:
+                pytest.fail(f"the job exited {proc.returncode} before sending Start: {proc.stdout.read()}")
+            assert time.monotonic() < deadline, "the job never sent Start"
             time.sleep(0.05)
         time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
