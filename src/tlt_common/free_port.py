@@ -2,9 +2,10 @@
 
 The usual way (bind port 0, read the port, close) returns a port from the kernel's ephemeral
 range, which the next socket bound to port 0 anywhere on the machine may get before the process
-meant to bind it does: a parallel test's socket took a ground-link port so, and the mission job
-exited "address already in use" (status 2). Ports above that range are never handed out for port
-0, so a port drawn there at random and found free stays free but for another such draw.
+meant to bind it does: the mission job's test saw it exit 2 (an OSError, by all signs "address
+already in use" on its ground port) before it sent anything. Ports above that range are never
+handed out for port 0, so a port drawn there at random and found free stays free but for another
+such draw.
 """
 
 from __future__ import annotations

@@ -250,14 +250,15 @@ class PartPipeline:
         near = None
         if pending and self.free_space is not None and depth is not None:
             near = nearest_depth(depth, self.free_space.window)
+        parted = self.parting.classes if self.parting is not None and depth is not None else ()
         refused: dict[str, list[tuple[int, np.ndarray]]] = {}
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
                 e = self._judged(e, points, dets[i].mask, depth, intrinsics, noise, near)
                 out[i] = Observation(cls, e, "", dets[i].object_id)
-                if not e.certified:
+                if cls in parted and not e.certified:
                     refused.setdefault(cls, []).append((i, points))
-        if self.parting is not None and depth is not None:
+        if refused:
             for i, e in self._parted(refused, dets, depth, intrinsics, noise, near):
                 out[i] = replace(out[i], estimate=e)
         return [o for o in out if o is not None]
@@ -299,8 +300,6 @@ class PartPipeline:
         parting = self.parting
         pieces: dict[str, list[tuple[int, np.ndarray]]] = {}
         for cls, items in refused.items():
-            if cls not in parting.classes:
-                continue
             separation = parting.min_separation * self.estimators[cls].model.diameter
             for i, points in items:
                 keep = larger_piece(points, parting.min_share, separation)
