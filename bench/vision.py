@@ -8,7 +8,8 @@ detected part, and prints against the issue's goals:
   with the thin parts' regions cut where the depth jumps, node.yaml ``segmentation.depth_split``,
   the end fittings' masks trimmed, ``segmentation.semantic_trim``, and those of end fittings and
   rivets made exclusive, ``segmentation.exclusive_overlaps``), and of the model's own on
-  the RGB image alone;
+  the RGB image alone (its semantic head's map read as the node reads it,
+  ``segmentation.semantic_background_weight``);
 * C-3PO on the parts both the model and the twin segment (a detection matched to a ground-truth
   instance of its class at mask IoU >= 0.5): the fraction certified (goal >= 95 %), of the certified
   the fraction with ADD-S under 2 % of the part's size (goal >= 95 %), their median rotation error
@@ -330,7 +331,8 @@ def main() -> int:
         cut += f", {', '.join(segmenter.trim.classes)} trimmed of thin parts' pixels"
     if segmenter.overlaps is not None:
         cut += f", {', '.join(segmenter.overlaps.classes)} masks exclusive"
-    for title, acc in ((f"as the node segments ({cut})", ap), ("the model alone, RGB", ap_rgb)):
+    alone = f"the model alone, RGB (the head's background weighted {model.cfg.semantic_background_weight:g})"
+    for title, acc in ((f"as the node segments ({cut})", ap), (alone, ap_rgb)):
         result = acc.result()
         per_class = {classes[k - 1]: v for k, v in result["per_class"].items()}
         ap_line = ", ".join(f"{c} {per_class[c]:.3f}" if c in per_class else f"{c} -" for c in classes)

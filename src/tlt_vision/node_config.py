@@ -71,6 +71,9 @@ SCHEMA = {
             "weights": opt("str", ""),
             "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
             "second_look_score": opt("float", None, minimum=0.0, maximum=1.0),
+            "semantic_background_weight": opt("float", None, minimum=0.01, maximum=1.0),
+            "proposals": opt("int", None, minimum=1, maximum=5000,
+                             doc="region proposals per image the box branch scores"),
             "second_look_closer": opt(
                 "dict",
                 None,
@@ -381,6 +384,15 @@ class VisionConfig:
             "depth_noise": self.depth_noise,
             "parting": self.parting,
         }
+
+    @property
+    def mask_rcnn_inference(self) -> dict[str, Any]:
+        """The Mask R-CNN's inference settings node.yaml sets (MaskRCNN.set_inference); the
+        weights' own for those left out."""
+        seg = self.raw["segmentation"]
+        named = {"semantic_background_weight": seg["semantic_background_weight"],
+                 "rpn_post_nms_top_n_test": seg["proposals"]}
+        return {key: value for key, value in named.items() if value is not None}
 
     @property
     def score_floor(self) -> float:

@@ -85,11 +85,14 @@ class MaskRcnnSegmenter:
     def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
                  radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None,
                  overlaps: ExclusiveOverlaps | None = None,
-                 camera_noise: Mapping[str, float] | None = None) -> None:
+                 camera_noise: Mapping[str, float] | None = None,
+                 inference: Mapping[str, Any] | None = None) -> None:
         from tlt_vision.segmentation.inference import load_mask_rcnn
 
-        # The configuration and the image size come from the weights' manifest, as trained.
+        # The configuration and the image size come from the weights' manifest, as trained;
+        # ``inference`` (MaskRCNN.set_inference) is the node's choice, not the weights'.
         self.model, manifest = load_mask_rcnn(weights)
+        self.model.set_inference(**(inference or {}))
         self.cfg = self.model.cfg
         self.max_size: int | None = manifest["settings"].get("max_size")
         self.min_score = min_score
@@ -112,7 +115,7 @@ class MaskRcnnSegmenter:
 
         return cls(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
                    config.depth_split, thin_part_radii(), config.semantic_trim, config.exclusive_overlaps,
-                   config.raw["depth_noise"]["cameras"])
+                   config.raw["depth_noise"]["cameras"], config.mask_rcnn_inference)
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb

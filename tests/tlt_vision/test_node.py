@@ -580,6 +580,11 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "segmentation.exclusive_overlaps.duplicate" in err and "1.5" in err
     wrong = vision_config()
+    wrong["segmentation"]["semantic_background_weight"] = 0  # no pixel would be background
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    assert "segmentation.semantic_background_weight" in capsys.readouterr().err
+    wrong = vision_config()
     wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2

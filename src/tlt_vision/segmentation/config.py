@@ -51,8 +51,15 @@ class MaskRCNNConfig:
     # Pixels between touching instances of a class that the head learns as background, so that
     # they are separate regions; 2 is one cell of its stride-2 map (a 1-pixel gap it cannot draw).
     semantic_gap: int = 2
+    # A pixel is a thin part's where that part's probability beats this times the background's
+    # (1: the most probable class). The head's doubt lies on a thin part's edges and narrow
+    # stretches; below 1 fewer tubes break in two or vanish (models/vision/README.md). Applied
+    # at inference only; the vision node sets it (node.yaml segmentation.semantic_background_weight).
+    semantic_background_weight: float = 1.0
 
     def __post_init__(self) -> None:
+        if not self.semantic_background_weight > 0:
+            raise ValueError(f"semantic_background_weight {self.semantic_background_weight} is not positive")
         unknown = [c for c in self.semantic_classes if c not in self.classes]
         if unknown:
             raise ValueError(f"semantic_classes {unknown} are not among the classes {list(self.classes)}")

@@ -17,6 +17,8 @@ which the vision node scores the pieces it cuts those regions into
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
 
 import torch
 from torch import nn
@@ -32,6 +34,10 @@ from tlt_vision.segmentation.semantic import (
     upsample_logits,
 )
 
+# MaskRCNNConfig fields a user of trained weights may change (MaskRCNN.set_inference).
+INFERENCE_SETTINGS = ("rpn_post_nms_top_n_test", "score_threshold", "detection_nms", "detections_per_image",
+                      "semantic_background_weight")
+
 
 class MaskRCNN(nn.Module):
     def __init__(self, cfg: MaskRCNNConfig | None = None) -> None:
@@ -44,6 +50,18 @@ class MaskRCNN(nn.Module):
         self.semantic = SemanticHead(self.cfg) if self.cfg.semantic_classes else None
         self.register_buffer("pixel_mean", torch.tensor(self.cfg.pixel_mean).view(1, 3, 1, 1))
         self.register_buffer("pixel_std", torch.tensor(self.cfg.pixel_std).view(1, 3, 1, 1))
+
+    def set_inference(self, **settings: Any) -> None:
+        """Change settings that act at inference only (:data:`INFERENCE_SETTINGS`: how many
+        proposals are scored, how the semantic head's map is read), never what the weights learned;
+        ValueError naming any other."""
+        other = sorted(set(settings) - set(INFERENCE_SETTINGS))
+        if other:
+            raise ValueError(f"not inference settings: {', '.join(other)} (these are: "
+                             f"{', '.join(INFERENCE_SETTINGS)})")
+        cfg = replace(self.cfg, **settings)
+        for module in (self, self.rpn, self.roi_heads):
+            module.cfg = cfg
 
     def features(self, images: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
         """The stem's stride-2 features and the FPN levels [P2..P5]."""
@@ -73,7 +91,8 @@ class MaskRCNN(nn.Module):
             return results
         probs = torch.softmax(upsample_logits(logits, size), dim=1)
         for r, p in zip(results, probs, strict=True):
-            found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area)
+            found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area,
+                                            self.cfg.semantic_background_weight)
             # A region's pixels are its instance's without a mask head's doubt.
             found["mask_probs"] = found["masks"].to(r["mask_probs"].dtype)
             for key in r:
@@ -112,4 +131,4 @@ def predict(model: MaskRCNN, images: torch.Tensor) -> list[dict[str, torch.Tenso
     return model(images)
 
 
-__all__ = ["MaskRCNN", "predict", "train_step"]
+__all__ = ["INFERENCE_SETTINGS", "MaskRCNN", "predict", "train_step"]

@@ -8,9 +8,11 @@ from tlt_vision.segmentation.depth_split import (
     DepthSplit,
     depth_pieces,
     join_collinear,
+    piece_score,
     split_by_depth,
     width_ratio,
 )
+from tlt_vision.segmentation.semantic import SURE
 
 SPLIT = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40)
 TUBE, FITTING = 1, 2
@@ -97,15 +99,23 @@ def test_without_a_fitting_depth_image_nothing_is_cut():
 
 
 def test_with_the_heads_probabilities_each_piece_is_scored_by_its_own_pixels():
+    """Each piece its pixels' mean probability times the share of them the head is sure of."""
     mask, depth = _tee()
     probs = torch.zeros((3, *mask.shape))
     probs[TUBE][20:23] = 0.9  # the front tube's row: the head is sure of it
-    probs[TUBE][:20] = 0.5  # the tube behind: less so
+    probs[TUBE][:11] = 0.7  # the tube behind: half of it as sure
+    probs[TUBE][11:20] = 0.3  # and half doubted (a region read with the background weighted down)
     result = {**_result([mask], [TUBE], [0.7]), "semantic_probs": probs}
     out = split_by_depth(result, depth, (TUBE,), SPLIT)
     assert out["masks"].flatten(1).sum(1).tolist() == [54, 108]
-    assert np.allclose(out["scores"].tolist(), [0.5, 0.9])
+    assert np.allclose(out["scores"].tolist(), [0.5 * 0.5, 0.9])
     assert out["semantic_probs"] is probs
+
+
+def test_a_piece_is_scored_by_its_mean_probability_times_its_share_the_head_is_sure_of():
+    assert piece_score(np.array([0.9, 0.9])) == pytest.approx(0.9)
+    assert piece_score(np.array([0.9, 0.3, 0.3, SURE])) == pytest.approx(0.5 * 0.25)
+    assert piece_score(np.array([0.4, 0.2])) == 0.0
 
 
 K = np.array([[500.0, 0.0, 20.0], [0.0, 500.0, 15.0], [0.0, 0.0, 1.0]])

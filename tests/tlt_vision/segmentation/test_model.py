@@ -104,6 +104,27 @@ def test_eval_outputs():
         assert (det["boxes"][:, 2] <= 56).all() and (det["boxes"][:, 3] <= 40).all()
 
 
+def test_inference_settings_change_what_the_model_does_not_its_weights():
+    """Proposals scored per image (rpn_post_nms_top_n_test) and detections kept are the model's and
+    its parts' at once; a setting of what was trained is refused by name."""
+    torch.manual_seed(0)
+    model = MaskRCNN(TINY).eval()
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    image = torch.rand(1, 3, 40, 56)
+
+    def proposals() -> int:
+        with torch.no_grad():
+            return len(model.rpn(model.features(image)[1], (40, 56))[0][0])
+
+    assert proposals() == TINY.rpn_post_nms_top_n_test
+    model.set_inference(rpn_post_nms_top_n_test=7, detections_per_image=3, score_threshold=0.0)
+    assert proposals() == 7 and model.rpn.cfg is model.cfg and model.roi_heads.cfg is model.cfg
+    assert len(predict(model, image)[0]["boxes"]) == 3
+    assert all(torch.equal(v, before[k]) for k, v in model.state_dict().items())
+    with pytest.raises(ValueError, match="not inference settings: fpn_channels"):
+        model.set_inference(fpn_channels=8)
+
+
 def test_bad_input_rejected():
     model = MaskRCNN(TINY)
     with pytest.raises(ValueError, match="expected images"):

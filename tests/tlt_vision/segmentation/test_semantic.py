@@ -7,7 +7,7 @@ import torch
 from tlt_vision.segmentation.config import MaskRCNNConfig
 from tlt_vision.segmentation.inference import detect_rgb
 from tlt_vision.segmentation.model import MaskRCNN, predict
-from tlt_vision.segmentation.semantic import instances_from_semantic, label_map, semantic_loss
+from tlt_vision.segmentation.semantic import instances_from_semantic, label_map, pixel_classes, semantic_loss
 from tlt_vision.segmentation.synthetic import toy_batch
 
 TINY = MaskRCNNConfig(backbone_channels=(8, 8, 16, 16), fpn_channels=16, representation=32, mask_convs=1,
@@ -51,6 +51,34 @@ def test_a_diagonal_line_is_one_region_and_an_empty_map_gives_nothing():
     assert none["boxes"].shape == (0, 4) and none["masks"].shape == (0, 16, 16)
 
 
+def test_a_background_weight_below_one_keeps_a_tube_whole_through_its_doubtful_pixels():
+    """A tube whose middle the head doubts (background 0.55, tube 0.45) is two regions when each
+    pixel takes its most probable class, one when the background counts half; a pixel the head
+    is sure of as background (0.9) stays so, and a region of doubtful pixels alone is no part."""
+    image = np.zeros((5, 21), dtype=np.int64)
+    image[2, 1:20] = 1
+    probs = _probs(image)
+    probs[:, 2, 10] = torch.tensor([0.55, 0.45, 0, 0, 0, 0])
+    probs[:, 0, 0] = torch.tensor([0.9, 0.08, 0, 0.02, 0, 0])
+    halves = instances_from_semantic(probs, labels=(1, 3), min_area=4)
+    assert halves["boxes"].tolist() == [[1, 2, 10, 3], [11, 2, 20, 3]]
+    whole = instances_from_semantic(probs, labels=(1, 3), min_area=4, background_weight=0.5)
+    assert whole["boxes"].tolist() == [[1, 2, 20, 3]]
+    probs[:, 4, 2:12] = torch.tensor([0.6, 0.4, 0, 0, 0, 0])[:, None]  # a streak of doubt alone
+    assert pixel_classes(probs, 0.5)[4, 2:12].eq(1).all()
+    again = instances_from_semantic(probs, labels=(1, 3), min_area=4, background_weight=0.5)
+    assert again["boxes"].tolist() == [[1, 2, 20, 3]]
+    read = pixel_classes(probs, 0.5)
+    assert int(read[0, 0]) == 0 and torch.equal(read, torch.where(read == 0, 0, 1))
+    assert torch.equal(pixel_classes(probs), probs.max(dim=0).indices)
+
+
+def test_with_the_background_weighted_a_pixel_takes_the_likelier_thin_class():
+    probs = torch.tensor([0.5, 0.2, 0.0, 0.3, 0.0, 0.0])[:, None, None]
+    assert int(pixel_classes(probs, 0.5)) == 3
+    assert int(pixel_classes(probs, 1.0)) == 0
+
+
 def test_label_map_and_loss_weighting():
     masks = torch.zeros(2, 4, 4, dtype=torch.bool)
     masks[0, 0, :] = True
@@ -91,6 +119,8 @@ def test_label_map_cuts_touching_instances_of_a_class_apart():
 def test_semantic_classes_must_be_classes():
     with pytest.raises(ValueError, match="semantic_classes"):
         MaskRCNNConfig(semantic_classes=("strut",))
+    with pytest.raises(ValueError, match="semantic_background_weight 0"):
+        MaskRCNNConfig(semantic_background_weight=0.0)
     assert TINY.semantic_labels == (1, 3)
     assert MaskRCNNConfig.from_dict(TINY.to_dict()) == TINY
 
