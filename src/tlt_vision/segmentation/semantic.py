@@ -121,8 +121,7 @@ def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area
     pixel the head is sure of (over :data:`SURE`), is one instance. ``boxes`` (D, 4) are its
     pixel-edge bounds, ``scores`` the mean probability of its class over it, ``masks`` (D, H, W)
     bool. With the background weighted down, the pixels the head doubts join its sure ones into
-    whole parts, and on their own make streaks of doubt on no part, which the last rule drops (on
-    bench/vision.py's seed 950, half the thin parts' regions at a weight of 0.15)."""
+    whole parts, and on their own make streaks of doubt on no part, which the last rule drops."""
     h, w = probs.shape[-2:]
     best = pixel_classes(probs, background_weight).cpu().numpy()
     masks: list[np.ndarray] = []
