@@ -67,6 +67,12 @@ def piece_score(own: np.ndarray) -> float:
     return float(own.mean()) * float((own > SURE).mean())
 
 
+def _scores(own: np.ndarray | None, piece: np.ndarray) -> bool:
+    """Whether a piece (a mask over ``own``, its class's probabilities) can score above 0; without
+    the probabilities it keeps its region's score."""
+    return own is None or bool((own[piece] > SURE).any())
+
+
 @dataclass(frozen=True)
 class DepthSplit:
     """How a thin-part region is cut (metres, and pixels of the full image)."""
@@ -239,13 +245,13 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
         region = masks[i][box].cpu().numpy()
         # A piece without a pixel the head is sure of scores nothing (piece_score): not kept, and
         # not searched for bends, the cut's costliest step.
-        smalls = [s for s in depth_pieces(region, depth[box], split) if own is None or (own[s] > SURE).any()]
+        smalls = [s for s in depth_pieces(region, depth[box], split) if _scores(own, s)]
         seen = (RegionPoints.of(region, depth[box], camera_matrix, y0, x0)
                 if camera_matrix is not None else None)
         radius = (radii or {}).get(label)
         if bend is not None and seen is not None and radius is not None:
             smalls = [straight for small in smalls for straight in straight_pieces(small, seen, radius, bend)
-                      if straight.sum() >= split.min_area and (own is None or (own[straight] > SURE).any())]
+                      if straight.sum() >= split.min_area and _scores(own, straight)]
         for small in smalls:
             piece = np.zeros(masks.shape[-2:], dtype=bool)
             piece[box] = small
