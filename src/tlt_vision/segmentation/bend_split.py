@@ -81,11 +81,14 @@ def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.ra
     if not fixed.any():
         return np.zeros(len(points), dtype=bool)
     centre, direction = points[a[fixed]], direction[fixed] / norm[fixed, None]
-    # Every line's distance to every scored point at once: (lines, points).
-    offset = points[scored][None, :, :] - centre[:, None, :]
-    along = np.einsum("lpk,lk->lp", offset, direction)
-    distance = np.linalg.norm(offset - along[..., None] * direction[:, None, :], axis=2)
-    best = int((distance <= tol[scored][None, :]).sum(axis=1).argmax())
+    # Every line's squared distance to every scored point at once, (points, lines), as the squared
+    # offset from the line's point less its square along the line: no (lines, points, 3) array.
+    # About the points' mean, so that the squares are of centimetres, not metres.
+    origin = points[scored].mean(axis=0)
+    p, c = points[scored] - origin, centre - origin
+    along = p @ direction.T - (c * direction).sum(axis=1)
+    squared = (p * p).sum(axis=1)[:, None] - 2.0 * p @ c.T + (c * c).sum(axis=1) - along * along
+    best = int((squared <= (tol[scored] ** 2)[:, None]).sum(axis=0).argmax())
     near = _distances(points, centre[best], direction[best]) <= tol
     for _ in range(2):  # the line fitted to its own points, then those near it again
         if near.sum() < 2:
