@@ -120,25 +120,26 @@ class SurfaceDistance:
         s = (rel * u).sum(-1)  # axial coordinate from a
         length, r = self.seg_len.to(points.dtype), self.seg_r.to(points.dtype)
         radial = rel - s[..., None] * u
-        rho = torch.sqrt((radial * radial).sum(-1) + 1e-18)
+        # Floored, as is the capsule's distance below: a point on the axis has no radial direction.
+        rho = torch.linalg.vector_norm(radial, dim=-1).clamp(min=1e-9)
         # Capsule: the distance to the axis segment minus the radius.
         beyond = s - torch.minimum(torch.clamp(s, min=0.0), length)
-        dist = torch.sqrt(rho * rho + beyond * beyond + 1e-18)
+        dist = torch.hypot(rho, beyond)
         caps = dist - r
         # Closed cylinder: the standard 2-D (radial, axial) box distance.
         dx = rho - r
         half = s - length / 2
         dz = half.abs() - length / 2
         ox, oz = dx.clamp(min=0), dz.clamp(min=0)
-        out = torch.sqrt(ox * ox + oz * oz + 1e-18)
-        cyl = out + torch.minimum(torch.maximum(dx, dz), torch.zeros_like(dx))
+        out = torch.hypot(ox, oz)  # 0 inside, where the gradient below does not divide by it
+        cyl = out + torch.maximum(dx, dz).clamp(max=0.0)
         flat = self.seg_flat
         value = torch.where(flat, cyl, caps)
         if not gradient:
             return value, None
         # Capsule: away from the nearest point of the axis segment. Cylinder: outside, from the
         # box's nearest point; inside, away from the nearer face.
-        outside, radial_face = (dx > 0) | (dz > 0), dx > dz
+        outside, radial_face = out > 0, dx > dz
         cyl_r = torch.where(outside, ox / (out * rho), torch.where(radial_face, 1.0 / rho, 0.0))
         cyl_u = torch.sign(half) * torch.where(outside, oz / out, torch.where(radial_face, 0.0, 1.0))
         c_r, c_u = torch.where(flat, cyl_r, 1.0 / dist), torch.where(flat, cyl_u, beyond / dist)

@@ -210,16 +210,17 @@ class _Fit:
 
 
 def _residuals(
-    surface: SurfaceDistance, points: torch.Tensor, rot: torch.Tensor, t: torch.Tensor, free_space: bool
+    surface: SurfaceDistance, points: torch.Tensor, rot: torch.Tensor, t: torch.Tensor, free_from: int
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Residuals (B, N), m, and their gradients (B, N, 3) with respect to the points' camera-frame
-    position: the distance to the surface, or for ``free_space`` the depth inside the part."""
+    position: the distance to the surface, and for the points from ``free_from`` on (the free-space
+    term's) the depth inside the part. Both terms' points are measured in one call: a call's cost
+    is mostly per operation, not per point."""
     sdf, grad = surface.signed_with_gradient(model_frame(points, rot, t))
-    if free_space:
-        inside = sdf < 0
-        res, dres = torch.where(inside, -sdf, 0.0), torch.where(inside[..., None], -grad, 0.0)
-    else:
-        res, dres = sdf.abs(), grad * torch.sign(sdf)[..., None]
+    free = torch.arange(points.shape[-2]) >= free_from
+    inside = sdf < 0
+    sign = torch.where(free, torch.where(inside, -1.0, 0.0), torch.sign(sdf))
+    res, dres = sdf * sign, grad * sign[..., None]
     return res, dres @ rot.transpose(-1, -2)  # model frame -> camera frame
 
 
@@ -340,7 +341,9 @@ def _levenberg_marquardt(
     observed, front, centre = cloud.observed, cloud.front, cloud.centre
     # residual (m) -> its share of the objective, mm: the Chamfer term's of the points kept
     scales = ((1.0 / cloud.kept).sqrt() / _MM, (1.0 / cloud.count).sqrt() / _MM)
-    arms = (observed - centre[:, None], front - centre[:, None])
+    # The Chamfer term's points, then the free-space term's, side by side (_residuals).
+    points, free_from = torch.cat([observed, front], 1), observed.shape[1]
+    arms = points - centre[:, None]
     proximal = torch.diag(torch.tensor([0.0, 0.0, 0.0, 1.0, 1.0, 1.0], dtype=observed.dtype)) * PROXIMAL
 
     def fit(r: torch.Tensor, tt: torch.Tensor, moved: torch.Tensor, rows: torch.Tensor | None = None) -> _Fit:
@@ -354,18 +357,16 @@ def _levenberg_marquardt(
         value = PROXIMAL * moved.pow(2).sum(-1)
         hessian = proximal.expand(len(r), 6, 6).clone()
         gradient = torch.cat([torch.zeros_like(moved), PROXIMAL * moved], -1)
-        terms = ((observed, arms[0], False, scales[0]), (front, arms[1], True, scales[1]))
-        for points, arm, free, scale in terms:
-            res, dres = _residuals(on, own(points), r, tt, free)
-            m = own(cloud.m)
-            counted = m if free else _nearest(res.pow(2), m, own(cloud.count), own(cloud.kept))
-            weight = counted.sqrt() * own(scale)[:, None]
-            # d(residual)/d(rotation w about the centre) = -(arm x dres); d/d(translation mm) = -dres mm.
-            jac = torch.cat([-torch.linalg.cross(own(arm), dres), -_MM * dres], -1) * weight[..., None]
-            res = res * weight
-            value = value + res.pow(2).sum(-1)
-            hessian = hessian + jac.transpose(-1, -2) @ jac
-            gradient = gradient + (jac * res[..., None]).sum(1)
+        res, dres = _residuals(on, own(points), r, tt, free_from)
+        m = own(cloud.m)
+        counted = _nearest(res[:, :free_from].pow(2), m, own(cloud.count), own(cloud.kept))
+        weight = torch.cat([counted.sqrt() * own(scales[0])[:, None], m.sqrt() * own(scales[1])[:, None]], -1)
+        # d(residual)/d(rotation w about the centre) = -(arm x dres); d/d(translation mm) = -dres mm.
+        jac = torch.cat([-torch.linalg.cross(own(arms), dres), -_MM * dres], -1) * weight[..., None]
+        res = res * weight
+        value = value + res.pow(2).sum(-1)
+        hessian = hessian + jac.transpose(-1, -2) @ jac
+        gradient = gradient + (jac * res[..., None]).sum(1)
         return _Fit(r, tt, moved, value, hessian, gradient)
 
     eye = torch.eye(6, dtype=torch.float64)

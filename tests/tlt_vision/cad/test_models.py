@@ -110,6 +110,10 @@ def test_surface_gradient_hand_computed(models):
         sdf, g = model.surface.signed_with_gradient(torch.tensor([point]))
         assert sdf.item() == pytest.approx(value, abs=1e-6), (model.name, point)
         assert g[0].tolist() == pytest.approx(grad, abs=1e-5), (model.name, point)
+    # On the axis there is no radial direction: the distance is still exact, the gradient finite.
+    for model, value in ((tube, -0.0125), (fitting, -0.02)):
+        sdf, g = model.surface.signed_with_gradient(torch.zeros(1, 3))
+        assert sdf.item() == pytest.approx(value, abs=1e-6) and bool(torch.isfinite(g).all())
 
 
 def test_surface_gradient_is_the_signed_distances_gradient(models):
