@@ -86,4 +86,5 @@ def roi_align(
     vals = vals.reshape(c, r, ph, s, pw, s).sum(dim=5).sum(dim=3) / (s * s)
     return vals.permute(1, 0, 2, 3).contiguous()
 
+
 __all__ = ["roi_align"]
