@@ -17,6 +17,9 @@ tests/system/system_run.py) with the test as the ground station. Checked:
   within 1 cm (each within a millimetre in a bench run; the near verticals stood 2 cm off while
   the planner did not know of the end effector's camera housings, one of which struck a lifter
   post and pushed the arm aside);
+* each part an ARS let go of at its place lay within the mission's position and angle tolerances
+  of it at that instant, by the twin's truth (``<run>/placements.jsonl``, tlt_sim.twin.simulation):
+  what CheckAlignment measured before the release held;
 * each request succeeded once at its ARS (the action servers' goal statuses in the recording):
   no member placed or riveted twice.
 
@@ -29,6 +32,7 @@ minutes on 2 cores.
 from __future__ import annotations
 
 import importlib.util
+import json
 from collections import Counter
 from pathlib import Path
 
@@ -100,6 +104,15 @@ def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
         off, nearest = min((min(float(np.linalg.norm(v - j)) for j in joints), k) for k, v in parts.items())
         assert off <= PLACE_TOLERANCE, f"{member.id}: the nearest part, {nearest}, is {1000 * off:.0f} mm off"
         used.add(nearest)
+
+    # Each release at a place within the mission's tolerances of it, by the truth at that instant.
+    lines = (run.run_dir / "placements.jsonl").read_text().splitlines()
+    released = [r for r in map(json.loads, lines) if r["member"] is not None]
+    assert {r["member"] for r in released} == inspected, lines
+    tol = mission.inspection
+    off = [r for r in released if r["position_error_m"] > tol["position_tolerance"]
+           or r["angle_error_rad"] > tol["angle_tolerance"]]  # fmt: skip
+    assert not off, off
 
     # Each request succeeded once at its ARS: nothing placed or riveted twice.
     wanted = Counter((m.add_ars, ACTIONS[m.kind]) for m in mission.members)

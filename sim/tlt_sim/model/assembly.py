@@ -64,6 +64,18 @@ class RivetShot:
     joined: list[str] = field(default_factory=list)  # equality names switched on
 
 
+@dataclass(frozen=True)
+class Release:
+    """An arm letting go of a part: the sim time, and the part's world pose at that instant (before
+    it settles or falls), for the twin's record of where parts were placed."""
+
+    arm: str
+    part: str
+    time: float
+    position: np.ndarray
+    rotation: np.ndarray
+
+
 @dataclass
 class CompressionResult:
     force_n: float
@@ -111,6 +123,7 @@ class Assembly:
         }
         self.state = dict.fromkeys(self.info.parts, "stowed")  # stowed, grasped, placed, dropped
         self.shots: list[RivetShot] = []
+        self.releases: list[Release] = []  # the twin takes them as they come (Twin.tick)
         self._watch()
         self._pending = True  # evaluate the rules once on the next update whatever moved
         for jid in self._jaw_range.values():
@@ -352,6 +365,8 @@ class Assembly:
             self.m.jnt_range[self._jaw_range[(arm, side)], 1] = self.ee["jaw_range"][1]
         if body is None:
             return None
+        pos, rot = self.body_pose(body)
+        self.releases.append(Release(arm, self.parts_by_body[body].name, float(self.d.time), pos, rot))
         self._off(f"grasp/{arm}/{body}")
         self.held[arm] = None
         self._slip_at.pop(arm, None)
@@ -517,4 +532,4 @@ def _corner_xy(info: ModelInfo, i: int) -> tuple[float, float]:
     return x * info.mission.bay_width, y * info.mission.bay_width
 
 
-__all__ = ["Assembly", "CompressionResult", "RivetShot"]
+__all__ = ["Assembly", "CompressionResult", "Release", "RivetShot"]

@@ -23,10 +23,11 @@ import numpy as np
 
 from tlt_common.mission.schema import Member, Mission
 from tlt_sim.model import names, ur10e
-from tlt_sim.model.assembly import Assembly, CompressionResult, RivetShot
+from tlt_sim.model.assembly import Assembly, CompressionResult, Release, RivetShot
 from tlt_sim.model.config import DEFAULT_EDU, load_edu
 from tlt_sim.model.generate import ModelInfo, PartInfo, build_model
 from tlt_sim.model.geometry import frame_from_axes, mat_to_quat
+from tlt_sim.model.placement import Placement, placement_of
 from tlt_sim.model.scenario import NOMINAL, Scenario, load_scenario
 
 
@@ -369,6 +370,12 @@ class Scene:
 
     def part_state(self, name: str) -> str:
         return self.assembly.state[name]
+
+    def placement(self, release: Release) -> Placement:
+        """Where ``release`` left its part against the mission's places (the twin's truth)."""
+        part = self.info.parts[release.part]
+        points = [release.position + release.rotation @ p for p in part.ends.values()]
+        return placement_of(part.name, part.kind, points, self.mission, self.joint_position_world)
 
     def part_end(self, name: str, end: str) -> np.ndarray:
         part = self.info.parts[name]

@@ -9,6 +9,11 @@
 4. the bindings feed the model back (encoders, limit switches, blocked shafts, the EE switch);
 5. scenario device faults due by the new sim time are applied.
 
+Each part an arm lets go of is judged against the mission's places by the model's truth
+(:meth:`Scene.placement`): logged, and appended to ``<run_dir>/placements.jsonl`` (one JSON object
+a release: arm, sim time, part, member, centre and angle error, each joint point's error), so a
+run's record says where every part really went, beside what vision measured.
+
 Only the thread that calls :meth:`tick` touches the Scene. The emulators' pty and socket threads
 answer the drivers in between, under the emulators' own locks.
 
@@ -29,6 +34,7 @@ ur-rtde's handshakes run on wall time, and the arm's motion generator on sim tim
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable
@@ -58,6 +64,7 @@ class Twin:
             for name, period in self.devices.driver_periods.items()
         }
         self._closed = False
+        self.placements_path = self.run_dir / "placements.jsonl"
 
     def start(self) -> None:
         """Serve every device link; faults due at time 0 apply at once."""
@@ -88,6 +95,7 @@ class Twin:
         self.devices.advance(dt)
         self.devices.drive(dt)
         self.scene.advance(dt)
+        self._note_releases()
         self.devices.sense(dt)
         self._apply_faults()
         self._note_traffic()
@@ -98,6 +106,19 @@ class Twin:
         end = self.scene.time + seconds - 1e-9
         while self.scene.time < end:
             self.tick()
+
+    def _note_releases(self) -> None:
+        releases = self.scene.assembly.releases
+        while releases:
+            release = releases.pop(0)
+            placed = self.scene.placement(release)
+            log.info("%s released %s at %.3f s", release.arm, placed.describe(), release.time)
+            record = {"arm": release.arm, "time": release.time, **placed.as_dict()}
+            try:
+                with self.placements_path.open("a") as f:
+                    f.write(json.dumps(record) + "\n")
+            except OSError as exc:
+                log.warning("cannot record a placement in %s: %s", self.placements_path, exc)
 
     def _apply_faults(self) -> None:
         for what in self.faults.apply_due(self.scene.time):

@@ -7,8 +7,11 @@ joint, not on the floor. ARS X stands at the placement configuration its planner
 ``bay1/cross_frame``; the frame is put on its grasp line, the jaws close on it and open again.
 """
 
+import dataclasses
+
 import mujoco
 import numpy as np
+import pytest
 from tlt_sim.model import names
 
 from tlt_ars.planning.reachability import reach_target
@@ -50,3 +53,42 @@ def test_a_cross_frame_released_at_its_place_rests_on_the_pads(scene, mover):
     tolerance = scene.mission.inspection["position_tolerance"]
     for c, j in joints.items():
         assert min(np.linalg.norm(s - j) for s in seated) <= tolerance, (c, j, seated)
+
+
+def test_the_release_is_recorded_with_where_the_frame_really_is(scene, mover):
+    """What the twin logs of each release (Twin.tick): the part's truth against its place, in the
+    mission's terms. Released at its place, the frame is bay1/cross_frame within the tolerances;
+    held 8 mm along its side, 8 mm off; let go of away from the tower, at no place."""
+    arm, part = "ars_x", scene.next_part("cross_frame_dispenser")
+    for joint, value in zip(names.arm_joints(arm), _placement(scene.mission), strict=True):
+        scene.set_joint_state(joint, float(value))
+    mujoco.mj_forward(scene.model, scene.data)
+    info = scene.part(part)
+    joints = [scene.joint_position_world(f"bay1/{c}") for c in CORNERS]
+    centre, axis = scene.assembly.grasp_line(arm)
+    inward = sum(joints) / len(joints) - centre
+    inward -= (inward @ axis) * axis
+    inward /= np.linalg.norm(inward)
+    seat = np.column_stack([axis, inward, np.cross(axis, inward)])
+    tol = scene.mission.inspection
+    m = mover(scene, arm)
+    placements = []
+    for shift in (0.0, 0.008):
+        scene.place_part(part, centre - axis * (info.length / 2 - shift), seat)
+        m.jaws(True)
+        m.jaws(False)
+        (release,) = scene.assembly.releases
+        scene.assembly.releases.clear()
+        placements.append(scene.placement(release))
+    at_place, shifted = placements
+    assert at_place.part == part and at_place.member == "bay1/cross_frame"
+    assert at_place.within(tol["position_tolerance"], tol["angle_tolerance"]), at_place.describe()
+    assert max(at_place.point_errors) < 0.002, at_place.describe()
+    assert shifted.member == "bay1/cross_frame" and not shifted.within(tol["position_tolerance"], 1.0)
+    assert shifted.position_error == pytest.approx(0.008, abs=0.0015), shifted.describe()
+    assert shifted.angle_error < 0.005 and "bay1/cross_frame: centre 8" in shifted.describe()
+
+    lifted = release.position + np.array([0.0, 0.0, 0.3])
+    away = scene.placement(dataclasses.replace(release, position=lifted))
+    assert away.member is None and not away.within(1.0, 1.0)
+    assert away.as_dict()["angle_error_rad"] is None and "at no place" in away.describe()

@@ -6,6 +6,7 @@ GPIO lines, UR motion commands); the bring-up test does the same through the rea
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 
@@ -37,7 +38,8 @@ def _grasp_mode(servo, goal_ticks: int) -> None:
     _write(servo, GOAL_POSITION, goal_ticks, 4)
 
 
-def test_a_grasp_on_a_tube_shows_as_a_blocked_shaft_pressing_with_current(make_twin):
+def test_a_grasp_on_a_tube_shows_as_a_blocked_shaft_pressing_with_current(make_twin, caplog):
+    caplog.set_level(logging.INFO, logger="tlt.twin")
     twin = make_twin()
     scene = twin.scene
     arm = "ars_x"
@@ -69,6 +71,12 @@ def test_a_grasp_on_a_tube_shows_as_a_blocked_shaft_pressing_with_current(make_t
     assert abs(left.get("present_position") - 2048) < 10
     assert scene.position(names.grasp_joint(arm, "a")) == pytest.approx(0.0, abs=0.02)
     assert scene.holding(arm) is None
+    # The release is on the run's record, judged by the truth: let go of where it was grasped,
+    # far from the tower, the strut was placed nowhere.
+    (record,) = [json.loads(line) for line in twin.placements_path.read_text().splitlines()]
+    assert (record["arm"], record["part"], record["member"]) == (arm, part.name, None)
+    assert record["position_error_m"] > 0.05 and record["time"] > 1.5
+    assert f"{arm} released {part.name} at no place" in caplog.text
 
 
 def test_an_empty_close_is_not_blocked(make_twin):
