@@ -53,6 +53,7 @@ def goal_from_msg(goal_msg) -> TrajectoryGoal:
         path_tolerance={t.name: t.position for t in goal_msg.path_tolerance},
         goal_tolerance={t.name: t.position for t in goal_msg.goal_tolerance},
         goal_time_tolerance=_duration_s(goal_msg.goal_time_tolerance),
+        goal_velocity_tolerance={t.name: t.velocity for t in goal_msg.goal_tolerance},
     )
 
 

@@ -13,8 +13,13 @@ running goal:
   aborts the goal (PATH_TOLERANCE_VIOLATED), unless the arm is within tolerance of where the path
   was up to ``path_lag_window`` seconds earlier: late along its path, not off it (a controller
   whose cycles were delayed); ``max_time_step`` bounds how far one cycle moves the trajectory on;
-* after the last point's time, the goal SUCCEEDS once every joint is within its goal tolerance, and
-  ABORTS (GOAL_TOLERANCE_VIOLATED) when that has not happened within the goal time tolerance.
+* after the last point's time, the goal SUCCEEDS once every joint is within its goal tolerance
+  and, where the caller passes the joints' velocities, moves no faster than its goal velocity
+  tolerance (ros2_control's ``stopped_velocity_tolerance``: a joint passing through its goal
+  tolerance at speed has not arrived, and what the caller does next, a camera measuring the held
+  part, expects the arm at rest), and has stayed so for ``goal_settle_s`` (an arm ringing about its
+  goal passes through zero speed at each turn); it ABORTS (GOAL_TOLERANCE_VIOLATED) when that has
+  not happened within the goal time tolerance.
 
 After success the controller holds the final point; after an abort, a cancel or a hardware fault
 it holds the position the joints had at that moment. Tolerances per joint follow
@@ -61,6 +66,7 @@ class TrajectoryGoal:
     path_tolerance: Mapping[str, float] = field(default_factory=dict)
     goal_tolerance: Mapping[str, float] = field(default_factory=dict)
     goal_time_tolerance: float = 0.0
+    goal_velocity_tolerance: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -73,6 +79,8 @@ class ExecutingGoal:
     goal_tolerance: dict[str, float]
     goal_time_tolerance: float
     start_positions: tuple[float, ...] = ()
+    goal_velocity_tolerance: dict[str, float] = field(default_factory=dict)
+    settled_since: float | None = None  # when the joints last came within every goal tolerance
     status: GoalStatus = GoalStatus.RUNNING
     error_code: int = SUCCESSFUL
     error_string: str = ""
@@ -102,6 +110,8 @@ class JointTrajectoryController:
         path_tolerance: float = 0.2,
         goal_tolerance: float = 0.02,
         goal_time_tolerance: float = 0.5,
+        goal_velocity_tolerance: float = -1.0,
+        goal_settle_s: float = 0.0,
         motion_gate: Callable[[], str | None] | None = None,
         max_time_step: float | None = None,
         path_lag_window: float = 0.0,
@@ -113,6 +123,8 @@ class JointTrajectoryController:
         self.default_path_tolerance = path_tolerance
         self.default_goal_tolerance = goal_tolerance
         self.default_goal_time_tolerance = goal_time_tolerance
+        self.default_goal_velocity_tolerance = goal_velocity_tolerance
+        self.goal_settle_s = goal_settle_s
         self.motion_gate = motion_gate
         self.hold: dict[str, float] = {}
         self.active: ExecutingGoal | None = None
@@ -128,7 +140,8 @@ class JointTrajectoryController:
         unknown = [n for n in names if n not in self.joints]
         if unknown:
             return INVALID_JOINTS, f"unknown joint(s) {unknown}; this controller has {self.joints}"
-        for kind, tolerances in (("path", goal.path_tolerance), ("goal", goal.goal_tolerance)):
+        for kind, tolerances in (("path", goal.path_tolerance), ("goal", goal.goal_tolerance),
+                                 ("goal velocity", goal.goal_velocity_tolerance)):
             stray = [n for n in tolerances if n not in self.joints]
             if stray:
                 return INVALID_JOINTS, f"{kind} tolerance for unknown joint(s) {stray}"
@@ -178,6 +191,9 @@ class JointTrajectoryController:
             if goal.goal_time_tolerance > 0
             else self.default_goal_time_tolerance,
             start_positions=tuple(actual.get(n, 0.0) for n in goal.joint_names),
+            goal_velocity_tolerance=self._tolerances(
+                goal.goal_velocity_tolerance, self.default_goal_velocity_tolerance
+            ),
         )
         if code != SUCCESSFUL:
             executing.finish(GoalStatus.ABORTED, code, reason)
@@ -216,8 +232,11 @@ class JointTrajectoryController:
                 self.hold[name] = actual[name]
 
     # --- control cycle -----------------------------------------------------------------------------
-    def update(self, now: float, actual: Mapping[str, float]) -> dict[str, float]:
-        """Position commands for every joint at ``now``; judges the running goal."""
+    def update(
+        self, now: float, actual: Mapping[str, float], velocities: Mapping[str, float] | None = None
+    ) -> dict[str, float]:
+        """Position commands for every joint at ``now``; judges the running goal (its goal velocity
+        tolerance only when the joints' ``velocities`` are given)."""
         for name in self.joints:
             self.hold.setdefault(name, actual.get(name, 0.0))
         commands = dict(self.hold)
@@ -247,17 +266,30 @@ class JointTrajectoryController:
         final = dict(zip(goal.goal.joint_names, goal.goal.points[-1].positions, strict=True))
         off = {n: abs(actual[n] - final[n]) for n in final if goal.goal_tolerance[n] > 0}
         outside = {n: e for n, e in off.items() if e > goal.goal_tolerance[n]}
-        if not outside:
-            goal.finish(GoalStatus.SUCCEEDED, SUCCESSFUL, "")
-            self.hold.update(final)
-            return dict(self.hold)
-        if t > end + goal.goal_time_tolerance:
-            name, error = max(outside.items(), key=lambda item: item[1])
+        vtol = goal.goal_velocity_tolerance
+        moving = {n: abs(velocities[n]) for n in final
+                  if velocities is not None and n in velocities and vtol.get(n, -1.0) > 0
+                  and abs(velocities[n]) > vtol[n]}  # fmt: skip
+        if not outside and not moving:
+            if goal.settled_since is None:
+                goal.settled_since = now
+            if now - goal.settled_since >= self.goal_settle_s - 1e-9:  # clock sums round
+                goal.finish(GoalStatus.SUCCEEDED, SUCCESSFUL, "")
+                self.hold.update(final)
+                return dict(self.hold)
+        else:
+            goal.settled_since = None
+        if goal.settled_since is None and t > end + goal.goal_time_tolerance:
+            if outside:
+                name, error = max(outside.items(), key=lambda item: item[1])
+                what = f"joint {name!r} is {error:.4f} from its goal (tolerance {goal.goal_tolerance[name]})"
+            else:
+                name, speed = max(moving.items(), key=lambda item: item[1])
+                what = f"joint {name!r} still moves at {speed:.4f}/s at its goal (tolerance {vtol[name]})"
             goal.finish(
                 GoalStatus.ABORTED,
                 GOAL_TOLERANCE_VIOLATED,
-                f"joint {name!r} is {error:.4f} from its goal (tolerance {goal.goal_tolerance[name]}) "
-                f"{t - end:.3f} s after the trajectory's end "
+                f"{what} {t - end:.3f} s after the trajectory's end "
                 f"(goal time tolerance {goal.goal_time_tolerance} s)",
             )
             self._hold_actual(actual)

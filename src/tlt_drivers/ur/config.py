@@ -68,6 +68,12 @@ UR_SCHEMA = {
     "default_path_tolerance": opt("float", 0.1, minimum=0.0),
     "default_goal_tolerance": opt("float", 0.01, minimum=0.0),
     "default_goal_time_tolerance_s": opt("float", 1.0, minimum=0.0),
+    "default_goal_velocity_tolerance": opt(
+        "float", 0.01, doc="rad/s a joint may still move at its goal; negative: not checked"
+    ),
+    "goal_settle_s": opt(
+        "float", 0.1, minimum=0.0, doc="how long the arm stays within its goal tolerances before success, s"
+    ),
     "max_trajectory_step_s": opt(
         "float", 0.05, minimum=0.001, doc="most trajectory time one control cycle may move on, s"
     ),
@@ -109,6 +115,8 @@ class URConfig:
     default_path_tolerance: float = 0.1
     default_goal_tolerance: float = 0.01
     default_goal_time_tolerance_s: float = 1.0
+    default_goal_velocity_tolerance: float = 0.01
+    goal_settle_s: float = 0.1
     max_trajectory_step_s: float = 0.05
     path_lag_window_s: float = 0.5
 

@@ -63,6 +63,8 @@ class URNode(LeanNode):
             path_tolerance=config.default_path_tolerance,
             goal_tolerance=config.default_goal_tolerance,
             goal_time_tolerance=config.default_goal_time_tolerance_s,
+            goal_velocity_tolerance=config.default_goal_velocity_tolerance,
+            goal_settle_s=config.goal_settle_s,
             motion_gate=self._motion_gate,
             max_time_step=config.max_trajectory_step_s,
             path_lag_window=config.path_lag_window_s,
@@ -98,7 +100,7 @@ class URNode(LeanNode):
         if hw.state == Lifecycle.ACTIVE:
             goal = self.controller.active
             if goal is not None and not goal.done:
-                commands = self.controller.update(self._loop_now(), hw.positions)
+                commands = self.controller.update(self._loop_now(), hw.positions, hw.velocities)
                 self._settling = True
             elif self._settling and self._still_moving():
                 # After a goal ends the controller holds a point (the final one after success);

@@ -86,6 +86,60 @@ def test_goal_tolerance_after_goal_time_aborts():
     assert "joint 'a'" in run.error_string and "0.0500" in run.error_string
 
 
+def test_a_joint_passing_through_its_goal_at_speed_has_not_arrived():
+    """With the joints' velocities given and a goal velocity tolerance (ros2_control's
+    stopped_velocity_tolerance), a goal succeeds only once the arm is at rest at it: the ARS
+    measures the held part with its EE cameras as soon as the move succeeds."""
+    c = make(goal_velocity_tolerance=0.01)
+    run = c.start(goal((1.0, (0.5, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    at_goal = {"a": 0.495, "b": 0.0}  # within the 0.01 goal tolerance
+    c.update(1.1, at_goal, {"a": 0.4, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING
+    c.update(1.2, at_goal, {"a": 0.005, "b": 0.0})
+    assert run.status == GoalStatus.SUCCEEDED
+    # Without velocities (a driver that reads none) the goal tolerance alone decides, as before.
+    c2 = make(goal_velocity_tolerance=0.01)
+    run = c2.start(goal((1.0, (0.5, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    c2.update(1.1, at_goal)
+    assert run.status == GoalStatus.SUCCEEDED
+
+
+def test_an_arm_ringing_about_its_goal_is_not_at_rest_at_a_turn():
+    """At each turn of an arm ringing about its goal its speed passes through zero: with a settle
+    time the joints must stay within their tolerances that long, and a swing out starts it again.
+    A goal settling when the goal time runs out is not aborted for it."""
+    c = make(goal_velocity_tolerance=0.01, goal_settle_s=0.1)
+    run = c.start(goal((1.0, (0.5, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    at, still, swinging = {"a": 0.498, "b": 0.0}, {"a": 0.0, "b": 0.0}, {"a": 0.05, "b": 0.0}
+    c.update(1.00, at, still)  # a turn
+    c.update(1.05, at, swinging)
+    c.update(1.10, at, still)  # the next turn
+    c.update(1.15, at, still)
+    assert run.status == GoalStatus.RUNNING
+    c.update(1.20, at, still)
+    assert run.status == GoalStatus.SUCCEEDED
+    late = c.start(goal((1.0, (0.5, 0.0))), 10.0, {"a": 0.0, "b": 0.0})
+    c.update(11.45, at, still)
+    c.update(11.55, at, still)  # past the 0.5 s goal time tolerance, settling since 11.45
+    assert late.status == GoalStatus.SUCCEEDED
+
+
+def test_an_arm_still_moving_after_the_goal_time_aborts_saying_so():
+    c = make()  # no default: the goal's own velocity tolerance applies
+    g = goal((1.0, (0.5, 0.0)), goal_velocity_tolerance={"a": 0.02})
+    run = c.start(g, 0.0, {"a": 0.0, "b": 0.0})
+    c.update(1.2, {"a": 0.5, "b": 0.0}, {"a": 0.1, "b": 0.0})
+    assert run.status == GoalStatus.RUNNING
+    c.update(1.6, {"a": 0.5, "b": 0.0}, {"a": 0.1, "b": 0.0})
+    assert run.status == GoalStatus.ABORTED and run.error_code == jtc.GOAL_TOLERANCE_VIOLATED
+    assert "joint 'a' still moves at 0.1000/s" in run.error_string and "tolerance 0.02" in run.error_string
+    # None given and no default: velocities are not judged.
+    plain = make()
+    run = plain.start(goal((1.0, (0.5, 0.0))), 0.0, {"a": 0.0, "b": 0.0})
+    plain.update(1.2, {"a": 0.5, "b": 0.0}, {"a": 0.1, "b": 0.0})
+    assert run.status == GoalStatus.SUCCEEDED
+
+
 def test_goal_time_tolerance_from_goal_overrides_default():
     c = make()
     run = c.start(
