@@ -11,12 +11,14 @@ extrinsics of ``config/vision/node.yaml``:
   joint for a camera on gripper b (``/ee_x/state``, ``ee_x_width``) <- optical frame (fixed).
 
 Optical frames are ROS camera frames (x right, y down, z forward). :meth:`CameraRig.camera_pose`
-answers the 4x4 pose of a camera at a ROS time, or raises :class:`FrameUnavailable` saying which
+answers the 4x4 pose of a camera at a ROS time (each joint interpolated between its states either
+side of that time, :class:`JointStates`), or raises :class:`FrameUnavailable` saying which
 joint state is missing or how old it is; it never guesses.
 """
 
 from __future__ import annotations
 
+import bisect
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -60,32 +62,66 @@ class EeState(NamedTuple):
 
 
 class JointStates:
-    """Latest position and stamp (ROS time, s) of every joint heard of; thread-safe."""
+    """Every joint's recent positions with their stamps (ROS time, s); thread-safe.
 
-    def __init__(self) -> None:
+    A camera's pose is wanted at its frame's stamp, and the arm carrying it may have moved since:
+    :meth:`get` interpolates each joint between the states stamped either side of the time asked
+    for, so a frame is placed where its camera was when it was taken, not where the arm is when
+    the frame is read. ``history`` states are kept per joint (50 Hz joint states: 5 s)."""
+
+    def __init__(self, history: int = 256) -> None:
         self._lock = threading.Lock()
-        self._state: dict[str, tuple[float, float]] = {}
+        self._history = history
+        self._stamps: dict[str, list[float]] = {}
+        self._values: dict[str, list[float]] = {}
 
     def update(self, names: Sequence[str], positions: Sequence[float], stamp: float) -> None:
+        stamp = float(stamp)
         with self._lock:
             for n, p in zip(names, positions, strict=False):
-                self._state[n] = (float(p), float(stamp))
+                stamps, values = self._stamps.setdefault(n, []), self._values.setdefault(n, [])
+                i = bisect.bisect_left(stamps, stamp)
+                if i < len(stamps) and stamps[i] == stamp:
+                    values[i] = float(p)
+                    continue
+                stamps.insert(i, stamp)
+                values.insert(i, float(p))
+                if len(stamps) > self._history:
+                    del stamps[0], values[0]
 
     def get(self, names: Sequence[str], at: float, max_age: float) -> list[float]:
-        """Positions of ``names``, each stamped within ``max_age`` of ``at``; else FrameUnavailable."""
+        """Positions of ``names`` at ROS time ``at``: interpolated between the states either side
+        of it when both lie within ``max_age`` of it, else the state nearest ``at``;
+        FrameUnavailable when that is further than ``max_age`` from it."""
         with self._lock:
-            out = []
-            for n in names:
-                if n not in self._state:
-                    raise FrameUnavailable(f"no joint state for {n} yet")
-                value, stamp = self._state[n]
-                if abs(at - stamp) > max_age:
-                    gap = abs(at - stamp)
-                    raise FrameUnavailable(
-                        f"joint state of {n} is {gap:.2f} s from the frame (limit {max_age:.2f} s)"
-                    )
-                out.append(value)
-            return out
+            return [self._at(n, at, max_age) for n in names]
+
+    def latest(self, names: Sequence[str]) -> list[float]:
+        """The newest position of each of ``names``; FrameUnavailable for one never heard of."""
+        with self._lock:
+            unheard = [n for n in names if n not in self._values]
+            if unheard:
+                raise FrameUnavailable(f"no joint state for {unheard[0]} yet")
+            return [self._values[n][-1] for n in names]
+
+    def _at(self, name: str, at: float, max_age: float) -> float:
+        stamps = self._stamps.get(name)
+        if not stamps:
+            raise FrameUnavailable(f"no joint state for {name} yet")
+        values = self._values[name]
+        i = bisect.bisect_left(stamps, at)
+        if 0 < i < len(stamps) and max(at - stamps[i - 1], stamps[i] - at) <= max_age:
+            t0, t1 = stamps[i - 1], stamps[i]
+            return values[i - 1] + (at - t0) / (t1 - t0) * (values[i] - values[i - 1])
+        # Before the first state, after the last, or across a silence of the driver longer than
+        # the age limit (what happened there is not known): the nearest state, if near enough.
+        near = min((k for k in (i - 1, i) if 0 <= k < len(stamps)), key=lambda k: abs(at - stamps[k]))
+        gap = abs(at - stamps[near])
+        if gap > max_age:
+            raise FrameUnavailable(
+                f"joint state of {name} is {gap:.2f} s from the frame (limit {max_age:.2f} s)"
+            )
+        return values[near]
 
 
 @dataclass(frozen=True)
@@ -165,7 +201,7 @@ class CameraRig:
         return ee.pose(q, width)
 
     def camera_pose(self, camera: str, at: float) -> np.ndarray:
-        """Pose (4x4, world) of ``camera`` at ROS time ``at`` from the latest joint states."""
+        """Pose (4x4, world) of ``camera`` at ROS time ``at`` from the joint states about then."""
         if camera not in self.lifter and camera not in self.ee:
             raise FrameUnavailable(f"unknown camera {camera!r}")
         names = self.joint_names(camera)
@@ -173,7 +209,7 @@ class CameraRig:
         return self.pose_from_joints(camera, dict(zip(names, values, strict=True)))
 
     def end_effector(self, arm: str, at: float) -> EeState:
-        """``arm``'s end effector at ROS time ``at`` from the latest joint states."""
+        """``arm``'s end effector at ROS time ``at`` from the joint states about then."""
         kinematics = next((c.kinematics for c in self.ee.values() if c.arm == arm), None)
         if kinematics is None:
             raise FrameUnavailable(f"no EE camera configured on {arm!r}, so no forward kinematics for it")

@@ -518,19 +518,22 @@ class VisionNode(LeanNode):
         tool: np.ndarray | None = None
         # Every camera's frame and pose first, then the poses (seconds each on a busy CPU): the
         # frames are of one moment, and the request's time is not spent before the last is taken.
-        frames: list[tuple[CameraFrame, np.ndarray]] = []
+        frames: list[tuple[CameraFrame, np.ndarray, np.ndarray]] = []  # frame, camera pose, as held
         counts: list[str] = []  # what each camera saw, for a check that fails
         uncertified: list[str] = []
         for cam in sorted(c.name for c in self.rig.ee.values() if c.arm == arm):
             try:
                 frame = self._grab(cam, self._frame_streams(), deadline)
-                frames.append((frame, self.rig.camera_pose(cam, frame.stamp)))
-                # The joint states kept are the latest, trusted only near the frame's stamp.
-                tool = self.rig.tool_pose(cam, frame.stamp, self.tool) if tool is None else tool
+                cam_pose = self.rig.camera_pose(cam, frame.stamp)
+                at_frame = self.rig.tool_pose(cam, frame.stamp, self.tool)
+                tool = at_frame if tool is None else tool
+                # The held part moves with the tool: what a camera sees of it is put where the
+                # tool held it when the first frame was taken, should the arm have moved between.
+                frames.append((frame, cam_pose, tool @ np.linalg.inv(at_frame) @ cam_pose))
             except (NoFrame, FrameUnavailable) as exc:
                 problems.append(f"{cam}: {exc}")
         places = inspection.expected_pieces(member.kind, joints, self.parts)
-        for frame, cam_pose in frames:
+        for frame, cam_pose, held_pose in frames:
             stamp = frame.stamp
             try:
                 detections = [d for d in self._segment(frame) if d.object_class == piece]
@@ -546,7 +549,7 @@ class VisionNode(LeanNode):
                     uncertified.append(f"{frame.camera}: {o.reason or e.certificate.reason}")
                     continue
                 certified += 1
-                e = _in_world(e, cam_pose)
+                e = _in_world(e, held_pose)
                 if all(np.linalg.norm(m.translation - e.translation) >= BAY_DUPLICATE_M for m in seen):
                     seen.append(e)
             counts.append(f"{frame.camera}: {len(detections)} segmented, {len(near)} near a place,"

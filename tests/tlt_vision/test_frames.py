@@ -53,3 +53,40 @@ def test_camera_pose_needs_fresh_joint_states():
     assert rig.camera_pose("zed_1", at=5.5).shape == (4, 4)
     with pytest.raises(FrameUnavailable, match="unknown camera"):
         rig.camera_pose("zed_9", at=5.0)
+
+
+def test_a_camera_is_placed_where_it_was_when_its_frame_was_taken():
+    """The mount turns while a frame is on its way: the frame, stamped 5.1 s, is read after a
+    state of 5.2 s came in, and is placed by the mount's angle at 5.1 s (between its states of 5.0
+    and 5.2 s), not by the latest. A time before every state kept takes the oldest, within the
+    age limit; :meth:`JointStates.latest` is the newest whatever the time."""
+    joints = JointStates()
+    rig = CameraRig(load_config(), joints)
+    joints.update(["camera_mount_1"], [0.0], stamp=5.0)
+    joints.update(["camera_mount_1"], [0.2], stamp=5.2)
+    joints.update(["camera_mount_1"], [0.4], stamp=5.4)
+    halfway = rig.pose_from_joints("zed_1", {"camera_mount_1": 0.1})
+    assert np.abs(rig.camera_pose("zed_1", at=5.1) - halfway).max() < 1e-12
+    assert joints.get(["camera_mount_1"], 5.4, 0.1) == [0.4]
+    assert joints.get(["camera_mount_1"], 4.5, 1.0) == [0.0]
+    assert joints.latest(["camera_mount_1"]) == [0.4]
+    with pytest.raises(FrameUnavailable, match="no joint state for camera_mount_0"):
+        joints.latest(["camera_mount_0"])
+    # States that arrive out of order are kept in order; one at a stamp already held replaces it.
+    joints.update(["camera_mount_1"], [0.3], stamp=5.3)
+    joints.update(["camera_mount_1"], [0.25], stamp=5.3)
+    assert joints.get(["camera_mount_1"], 5.35, 0.1) == pytest.approx([0.325])
+
+
+def test_joint_states_keep_a_bounded_history():
+    joints = JointStates(history=4)
+    for k in range(10):
+        joints.update(["j"], [float(k)], stamp=float(k))
+    assert joints.get(["j"], 6.5, 0.5) == [6.5]
+    with pytest.raises(FrameUnavailable, match=r"j is 1\.00 s from the frame"):
+        joints.get(["j"], 5.0, 0.5)  # state 5 was dropped: the oldest kept is 6
+    # Nor is a position guessed across a silence of the driver longer than the age limit.
+    joints.update(["j"], [20.0], stamp=20.0)
+    with pytest.raises(FrameUnavailable, match=r"j is 5\.00 s from the frame"):
+        joints.get(["j"], 14.0, 1.0)
+    assert joints.get(["j"], 19.5, 1.0) == [20.0] and joints.get(["j"], 9.5, 1.0) == [9.0]

@@ -12,7 +12,6 @@ node runs on sim time.
 from __future__ import annotations
 
 import contextlib
-import math
 import queue
 import signal
 import subprocess
@@ -443,7 +442,7 @@ def _wait_until_heard(rig: Rig, q: np.ndarray) -> None:
 
     def heard() -> bool:
         try:
-            now = rig.vision.rig.joints.get(arm_joint_names("ars_x"), 0.0, math.inf)
+            now = rig.vision.rig.joints.latest(arm_joint_names("ars_x"))
             return np.allclose(now, q, atol=1e-3)
         except FrameUnavailable:  # none heard yet
             return False
