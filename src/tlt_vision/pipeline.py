@@ -187,7 +187,7 @@ class PartPipeline:
         """The point cloud C-3PO is given for one detection (its reason when there is none), the
         depth's noise ``depth_noise`` (by default the pipeline's) filtered out."""
         noise = depth_noise or self.depth_noise
-        small = int(detection.mask.sum()) < self.keep_border_below
+        small = np.count_nonzero(detection.mask) < self.keep_border_below
         estimator = self.estimators.get(detection.object_class)
         cloud = masked_point_cloud(
             border_kept(detection.mask, depth) if small else detection.mask,

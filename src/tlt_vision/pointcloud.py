@@ -149,7 +149,7 @@ def masked_point_cloud(
     if not (intrinsics.fx > 0 and intrinsics.fy > 0):
         return _failed(f"invalid intrinsics fx={intrinsics.fx}, fy={intrinsics.fy}")
     sel = mask.astype(bool)
-    pixels = int(sel.sum())
+    pixels = np.count_nonzero(sel)
     if pixels == 0:
         return _failed("empty mask: part not in view")
     # Only the mask's box, with a pixel of margin for the erosion to see the mask's edge: a part

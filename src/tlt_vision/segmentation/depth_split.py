@@ -165,7 +165,7 @@ def join_collinear(masks: list[np.ndarray], scores: list[float], depth: np.ndarr
     each piece's back-projected pixels, if the caller has them already; returned joined too."""
     masks, scores = list(masks), list(scores)
     points = list(points) if points is not None else [RegionPoints.of(m, depth, k).points for m in masks]
-    areas = [int(m.sum()) for m in masks]
+    areas = [np.count_nonzero(m) for m in masks]  # full-frame masks: several times sum()'s speed
     axes = [_axis(p) for p in points]
     joined = True
     while joined:

@@ -64,7 +64,8 @@ def rgb_to_tensor(rgb: np.ndarray) -> torch.Tensor:
 def detect_rgb(model: MaskRCNN, rgb: np.ndarray, max_size: int | None) -> dict[str, torch.Tensor]:
     """Detections of one uint8 RGB image (H, W, 3): ``boxes``, ``labels``, ``scores`` and
     ``masks`` (D, H, W) at the image's own size, however small the model saw it, the probabilities
-    they were thresholded from (``mask_probs``, 1 on a semantic head's regions) and with a
+    the box branch's were thresholded from (``mask_probs``, (B, H, W) for the first B detections,
+    the box branch's; a semantic head's regions follow them, their mask their probability) and with a
     semantic head its ``semantic_probs`` (C, H, W) at that size too; on the CPU whatever device
     the model is on."""
     model.eval()

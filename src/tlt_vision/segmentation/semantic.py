@@ -24,7 +24,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import MaskRCNNConfig
 
 
@@ -124,31 +123,38 @@ def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area
     whole parts, and on their own make streaks of doubt on no part, which the last rule drops."""
     h, w = probs.shape[-2:]
     best = pixel_classes(probs, background_weight).cpu().numpy()
-    masks: list[np.ndarray] = []
+    found: list[tuple[np.ndarray, int]] = []  # (regions, region number) of each instance
     out_labels: list[int] = []
     scores: list[float] = []
+    boxes: list[tuple[int, int, int, int]] = []
     for label in labels:
-        count, regions = cv2.connectedComponents((best == label).astype(np.uint8), connectivity=8)
+        count, regions, stats, _ = cv2.connectedComponentsWithStats(
+            (best == label).astype(np.uint8), connectivity=8
+        )
         if count <= 1:
             continue
-        p = probs[label].detach().cpu().numpy()
-        area = np.bincount(regions.ravel(), minlength=count)
-        mass = np.bincount(regions.ravel(), weights=p.ravel(), minlength=count)
-        sure = np.bincount(regions.ravel(), weights=(p > SURE).ravel(), minlength=count)
+        # The sums over the label's own pixels only: a tenth of the frame or less.
+        inside = regions.ravel() > 0
+        at = regions.ravel()[inside]
+        p = probs[label].detach().cpu().numpy().ravel()[inside]
+        mass = np.bincount(at, weights=p, minlength=count)
+        sure = np.bincount(at, weights=p > SURE, minlength=count)
+        area = stats[:, cv2.CC_STAT_AREA]
         for k in range(1, count):
             if area[k] >= min_area and sure[k] > 0:
-                masks.append(regions == k)
+                x, y = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
+                boxes.append((x, y, x + stats[k, cv2.CC_STAT_WIDTH], y + stats[k, cv2.CC_STAT_HEIGHT]))
+                found.append((regions, k))
                 out_labels.append(label)
                 scores.append(float(mass[k] / area[k]))
     device = probs.device
-    if not masks:
-        return {"boxes": torch.zeros((0, 4), device=device),
-                "labels": torch.zeros(0, dtype=torch.long, device=device),
-                "scores": torch.zeros(0, device=device),
-                "masks": torch.zeros((0, h, w), dtype=torch.bool, device=device)}
-    m = torch.from_numpy(np.stack(masks)).to(device)
-    return {"boxes": boxes_from_masks(m), "labels": torch.tensor(out_labels, dtype=torch.long, device=device),
-            "scores": torch.tensor(scores, device=device), "masks": m}
+    masks = np.zeros((len(found), h, w), dtype=bool)
+    for i, ((regions, k), (x0, y0, x1, y1)) in enumerate(zip(found, boxes, strict=True)):
+        masks[i, y0:y1, x0:x1] = regions[y0:y1, x0:x1] == k  # a region lies within its box
+    return {"boxes": torch.tensor(boxes, dtype=torch.float32, device=device).reshape(-1, 4),
+            "labels": torch.tensor(out_labels, dtype=torch.long, device=device),
+            "scores": torch.tensor(scores, dtype=torch.float32, device=device),
+            "masks": torch.from_numpy(masks).to(device)}
 
 
 __all__ = ["SURE", "SemanticHead", "instances_from_semantic", "label_map", "pixel_classes", "semantic_loss",

@@ -43,9 +43,11 @@ def trim_by_semantic(
     if not bool(chosen.any()):
         return result
     thin = probs[list(semantic_labels)].amax(dim=0) > above  # once a frame, for every mask
+    rows = chosen.nonzero()[:, 0]
     masks = masks.clone()
-    masks[chosen] &= ~thin
-    kept = masks.flatten(1).any(dim=1)
+    masks[rows] = masks[rows] & ~thin
+    # An empty mask goes, trimmed or not; amax of the bytes is many times torch's any over a row.
+    kept = masks.flatten(1).view(torch.uint8).amax(dim=1) > 0
     out = dict(result)
     for key in ("boxes", "labels", "scores"):
         out[key] = result[key][kept]
