@@ -72,6 +72,8 @@ SCHEMA = {
             "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
             "second_look_score": opt("float", None, minimum=0.0, maximum=1.0),
             "semantic_background_weight": opt("float", None, minimum=0.01, maximum=1.0),
+            "semantic_vote": opt("bool", False,
+                                 doc="a thin region or piece of the class with the most probability over it"),
             "proposals": opt("int", None, minimum=1, maximum=5000,
                              doc="region proposals per image the box branch scores"),
             "second_look_closer": opt(
@@ -391,7 +393,7 @@ class VisionConfig:
         weights' own for those left out."""
         seg = self.raw["segmentation"]
         named = {"semantic_background_weight": seg["semantic_background_weight"],
-                 "rpn_post_nms_top_n_test": seg["proposals"]}
+                 "rpn_post_nms_top_n_test": seg["proposals"], "semantic_vote": seg["semantic_vote"]}
         return {key: value for key, value in named.items() if value is not None}
 
     @property
@@ -421,7 +423,8 @@ class VisionConfig:
             return None
         band = raw["width_band"]
         return DepthSplit(**{**raw, "width_band": tuple(band) if band else None,
-                             "depth_noise": self.depth_noise.fraction})
+                             "depth_noise": self.depth_noise.fraction,
+                             "vote": self.raw["segmentation"]["semantic_vote"]})
 
     @property
     def semantic_trim(self) -> SemanticTrim | None:

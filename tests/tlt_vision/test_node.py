@@ -584,6 +584,11 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     assert "segmentation.semantic_background_weight" in capsys.readouterr().err
     wrong = vision_config()
+    wrong["segmentation"]["semantic_vote"] = "yes"
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    assert "segmentation.semantic_vote" in capsys.readouterr().err
+    wrong = vision_config()
     wrong["axial_slide"] = {"classes": ["corner_joint"]}  # a cube has no axis to slide along
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2

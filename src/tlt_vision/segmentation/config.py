@@ -56,6 +56,9 @@ class MaskRCNNConfig:
     # stretches; below 1 fewer tubes break in two or vanish (models/vision/README.md). Applied
     # at inference only; the vision node sets it (node.yaml segmentation.semantic_background_weight).
     semantic_background_weight: float = 1.0
+    # A region is one of any thin class's pixels, of the class with the most probability over it
+    # (semantic.instances_from_semantic); False: one class's pixels. Applied at inference only.
+    semantic_vote: bool = False
 
     def __post_init__(self) -> None:
         if not self.semantic_background_weight > 0:

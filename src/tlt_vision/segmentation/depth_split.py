@@ -67,6 +67,18 @@ def piece_score(own: np.ndarray) -> float:
     return float(own.mean()) * float((own > SURE).mean())
 
 
+def voted(probs: Sequence[np.ndarray], piece: np.ndarray) -> tuple[int, float]:
+    """A thin piece's class, the index in ``probs`` (each thin class's probabilities over the
+    piece's box) of the most probability over its pixels, and its score: :func:`piece_score` of the
+    classes' probabilities together times that class's share of them. A part whose class the head
+    wavers between along it scores as a thin part it is sure of, halved at an even split."""
+    each = [q[piece] for q in probs]
+    mass = np.array([float(q.sum()) for q in each])
+    chosen = int(mass.argmax())
+    share = mass[chosen] / mass.sum() if mass.sum() > 0 else 0.0
+    return chosen, piece_score(np.sum(each, axis=0)) * float(share)
+
+
 def _scores(own: np.ndarray | None, piece: np.ndarray) -> bool:
     """Whether a piece (a mask over ``own``, its class's probabilities) can score above 0; without
     the probabilities it keeps its region's score."""
@@ -92,6 +104,10 @@ class DepthSplit:
     bend_tolerance: float | None = None
     # The depth camera's noise, a fraction of the depth (1 sigma), which the bend cut allows for.
     depth_noise: float = 0.0
+    # Each piece of the class with the most probability summed over it, scored by the thin
+    # classes' probabilities together times that class's share (:func:`voted`); False: of its
+    # region's class, scored by that class's probabilities.
+    vote: bool = False
 
 
 def depth_pieces(mask: np.ndarray, depth: np.ndarray, split: DepthSplit) -> list[np.ndarray]:
@@ -242,6 +258,9 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
         box = np.s_[y0:y1, x0:x1]
         label = int(result["labels"][i])
         own = probs[label][box].cpu().numpy() if probs is not None else None
+        if split.vote and probs is not None:
+            each = [probs[other][box].cpu().numpy() for other in labels]
+            own = np.sum(each, axis=0)  # a piece is kept when sure of being a thin part
         region = masks[i][box].cpu().numpy()
         # A piece without a pixel the head is sure of scores nothing (piece_score): not kept, and
         # not searched for bends, the cut's costliest step.
@@ -256,10 +275,14 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
             piece = np.zeros(masks.shape[-2:], dtype=bool)
             piece[box] = small
             score = piece_score(own[small]) if own is not None else float(result["scores"][i])
-            pieces[label][0].append(piece)
-            pieces[label][1].append(score * min(1.0, small.sum() / split.full_score_area))
+            into = label
+            if split.vote and probs is not None:
+                chosen, score = voted(each, small)
+                into = labels[chosen]
+            pieces[into][0].append(piece)
+            pieces[into][1].append(score * min(1.0, small.sum() / split.full_score_area))
             if seen is not None:
-                pieces[label][2].append(seen.of_pixels(small))
+                pieces[into][2].append(seen.of_pixels(small))
     new_masks, new_labels, new_scores = [], [], []
     for label, (class_masks, class_scores, class_points) in pieces.items():
         if camera_matrix is not None:
@@ -289,4 +312,4 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
 
 
 __all__ = ["DepthSplit", "depth_pieces", "join_collinear", "piece_score", "radii_by_label",
-           "split_by_depth", "width_ratio"]
+           "split_by_depth", "voted", "width_ratio"]

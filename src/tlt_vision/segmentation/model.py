@@ -36,7 +36,7 @@ from tlt_vision.segmentation.semantic import (
 
 # MaskRCNNConfig fields a user of trained weights may change (MaskRCNN.set_inference).
 INFERENCE_SETTINGS = ("rpn_post_nms_top_n_test", "score_threshold", "detection_nms", "detections_per_image",
-                      "semantic_background_weight")
+                      "semantic_background_weight", "semantic_vote")
 
 
 class MaskRCNN(nn.Module):
@@ -92,7 +92,7 @@ class MaskRCNN(nn.Module):
         probs = torch.softmax(upsample_logits(logits, size), dim=1)
         for r, p in zip(results, probs, strict=True):
             found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area,
-                                            self.cfg.semantic_background_weight)
+                                            self.cfg.semantic_background_weight, self.cfg.semantic_vote)
             # ``mask_probs`` stay the box branch's alone, whose detections come first: a region's
             # probability is its mask, and a frame's regions as full-size floats took 10 ms.
             for key in r:

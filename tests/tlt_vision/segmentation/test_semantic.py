@@ -73,6 +73,31 @@ def test_a_background_weight_below_one_keeps_a_tube_whole_through_its_doubtful_p
     assert torch.equal(pixel_classes(probs), probs.max(dim=0).indices)
 
 
+def test_with_the_vote_a_part_whose_class_wavers_is_one_region_of_its_likelier_class():
+    """A bar whose pixels the head calls tube and frame side by turns (0.55 against 0.35, the tube
+    ahead on most of them) is seven pieces of both classes class by class, one tube with the vote,
+    scored by its tube probability; a pixel of a box-branch class still parts it."""
+    image = np.zeros((5, 24), dtype=np.int64)
+    image[2, 1:22] = 1
+    image[2, 5:8] = image[2, 12:14] = image[2, 17:19] = 3
+    probs = _probs(image, confidence=0.5)
+    probs[:, 2, 1:22] = torch.tensor([0.1, 0.0, 0.0, 0.0, 0.0, 0.0])[:, None]
+    probs[1, 2, 1:22] = torch.where(torch.from_numpy(image[2, 1:22] == 1), 0.55, 0.35)
+    probs[3, 2, 1:22] = 0.9 - probs[1, 2, 1:22]
+    apart = instances_from_semantic(probs, labels=(1, 3), min_area=1)
+    assert sorted(apart["labels"].tolist()) == [1, 1, 1, 1, 3, 3, 3]
+    whole = instances_from_semantic(probs, labels=(1, 3), min_area=1, vote=True)
+    assert whole["labels"].tolist() == [1] and whole["boxes"].tolist() == [[1, 2, 22, 3]]
+    assert float(whole["scores"][0]) == pytest.approx((14 * 0.55 + 7 * 0.35) / 21)
+    image[2, 10] = 2  # an end fitting between: two parts
+    probs[:, 2, 10] = torch.tensor([0.0, 0.1, 0.9, 0.0, 0.0, 0.0])
+    two = instances_from_semantic(probs, labels=(1, 3), min_area=1, vote=True)
+    assert two["boxes"].tolist() == [[1, 2, 10, 3], [11, 2, 22, 3]]
+    # Without a pixel sure of being a thin part (tube and frame side together), no part at all.
+    probs[1, 2, 1:22], probs[3, 2, 1:22] = 0.2, 0.2
+    assert len(instances_from_semantic(probs, labels=(1, 3), min_area=1, vote=True)["labels"]) == 0
+
+
 def test_with_the_background_weighted_a_pixel_takes_the_likelier_thin_class():
     probs = torch.tensor([0.5, 0.2, 0.0, 0.3, 0.0, 0.0])[:, None, None]
     assert int(pixel_classes(probs, 0.5)) == 3
