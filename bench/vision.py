@@ -21,6 +21,10 @@ detected part, and prints against the issue's goals:
 * segmentation and pose of every detected part of a 640x480 frame, median and p95 over the frames
   (goal <= 500 ms on 2 CPU cores).
 
+``--picture PATH`` draws the first frames (``--picture-frames``) as the node saw them: its masks,
+and every posed part's model where C-3PO put it, green when certified and red when not
+(tlt_vision.pose_picture).
+
 The twin's images are exact. ``--depth-noise F`` adds Gaussian noise of F times each pixel's depth
 (a stereo camera's, about 0.01 at a few metres; drawn the same for each image every run), to see
 what of the figures holds on a real camera's depth, and tells the node's pipeline so (node.yaml
@@ -35,6 +39,7 @@ vertical one.
 
     .venv/bin/python bench/vision.py [--weights models/vision/mask_rcnn.pt] [--count 40]
         [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01] [--image-noise 3]
+        [--picture vision_poses.png] [--picture-frames 4]
 """
 
 from __future__ import annotations
@@ -60,6 +65,7 @@ from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rc
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.certificate import visible_groups
 from tlt_vision.pose.errors import add_s, rotation_error_deg
+from tlt_vision.pose_picture import PosedFrame, write_pose_picture
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
@@ -241,7 +247,11 @@ def main() -> int:
                    help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
     p.add_argument("--image-noise", type=float, default=0.0,
                    help="Gaussian noise added to each pixel's colours, in grey levels of 255 (default none)")
+    p.add_argument("--picture", type=Path, help="draw the first frames' masks and posed models into this PNG")
+    p.add_argument("--picture-frames", type=int, default=4, help="frames drawn (default 4)")
     args = p.parse_args()
+    if args.picture_frames < 1:
+        p.error(f"--picture-frames {args.picture_frames}: at least one")
     if not 0.0 <= args.image_noise <= 64:
         p.error(f"--image-noise {args.image_noise}: grey levels from 0 to 64")
     if not 0.0 <= args.depth_noise <= 0.1:
@@ -276,6 +286,7 @@ def main() -> int:
         ap, ap_rgb = MaskAP(len(classes)), MaskAP(len(classes))
         from_model, from_twin = PoseTally(), PoseTally()
         frame_s, seg_s, parts = [], [], []
+        pictured: list[PosedFrame] = []
         for i in range(len(images)):
             s = images[i]
             if args.depth_noise:
@@ -290,8 +301,11 @@ def main() -> int:
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work.
             frame_items = [d for d in dets if d.object_class in POSED]
-            frame_pipeline.observe(frame_items, s.depth, intrinsics)
+            observations = frame_pipeline.observe(frame_items, s.depth, intrinsics)
             frame_s.append(time.perf_counter() - t0)
+            if args.picture and len(pictured) < args.picture_frames:
+                pictured.append(PosedFrame(f"{images.path(i).name}", s.rgb, s.intrinsics, frame_items,
+                                           observations))
             seg_s.append(t1 - t0)
             parts.append(len(frame_items))
             gt_masks = torch.as_tensor(s.masks, dtype=torch.bool)
@@ -345,6 +359,10 @@ def main() -> int:
     print(f"segmentation + pose of every part in a frame ({statistics.mean(parts):.1f} parts on "
           f"average): median {med * 1000:.0f} ms, p95 {p95 * 1000:.0f} ms (goal <= 500 ms; ratio "
           f"{med / 0.5:.2f}); segmentation alone median {statistics.median(seg_s) * 1000:.0f} ms")
+    if args.picture:
+        models = {cls: e.model for cls, e in frame_pipeline.estimators.items()}
+        written = write_pose_picture(args.picture, pictured, models, classes)
+        print(f"picture of {len(pictured)} frames: {written}")
     print("not measured here: inspection catch and false-reject rates (tests/tlt_vision/"
           "test_twin_parts.py checks each defect kind), AprilTag at 1 m (tests/tlt_vision/test_apriltag.py)")
     return 0
