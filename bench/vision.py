@@ -63,8 +63,7 @@ from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn
 from tlt_vision.pointcloud import Intrinsics
-from tlt_vision.pose.certificate import visible_groups
-from tlt_vision.pose.errors import add_s, rotation_error_deg
+from tlt_vision.pose.errors import add_s, non_degenerate_at, rotation_error_deg
 from tlt_vision.pose_picture import PosedFrame, write_pose_picture
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb
@@ -104,14 +103,6 @@ class PoseTally:
 
     def total(self, table: dict[str, int]) -> int:
         return sum(table.values())
-
-
-def non_degenerate_at(model, points: np.ndarray, pose: np.ndarray) -> bool:
-    """Whether ``points`` (camera frame) show enough of ``model``'s keypoint groups at ``pose``."""
-    kp = np.asarray(model.keypoints) @ pose[:3, :3].T + pose[:3, 3]
-    groups = visible_groups(torch.as_tensor(points, dtype=torch.float32),
-                            torch.as_tensor(kp, dtype=torch.float32), model.visibility)
-    return len(groups) >= model.visibility.groups_required
 
 
 def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally) -> None:

@@ -4,7 +4,9 @@ A symmetric part has several true poses (a cube's 24, the square frame's 8, a tu
 and the rotation of a tube, end fitting or rivet about its own axis (model z) is not observable,
 so the rotation error is taken against the nearest symmetric image of the truth and, for those
 axial classes, is the angle between the axes alone. ADD-S (the mean distance of the estimated
-model's surface points to the true model's surface) is blind to symmetry by construction.
+model's surface points to the true model's surface) is blind to symmetry by construction. A view
+that shows too little of its part at the *true* pose (:func:`non_degenerate_at`) may not be
+certified by any estimate, and is left out of the certified fraction.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numpy as np
 import torch
 
 from tlt_vision.cad.models import CadModel
+from tlt_vision.pose.certificate import visible_groups
 
 # Round parts whose spin about their own axis no camera can see (docs/vision.md).
 AXIAL_CLASSES = frozenset({"strut_tube", "end_fitting", "rivet"})
@@ -54,4 +57,13 @@ def add_s(
     return float(dist.abs().mean())
 
 
-__all__ = ["AXIAL_CLASSES", "add_s", "rotation_error_deg"]
+def non_degenerate_at(model: CadModel, points: np.ndarray, pose: np.ndarray) -> bool:
+    """Whether ``points`` (N, 3, camera frame) show enough of ``model``'s keypoint groups with the
+    part at ``pose`` (4x4, camera frame): the certificate's own rule, at the truth."""
+    kp = np.asarray(model.keypoints) @ pose[:3, :3].T + pose[:3, 3]
+    groups = visible_groups(torch.as_tensor(points, dtype=torch.float32),
+                            torch.as_tensor(kp, dtype=torch.float32), model.visibility)
+    return len(groups) >= model.visibility.groups_required
+
+
+__all__ = ["AXIAL_CLASSES", "add_s", "non_degenerate_at", "rotation_error_deg"]
