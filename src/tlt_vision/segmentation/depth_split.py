@@ -274,11 +274,12 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
         for small in smalls:
             piece = np.zeros(masks.shape[-2:], dtype=bool)
             piece[box] = small
-            score = piece_score(own[small]) if own is not None else float(result["scores"][i])
-            into = label
             if split.vote and probs is not None:
                 chosen, score = voted(each, small)
                 into = labels[chosen]
+            else:
+                score = piece_score(own[small]) if own is not None else float(result["scores"][i])
+                into = label
             pieces[into][0].append(piece)
             pieces[into][1].append(score * min(1.0, small.sum() / split.full_score_area))
             if seen is not None:
