@@ -18,6 +18,9 @@
 # scene weights (render_dataset's --scenes, e.g. "held=0.2 presented=0.3 ..."; default its own).
 # NOISE grey levels and BLUR pixels: the most sensor noise and blur added to a training image (the
 # trainer's --sensor-noise and --blur; 0, none, as the shipped model trained).
+# NODE_CONFIG (config/vision/node.yaml): validate on the masks as the vision node so configured
+# makes them (the trainer's --node-config; the benchmark's figure, which picks the best epoch);
+# NODE_CONFIG= validates the model's masks alone.
 # SEED_BASE (1000): shard k renders with seed SEED_BASE + k; give each lending's run new seeds.
 # RENDER=0 renders nothing: the run waits for another run's shards in the same DATA_DIR (its
 # "rendered" marker) and trains on them, so two models can train side by side on one device.
@@ -47,6 +50,7 @@ NOISE=${NOISE:-0}
 BLUR=${BLUR:-0}
 SCENES=${SCENES:-}
 SEED_BASE=${SEED_BASE:-1000}
+NODE_CONFIG=${NODE_CONFIG-config/vision/node.yaml}
 MODEL=${MODEL:---config semantic_classes=[\"strut_tube\",\"cross_frame\"] --config mask_pool=28 --config anchor_sizes=[16,32,64,128] --config rpn_fg_iou=0.5}
 data=${DATA_DIR:-/tmp/tlt-vision-data}
 mkdir -p "$out" "$data"
@@ -56,7 +60,7 @@ smoke_train() {
     # shellcheck disable=SC2086
     "$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" \
         --out "$out/smoke_out/w.pt" --epochs 1 --batch 1 --ranks $(( RANKS > 1 ? 2 : 1 )) \
-        --device "$DEVICE" $MODEL > "$out/smoke.log"
+        --device "$DEVICE" $MODEL ${NODE_CONFIG:+--node-config "$NODE_CONFIG"} > "$out/smoke.log"
     rm -rf "$out/smoke_out"
     log "smoke test passed"
 }
@@ -112,7 +116,7 @@ log "training on $DEVICE for at most $BUDGET_MIN min"
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
     --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" \
     --log-every 50 --sensor-noise "$NOISE" --blur "$BLUR" $MODEL \
-    ${INIT:+--init "$INIT"} \
+    ${INIT:+--init "$INIT"} ${NODE_CONFIG:+--node-config "$NODE_CONFIG"} \
     2>&1 | tee "$out/train.log"
 rm -f "$out/mask_rcnn_checkpoint.pt"  # optimiser state: large, and not what ships
 log "done: $out"

@@ -44,6 +44,7 @@ from tlt_vision.weights import WeightsError
 
 if TYPE_CHECKING:
     from tlt_vision.node_config import VisionConfig
+    from tlt_vision.segmentation.model import MaskRCNN
 
 MASK_RCNN_KIND = "mask_rcnn"
 
@@ -82,19 +83,19 @@ class TwinLabels:
 class MaskRcnnSegmenter:
     streams = ("rgb",)
 
-    def __init__(self, weights: str | Path, min_score: float, depth_split: DepthSplit | None = None,
-                 radii: Mapping[str, float] | None = None, trim: SemanticTrim | None = None,
-                 overlaps: ExclusiveOverlaps | None = None,
+    def __init__(self, model: MaskRCNN, max_size: int | None, min_score: float,
+                 depth_split: DepthSplit | None = None, radii: Mapping[str, float] | None = None,
+                 trim: SemanticTrim | None = None, overlaps: ExclusiveOverlaps | None = None,
                  camera_noise: Mapping[str, float] | None = None,
                  inference: Mapping[str, Any] | None = None) -> None:
-        from tlt_vision.segmentation.inference import load_mask_rcnn
-
-        # The configuration and the image size come from the weights' manifest, as trained;
+        """Segment with ``model`` at ``max_size`` (the image size it was trained at); ValueError
+        for a trim or overlap rule naming a class its semantic head segments."""
         # ``inference`` (MaskRCNN.set_inference) is the node's choice, not the weights'.
-        self.model, manifest = load_mask_rcnn(weights)
-        self.model.set_inference(**(inference or {}))
+        self.model = model
+        self.inference = dict(inference or {})
+        self.model.set_inference(**self.inference)
         self.cfg = self.model.cfg
-        self.max_size: int | None = manifest["settings"].get("max_size")
+        self.max_size = max_size
         self.min_score = min_score
         self.depth_split = depth_split
         # Each camera's depth noise (a fraction of the depth), which the bend cut allows for; a
@@ -104,18 +105,37 @@ class MaskRcnnSegmenter:
         self.trim, self.overlaps = trim, overlaps
         for key, named in (("semantic_trim", trim), ("exclusive_overlaps", overlaps)):
             if named is not None and (thin := sorted(set(named.classes) & set(self.cfg.semantic_classes))):
-                raise WeightsError(weights, f"its semantic head segments {', '.join(thin)}, which "
-                                   f"segmentation.{key}.classes may not name (it acts on box masks)")
+                raise ValueError(f"its semantic head segments {', '.join(thin)}, which "
+                                 f"segmentation.{key}.classes may not name (it acts on box masks)")
 
     @classmethod
-    def from_config(cls, config: VisionConfig, weights: str | Path | None = None) -> MaskRcnnSegmenter:
-        """The segmenter of a vision node run with ``config`` (with other ``weights`` if given)."""
+    def load(cls, weights: str | Path, min_score: float, **options: Any) -> MaskRcnnSegmenter:
+        """The segmenter of trained ``weights``: the model's configuration and image size from
+        their manifest, as trained; WeightsError naming the path for weights that do not fit."""
+        from tlt_vision.segmentation.inference import load_mask_rcnn
+
+        model, manifest = load_mask_rcnn(weights)
+        try:
+            return cls(model, manifest["settings"].get("max_size"), min_score, **options)
+        except ValueError as exc:
+            raise WeightsError(weights, str(exc)) from exc
+
+    @classmethod
+    def from_config(cls, config: VisionConfig, weights: str | Path | None = None, *,
+                    model: MaskRCNN | None = None, max_size: int | None = None) -> MaskRcnnSegmenter:
+        """The segmenter of a vision node run with ``config``, with other ``weights`` if given, or
+        around a ``model`` in memory (one being trained) that sees images of ``max_size``."""
         from tlt_vision.cad.models import thin_part_radii
         from tlt_vision.node_config import repo_path
 
-        return cls(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
-                   config.depth_split, thin_part_radii(), config.semantic_trim, config.exclusive_overlaps,
-                   config.raw["depth_noise"]["cameras"], config.mask_rcnn_inference)
+        options = {"depth_split": config.depth_split, "radii": thin_part_radii(),
+                   "trim": config.semantic_trim, "overlaps": config.exclusive_overlaps,
+                   "camera_noise": config.raw["depth_noise"]["cameras"],
+                   "inference": config.mask_rcnn_inference}
+        if model is not None:
+            return cls(model, max_size, config.score_floor, **options)
+        return cls.load(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
+                        **options)
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb

@@ -1,7 +1,8 @@
 """scripts/train_mask_rcnn.sh on the CPU at toy size: it renders the shards (with the seeds and
 scene mix asked for) and the validation set, trains within its budget and leaves the weights,
 figures and logs; a second run trains on the first one's images from its weights, in two processes
-sharing each step, with sensor noise and blur added to its images; a device it cannot use stops it
+sharing each step, with sensor noise and blur added to its images, validated on the model's masks
+alone where the first was validated on the masks as the node makes them; a device it cannot use stops it
 at the smoke test, before anything is rendered at scale."""
 
 from __future__ import annotations
@@ -41,12 +42,13 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert [r["seed"] for r in figures["train_recipes"]] == [1500, 1501]
     assert all(r["scenes"] == {"held": 0.5, "feeder": 0.5} for r in figures["train_recipes"])
     assert "epoch 1/1 val mask AP50" in (out / "train.log").read_text()
+    assert figures["val_as"] == "as the node segments (config/vision/node.yaml)"  # NODE_CONFIG's default
     # A second run on the same images renders nothing and starts from the first run's weights; its
     # two processes (RANKS) take two images each of the step, and its smoke test trains with two.
     again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
                            timeout=300, env={**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"),
                                              "RENDER": "0", "INIT": str(out / "mask_rcnn.pt"), "RANKS": "2",
-                                             "NOISE": "4", "BLUR": "1.5"})
+                                             "NOISE": "4", "BLUR": "1.5", "NODE_CONFIG": ""})
     assert again.returncode == 0, again.stdout + again.stderr
     assert "rendering 4 images" not in again.stdout
     assert "rendered 4 training images in 2 shards" in again.stdout
@@ -55,8 +57,9 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert "2 processes sharing each step's 4 images" in log
     assert "2 processes sharing each step's 2 images" in (tmp_path / "again" / "smoke.log").read_text()
     # What a camera adds, as asked, recorded with the weights; the first run's had none.
-    augmented = json.loads((tmp_path / "again" / "mask_rcnn.json").read_text())["extra"]["figures"]["augment"]
-    assert (augmented["noise"], augmented["blur"]) == (4.0, 1.5)
+    second = json.loads((tmp_path / "again" / "mask_rcnn.json").read_text())["extra"]["figures"]
+    assert (second["augment"]["noise"], second["augment"]["blur"]) == (4.0, 1.5)
+    assert second["val_as"] == "the model alone"
     assert (figures["augment"]["noise"], figures["augment"]["blur"]) == (0.0, 0.0)
 
 

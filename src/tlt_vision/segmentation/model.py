@@ -63,6 +63,10 @@ class MaskRCNN(nn.Module):
         for module in (self, self.rpn, self.roi_heads):
             module.cfg = cfg
 
+    def inference_settings(self) -> dict[str, Any]:
+        """The inference settings in force (:data:`INFERENCE_SETTINGS`), to set back later."""
+        return {key: getattr(self.cfg, key) for key in INFERENCE_SETTINGS}
+
     def features(self, images: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
         """The stem's stride-2 features and the FPN levels [P2..P5]."""
         stem, feats = self.backbone.pyramid((images - self.pixel_mean) / self.pixel_std)

@@ -26,6 +26,12 @@ Evaluate saved weights::
 prints AP50 per class and mean and the mean inference time per image (as the node runs it:
 :func:`tlt_vision.segmentation.inference.detect_rgb`, full-size image in, full-size masks out).
 
+With ``--node-config config/vision/node.yaml`` the validation AP (in training, and so the best
+epoch, and with ``--evaluate``) is that of the masks as the vision node makes them
+(:meth:`tlt_vision.segmentation_source.MaskRcnnSegmenter.refine`: its inference settings, the
+depth cut of thin parts, the trim and the exclusive overlaps), not the model's alone: the figure
+the benchmark holds to its goal, and on the shipped weights 0.64 against 0.91.
+
 An input that cannot be used (not an image set, another class list, no images, unreadable or
 mismatched checkpoint or weights) ends the command with exit status 2 and the path and reason on
 stderr.
@@ -41,7 +47,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -63,6 +69,9 @@ from tlt_vision.segmentation.model import MaskRCNN, train_step
 from tlt_vision.train.data_parallel import Ranks, run_ranks
 from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets
 from tlt_vision.weights import WeightsError, read_manifest, save_weights
+
+if TYPE_CHECKING:
+    from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
 VERSION = "1"
 LOSSES = ("rpn_objectness", "rpn_box", "roi_cls", "roi_box", "roi_mask")
@@ -225,22 +234,47 @@ def resolve_device(name: str) -> torch.device:
 # ---------------------------------------------------------------------------------- evaluation
 
 
+def node_segmenter(path: str | Path, model: MaskRCNN, max_size: int | None) -> MaskRcnnSegmenter:
+    """The vision node's segmentation (configured by the node.yaml at ``path``) around ``model``,
+    whose own inference settings stay in force but while :func:`evaluate` uses the node's."""
+    from tlt_vision.node_config import load_config
+    from tlt_vision.segmentation_source import MaskRcnnSegmenter
+
+    own = model.inference_settings()
+    try:
+        segmenter = MaskRcnnSegmenter.from_config(load_config(path), model=model, max_size=max_size)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--node-config {path}: {exc}") from exc
+    model.set_inference(**own)
+    return segmenter
+
+
 def evaluate(
-    model: MaskRCNN, images: ImageSet, max_size: int | None, limit: int | None = None
+    model: MaskRCNN, images: ImageSet, max_size: int | None, limit: int | None = None,
+    node: MaskRcnnSegmenter | None = None,
 ) -> dict[str, Any]:
     """Mask AP50 of ``model`` on the set at full resolution: ``map``, ``per_class`` {name: AP}
-    (classes with ground truth), ``seconds_per_image`` (inference only), ``images``."""
+    (classes with ground truth), ``seconds_per_image`` (segmentation, not scoring), ``images``; with
+    ``node`` (:func:`node_segmenter` around ``model``), of the masks as the node makes them."""
     n = len(images) if limit is None else min(limit, len(images))
     acc = MaskAP(len(images.classes))
     seconds = 0.0
-    for i in range(n):
-        s = images[i]
-        t0 = time.perf_counter()
-        pred = detect_rgb(model, s.rgb, max_size)
-        seconds += time.perf_counter() - t0
-        gt = {"masks": torch.as_tensor(s.masks, dtype=torch.bool),
-              "labels": torch.as_tensor(s.labels, dtype=torch.long)}
-        acc.add(pred, gt)
+    own = model.inference_settings()
+    if node is not None:
+        model.set_inference(**node.inference)
+    try:
+        for i in range(n):
+            s = images[i]
+            t0 = time.perf_counter()
+            pred = detect_rgb(model, s.rgb, max_size)
+            if node is not None:
+                pred = node.refine(pred, s.depth, s.intrinsics)
+            seconds += time.perf_counter() - t0
+            gt = {"masks": torch.as_tensor(s.masks, dtype=torch.bool),
+                  "labels": torch.as_tensor(s.labels, dtype=torch.long)}
+            acc.add(pred, gt)
+    finally:
+        model.set_inference(**own)
     result = acc.result()
     per_class = {images.classes[label - 1]: ap for label, ap in result["per_class"].items()}
     return {"map": result["map"], "per_class": per_class, "seconds_per_image": seconds / max(n, 1),
@@ -500,6 +534,8 @@ def open_inputs(args: argparse.Namespace) -> Inputs:
     if len(train_set) < args.batch * args.ranks:
         raise InputError(f"{', '.join(map(str, train_set.roots))}: {len(train_set)} images, fewer than "
                          f"--batch {args.batch} times --ranks {args.ranks}")
+    if args.node_config:
+        node_segmenter(args.node_config, MaskRCNN(cfg), args.max_size)  # refused here, not after an epoch
     return Inputs(cfg, settings, train_set, val_set, device, out)
 
 
@@ -533,6 +569,10 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         say(f"initialised from {args.init}" + (f"; {len(fresh)} tensors fresh, from {fresh[0]}"
                                                 if fresh else ""), flush=True)
     model.to(device)
+    node = None
+    if args.node_config and ranks.leader:  # only the leader validates
+        node = node_segmenter(args.node_config, model, args.max_size)
+    val_as = f"as the node segments ({args.node_config})" if node is not None else "the model alone"
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment(noise=args.sensor_noise, blur=args.blur)
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
@@ -556,7 +596,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     if ranks.size > 1:
         torch.manual_seed(args.seed + ranks.rank)  # each process samples its own anchors and RoIs
     say(f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
-        + (f", val {val_set.root} ({len(val_set)} images)" if val_set else ", no validation set")
+        + (f", val {val_set.root} ({len(val_set)} images, {val_as})" if val_set else ", no validation set")
         + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
         f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
         f"device {device}; {args.workers} loader workers"
@@ -629,7 +669,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         }
         improved = True
         if val_set is not None and ranks.leader:
-            result = evaluate(model, val_set, args.max_size, args.val_limit)
+            result = evaluate(model, val_set, args.max_size, args.val_limit, node)
             record.update(val_map=result["map"], val_ap50=result["per_class"],
                           val_seconds_per_image=result["seconds_per_image"])
             improved = result["map"] > best_map
@@ -649,6 +689,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                 "train": [str(root) for root in train_set.roots],
                 "train_recipes": [images.recipe for images in train_set.sets],
                 "val": str(val_set.root) if val_set else None,
+                "val_as": val_as if val_set else None,
                 "final_losses": record["train_losses"],
                 "val_map": record["val_map"],
                 "val_ap50": record["val_ap50"],
@@ -699,9 +740,11 @@ def evaluate_command(args: argparse.Namespace) -> int:
     model.to(device)
     max_size = manifest["settings"].get("max_size")
     images = open_set(args.val, model.cfg.classes)
-    result = evaluate(model, images, max_size, args.val_limit)
+    node = node_segmenter(args.node_config, model, max_size) if args.node_config else None
+    result = evaluate(model, images, max_size, args.val_limit, node)
     print(f"{args.evaluate} on {images.root} ({result['images']} images, max size {max_size or 'full'}, "
-          f"{args.threads} threads, {device})")
+          f"{args.threads} threads, {device}), "
+          + (f"as the node segments ({args.node_config})" if node is not None else "the model alone"))
     for c in model.cfg.classes:
         ap = result["per_class"].get(c)
         print(f"  {c:<14} AP50 {ap:.3f}" if ap is not None else f"  {c:<14} AP50 -  (no instances)")
@@ -749,6 +792,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                         "(the learning rate's decay is fitted to them)")
     p.add_argument("--log-every", type=int, default=10, help="steps between progress lines")
     p.add_argument("--val-limit", type=int, default=None, help="evaluate on the first N validation images")
+    p.add_argument("--node-config", metavar="NODE_YAML",
+                   help="validate the masks as the vision node configured by this file makes them "
+                        "(e.g. config/vision/node.yaml), not the model's alone")
     p.add_argument("--resume", help="checkpoint (<out stem>_checkpoint.pt) to continue from")
     p.add_argument("--init", metavar="WEIGHTS",
                    help="start from these trained weights (tensors of the same name and shape)")
@@ -772,6 +818,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         p.error("--init and --resume exclude each other (a checkpoint holds the weights)")
     if args.evaluate and not args.val:
         p.error("--evaluate needs --val")
+    if args.node_config and not args.val:
+        p.error("--node-config needs --val")
     if not args.evaluate and not args.train:
         p.error("--train is required (or --evaluate WEIGHTS --val DIR)")
     return args

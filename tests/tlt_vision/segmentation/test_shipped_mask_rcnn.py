@@ -184,9 +184,9 @@ def test_the_nodes_segmenter_leaves_no_pixel_in_two_end_fittings_but_duplicates(
 
 def test_a_trim_or_overlap_rule_of_a_class_the_semantic_head_segments_is_refused_naming_the_weights():
     with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments strut_tube.*semantic_trim"):
-        MaskRcnnSegmenter(WEIGHTS, 0.3, trim=SemanticTrim(("end_fitting", "strut_tube"), 0.3))
+        MaskRcnnSegmenter.load(WEIGHTS, 0.3, trim=SemanticTrim(("end_fitting", "strut_tube"), 0.3))
     with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments cross_frame.*exclusive_overlaps"):
-        MaskRcnnSegmenter(WEIGHTS, 0.3, overlaps=ExclusiveOverlaps(("rivet", "cross_frame"), 0.6))
+        MaskRcnnSegmenter.load(WEIGHTS, 0.3, overlaps=ExclusiveOverlaps(("rivet", "cross_frame"), 0.6))
 
 
 def test_the_nodes_bend_cut_parts_frame_sides_meeting_at_a_corner(results):
@@ -211,3 +211,28 @@ def test_the_class_vote_finds_more_tubes_and_frame_sides_and_changes_nothing_els
         assert node[label] >= unvoted[label] + gain, (label, node, unvoted)
     for label in (2, 4, 5):
         assert node[label] == unvoted[label]
+
+
+def test_the_trainers_validation_as_the_node_segments_scores_the_nodes_masks(held_out):
+    """``mask_rcnn --node-config``: a model in training validated on the masks the node would make
+    of it (the figure the benchmark holds to its goal), the model's own inference settings in force
+    again after each validation."""
+    from tlt_vision.train.mask_rcnn import evaluate, node_segmenter
+
+    model, manifest = load_mask_rcnn(WEIGHTS)
+    max_size = manifest["settings"]["max_size"]
+    own = model.inference_settings()
+    node = node_segmenter(ROOT / "config" / "vision" / "node.yaml", model, max_size)
+    assert model.inference_settings() == own
+    n = 10
+    as_node = evaluate(model, held_out, max_size, n, node)
+    assert model.inference_settings() == own
+    seg = MaskRcnnSegmenter.from_config(load_config())
+    acc = MaskAP(len(held_out.classes))
+    for i in range(n):
+        sample = held_out[i]
+        found = seg.refine(detect_rgb(seg.model, sample.rgb, seg.max_size), sample.depth, sample.intrinsics)
+        acc.add(found, {"masks": torch.as_tensor(sample.masks, dtype=torch.bool),
+                        "labels": torch.as_tensor(sample.labels, dtype=torch.long)})
+    assert as_node["map"] == pytest.approx(acc.result()["map"])
+    assert as_node["map"] >= evaluate(model, held_out, max_size, n)["map"] + 0.1  # not the model alone

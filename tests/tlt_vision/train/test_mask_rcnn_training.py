@@ -5,6 +5,7 @@ import contextlib
 import io
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -120,7 +121,7 @@ def test_saved_weights_load_in_the_node_and_a_mismatched_manifest_is_refused(run
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     # A dozen epochs on sixteen images leave the class scores near 0.3 (of six classes).
-    seg = MaskRcnnSegmenter(run["out"], min_score=0.2)
+    seg = MaskRcnnSegmenter.load(run["out"], min_score=0.2)
     sample = open_set(run["val"], CLASSES)[0]
     frame = CameraFrame("zed_1", 0.0, "zed_1_optical", None, np.eye(3), {"rgb": sample.rgb})
     dets = seg.detect(frame)
@@ -151,7 +152,7 @@ def test_saved_weights_load_in_the_node_and_a_mismatched_manifest_is_refused(run
             manifest["settings"]["model"]["classes"] = value
         bad.with_suffix(".json").write_text(json.dumps(manifest))
         with pytest.raises(WeightsError, match=reason):
-            MaskRcnnSegmenter(bad, min_score=0.5)
+            MaskRcnnSegmenter.load(bad, min_score=0.5)
     wider = tmp_path / "wider.pt"
     shutil.copy(run["out"], wider)
     manifest = json.loads(run["out"].with_suffix(".json").read_text())
@@ -202,6 +203,36 @@ def test_evaluate_prints_ap_per_class_and_time(run, capsys):
     assert f"corner_joint   AP50 {figures['val_ap50']['corner_joint']:.3f}" in text
     assert f"mean           AP50 {figures['val_map']:.3f}" in text
     assert "strut_tube     AP50 -" in text and "ms per image" in text
+
+
+def test_validation_as_the_node_segments_is_named_in_the_log_manifest_and_evaluation(trained, tmp_path,
+                                                                                     capsys):
+    """``--node-config``: the validation AP is that of the node's masks (the shipped model's case is
+    tests/tlt_vision/segmentation/test_shipped_mask_rcnn.py), and every report says which it is."""
+    node_yaml = str(Path(__file__).resolve().parents[3] / "config" / "vision" / "node.yaml")
+    out = tmp_path / "w.pt"
+    args = ["--train", str(trained["train"]), "--val", str(trained["val"]), "--out", str(out),
+            "--epochs", "1", "--batch", "4", "--threads", "1", "--node-config", node_yaml, *CONFIG_ARGS]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert f"val {trained['val']} (6 images, as the node segments ({node_yaml}))" in text
+    assert read_manifest(out)["extra"]["figures"]["val_as"] == f"as the node segments ({node_yaml})"
+    assert main(["--evaluate", str(out), "--val", str(trained["val"]), "--node-config", node_yaml]) == 0
+    assert f"as the node segments ({node_yaml})" in capsys.readouterr().out
+    assert main(["--evaluate", str(out), "--val", str(trained["val"])]) == 0
+    assert "the model alone" in capsys.readouterr().out
+    bad = tmp_path / "node.yaml"
+    text = Path(node_yaml).read_text()
+    assert "\n  min_score: 0.3\n" in text
+    bad.write_text(text.replace("\n  min_score: 0.3\n", "\n  min_score: 2\n"))
+    refused = tmp_path / "refused.pt"
+    assert main([*args, "--out", str(refused), "--node-config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"--node-config {bad}: " in err and "segmentation.min_score" in err, err
+    assert not refused.exists()  # refused before training, not after an epoch
+    with pytest.raises(SystemExit):
+        parse_args(["--train", str(trained["train"]), "--node-config", node_yaml])
+    assert "--node-config needs --val" in capsys.readouterr().err
 
 
 def test_bad_inputs_exit_2_naming_the_path(tmp_path, capsys):
