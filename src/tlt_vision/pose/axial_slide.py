@@ -14,7 +14,7 @@ takes the slide with the fewest, when the pose as it was overhangs by ``min_over
 more and the slide removes at least ``min_gain`` of that: a view whose overhang hardly changes
 along the axis says nothing about it, and the pose stays. On the held-out images (seed 900) the
 certified end fittings within the ADD-S goal went from 92.7 to 99.5 % on the twin's masks, and
-from 92.7 to 97.6 % on Mask R-CNN's (models/vision/README.md). config/vision/node.yaml
+from 92.7 to 97.6 % on Mask R-CNN's (models/vision/history.md). config/vision/node.yaml
 ``axial_slide`` turns it on for end fittings. It needs masks that end where the part does: with
 the Mask R-CNN weights before 2026-11-28 it slid good held struts' fittings out of their place on
 the tube, and ``bench/inspection.py`` rejected 1 and 3 of 72 good struts (seeds 1100 and 1200);

@@ -53,7 +53,7 @@ class MaskRCNNConfig:
     semantic_gap: int = 2
     # A pixel is a thin part's where that part's probability beats this times the background's
     # (1: the most probable class). The head's doubt lies on a thin part's edges and narrow
-    # stretches; below 1 fewer tubes break in two or vanish (models/vision/README.md). Applied
+    # stretches; below 1 fewer tubes break in two or vanish (models/vision/history.md). Applied
     # at inference only; the vision node sets it (node.yaml segmentation.semantic_background_weight).
     semantic_background_weight: float = 1.0
     # A region is one of any thin class's pixels, of the class with the most probability over it
