@@ -59,6 +59,12 @@ TRAJECTORY_SCHEMA = {
     "path_tolerance": opt("float", 0.2, doc="default path tolerance, joint units (<=0: none)"),
     "goal_tolerance": opt("float", 0.02, doc="default goal tolerance, joint units (<=0: none)"),
     "goal_time_tolerance_s": opt("float", 0.5, minimum=0.0),
+    # A servo entering its goal tolerance still moves (the position loop slows as it nears the
+    # goal): what comes next, a camera frame or a grasp's hold, expects it at rest.
+    "goal_velocity_tolerance": opt(
+        "float", 0.05, doc="a goal succeeds only once each joint moves slower, units/s (<0: not checked)"
+    ),
+    "goal_settle_s": opt("float", 0.05, minimum=0.0, doc="...and has been that slow this long, s"),
     "max_time_step_s": opt(
         "float", 0.05, minimum=0.001, doc="most trajectory time one control cycle may move on, s"
     ),

@@ -1,13 +1,13 @@
 """The control loop every Dynamixel/MightyZAP driver node runs, as ros2_control's controller manager would.
 
 Each timer tick (``rate_hz``, in the loop's time base: sim time on the twin, monotonic on hardware,
-``tlt_drivers.loop_time``): ``read`` the hardware, ``update`` the controllers with
-the actual positions, copy their commands into the interface, ``write``, then let the ROS adapters
-resolve goals and publish. While the interface is in ERROR, goals are aborted with HARDWARE_FAULT,
-group commands are refused, nothing is written, and ``recover`` is tried every
-``comm.recover_period_s``; after a recovery both controllers hold the actual positions, so a
-returning link never makes a joint jump. ``HardwareStatus`` and the node's own state message are
-published at ``state_rate_hz``.
+``tlt_drivers.loop_time``): ``read`` the hardware, ``update`` the controllers with the actual
+positions (and speeds, where the interface reads them), copy their commands into the interface,
+``write``, then let the ROS adapters resolve goals and publish. While the interface is in ERROR,
+goals are aborted with HARDWARE_FAULT, group commands are refused, nothing is written, and
+``recover`` is tried every ``comm.recover_period_s``; after a recovery both controllers hold the
+actual positions, so a returning link never makes a joint jump. ``HardwareStatus`` and the node's
+own state message are published at ``state_rate_hz``.
 """
 
 from __future__ import annotations
@@ -72,6 +72,8 @@ class DriverLoop:
                 path_tolerance=tol.get("path_tolerance", 0.2),
                 goal_tolerance=tol.get("goal_tolerance", 0.02),
                 goal_time_tolerance=tol.get("goal_time_tolerance_s", 0.5),
+                goal_velocity_tolerance=tol.get("goal_velocity_tolerance", -1.0),
+                goal_settle_s=tol.get("goal_settle_s", 0.0),
                 motion_gate=self.motion_refusal,
                 # A starved loop resumes the path where it left it (see the controller).
                 max_time_step=tol.get("max_time_step_s", 0.05),
@@ -162,7 +164,9 @@ class DriverLoop:
             actual = self.actual()
             commands: dict[str, float] = {}
             if self.trajectory is not None:
-                commands.update(self.trajectory.update(now, actual))
+                # Interfaces that read their joints' speeds (Dynamixel) let a goal end at rest only.
+                velocity = getattr(self.hw, "velocity", None)
+                commands.update(self.trajectory.update(now, actual, dict(velocity) if velocity else None))
             if self.group is not None:
                 commands.update(self.group.update(actual))
             if self.override is not None:

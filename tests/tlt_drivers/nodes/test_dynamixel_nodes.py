@@ -238,6 +238,50 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
         chain.stop()
 
 
+@pytest.mark.parametrize("checked", [True, False], ids=["at_rest", "velocity_not_checked"])
+def test_a_camera_mount_goal_succeeds_only_once_the_servos_are_at_rest(harness, checked):
+    """A servo's position loop slows as it nears its goal, so it enters a goal tolerance still
+    moving; the camera frame taken next expects it at rest. The driver passes the servos' speeds
+    to its trajectory controller (``trajectory.goal_velocity_tolerance``, ``goal_settle_s``): the
+    goal ends only once they are under it. Without the check the same goal ends at speed."""
+    chain = DynamixelChain([1, 2])
+    chain.start()
+    try:
+        config = load_chain("config/hardware/camera_mounts.yaml")
+        config["port"] = chain.port
+        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        # A wide goal tolerance: a servo enters it fast, whatever cycles a busy host skips.
+        config["trajectory"]["goal_tolerance"] = 0.1
+        tolerance = config["trajectory"]["goal_velocity_tolerance"]
+        assert tolerance > 0 and config["trajectory"]["goal_settle_s"] > 0
+        if not checked:
+            config["trajectory"]["goal_velocity_tolerance"] = -1.0
+        node = harness.add(CameraMountsNode(config, context=harness.context))
+        at_end: list[dict[str, float]] = []
+        publish = node.loop.action.executed.publish
+
+        def record_speeds_as_the_goal_ends(*args, **kwargs):  # on the control loop's own cycle
+            at_end.append(dict(node.hw.velocity))
+            return publish(*args, **kwargs)
+
+        node.loop.action.executed.publish = record_speeds_as_the_goal_ends
+        action = SerialisedActionClient(
+            harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory"
+        )
+        harness.spin()
+        result = send_goal(harness, action, ["camera_mount_1", "camera_mount_2"], [0.6, -0.5], 0.5)
+        assert result.status == 4 and result.result.error_code == 0, result.result.error_string
+        fastest = max(abs(v) for v in at_end[-1].values())
+        if checked:
+            assert fastest <= tolerance, at_end
+            assert node.hw.position["camera_mount_1"] == pytest.approx(0.6, abs=0.01)
+        else:
+            assert fastest > 2 * tolerance, at_end
+    finally:
+        harness.close()
+        chain.stop()
+
+
 def test_cancel_stops_the_goal_where_the_joints_stand(harness):
     chain = DynamixelChain([1, 2])
     chain.start()
