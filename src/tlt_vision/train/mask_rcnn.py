@@ -461,7 +461,16 @@ def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
     tmp.replace(path)  # a run killed while writing keeps its previous checkpoint
 
 
-def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str]) -> dict[str, Any]:
+def validated_as(args: argparse.Namespace) -> str | None:
+    """Which masks a run's validation scores (the manifest's and each epoch's ``val_as``); None
+    without ``--val``."""
+    if not args.val:
+        return None
+    return f"as the node segments ({args.node_config})" if args.node_config else "the model alone"
+
+
+def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str],
+                     val_as: str | None) -> dict[str, Any]:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError as exc:
@@ -479,6 +488,11 @@ def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str
             diff.append("max_size")
         raise InputError(f"{path}: checkpoint was trained with other settings ({', '.join(diff)}); "
                          "resume with the same --config and --max-size")
+    validated = [h.get("val_as", "the model alone") for h in ckpt["history"] if h.get("val_map") is not None]
+    if val_as is not None and validated and validated[-1] != val_as:
+        raise InputError(f"{path}: its epochs were validated {validated[-1]}, this run's would be "
+                         f"{val_as} (the best epoch would be chosen by two measures); resume with the "
+                         "same --node-config")
     return ckpt
 
 
@@ -547,7 +561,7 @@ def refuse_bad_inputs(args: argparse.Namespace) -> None:
     if args.init:
         init_from(MaskRCNN(inputs.cfg), Path(args.init), inputs.cfg.classes)
     if args.resume:
-        _load_checkpoint(Path(args.resume), inputs.settings, inputs.cfg.classes)
+        _load_checkpoint(Path(args.resume), inputs.settings, inputs.cfg.classes, validated_as(args))
 
 
 def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
@@ -572,7 +586,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     node = None
     if args.node_config and ranks.leader:  # only the leader validates
         node = node_segmenter(args.node_config, model, args.max_size)
-    val_as = f"as the node segments ({args.node_config})" if node is not None else "the model alone"
+    val_as = validated_as(args)
     optimizer = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=1e-4)
     aug = Augment(noise=args.sensor_noise, blur=args.blur)
     loss_keys = (*LOSSES, SEMANTIC) if cfg.semantic_classes else LOSSES
@@ -583,7 +597,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     step_losses: list[dict[str, float]] = []
     best_map, start_epoch, seconds_before = -1.0, 0, 0.0
     if args.resume:
-        ckpt = _load_checkpoint(Path(args.resume), settings, cfg.classes)
+        ckpt = _load_checkpoint(Path(args.resume), settings, cfg.classes, validated_as(args))
         model.load_state_dict(ckpt["model"])
         optimizer.load_state_dict(ckpt["optimizer"])
         torch.set_rng_state(ckpt["torch_rng"])
@@ -670,7 +684,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         improved = True
         if val_set is not None and ranks.leader:
             result = evaluate(model, val_set, args.max_size, args.val_limit, node)
-            record.update(val_map=result["map"], val_ap50=result["per_class"],
+            record.update(val_map=result["map"], val_ap50=result["per_class"], val_as=val_as,
                           val_seconds_per_image=result["seconds_per_image"])
             improved = result["map"] > best_map
             say(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
@@ -689,7 +703,7 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                 "train": [str(root) for root in train_set.roots],
                 "train_recipes": [images.recipe for images in train_set.sets],
                 "val": str(val_set.root) if val_set else None,
-                "val_as": val_as if val_set else None,
+                "val_as": val_as,
                 "final_losses": record["train_losses"],
                 "val_map": record["val_map"],
                 "val_ap50": record["val_ap50"],

@@ -217,6 +217,13 @@ def test_validation_as_the_node_segments_is_named_in_the_log_manifest_and_evalua
     text = capsys.readouterr().out
     assert f"val {trained['val']} (6 images, as the node segments ({node_yaml}))" in text
     assert read_manifest(out)["extra"]["figures"]["val_as"] == f"as the node segments ({node_yaml})"
+    # Its epochs were chosen by the node's masks: resumed, the next ones must be too.
+    resumed = ["--train", str(trained["train"]), "--val", str(trained["val"]), "--out", str(out),
+               "--epochs", "2", "--batch", "4", "--threads", "1", *CONFIG_ARGS,
+               "--resume", str(tmp_path / "w_checkpoint.pt")]  # fmt: skip
+    assert main(resumed) == 2
+    err = capsys.readouterr().err
+    assert f"validated as the node segments ({node_yaml}), this run's would be the model alone" in err
     assert main(["--evaluate", str(out), "--val", str(trained["val"]), "--node-config", node_yaml]) == 0
     assert f"as the node segments ({node_yaml})" in capsys.readouterr().out
     assert main(["--evaluate", str(out), "--val", str(trained["val"])]) == 0
