@@ -1,7 +1,8 @@
 """The mission timeline as a PNG: per bay and member, when each step of the CRS tree ran.
 
 One row per member (or phase: Index Payload n, Test Bay n), grouped by bay, foundation rivets
-last; the x axis is the CRS's ROS time (simulated time on the twin) from the start of the run.
+last; the x axis is the CRS's ROS time (simulated time on the twin) from the first step that ran
+(:func:`timeline_origin`).
 Each step is a bar, coloured by what it does (sending a request, waiting for an ARS, inspecting,
 moving the lifter, grippers or cameras, waiting for help). Faults are red bands from when they
 were raised to when they were cleared (to the end of the run if they stand); a failed part
@@ -57,13 +58,23 @@ def _rows(steps: list[StepSpan]) -> list[tuple[str, str]]:
     return sorted(seen, key=order)  # stable: within a group, first-run order
 
 
+def timeline_origin(summary: MissionSummary) -> float:
+    """The sim time the x axis starts at: the first step that ran. A CRS reports its mission step
+    from the moment it is up, well before Start (a two-bay job's first 55 s were Start refused as
+    "not ready"), and a run's first packet would leave that much empty axis."""
+    ran = [s.sim_start for s in summary.steps if s.step]
+    return min(ran) if ran else summary.sim_start or 0.0
+
+
 def plot_timeline(summary: MissionSummary, path: str | Path, *, title: str | None = None) -> Path:
     """Draw ``summary``'s timeline to ``path`` (PNG); return the path."""
     path = Path(path)
     steps = [s for s in summary.steps if s.step]
     rows = _rows(steps)
-    origin = summary.sim_start or 0.0
+    origin = timeline_origin(summary)
     end = (summary.sim_end or origin) - origin
+    # A fault raised before the first step (a CRS that faults while it comes up) stays in view.
+    first = min([0.0] + [f.raised_sim - origin for f in summary.faults if f.raised_sim is not None])
     height = max(3.0, 0.28 * len(rows) + 1.6)
     fig, ax = plt.subplots(figsize=(12, height), dpi=100)
     try:
@@ -94,7 +105,7 @@ def plot_timeline(summary: MissionSummary, path: str | Path, *, title: str | Non
         ax.set_yticklabels([f"{group}: {member}" for group, member in rows], fontsize=7)
         ax.invert_yaxis()
         ax.set_xlabel("sim time since the first step [s]")
-        ax.set_xlim(0, max(end, 1e-3) * 1.02)
+        ax.set_xlim(first, max(end, 1e-3) * 1.02)
         ax.grid(axis="x", alpha=0.3)
         handles = [Patch(color=c, label=label) for label, c in used.items()]
         if summary.faults:
@@ -119,4 +130,4 @@ def plot_timeline(summary: MissionSummary, path: str | Path, *, title: str | Non
     return path
 
 
-__all__ = ["category", "plot_timeline"]
+__all__ = ["category", "plot_timeline", "timeline_origin"]

@@ -13,7 +13,7 @@ from tlt_common.ccsds.definitions import load_definitions
 from tlt_gsw import cli
 from tlt_gsw.archive import Recorder
 from tlt_gsw.summary import format_summary, summarize_file
-from tlt_gsw.timeline_plot import category, plot_timeline
+from tlt_gsw.timeline_plot import category, plot_timeline, timeline_origin
 
 DEFS = load_definitions()
 KEY = os.urandom(32)
@@ -246,6 +246,23 @@ def test_plot_of_the_timeline_rows_and_categories(two_bay_archive, tmp_path):
     assert category("Wait For Help")[0] == "fault: waiting for help"
     path = plot_timeline(summarize_file(two_bay_archive), tmp_path / "t.png", title="two bays")
     assert path.read_bytes().startswith(b"\x89PNG")
+
+
+def test_the_timeline_starts_at_the_first_step_not_when_the_crs_came_up(tmp_path):
+    """A CRS reports its mission step from the moment it is up, with no step running while a job's
+    Start is refused as not ready: the plot's axis starts at the first step, the whole run still at
+    the first packet."""
+    path = tmp_path / "run.sqlite"
+    a = Archive(path)
+    for k in range(5):
+        a.step(990.0 + k, 10.0 * k, "idle", 0, "", "", 0, 0, 0)
+    _two_bay_run(a)
+    a.close()
+    summary = summarize_file(path)
+    assert summary.sim_start == 0.0 and summary.steps[0].sim_start == 50.0
+    assert timeline_origin(summary) == 50.0
+    assert "whole run       104.0 s" in format_summary(summary)
+    assert plot_timeline(summary, tmp_path / "t.png").read_bytes().startswith(b"\x89PNG")
 
 
 def test_like_refusals_in_a_row_are_one_line_with_their_count(tmp_path):
