@@ -54,6 +54,9 @@ REJECTION_CODES = ("COMMAND_REJECTED", "DATAGRAM_REJECTED")
 NOT_READY = "not ready"
 
 REJECTION_ACK_GRACE_S = 0.5
+# After "done", how long the job waits for the tower model's next report (hk_tower, every 2 s and
+# after each progress report): the last member's state may have changed after the report before.
+TOWER_REPORT_WAIT_S = 3.0
 
 
 class JobError(ValueError):
@@ -81,6 +84,7 @@ class Progress:
         self.sim_start: float | None = None
         self.last_mission: dict[str, Any] = {}
         self.crs_up = 0  # CRS_UP events seen: the CRS (re)started
+        self.tower_reports = 0  # hk_tower packets seen
 
     def say(self, text: str) -> None:
         print(text, file=self.out, flush=True)
@@ -127,6 +131,8 @@ class Progress:
                 "FAULT_CLEARED", "INSPECTION_FAILED", "BAY_INSPECTION_PASSED", "STARTED", "CRS_UP",
             ):  # fmt: skip
                 self.say(f"  EVENT {f['severity'].upper()} {code}: {f['text']}")
+        elif kind == "hk_tower":
+            self.tower_reports += 1
         elif kind == "tree_status" and f["agent"] == "crs":
             self._tree_status(f, now)
 
@@ -285,8 +291,12 @@ def run_mission(
             progress.say(f"  ARCHIVE: {link.recorder.last_error}")
         if progress.tower_built:
             progress.say("tower built")
-            # The packets the CRS sent along with "done" (progress, tower model) belong in the archive.
+            # The packets the CRS sent along with "done" (progress, tower model) belong in the archive,
+            # and a tower model reported after it: the summary's member states are the last report's.
+            reports, deadline = progress.tower_reports, clock() + TOWER_REPORT_WAIT_S
             link.poll(0.3)
+            while progress.tower_reports == reports and clock() < deadline:
+                link.poll(0.1)
             return EXIT_BUILT
         now = clock()
         since = progress.fault_since

@@ -27,6 +27,7 @@ from tlt_common.ccsds.auth import KeyRing, write_key_file
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.reasons import Reason, Severity
 from tlt_common.free_port import free_udp_port
+from tlt_common.mission.member_states import pack_member_states
 from tlt_common.ros_isolation import isolate
 from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli, mission_job
@@ -332,6 +333,31 @@ def test_a_crs_that_restarts_mid_build_gets_start_again(tmp_path, keys):
     assert code == 0, out
     assert "the CRS restarted: sending Start again" in out and crs.commands == ["start", "start"]
     assert "tower built" in out
+
+
+def test_the_summary_has_the_tower_model_reported_after_done(tmp_path, keys):
+    """The last member's state can change after the tower model's last report before "done": the
+    job waits for the next report (hk_tower) before it ends, so the summary's states are final."""
+    gsw_port = free_udp_port()
+
+    def tower(states: list[int]) -> dict:
+        return {"member_count": len(states), "member_states": pack_member_states(states)}
+
+    def finish(crs: FakeCrs) -> None:
+        time.sleep(0.3)
+        crs.link.send_telemetry("hk_tower", tower([2, 0]))  # the foundation rivet not yet reported
+        _done(crs.link)
+        time.sleep(1.0)  # hk_tower goes out every 2 s, and with the next progress report
+        crs.link.send_telemetry("hk_tower", tower([2, 2]))
+
+    crs = FakeCrs(tmp_path, keys, gsw_port, on_start=finish)
+    try:
+        code, out = _job(link_yaml(tmp_path, keys, crs.port, gsw_port), "--timeout", "60")
+    finally:
+        crs.close()
+    assert code == 0, out
+    states = summarize_file(tmp_path / "archive.sqlite").member_states
+    assert states == {"not placed": 0, "placed": 0, "riveted": 2, "inspected": 0}, out
 
 
 def test_timeout_ends_the_job_with_exit_3(tmp_path, keys):
