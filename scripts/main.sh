@@ -29,6 +29,9 @@ if [ ! -f "$ROOT/missions/$MISSION.yaml" ]; then
 fi
 bash "$ROOT/scripts/setup.sh"
 VENV="${TLT_VENV:-$ROOT/.venv}"
+# Fast DDS shared-memory files that killed runs left in /dev/shm (hundreds piled up on the
+# development machine): those no process holds go; a running system's stay.
+[ -x "$VENV/bin/fastdds" ] && "$VENV/bin/fastdds" shm clean > /dev/null 2>&1 || true
 # A private device folder, ROS domain and UR controller addresses (all of 127/8 is loopback), so
 # the job does not meet another run, or pytest's emulated arms on 127.0.0.2/.3, on this machine.
 export TLT_RUN_DIR="${TLT_RUN_DIR:-$(mktemp -d /tmp/tlt-run.XXXXXX)}"

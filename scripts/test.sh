@@ -15,6 +15,9 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup.sh"
 VENV="${TLT_VENV:-$ROOT/.venv}"
 cd "$ROOT"
+# Fast DDS shared-memory files that killed runs left in /dev/shm (hundreds piled up on the
+# development machine): those no process holds go; a running system's stay.
+[ -x "$VENV/bin/fastdds" ] && "$VENV/bin/fastdds" shm clean > /dev/null 2>&1 || true
 echo "[test] ruff check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tests bench 2>/dev/null)
 if [ $# -gt 0 ]; then
