@@ -109,6 +109,14 @@ def harness():
     h.close()
 
 
+def chain_config(path: str, chain: DynamixelChain) -> dict:
+    """A chain's shipped configuration on the emulator's port, with reply times for a busy host."""
+    config = load_chain(path)
+    config["port"] = chain.port
+    config["comm"]["latency_timer_ms"] = LATENCY_MS  # in-process emulator on a busy host
+    return config
+
+
 def send_goal(h: Harness, action: SerialisedActionClient, names, positions, seconds: float):
     goal = FollowJointTrajectory.Goal()
     goal.trajectory.joint_names = list(names)
@@ -124,9 +132,7 @@ def test_active_grippers_follow_a_trajectory_and_refuse_out_of_limit_goals(harne
     chain = DynamixelChain([1, 2, 3, 4])
     chain.start()
     try:
-        config = load_chain("config/hardware/active_grippers.yaml")
-        config["port"] = chain.port
-        config["comm"]["latency_timer_ms"] = LATENCY_MS  # in-process emulator on a busy host
+        config = chain_config("config/hardware/active_grippers.yaml", chain)
         node = harness.add(GripperGroupNode(config, context=harness.context))
         states: list[GripperState] = []
         statuses: list[HardwareStatus] = []
@@ -173,9 +179,7 @@ def test_hardware_error_reported_on_state_then_reboot_recovers(harness):
     chain = DynamixelChain([1, 2, 3, 4])
     chain.start()
     try:
-        config = load_chain("config/hardware/active_grippers.yaml")
-        config["port"] = chain.port
-        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        config = chain_config("config/hardware/active_grippers.yaml", chain)
         harness.add(GripperGroupNode(config, context=harness.context))
         states: list[GripperState] = []
         harness.client.create_subscription(GripperState, "/active_grippers/state", states.append, 50)
@@ -197,9 +201,7 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
     chain = DynamixelChain([1, 2])
     chain.start()
     try:
-        config = load_chain("config/hardware/camera_mounts.yaml")
-        config["port"] = chain.port
-        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        config = chain_config("config/hardware/camera_mounts.yaml", chain)
         harness.add(CameraMountsNode(config, context=harness.context))
         joint_states: list[JointState] = []
         harness.client.create_subscription(JointState, "/camera_mounts/joint_states", joint_states.append, 50)
@@ -247,9 +249,7 @@ def test_a_camera_mount_goal_succeeds_only_once_the_servos_are_at_rest(harness, 
     chain = DynamixelChain([1, 2])
     chain.start()
     try:
-        config = load_chain("config/hardware/camera_mounts.yaml")
-        config["port"] = chain.port
-        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        config = chain_config("config/hardware/camera_mounts.yaml", chain)
         # A wide goal tolerance: a servo enters it fast, whatever cycles a busy host skips.
         config["trajectory"]["goal_tolerance"] = 0.1
         tolerance = config["trajectory"]["goal_velocity_tolerance"]
@@ -286,9 +286,7 @@ def test_cancel_stops_the_goal_where_the_joints_stand(harness):
     chain = DynamixelChain([1, 2])
     chain.start()
     try:
-        config = load_chain("config/hardware/camera_mounts.yaml")
-        config["port"] = chain.port
-        config["comm"]["latency_timer_ms"] = LATENCY_MS
+        config = chain_config("config/hardware/camera_mounts.yaml", chain)
         node = harness.add(CameraMountsNode(config, context=harness.context))
         action = SerialisedActionClient(
             harness.client, FollowJointTrajectory, "/camera_mounts/follow_joint_trajectory"
