@@ -61,7 +61,7 @@ from tlt_common.mission.schema import load_mission
 from tlt_vision.depth_noise import with_noise
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
-from tlt_vision.pipeline import Detection, PartPipeline, detections_from_mask_rcnn
+from tlt_vision.pipeline import Detection, PartPipeline, detection_of, detections_from_mask_rcnn
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.errors import add_s, non_degenerate_at, rotation_error_deg
 from tlt_vision.pose_picture import PosedFrame, write_pose_picture
@@ -320,7 +320,7 @@ def main() -> int:
                 best = int(scores.argmax())
                 if float(scores[best]) >= 0.5 and best not in used:
                     used.add(best)
-                    matched.append((Detection(cls, pred["masks"][best].numpy()), item_name, pose))
+                    matched.append((detection_of(pred, classes, best), item_name, pose))
             pose_instances(pipelines, estimators, matched, s.depth, intrinsics, from_model)
             pose_instances(pipelines, estimators, truth, s.depth, intrinsics, from_twin)
             print(f"  image {i + 1}/{len(images)}: {len(dets)} detections, {len(matched)} matched, "

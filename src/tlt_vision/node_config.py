@@ -113,6 +113,8 @@ SCHEMA = {
                 schema={
                     "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks trimmed"),
                     "above": Field("float", minimum=0.0, maximum=1.0, doc="a thin part's probability"),
+                    "cores": opt("list", [], item=Field("str", choices=CLASSES),
+                                 doc="masks kept whole, their trimmed masks fitted where theirs is refused"),
                 },
             ),
             "exclusive_overlaps": opt(
@@ -403,10 +405,11 @@ class VisionConfig:
         return seg["min_score"] if seg["second_look_score"] is None else seg["second_look_score"]
 
     @property
-    def parting(self) -> Parting | None:
-        """Which refused clouds are posed again on the larger of two pieces; None: none."""
+    def parting(self) -> Parting:
+        """Which refused clouds are posed again on the larger of two pieces (none when its classes
+        are empty), and when a second pose is taken (that of a mask's core too)."""
         raw = self.raw["parting"]
-        return Parting(**{**raw, "classes": tuple(raw["classes"])}) if raw["classes"] else None
+        return Parting(**{**raw, "classes": tuple(raw["classes"])})
 
     @property
     def detached(self) -> Detached:
@@ -430,7 +433,7 @@ class VisionConfig:
     def semantic_trim(self) -> SemanticTrim | None:
         """Which box-branch masks lose the pixels the semantic head holds to be a thin part."""
         raw = self.raw["segmentation"]["semantic_trim"]
-        return SemanticTrim(tuple(raw["classes"]), raw["above"]) if raw else None
+        return SemanticTrim(tuple(raw["classes"]), raw["above"], tuple(raw["cores"])) if raw else None
 
     @property
     def exclusive_overlaps(self) -> ExclusiveOverlaps | None:

@@ -24,7 +24,11 @@ whole depth image (``free_space``, :mod:`tlt_vision.pose.free_space`): a pose th
 where the camera saw past it is not certified. With ``parting`` (node.yaml's is on for end
 fittings), a refused cloud of its classes that holds two pieces about two centres is posed again on
 the larger one, taken only when certified and within its mask (:mod:`tlt_vision.pose.parting`): a
-fitting's mask that took in its racked neighbour.
+fitting's mask that took in its racked neighbour. A detection that carries a ``core`` (the pixels
+of its mask the segmentation is surest of: Mask R-CNN's corner joints less what its semantic head
+holds to be a frame side, :mod:`tlt_vision.segmentation.semantic_trim`) and whose pose is refused
+has its core's cloud fitted from that pose (refined, :func:`~tlt_vision.pose.estimator.refined_together`),
+and the fit taken on the same terms.
 
 Given a real camera's depth noise (``depth_noise``; the twin's depth is exact), each cloud point
 takes the median depth of its mask's pixels about it, and each certificate allows for the noise
@@ -60,7 +64,7 @@ from tlt_vision.pointcloud import (
 )
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
-from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together
+from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together, refined_together
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
 from tlt_vision.pose.parting import Parting, larger_piece, visible_share_in_mask
@@ -88,17 +92,29 @@ class Detection:
     mask: np.ndarray  # (H, W) bool
     score: float = 1.0
     object_id: str = ""
+    # The part of ``mask`` the segmentation is surest of, whose pose stands in for the whole
+    # mask's when that is refused; None: no such part, or the whole mask.
+    core: np.ndarray | None = None
+
+
+def detection_of(result: Mapping[str, torch.Tensor], classes: Sequence[str], k: int) -> Detection:
+    """The ``k``-th detection of one image's Mask R-CNN output (labels are 1-based indices into
+    ``classes``), with its core where ``core_masks`` gives one smaller than its mask."""
+    mask = result["masks"][k].numpy().astype(bool)
+    core = None
+    if "core_masks" in result:
+        core = result["core_masks"][k].numpy().astype(bool)
+        if not core.any() or np.array_equal(core, mask):
+            core = None
+    return Detection(classes[int(result["labels"][k]) - 1], mask, float(result["scores"][k]), core=core)
 
 
 def detections_from_mask_rcnn(
     result: Mapping[str, torch.Tensor], classes: Sequence[str], min_score: float = 0.5
 ) -> list[Detection]:
-    """Detections of one image's Mask R-CNN output (labels are 1-based indices into ``classes``)."""
-    out = []
-    for label, score, mask in zip(result["labels"], result["scores"], result["masks"], strict=True):
-        if float(score) >= min_score:
-            out.append(Detection(classes[int(label) - 1], mask.numpy().astype(bool), float(score)))
-    return out
+    """Detections of one image's Mask R-CNN output scoring at least ``min_score``."""
+    return [detection_of(result, classes, k) for k, score in enumerate(result["scores"].tolist())
+            if score >= min_score]
 
 
 def merge_instances(detections: Sequence[Detection], classes: Sequence[str]) -> list[Detection]:
@@ -183,9 +199,11 @@ class PartPipeline:
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
         depth_noise: DepthNoise | None = None,
+        rng: np.random.Generator | None = None,
     ) -> MaskedCloud:
         """The point cloud C-3PO is given for one detection (its reason when there is none), the
-        depth's noise ``depth_noise`` (by default the pipeline's) filtered out."""
+        depth's noise ``depth_noise`` (by default the pipeline's) filtered out; a mask of more
+        than ``max_points`` pixels gives a subset drawn with ``rng`` (by default the pipeline's)."""
         noise = depth_noise or self.depth_noise
         small = np.count_nonzero(detection.mask) < self.keep_border_below
         estimator = self.estimators.get(detection.object_class)
@@ -196,7 +214,7 @@ class PartPipeline:
             rgb,
             self.min_points,
             max_points=self.max_points,
-            rng=self.rng,
+            rng=self.rng if rng is None else rng,
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
             smooth=0 if noise.exact else noise.window,
@@ -231,6 +249,7 @@ class PartPipeline:
         noise = depth_noise or self.depth_noise
         dets = merge_instances(detections, self.merge)
         out: list[Observation | None] = [None] * len(dets)
+        again = self.parting is not None and depth is not None
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
         for i, d in enumerate(dets):
             cloud = self.cloud(d, depth, intrinsics, rgb, noise)
@@ -250,7 +269,7 @@ class PartPipeline:
         near = None
         if pending and self.free_space is not None and depth is not None:
             near = nearest_depth(depth, self.free_space.window)
-        parted = self.parting.classes if self.parting is not None and depth is not None else ()
+        parted = self.parting.classes if again else ()
         refused: dict[str, list[tuple[int, np.ndarray]]] = {}
         for (cls, items), estimates in zip(pending.items(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
@@ -258,7 +277,15 @@ class PartPipeline:
                 out[i] = Observation(cls, e, "", dets[i].object_id)
                 if cls in parted and not e.certified:
                     refused.setdefault(cls, []).append((i, points))
-        if refused:
+        if again:
+            estimates = [o.estimate for o in out]
+            cored = [i for i, e in enumerate(estimates)
+                     if dets[i].core is not None and e is not None and not e.certified]
+            for i, e in self._cored(cored, estimates, dets, depth, intrinsics, rgb, noise, near):
+                out[i] = replace(out[i], estimate=e)
+        refused = {cls: [(i, p) for i, p in items if not out[i].estimate.certified]
+                   for cls, items in refused.items()}
+        if any(refused.values()):
             for i, e in self._parted(refused, dets, depth, intrinsics, noise, near):
                 out[i] = replace(out[i], estimate=e)
         return [o for o in out if o is not None]
@@ -309,17 +336,66 @@ class PartPipeline:
             return []
         jobs = [(self.estimators[cls], [p for _, p in items], None) for cls, items in pieces.items()]
         taken = []
-        for (cls, items), estimates in zip(pieces.items(), estimate_together(jobs), strict=True):
+        for items, estimates in zip(pieces.values(), estimate_together(jobs), strict=True):
             for (i, points), e in zip(items, estimates, strict=True):
-                e = self._judged(e, points, dets[i].mask, depth, intrinsics, noise, near)
-                if not e.certified:
-                    continue
-                surface = self._surface(cls) @ e.rotation.T + e.translation
-                share = visible_share_in_mask(surface, dets[i].mask, depth, intrinsics,
-                                              parting.mask_margin, parting.hidden_margin)
-                if share >= parting.in_mask:
+                e = self._taken(e, points, dets[i].mask, depth, intrinsics, noise, near)
+                if e is not None:
                     taken.append((i, e))
         return taken
+
+    def _cored(
+        self,
+        refused: Sequence[int],
+        estimates: Sequence[PoseEstimate | None],
+        dets: Sequence[Detection],
+        depth: np.ndarray,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None,
+        noise: DepthNoise,
+        near: np.ndarray | None,
+    ) -> list[tuple[int, PoseEstimate]]:
+        """For the ``refused`` detections (indices) that carry a core, ``(index, estimate)`` of
+        those whose core's cloud, refined from the whole mask's pose, is certified and lies within
+        the whole mask; every core of the frame refined in one batch. Refined, not posed afresh:
+        a corrector's run of its own for the few refused joints cost a frame 10-15 % more."""
+        items, clouds = [], []
+        for i in refused:
+            # Its own draw, so that a core leaves the clouds of later frames as they were.
+            d = dets[i]
+            draw = np.random.default_rng(i)
+            cloud = self.cloud(replace(d, mask=d.core), depth, intrinsics, rgb, noise, draw)
+            if cloud.ok:
+                e = estimates[i]
+                items.append((self.estimators[d.object_class], cloud.points, e.rotation, e.translation))
+                clouds.append((i, cloud.points))
+        taken = []
+        for (i, points), e in zip(clouds, refined_together(items), strict=True):
+            e = self._taken(e, points, dets[i].mask, depth, intrinsics, noise, near)
+            if e is not None:
+                taken.append((i, e))
+        return taken
+
+    def _taken(
+        self,
+        estimate: PoseEstimate,
+        points: np.ndarray,
+        mask: np.ndarray,
+        depth: np.ndarray,
+        intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
+        near: np.ndarray | None,
+    ) -> PoseEstimate | None:
+        """``estimate`` of a part of a refused detection's cloud (a parted piece, its core's cloud),
+        judged as any; taken (returned) when certified and when the posed model's visible surface
+        lies within the detection's whole ``mask`` on the parting's terms, else None."""
+        e = self._judged(estimate, points, mask, depth, intrinsics, noise, near)
+        if not e.certified:
+            return None
+        parting = self.parting
+        surface = self._surface(e.object_class) @ e.rotation.T + e.translation
+        share = visible_share_in_mask(surface, mask, depth, intrinsics, parting.mask_margin,
+                                      parting.hidden_margin)
+        return e if share >= parting.in_mask else None
 
     def _slid(
         self,
@@ -385,6 +461,7 @@ __all__ = [
     "Detection",
     "PartPipeline",
     "border_kept",
+    "detection_of",
     "detections_from_mask_rcnn",
     "merge_instances",
 ]

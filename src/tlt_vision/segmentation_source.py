@@ -13,7 +13,9 @@
   joined again, and, given the parts' radii, pieces not as wide as their part scored down
   (node.yaml ``segmentation.depth_split``). Given a
   :class:`~tlt_vision.segmentation.semantic_trim.SemanticTrim`, the masks of its classes lose the
-  pixels the semantic head holds to be a thin part (``segmentation.semantic_trim``). Given
+  pixels the semantic head holds to be a thin part, and those of its ``cores`` keep their masks
+  whole with the trimmed mask beside them as the detection's core (``segmentation.semantic_trim``,
+  :mod:`~tlt_vision.segmentation.semantic_trim`). Given
   :class:`~tlt_vision.segmentation.overlap.ExclusiveOverlaps`, two masks of one of its classes
   share no pixel but as duplicates of one part (``segmentation.exclusive_overlaps``).
   :meth:`MaskRcnnSegmenter.from_config` builds it as the vision node does.
@@ -39,7 +41,7 @@ from tlt_vision.camera_frames import CameraFrame
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
 from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
 from tlt_vision.segmentation.overlap import ExclusiveOverlaps, resolve_overlaps
-from tlt_vision.segmentation.semantic_trim import SemanticTrim, trim_by_semantic
+from tlt_vision.segmentation.semantic_trim import SemanticTrim, semantic_cores, trim_by_semantic
 from tlt_vision.weights import WeightsError
 
 if TYPE_CHECKING:
@@ -103,10 +105,13 @@ class MaskRcnnSegmenter:
         self.camera_noise = dict(camera_noise or {})
         self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
         self.trim, self.overlaps = trim, overlaps
-        for key, named in (("semantic_trim", trim), ("exclusive_overlaps", overlaps)):
-            if named is not None and (thin := sorted(set(named.classes) & set(self.cfg.semantic_classes))):
+        named = [("semantic_trim.classes", trim and trim.classes),
+                 ("semantic_trim.cores", trim and trim.cores),
+                 ("exclusive_overlaps.classes", overlaps and overlaps.classes)]
+        for key, names in named:
+            if names and (thin := sorted(set(names) & set(self.cfg.semantic_classes))):
                 raise ValueError(f"its semantic head segments {', '.join(thin)}, which "
-                                 f"segmentation.{key}.classes may not name (it acts on box masks)")
+                                 f"segmentation.{key} may not name (it acts on box masks)")
 
     @classmethod
     def load(cls, weights: str | Path, min_score: float, **options: Any) -> MaskRcnnSegmenter:
@@ -168,10 +173,13 @@ class MaskRcnnSegmenter:
         return {key: value for key, value in result.items() if key != "mask_probs"}
 
     def _trimmed(self, result: dict[str, Any]) -> dict[str, Any]:
+        """``result`` with the trim's classes trimmed and its cores given (after the trim, which
+        may drop detections)."""
         if self.trim is None:
             return result
-        return trim_by_semantic(result, self.trim.labels(self.cfg.classes), self.cfg.semantic_labels,
-                                self.trim.above)
+        classes, thin = self.cfg.classes, self.cfg.semantic_labels
+        result = trim_by_semantic(result, self.trim.labels(classes), thin, self.trim.above)
+        return semantic_cores(result, self.trim.core_labels(classes), thin, self.trim.above)
 
     def detect_in(
         self, frame: CameraFrame, region: tuple[int, int, int, int], scale: float
@@ -191,14 +199,16 @@ class MaskRcnnSegmenter:
         crop = rgb[y0:y1, x0:x1]
         size = (max(1, round((x1 - x0) * scale)), max(1, round((y1 - y0) * scale)))
         result = detect_rgb(self.model, cv2.resize(crop, size, interpolation=cv2.INTER_LINEAR), None)
-        out = []
-        for d in detections_from_mask_rcnn(self._trimmed(self._exclusive(result)), self.cfg.classes,
-                                           self.min_score):
-            small = cv2.resize(d.mask.astype(np.uint8), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+
+        def in_frame(crop_mask: np.ndarray) -> np.ndarray:
+            small = cv2.resize(crop_mask.astype(np.uint8), (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
             mask = np.zeros(rgb.shape[:2], dtype=bool)
             mask[y0:y1, x0:x1] = small >= 0.5
-            out.append(replace(d, mask=mask))
-        return out
+            return mask
+
+        return [replace(d, mask=in_frame(d.mask), core=None if d.core is None else in_frame(d.core))
+                for d in detections_from_mask_rcnn(self._trimmed(self._exclusive(result)), self.cfg.classes,
+                                                   self.min_score)]
 
 
 __all__ = ["MASK_RCNN_KIND", "MaskRcnnSegmenter", "TwinLabels"]

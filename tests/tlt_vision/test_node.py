@@ -572,6 +572,11 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "segmentation.semantic_trim.classes" in err and "'fitting'" in err
+    wrong["segmentation"]["semantic_trim"] = {"classes": [], "above": 0.3, "cores": ["joint"]}
+    path.write_text(__import__("yaml").safe_dump(wrong))
+    assert main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "segmentation.semantic_trim.cores" in err and "'joint'" in err
     wrong = vision_config()
     wrong["segmentation"]["exclusive_overlaps"] = {"classes": ["end_fitting"], "duplicate": 1.5}
     path.write_text(__import__("yaml").safe_dump(wrong))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from tlt_vision.segmentation.semantic_trim import SemanticTrim, trim_by_semantic
+from tlt_vision.segmentation.semantic_trim import SemanticTrim, semantic_cores, trim_by_semantic
 
 TUBE, FITTING, FRAME, JOINT = 1, 2, 3, 4
 
@@ -47,6 +47,20 @@ def test_nothing_to_trim_gives_the_same_result():
     assert trim_by_semantic(without, (FITTING,), (TUBE, FRAME), 0.3) is without
 
 
+def test_a_cored_class_keeps_its_mask_and_gets_it_trimmed_beside_it():
+    result = _result()
+    out = semantic_cores(result, (JOINT,), (TUBE, FRAME), 0.3)
+    assert torch.equal(out["masks"], result["masks"]) and out["labels"].tolist() == [FITTING, JOINT, FITTING]
+    fitting, joint, side = out["core_masks"]
+    assert torch.equal(fitting, result["masks"][0]) and torch.equal(side, result["masks"][2])  # not cored
+    assert not joint[:, 4].any() and joint[2:6, 5].all() and int(joint.sum()) == 12
+    assert "core_masks" not in result  # the input is not changed
+    assert semantic_cores(result, (), (TUBE, FRAME), 0.3) is result
+    without = {k: v for k, v in result.items() if k != "semantic_probs"}
+    assert semantic_cores(without, (JOINT,), (TUBE, FRAME), 0.3) is without
+
+
 def test_trim_names_resolve_to_the_models_labels():
     classes = ("strut_tube", "end_fitting", "cross_frame", "corner_joint", "rivet")
     assert SemanticTrim(("rivet", "end_fitting"), 0.3).labels(classes) == (5, 2)
+    assert SemanticTrim(("end_fitting",), 0.3, ("corner_joint",)).core_labels(classes) == (4,)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -187,6 +188,8 @@ def test_a_trim_or_overlap_rule_of_a_class_the_semantic_head_segments_is_refused
         MaskRcnnSegmenter.load(WEIGHTS, 0.3, trim=SemanticTrim(("end_fitting", "strut_tube"), 0.3))
     with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments cross_frame.*exclusive_overlaps"):
         MaskRcnnSegmenter.load(WEIGHTS, 0.3, overlaps=ExclusiveOverlaps(("rivet", "cross_frame"), 0.6))
+    with pytest.raises(WeightsError, match=r"mask_rcnn\.pt.*segments cross_frame.*semantic_trim\.cores"):
+        MaskRcnnSegmenter.load(WEIGHTS, 0.3, trim=SemanticTrim((), 0.3, ("corner_joint", "cross_frame")))
 
 
 def test_the_nodes_bend_cut_parts_frame_sides_meeting_at_a_corner(results):
@@ -236,3 +239,32 @@ def test_the_trainers_validation_as_the_node_segments_scores_the_nodes_masks(hel
                         "labels": torch.as_tensor(sample.labels, dtype=torch.long)})
     assert as_node["map"] == pytest.approx(acc.result()["map"])
     assert as_node["map"] >= evaluate(model, held_out, max_size, n)["map"] + 0.1  # not the model alone
+
+
+def test_the_nodes_segmenter_gives_corner_joints_a_core_within_their_mask(held_out):
+    """As node.py builds it, a corner joint whose mask takes in what the semantic head holds to be
+    a frame side or tube carries its mask less those pixels as its core, also when a region of
+    the frame is looked at again enlarged (masks of the frame's size)."""
+    config = load_config()
+    assert config.semantic_trim is not None and "corner_joint" in config.semantic_trim.cores
+    seg = MaskRcnnSegmenter.from_config(config)
+    cored, closer_cored = 0, 0
+    for i in range(12):
+        sample = held_out[i]
+        images = {"rgb": sample.rgb, "depth": sample.depth}
+        frame = CameraFrame("zed_1", 0.0, "zed_1_optical", None, sample.intrinsics, images)
+        dets = seg.detect(frame)
+        joints = [d for d in dets if d.core is not None]
+        for d in joints:
+            assert d.object_class == "corner_joint"
+            assert d.core.any() and not (d.core & ~d.mask).any() and d.core.sum() < d.mask.sum()
+        cored += len(joints)
+        for d in joints[:2]:
+            rows, cols = np.nonzero(d.mask)
+            region = (cols.min() - 20, rows.min() - 20, cols.max() + 21, rows.max() + 21)
+            for c in seg.detect_in(frame, region, 2.0):
+                if c.core is not None:
+                    assert c.core.shape == c.mask.shape == sample.depth.shape
+                    assert not (c.core & ~c.mask).any()
+                    closer_cored += 1
+    assert cored > 0 and closer_cored > 0, (cored, closer_cored)
