@@ -13,8 +13,8 @@ A corner joint's mask takes in the frame sides it joins in the same way (10-70 p
 pixel mask on the held-out images), but trimmed outright its masks lost more than the certificate
 gained (mask AP50 0.964 -> 0.918 on seed 950). So the classes in ``cores`` keep their masks whole
 and :func:`semantic_cores` gives each its trimmed mask beside it as its *core*
-(``core_masks``): the pipeline poses a detection again on its core when the whole mask's pose is
-refused (:mod:`tlt_vision.pipeline`).
+(``core_masks``): where the whole mask's pose is refused, the pipeline fits the core's cloud from
+that pose (:mod:`tlt_vision.pipeline`).
 """
 
 from __future__ import annotations
