@@ -16,12 +16,13 @@ figures against the goals.
     .venv/bin/python bench/inspection.py [--mission two_bay] [--rounds 2] [--seed 1100]
         [--bends 3 5 8 12] [--joint-jitter-deg 0.29] [--slide-mm 10]
         [--segmentation twin|mask_rcnn] [--weights W] [--min-score S] [--second-look S]
-        [--no-closer] [--no-self-filter] [--threads 2] [--depth-noise 0.005]
+        [--no-closer] [--no-self-filter] [--threads 2] [--depth-noise 0.005] [--json figures.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from collections import defaultdict
@@ -231,7 +232,7 @@ def run(args: argparse.Namespace) -> list[Presented]:
     return results
 
 
-def report(results: list[Presented]) -> dict[str, float]:
+def report(results: list[Presented]) -> dict[str, float | int]:
     by_defect: dict[str, list[Presented]] = defaultdict(list)
     for r in results:
         by_defect[r.defect].append(r)
@@ -252,7 +253,7 @@ def report(results: list[Presented]) -> dict[str, float]:
     caught = sum(not r.passed for r in bad) / max(1, len(bad))
     print(f"\ndefective parts caught: {caught:.1%} of {len(bad)} (goal >= {CAUGHT_GOAL:.0%})")
     print(f"good parts rejected:    {rejected:.1%} of {len(good)} (goal <= {REJECTED_GOAL:.0%})")
-    return {"caught": caught, "rejected": rejected}
+    return {"caught": caught, "rejected": rejected, "defective": len(bad), "good": len(good)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -281,11 +282,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--depth-noise", type=float, default=0.0,
                         help="Gaussian noise added to each pixel's depth, a fraction of it; the node is "
                              "told so (node.yaml depth_noise)")
+    parser.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
     if not 0.0 <= args.depth_noise <= 0.1:
         parser.error(f"--depth-noise {args.depth_noise}: a fraction of the depth from 0 to 0.1")
     torch.set_num_threads(args.threads)
-    report(run(args))
+    figures = report(run(args))
+    if args.json:
+        settings = {"seed": args.seed, "rounds": args.rounds, "mission": args.mission,
+                    "segmentation": args.segmentation, "weights": args.weights}
+        args.json.write_text(json.dumps({**settings, **figures}, indent=1) + "\n")
     return 0
 
 

@@ -39,13 +39,16 @@ vertical one.
 
     .venv/bin/python bench/vision.py [--weights models/vision/mask_rcnn.pt] [--count 40]
         [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01] [--image-noise 3]
-        [--picture vision_poses.png] [--picture-frames 4]
+        [--picture vision_poses.png] [--picture-frames 4] [--json figures.json]
+
+``--json PATH`` also writes the figures as JSON (``bench/vision_candidate.py`` reads them).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import statistics
 import sys
 import tempfile
@@ -53,6 +56,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -159,16 +163,31 @@ def refusal_kind(reason: str) -> str:
     return reason.split(":")[0] or "no reason given"
 
 
+def pose_summary(tally: PoseTally) -> dict[str, Any]:
+    """The figures :func:`report_poses` prints first, for ``--json``: parts posed and certified,
+    views non-degenerate at the true pose and of them certified, certified within the ADD-S goal,
+    median errors (None with nothing certified)."""
+    rot = [v for c in tally.rotation.values() for v in c]
+    trans = [v for c in tally.translation.values() for v in c]
+    return {
+        "posed": tally.total(tally.estimated),
+        "certified": tally.total(tally.certified),
+        "views": tally.total(tally.whole),
+        "views_certified": tally.total(tally.whole_certified),
+        "add_s_ok": tally.total(tally.add_s_ok),
+        "median_rotation_deg": statistics.median(rot) if rot else None,
+        "median_translation_mm": statistics.median(trans) if trans else None,
+    }
+
+
 def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
-    est, cert = tally.total(tally.estimated), tally.total(tally.certified)
+    summary = pose_summary(tally)
+    est, cert, ok = summary["posed"], summary["certified"], summary["add_s_ok"]
     print(f"{title}: {est} parts posed ({tally.no_cloud} without a usable cloud)")
     if not est:
         return
-    rot = [v for c in tally.rotation.values() for v in c]
-    trans = [v for c in tally.translation.values() for v in c]
-    ok = tally.total(tally.add_s_ok)
     print(f"  certified {cert}/{est} = {cert / est * 100:.1f} % (goal >= 95 %)")
-    whole, whole_cert = tally.total(tally.whole), tally.total(tally.whole_certified)
+    whole, whole_cert = summary["views"], summary["views_certified"]
     if whole:
         print(f"  of the {whole} views non-degenerate at the true pose (enough keypoint groups seen), "
               f"certified {whole_cert}/{whole} = {whole_cert / whole * 100:.1f} %")
@@ -180,8 +199,8 @@ def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
     if cert:
         print(f"  of the certified, ADD-S < 2 % of size: {ok}/{cert} = {ok / cert * 100:.1f} % "
               "(goal >= 95 %)")
-        print(f"  median rotation error {statistics.median(rot):.2f} deg (goal <= 2), "
-              f"translation {statistics.median(trans):.1f} mm (goal <= 3)")
+        print(f"  median rotation error {summary['median_rotation_deg']:.2f} deg (goal <= 2), "
+              f"translation {summary['median_translation_mm']:.1f} mm (goal <= 3)")
     for cls in POSED:
         n = tally.estimated.get(cls, 0)
         if not n:
@@ -240,6 +259,7 @@ def main() -> int:
                    help="Gaussian noise added to each pixel's colours, in grey levels of 255 (default none)")
     p.add_argument("--picture", type=Path, help="draw the first frames' masks and posed models into this PNG")
     p.add_argument("--picture-frames", type=int, default=4, help="frames drawn (default 4)")
+    p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = p.parse_args()
     if args.picture_frames < 1:
         p.error(f"--picture-frames {args.picture_frames}: at least one")
@@ -337,8 +357,9 @@ def main() -> int:
     if segmenter.overlaps is not None:
         cut += f", {', '.join(segmenter.overlaps.classes)} masks exclusive"
     alone = f"the model alone, RGB (the head's background weighted {model.cfg.semantic_background_weight:g})"
-    for title, acc in ((f"as the node segments ({cut})", ap), (alone, ap_rgb)):
-        result = acc.result()
+    results = {}
+    for key, title, acc in (("node", f"as the node segments ({cut})", ap), ("model_alone", alone, ap_rgb)):
+        result = results[key] = acc.result()
         per_class = {classes[k - 1]: v for k, v in result["per_class"].items()}
         ap_line = ", ".join(f"{c} {per_class[c]:.3f}" if c in per_class else f"{c} -" for c in classes)
         print(f"mask AP50 {title}: {result['map']:.3f} (goal >= 0.90; ratio {result['map'] / 0.90:.2f}): "
@@ -350,6 +371,20 @@ def main() -> int:
     print(f"segmentation + pose of every part in a frame ({statistics.mean(parts):.1f} parts on "
           f"average): median {med * 1000:.0f} ms, p95 {p95 * 1000:.0f} ms (goal <= 500 ms; ratio "
           f"{med / 0.5:.2f}); segmentation alone median {statistics.median(seg_s) * 1000:.0f} ms")
+    if args.json:
+        figures = {
+            "weights": str(args.weights), "images": len(images), "source": str(root) if args.images else None,
+            "seed": None if args.images else args.seed, "depth_noise": args.depth_noise,
+            "image_noise": args.image_noise, "threads": args.threads,
+            **{f"mask_ap50_{key}": {"mean": r["map"],
+                                    "per_class": {classes[k - 1]: v for k, v in r["per_class"].items()}}
+               for key, r in results.items()},
+            "poses": pose_summary(from_model), "poses_twin_masks": pose_summary(from_twin),
+            "frame_median_ms": med * 1000, "frame_p95_ms": p95 * 1000,
+            "segmentation_median_ms": statistics.median(seg_s) * 1000,
+            "parts_per_frame": statistics.mean(parts),
+        }
+        args.json.write_text(json.dumps(figures, indent=1) + "\n")
     if args.picture:
         models = {cls: e.model for cls, e in frame_pipeline.estimators.items()}
         written = write_pose_picture(args.picture, pictured, models, classes)

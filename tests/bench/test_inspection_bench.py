@@ -103,7 +103,7 @@ def test_figures_and_wrong_decisions(bench, capsys):
         P("d/3", "ars_y", "missing_end_fitting b", False, ("missing end fitting",)),
     ]
     figures = bench.report(results)
-    assert figures == {"caught": 0.75, "rejected": 0.02}
+    assert figures == {"caught": 0.75, "rejected": 0.02, "defective": 4, "good": 50}
     out = capsys.readouterr().out
     wrong = out.split("wrong decisions:")[1].split("\n\n")[0].strip().splitlines()
     assert [line.split()[0] for line in wrong] == ["v/49", "d/1"]
@@ -139,3 +139,4 @@ def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_d
     bench_masks = masks(detect(frame, camera))
     assert bench_masks == node_masks(rgb=frame.rgb, depth=frame.depth)
     assert bench_masks != node_masks(rgb=frame.rgb)
+

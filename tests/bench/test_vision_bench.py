@@ -70,3 +70,7 @@ def test_views_left_uncertified_are_reported_by_the_certificates_reason(bench, c
     out = capsys.readouterr().out
     assert "certified 0/3 = 0.0 %" in out
     assert "    end_fitting   Chamfer over threshold 2 [1], seen past 1 [0]\n" in out
+    assert bench.pose_summary(tally) == {
+        "posed": 3, "certified": 0, "views": 3, "views_certified": 0, "add_s_ok": 0,
+        "median_rotation_deg": None, "median_translation_mm": None,
+    }
