@@ -40,7 +40,7 @@ GOALS = {"ap50": 0.90, "certified": 0.95, "add_s_ok": 0.95, "caught": 0.99, "rej
 
 @dataclass(frozen=True)
 class Job:
-    """One benchmark run: its command, the JSON it writes and what the table calls it."""
+    """One benchmark run: its label in the progress lines, its command, the JSON it writes, its log."""
 
     label: str
     command: list[str]
