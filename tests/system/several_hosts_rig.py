@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import signal
 import sys
 import threading
@@ -22,6 +21,8 @@ from pathlib import Path
 import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
+
+from tlt_common.json_lines import JsonLinesWriter
 
 CRS_RIG = Path(__file__).resolve().parents[1] / "tlt_crs" / "conftest.py"
 
@@ -41,11 +42,10 @@ def main() -> None:
     parser.add_argument("--hold-first-s", type=float, default=0.0)
     args = parser.parse_args()
     rig_module = load_rig()
-    lock = threading.Lock()
+    record = JsonLinesWriter(args.record)
 
     def write(entry: dict) -> None:
-        with lock, args.record.open("a") as f:
-            f.write(json.dumps({**entry, "wall": time.time()}) + "\n")
+        record.append({**entry, "wall": time.time()})
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -32,13 +32,13 @@ minutes on 2 cores.
 from __future__ import annotations
 
 import importlib.util
-import json
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tlt_common import json_lines
 from tlt_common.ccsds.reasons import AckStage
 from tlt_common.mission.schema import load_mission
 from tlt_gsw.summary import STATE_NAMES, unpack_member_states
@@ -106,9 +106,9 @@ def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):
         used.add(nearest)
 
     # Each release at a place within the mission's tolerances of it, by the truth at that instant.
-    lines = (run.run_dir / "placements.jsonl").read_text().splitlines()
-    released = [r for r in map(json.loads, lines) if r["member"] is not None]
-    assert {r["member"] for r in released} == inspected, lines
+    placements = json_lines.read(run.run_dir / "placements.jsonl")
+    released = [r for r in placements if r["member"] is not None]
+    assert {r["member"] for r in released} == inspected, placements
     tol = mission.inspection
     off = [r for r in released if r["position_error_m"] > tol["position_tolerance"]
            or r["angle_error_rad"] > tol["angle_tolerance"]]  # fmt: skip

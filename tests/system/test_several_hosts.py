@@ -37,6 +37,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tlt_common import json_lines
 from tlt_common.ccsds.auth import write_key_file
 from tlt_common.ccsds.reasons import AckStage
 from tlt_common.launch.hosts import (
@@ -104,22 +105,6 @@ def wait(predicate, timeout: float, what: str, output: Output) -> None:
         time.sleep(0.1)
 
 
-def records(path: Path, kind: str) -> list[dict]:
-    try:
-        lines = path.read_text().splitlines()
-    except OSError:
-        return []
-    entries = []
-    for line in lines:
-        try:
-            entry = json.loads(line)
-        except ValueError:
-            continue  # a line being written
-        if entry["kind"] == kind:
-            entries.append(entry)
-    return entries
-
-
 def members(state_file: Path) -> dict[str, str]:
     try:
         return json.loads(state_file.read_text())["members"]
@@ -179,9 +164,9 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
     out = Output(proc)
     try:
         # ARS X gets its first request from the CRS, across the network, and holds it.
-        wait(lambda: any(r["ars"] == "ars_x" for r in records(record, "request")), 90,
+        wait(lambda: any(r["ars"] == "ars_x" for r in json_lines.read(record, "request")), 90,
              "a first request reaches ARS X", out)
-        held = next(r for r in records(record, "request") if r["ars"] == "ars_x")
+        held = next(r for r in json_lines.read(record, "request") if r["ars"] == "ars_x")
         cut_link(RUN, "ars_x")
         # The CRS loses ARS X from its graph (lease 3 s) and, ars_server_s (4 s) later, faults.
         wait(lambda: out.matching(r"CRS_FAULT.*ars_x"), 40, "the CRS faults on the lost ARS X", out)
@@ -202,7 +187,7 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
         built = members(state)
         assert built and set(built.values()) <= {"INSPECTED", "RIVETED"}, built
         # Both ARS hosts worked on the tower, and ARS X again after its link healed.
-        requests = records(record, "request")
+        requests = json_lines.read(record, "request")
         assert {r["ars"] for r in requests} == {"ars_x", "ars_y"}
         assert [r for r in requests if r["ars"] == "ars_x" and r["wall"] > held["wall"]]
         assert len(out.matching(r"\[launch\] (crs|ars_x|ars_y|crs_drivers) exited")) == 0

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tlt_common import json_lines
 from tlt_common.free_port import free_udp_port
 from tlt_common.ros_isolation import isolate
 
@@ -69,19 +70,7 @@ class RigProcess:
             time.sleep(0.05)
 
     def entries(self, kind):
-        try:
-            lines = self.record.read_text().splitlines()
-        except OSError:
-            return []
-        out = []
-        for line in lines:
-            try:
-                entry = json.loads(line)
-            except ValueError:
-                continue  # a line being written
-            if entry["kind"] == kind:
-                out.append(entry)
-        return out
+        return json_lines.read(self.record, kind)
 
     def close(self):
         self.proc.terminate()

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import signal
 import sys
 import threading
 from pathlib import Path
 
 import rclpy
+
+from tlt_common.json_lines import JsonLinesWriter
 
 CRS_RIG = Path(__file__).resolve().parents[1] / "tlt_crs" / "conftest.py"
 
@@ -31,11 +32,7 @@ def main() -> None:
     rig_module = importlib.util.module_from_spec(spec)
     sys.modules["crs_rig"] = rig_module  # dataclasses look their module up there
     spec.loader.exec_module(rig_module)
-    lock = threading.Lock()
-
-    def write(entry: dict) -> None:
-        with lock, args.record.open("a") as f:
-            f.write(json.dumps(entry) + "\n")
+    write = JsonLinesWriter(args.record).append
 
     original_add = rig_module.Recorder.add
 

@@ -10,7 +10,6 @@ did. The other endings (rejected Start, fault not cleared, timeout, Ctrl-C, no C
 from __future__ import annotations
 
 import io
-import json
 import os
 import re
 import signal
@@ -23,6 +22,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tlt_common import json_lines
 from tlt_common.ccsds.auth import KeyRing, write_key_file
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.reasons import Reason, Severity
@@ -70,22 +70,6 @@ def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM) -> None:
             proc.wait()
 
 
-def _rig_entries(record: Path, kind: str) -> list[dict]:
-    try:
-        lines = record.read_text().splitlines()
-    except OSError:
-        return []
-    out = []
-    for line in lines:
-        try:
-            entry = json.loads(line)
-        except ValueError:
-            continue  # a line being written
-        if entry["kind"] == kind:
-            out.append(entry)
-    return out
-
-
 def test_job_builds_a_one_bay_tower_through_a_crs_process(tmp_path, keys):
     gsw_port, crs_port = free_udp_port(), free_udp_port()
     link = link_yaml(tmp_path, keys, crs_port, gsw_port)
@@ -107,7 +91,7 @@ def test_job_builds_a_one_bay_tower_through_a_crs_process(tmp_path, keys):
     crs = None
     try:
         deadline = time.monotonic() + 30
-        while not _rig_entries(record, "ready"):
+        while not json_lines.read(record, "ready"):
             assert time.monotonic() < deadline and rig.poll() is None, "the stand-ins did not start"
             time.sleep(0.05)
         crs = subprocess.Popen(
@@ -156,7 +140,7 @@ def test_job_builds_a_one_bay_tower_through_a_crs_process(tmp_path, keys):
     assert not any("hk_lifter" in line or "hk_grippers" in line for line in lines)
 
     # The summary matches what the stand-ins did.
-    requests = _rig_entries(record, "request")
+    requests = json_lines.read(record, "request")
     added = [r["member"] for r in requests if r["request"] in ("add_member", "add_cross_frame")]
     riveted = [r["member"] for r in requests if r["request"] == "foundation_rivet"]
     assert len(added) == len(set(added)) == 9 and len(riveted) == 4

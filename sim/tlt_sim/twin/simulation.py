@@ -34,13 +34,13 @@ ur-rtde's handshakes run on wall time, and the arm's motion generator on sim tim
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from tlt_common.json_lines import JsonLinesWriter
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.devices import TwinDevices
 from tlt_sim.twin.faults import FaultSchedule
@@ -65,6 +65,7 @@ class Twin:
         }
         self._closed = False
         self.placements_path = self.run_dir / "placements.jsonl"
+        self._placements = JsonLinesWriter(self.placements_path)
 
     def start(self) -> None:
         """Serve every device link; faults due at time 0 apply at once."""
@@ -115,8 +116,7 @@ class Twin:
             log.info("%s released %s at %.3f s", release.arm, placed.describe(), release.time)
             record = {"arm": release.arm, "time": release.time, **placed.as_dict()}
             try:
-                with self.placements_path.open("a") as f:
-                    f.write(json.dumps(record) + "\n")
+                self._placements.append(record)
             except OSError as exc:
                 log.warning("cannot record a placement in %s: %s", self.placements_path, exc)
 

@@ -6,7 +6,6 @@ GPIO lines, UR motion commands); the bring-up test does the same through the rea
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 
@@ -19,6 +18,7 @@ from tlt_sim.model.geometry import frame_from_axes
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.bindings import ServoJointBinding, URArmBinding
 
+from tlt_common import json_lines
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
 
@@ -73,7 +73,7 @@ def test_a_grasp_on_a_tube_shows_as_a_blocked_shaft_pressing_with_current(make_t
     assert scene.holding(arm) is None
     # The release is on the run's record, judged by the truth: let go of where it was grasped,
     # far from the tower, the strut was placed nowhere.
-    (record,) = [json.loads(line) for line in twin.placements_path.read_text().splitlines()]
+    (record,) = json_lines.read(twin.placements_path)
     assert (record["arm"], record["part"], record["member"]) == (arm, part.name, None)
     assert record["position_error_m"] > 0.05 and record["time"] > 1.5
     assert f"{arm} released {part.name} at no place" in caplog.text
