@@ -12,8 +12,8 @@ from tlt_interfaces.msg import GripperState
 
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
-from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
+from tlt_drivers.nodes.gripper_state import gripper_state
 from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
@@ -29,22 +29,11 @@ class GripperGroupNode(DynamixelDriverNode):
             self.loop.start()
 
     def publish_state(self) -> None:
-        msg = GripperState()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.group = self.config["component"]
-        names = self.hw.joint_names
-        msg.joint_names = names
-        msg.position = [self.hw.position[n] for n in names]
-        msg.goal_position = [self.hw.command[n] for n in names]
-        msg.engaged = [
+        engaged = [
             j.engaged_above is not None and self.hw.position[j.name] >= j.engaged_above
             for j in self.hw.joints
         ]
-        msg.hardware_error = [self.hw.hardware_error[n] & 0xFF for n in names]
-        msg.torque_enabled = self.hw.state == Lifecycle.ACTIVE
-        msg.fault = self.hw.state == Lifecycle.ERROR
-        msg.fault_reason = self.hw.fault
-        self.state_pub.publish(msg)
+        self.state_pub.publish(gripper_state(self, self.hw, self.config["component"], engaged))
 
 
 def driver(args: list[str]) -> Driver:

@@ -14,10 +14,10 @@ from tlt_interfaces.msg import GripperState
 
 from tlt_common import ros_names
 from tlt_common.lean_node import LeanNode
-from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.driver_loop import DriverLoop
+from tlt_drivers.nodes.gripper_state import gripper_state
 from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
@@ -43,19 +43,8 @@ class TopGrippersNode(LeanNode):
             self.loop.start()
 
     def publish_state(self) -> None:
-        msg = GripperState()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.group = self.config["component"]
-        names = self.hw.joint_names
-        msg.joint_names = names
-        msg.position = [self.hw.position[n] for n in names]
-        msg.goal_position = [self.hw.command[n] for n in names]
-        msg.engaged = [self.hw.position[a["name"]] >= a["engaged_above"] for a in self.hw.actuators]
-        msg.hardware_error = [self.hw.hardware_error[n] & 0xFF for n in names]
-        msg.torque_enabled = self.hw.state == Lifecycle.ACTIVE
-        msg.fault = self.hw.state == Lifecycle.ERROR
-        msg.fault_reason = self.hw.fault
-        self.state_pub.publish(msg)
+        engaged = [self.hw.position[a["name"]] >= a["engaged_above"] for a in self.hw.actuators]
+        self.state_pub.publish(gripper_state(self, self.hw, self.config["component"], engaged))
 
     def shutdown(self) -> None:
         """Stop the control loop and close the board's port."""
