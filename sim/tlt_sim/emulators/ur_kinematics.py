@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tlt_sim.model import ur10e
+
 
 @dataclass(frozen=True)
 class DH:
@@ -28,27 +30,12 @@ class DH:
     alpha: tuple[float, ...]
 
 
-UR10E = DH(
-    d=(0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655),
-    a=(0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0),
-    alpha=(math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0),
-)
+# The data sheet's, kept in one place with the twin's model of the arm.
+UR10E = DH(d=ur10e.D, a=ur10e.A, alpha=ur10e.ALPHA)
 
 
 class IKError(ValueError):
     """The pose has no joint solution (out of reach or at a singular configuration)."""
-
-
-def _link(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array(
-        [
-            [ct, -st * ca, st * sa, a * ct],
-            [st, ct * ca, -ct * sa, a * st],
-            [0.0, sa, ca, d],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
 
 
 def rotvec_to_matrix(rv: Sequence[float]) -> np.ndarray:
@@ -93,7 +80,7 @@ def forward_matrix(q: Sequence[float], dh: DH = UR10E) -> np.ndarray:
     """Base-to-flange transform at joint angles ``q``."""
     t = np.eye(4)
     for i in range(6):
-        t = t @ _link(q[i], dh.d[i], dh.a[i], dh.alpha[i])
+        t = t @ ur10e.dh(q[i], dh.d[i], dh.a[i], dh.alpha[i])
     return t
 
 
@@ -138,9 +125,9 @@ def inverse_all(
                     (-t60[1, 0] * sn1 + t60[1, 1] * c1) / sn5,
                     (t60[0, 0] * sn1 - t60[0, 1] * c1) / sn5,
                 )
-            t01 = _link(th1, d1, 0.0, dh.alpha[0])
-            t45 = _link(th5, d5, 0.0, dh.alpha[4])
-            t56 = _link(th6, d6, 0.0, dh.alpha[5])
+            t01 = ur10e.dh(th1, d1, 0.0, dh.alpha[0])
+            t45 = ur10e.dh(th5, d5, 0.0, dh.alpha[4])
+            t56 = ur10e.dh(th6, d6, 0.0, dh.alpha[5])
             t14 = np.linalg.inv(t01) @ t06 @ np.linalg.inv(t45 @ t56)
             p13 = t14 @ np.array([0.0, -d4, 0.0, 1.0]) - np.array([0.0, 0.0, 0.0, 1.0])
             n13 = float(np.linalg.norm(p13[:3]))
@@ -150,8 +137,8 @@ def inverse_all(
             for s3 in (1, -1):
                 th3 = s3 * math.acos(max(-1.0, min(1.0, c3)))
                 th2 = -math.atan2(p13[1], -p13[0]) + math.asin(max(-1.0, min(1.0, a3 * math.sin(th3) / n13)))
-                t12 = _link(th2, 0.0, a2, 0.0)
-                t23 = _link(th3, 0.0, a3, 0.0)
+                t12 = ur10e.dh(th2, 0.0, a2, 0.0)
+                t23 = ur10e.dh(th3, 0.0, a3, 0.0)
                 t34 = np.linalg.inv(t12 @ t23) @ t14
                 th4 = math.atan2(t34[1, 0], t34[0, 0])
                 q = [th1, th2, th3, th4, th5, th6]
