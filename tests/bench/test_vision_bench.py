@@ -63,14 +63,17 @@ def test_views_left_uncertified_are_reported_by_the_certificates_reason(bench, c
 
     tally = bench.PoseTally()
     tally.estimated["end_fitting"] = tally.whole["end_fitting"] = tally.reach["end_fitting"] = 3
+    tally.shown["end_fitting"] = 4  # one more the detection's mask fell short of
     tally.refused["end_fitting"]["Chamfer over threshold", True] += 1
     tally.refused["end_fitting"]["Chamfer over threshold", False] += 1
     tally.refused["end_fitting"]["seen past", False] += 1
     bench.report_poses("on masks", tally, 0.02)
     out = capsys.readouterr().out
     assert "certified 0/3 = 0.0 %" in out
+    assert "of the 4 views in which the twin's mask of the part shows enough of it" in out
     assert "    end_fitting   Chamfer over threshold 2 [1], seen past 1 [0]\n" in out
     assert bench.pose_summary(tally) == {
-        "posed": 3, "certified": 0, "views": 3, "views_certified": 0, "add_s_ok": 0,
+        "posed": 3, "certified": 0, "views": 3, "views_certified": 0, "views_shown": 4,
+        "views_shown_certified": 0, "add_s_ok": 0,
         "median_rotation_deg": None, "median_translation_mm": None,
     }

@@ -17,22 +17,26 @@ def bench(load_bench):
     return load_bench("vision_candidate")
 
 
-def _vision_json(views: int, views_certified: int, certified: int, add_s_ok: int, ap: float) -> dict:
+def _vision_json(views: int, views_certified: int, certified: int, add_s_ok: int, ap: float,
+                 shown: tuple[int, int] = (0, 0)) -> dict:
     poses = {"posed": certified + 5, "certified": certified, "views": views,
-             "views_certified": views_certified, "add_s_ok": add_s_ok, "median_rotation_deg": 0.1,
-             "median_translation_mm": 0.4}
+             "views_certified": views_certified, "views_shown": shown[0], "views_shown_certified": shown[1],
+             "add_s_ok": add_s_ok, "median_rotation_deg": 0.1, "median_translation_mm": 0.4}
     return {"mask_ap50_node": {"mean": ap, "per_class": {}}, "poses": poses}
 
 
 def test_the_table_reads_the_vision_benchs_figures_and_marks_the_goals(bench):
-    row = bench.vision_figures(_vision_json(200, views_certified=192, certified=195, add_s_ok=190, ap=0.91))
-    assert row == {"ap50": 0.91, "certified": 0.96, "add_s_ok": pytest.approx(190 / 195), "views": 200}
-    assert bench.goals_met(row) == {"ap50": True, "certified": True, "add_s_ok": True}
+    row = bench.vision_figures(_vision_json(200, views_certified=192, certified=195, add_s_ok=190, ap=0.91,
+                                            shown=(220, 198)))
+    assert row == {"ap50": 0.91, "certified": 0.96, "shown": 0.9, "add_s_ok": pytest.approx(190 / 195),
+                   "views": 200, "views_shown": 220}
+    # Segmentation's losses counted, the same poses fall short.
+    assert bench.goals_met(row) == {"ap50": True, "certified": True, "shown": False, "add_s_ok": True}
     short = bench.vision_figures(_vision_json(100, views_certified=94, certified=94, add_s_ok=80, ap=0.84))
     assert bench.goals_met(short) == {"ap50": False, "certified": False, "add_s_ok": False}
     # Nothing certified: no share to give, and no goal judged on it.
     none = bench.vision_figures(_vision_json(views=0, views_certified=0, certified=0, add_s_ok=0, ap=0.5))
-    assert none["certified"] is None and none["add_s_ok"] is None
+    assert none["certified"] is None and none["shown"] is None and none["add_s_ok"] is None
     assert bench.goals_met(none) == {"ap50": False}
     # Good parts rejected: lower is better, so at most the goal meets it.
     assert bench.goals_met({"caught": 1.0, "rejected": 0.02}) == {"caught": True, "rejected": True}
@@ -46,9 +50,12 @@ def test_a_positive_difference_is_always_a_gain(bench):
 
 
 def test_the_sets_are_pooled_by_their_views_and_their_ap_averaged(bench):
-    rows = {"seed 1": {"a": {"ap50": 0.8, "certified": 1.0, "views": 100}},
-            "seed 2": {"a": {"ap50": 0.9, "certified": 0.5, "views": 300}}}
-    assert bench.pooled(rows, ["a"])["a"] == pytest.approx({"ap50": 0.85, "certified": 0.625})
+    rows = {"seed 1": {"a": {"ap50": 0.8, "certified": 1.0, "views": 100, "shown": 0.5, "views_shown": 100}},
+            "seed 2": {"a": {"ap50": 0.9, "certified": 0.5, "views": 300, "shown": 1.0, "views_shown": 100}}}
+    assert bench.pooled(rows, ["a"])["a"] == pytest.approx({"ap50": 0.85, "certified": 0.625, "shown": 0.75})
+    # A set measured before the second count: pooled over the sets that have it.
+    rows["seed 3"] = {"a": {"ap50": 0.7, "certified": 1.0, "views": 400, "shown": None, "views_shown": 0}}
+    assert bench.pooled(rows, ["a"])["a"]["shown"] == pytest.approx(0.75)
     text = bench.table(rows, ["a"], ["ap50", "certified"])
     assert "0.800 --" in text and "100.0 % ok" in text and "50.0 % --" in text
 
@@ -67,6 +74,9 @@ def test_a_run_compares_two_weights_on_a_small_held_out_set(bench, tmp_path, cap
     assert 0.0 < seed["candidate"]["ap50"] <= 1.0 and seed["candidate"]["views"] > 0
     figures = json.loads((tmp_path / "candidate_900.json").read_text())
     assert figures["images"] == 2 and figures["poses"]["views"] == seed["candidate"]["views"]
+    # On the twin's own masks both counts judge the same cloud.
+    twin = figures["poses_twin_masks"]
+    assert (twin["views_shown"], twin["views_shown_certified"]) == (twin["views"], twin["views_certified"])
     assert "mask AP50 +0.000" in out and "seed 900" in out
     # The rendered set is kept for the next run; a missing weights file is refused up front.
     assert (tmp_path / "held_out_900_2" / "index.json").exists()
