@@ -120,9 +120,9 @@ class PoseTally:
 
 
 def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally) -> None:
-    """Pose ``items`` [(Detection, model name, true 4x4 pose, the twin's mask of the part)] and
-    count them into ``tally``."""
-    by_model: dict[str, list[tuple[Detection, np.ndarray, np.ndarray]]] = defaultdict(list)
+    """Pose ``items`` [(Detection, model name, true 4x4 pose, the twin's mask of the part, or None
+    where the detection's mask is the twin's)] and count them into ``tally``."""
+    by_model: dict[str, list[tuple[Detection, np.ndarray, np.ndarray | None]]] = defaultdict(list)
     for det, name, true, truth_mask in items:
         by_model[name].append((det, true, truth_mask))
     for name, group in by_model.items():
@@ -140,9 +140,11 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
             points = pipelines[name].cloud(det, depth, intrinsics, rng=np.random.default_rng(0)).points
             whole = non_degenerate_at(model, points, true)
             tally.whole[cls] += whole
-            truth_cloud = pipelines[name].cloud(dataclasses.replace(det, mask=truth_mask), depth, intrinsics,
-                                                rng=np.random.default_rng(0))
-            shown = truth_cloud.ok and non_degenerate_at(model, truth_cloud.points, true)
+            shown = whole
+            if truth_mask is not None:
+                truth_cloud = pipelines[name].cloud(dataclasses.replace(det, mask=truth_mask), depth,
+                                                    intrinsics, rng=np.random.default_rng(0))
+                shown = truth_cloud.ok and non_degenerate_at(model, truth_cloud.points, true)
             tally.shown[cls] += shown
             noise = pipelines[name].depth_noise
             reach = whole and not noise.too_noisy(float(np.median(points[:, 2])), model.diameter)
@@ -358,7 +360,7 @@ def main() -> int:
                 if cls not in POSED:
                     continue
                 item_name = instance_model(cls, str(name))
-                truth.append((Detection(cls, s.masks[j]), item_name, pose, s.masks[j]))
+                truth.append((Detection(cls, s.masks[j]), item_name, pose, None))
                 if iou is None:
                     continue
                 same = (pred["labels"] == int(label)) & (pred["scores"] >= min_score)

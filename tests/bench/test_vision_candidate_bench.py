@@ -74,9 +74,8 @@ def test_a_run_compares_two_weights_on_a_small_held_out_set(bench, tmp_path, cap
     assert 0.0 < seed["candidate"]["ap50"] <= 1.0 and seed["candidate"]["views"] > 0
     figures = json.loads((tmp_path / "candidate_900.json").read_text())
     assert figures["images"] == 2 and figures["poses"]["views"] == seed["candidate"]["views"]
-    # On the twin's own masks both counts judge the same cloud.
-    twin = figures["poses_twin_masks"]
-    assert (twin["views_shown"], twin["views_shown_certified"]) == (twin["views"], twin["views_certified"])
+    # The second count is made on the model's masks too: the twin's masks of the matched parts.
+    assert figures["poses"]["views_shown"] > 0
     assert "mask AP50 +0.000" in out and "seed 900" in out
     # The rendered set is kept for the next run; a missing weights file is refused up front.
     assert (tmp_path / "held_out_900_2" / "index.json").exists()
