@@ -36,10 +36,11 @@ import torch
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
+from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.depth_noise import with_noise
 from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import LookCloser, PartInspector
-from tlt_vision.segmentation_source import CameraFrame, TwinLabels
+from tlt_vision.segmentation_source import TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.train.render_dataset import ARMS, inspection_joints
 

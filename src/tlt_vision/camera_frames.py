@@ -18,7 +18,6 @@ import json
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -28,6 +27,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
+from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.pointcloud import Intrinsics
 
 IMAGE_STREAMS = ("rgb", "depth", "segmentation")
@@ -40,19 +40,6 @@ _ENCODINGS = {
 
 class NoFrame(RuntimeError):
     """No usable frame in time; the message says which stream was missing or wrong."""
-
-
-@dataclass
-class CameraFrame:
-    camera: str
-    stamp: float  # ROS time, s
-    frame_id: str
-    intrinsics: Intrinsics
-    camera_matrix: np.ndarray  # 3x3
-    images: dict[str, np.ndarray] = field(default_factory=dict)
-
-    def get(self, stream: str) -> np.ndarray | None:
-        return self.images.get(stream)
 
 
 def stamp_of(msg: object) -> float:

@@ -116,7 +116,7 @@ def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_d
     alone's (before 2026-12-04 the bench gave the segmenter no depth, and judged a held diagonal
     whose tube the jaws cross by two pieces the node would have joined)."""
     scene_mod = pytest.importorskip("tlt_sim.model.scene")
-    from tlt_vision.segmentation_source import CameraFrame
+    from tlt_vision.camera_frame import CameraFrame
 
     config = load_config()
     assert config.raw["segmentation"]["depth_split"], "node.yaml cuts no thin part on the depth"

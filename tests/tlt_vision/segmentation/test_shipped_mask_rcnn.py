@@ -28,7 +28,7 @@ import pytest
 import torch
 
 from tlt_vision.cad.models import thin_part_radii
-from tlt_vision.camera_frames import CameraFrame
+from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.node_config import load_config
 from tlt_vision.segmentation.depth_split import depth_pieces, join_collinear, radii_by_label, split_by_depth
 from tlt_vision.segmentation.evaluate import MaskAP

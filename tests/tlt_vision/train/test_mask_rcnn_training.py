@@ -117,7 +117,7 @@ def test_training_reduces_the_loss_raises_ap50_and_writes_its_outputs(run):
 
 
 def test_saved_weights_load_in_the_node_and_a_mismatched_manifest_is_refused(run, tmp_path):
-    from tlt_vision.camera_frames import CameraFrame
+    from tlt_vision.camera_frame import CameraFrame
     from tlt_vision.segmentation_source import MaskRcnnSegmenter
 
     # A dozen epochs on sixteen images leave the class scores near 0.3 (of six classes).
