@@ -221,16 +221,13 @@ class ActionGoal(Action):
     def update(self) -> Status:
         now = self.clock()
         if self._send_future is None:
-            # Wait on the cached answer; send, or fail, only on a fresh one (server_readiness).
-            up = self._readiness.ready()
-            if up or now - self._started > self.server_timeout:
-                up = self._readiness.ready_now()
-            if not up:
-                if now - self._started > self.server_timeout:
-                    return self.fail(
-                        f"action server '{self.action_name}' not available after {self.server_timeout:g} s"
-                    )
+            up = self._readiness.wait(now - self._started, self.server_timeout)
+            if up is None:
                 return Status.RUNNING
+            if not up:
+                return self.fail(
+                    f"action server '{self.action_name}' not available after {self.server_timeout:g} s"
+                )
             try:
                 goal = self._goal() if callable(self._goal) else self._goal
             except Exception as exc:
@@ -364,15 +361,11 @@ class ServiceCall(Action):
     def update(self) -> Status:
         now = self.clock()
         if self._future is None:
-            up = self._readiness.ready()
-            if up or now - self._started > self.service_timeout:
-                up = self._readiness.ready_now()
-            if not up:
-                if now - self._started > self.service_timeout:
-                    return self.fail(
-                        f"service '{self.srv_name}' not available after {self.service_timeout:g} s"
-                    )
+            up = self._readiness.wait(now - self._started, self.service_timeout)
+            if up is None:
                 return Status.RUNNING
+            if not up:
+                return self.fail(f"service '{self.srv_name}' not available after {self.service_timeout:g} s")
             try:
                 request = self._request() if callable(self._request) else self._request
             except Exception as exc:

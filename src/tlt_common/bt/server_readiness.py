@@ -11,6 +11,7 @@ Rule for callers: *wait* on :meth:`Readiness.ready` (a cached answer), *act* on
 :meth:`Readiness.ready_now` (a fresh one): a goal is sent, and a "server not available" or
 "server gone" failure is raised, only on an answer rclpy has just given. A cached answer only
 delays noticing that a server came or went, by at most ``period``; it never decides anything.
+:meth:`Readiness.wait` is that rule for a behaviour waiting to send its goal or request.
 """
 
 from __future__ import annotations
@@ -65,6 +66,18 @@ class Readiness:
         if now - self._asked_at >= FRESH_S:
             return self._refresh(now)
         return self._answer
+
+    def wait(self, waited: float, timeout: float) -> bool | None:
+        """A behaviour's wait for the server, ``waited`` seconds into it: True when a fresh answer
+        says it is up (send now), False when a fresh answer says it is not after ``timeout`` (fail
+        now), None while it is still worth waiting (cached answers, so a tick asks rclpy at most
+        once a ``period``)."""
+        up = self.ready()
+        if up or waited > timeout:
+            up = self.ready_now()
+        if up:
+            return True
+        return False if waited > timeout else None
 
 
 def readiness_of(client: Any) -> Readiness:

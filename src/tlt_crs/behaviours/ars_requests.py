@@ -250,18 +250,14 @@ class SendArsRequest(Action):
                 server = req.server(ars)
             except ValueError as exc:
                 return self.fail(f"cannot address the ARS: {exc}")
-            # Wait on the cached answer; send, or fail, only on a fresh one (server_readiness).
-            up = server.readiness.ready()
-            if up or now - self._started > limit:
-                up = server.readiness.ready_now()
-            if not up:
-                if now - self._started > limit:
-                    return self.fail(
-                        f"ARS '{ars}' missing: action server '{server.action}'"
-                        f" not available after {limit:g} s"
-                    )
+            up = server.readiness.wait(now - self._started, limit)
+            if up is None:
                 self.feedback_message = server.waiting_text
                 return Status.RUNNING
+            if not up:
+                return self.fail(
+                    f"ARS '{ars}' missing: action server '{server.action}' not available after {limit:g} s"
+                )
             try:
                 goal = req.make_goal(ars)
             except Exception as exc:

@@ -67,6 +67,30 @@ def test_ready_now_asks_unless_just_asked(server_and_clock):
     assert server.asked == 3
 
 
+def test_wait_runs_on_cached_answers_and_decides_on_fresh_ones(server_and_clock):
+    server, clock, readiness = server_and_clock
+    assert readiness.wait(0.0, timeout=1.0) is None  # not up: keep waiting
+    server.up = True
+    clock.now += 0.1
+    assert readiness.wait(0.1, timeout=1.0) is None  # up, but the cached answer says not yet
+    assert server.asked == 1
+    clock.now += 0.2
+    assert readiness.wait(0.3, timeout=1.0) is True  # the period is over: asked, up
+    assert server.asked == 2
+
+
+def test_wait_fails_only_on_a_fresh_answer_after_the_timeout(server_and_clock):
+    server, clock, readiness = server_and_clock
+    assert readiness.wait(0.0, timeout=1.0) is None
+    clock.now += 0.01
+    server.up = True  # came up just now; the cache still says not
+    assert readiness.wait(1.5, timeout=1.0) is True  # past the timeout: asked afresh, not failed
+    server.up = False
+    clock.now += 0.01
+    assert readiness.wait(1.6, timeout=1.0) is False
+    assert server.asked == 3
+
+
 def test_period_zero_asks_every_time():
     server, clock = Server(), Monotonic()
     readiness = Readiness(server.is_ready, period=0.0, monotonic=clock)
