@@ -173,3 +173,26 @@ def test_on_a_noisy_depth_camera_a_near_fitting_is_certified_right_and_a_far_one
     depth = with_noise(depth, 0.01, np.random.default_rng(1))
     e = pipeline.observe([Detection("end_fitting", ids == 0)], depth, K, depth_noise=noise)[0].estimate
     assert not e.certified and e.certificate.reason.startswith("depth too noisy to certify at 0.6")
+
+
+def test_a_frame_asked_about_again_is_posed_the_same_whatever_came_between():
+    """An operator who asks for the same inspection twice gets the same answer: a mask of more
+    pixels than ``max_points`` is subsampled, and the draw depends on the frame alone, not on
+    how many frames the pipeline posed before."""
+    joint = MODELS["corner_joint"]
+    depth, ids = _render([(joint, _rz(0.4), np.array([-0.02, 0.0, 0.45]))])
+    other, other_ids = _render([(joint, _rz(1.1), np.array([0.03, 0.01, 0.5]))])
+    torch.manual_seed(0)
+    est = PoseEstimator(joint, KeypointDetector(8, joint.diameter / 2, width=8), threshold=0.006)
+    pipe = PartPipeline({"corner_joint": est}, max_points=200)
+    det = Detection("corner_joint", ids == 0)
+    assert np.count_nonzero(det.mask) > 2 * pipe.max_points
+
+    def pose():
+        (obs,) = pipe.observe([det], depth, K)
+        return np.concatenate([obs.estimate.rotation.ravel(), obs.estimate.translation])
+
+    first = pose()
+    pipe.observe([Detection("corner_joint", other_ids == 0)], other, K)
+    np.testing.assert_array_equal(pose(), first)
+    np.testing.assert_array_equal(pipe.cloud(det, depth, K).points, pipe.cloud(det, depth, K).points)
