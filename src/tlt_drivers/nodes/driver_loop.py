@@ -13,6 +13,7 @@ own state message are published at ``state_rate_hz``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from rclpy.node import Node
 from tlt_interfaces.msg import HardwareStatus
@@ -99,6 +100,29 @@ class DriverLoop:
         )
         self._timer = None
         self._clock = loop_clock(node)
+
+    @classmethod
+    def for_chain(
+        cls,
+        node: Node,
+        hw: HardwareInterface,
+        config: Mapping[str, Any],
+        members: Sequence[Mapping[str, Any]],
+        **controllers: Any,
+    ) -> DriverLoop:
+        """The loop of a validated chain config (``component``, ``rate_hz``, ``state_rate_hz``,
+        ``comm.recover_period_s``) whose ``members`` (joints or actuators) carry ``name``, ``lower``
+        and ``upper``; ``controllers`` are the rest of :class:`DriverLoop`'s keywords."""
+        return cls(
+            node,
+            hw,
+            component=config["component"],
+            rate_hz=config["rate_hz"],
+            state_rate_hz=config["state_rate_hz"],
+            recover_period_s=config["comm"]["recover_period_s"],
+            limits={m["name"]: (m["lower"], m["upper"]) for m in members},
+            **controllers,
+        )
 
     # --- helpers -----------------------------------------------------------------------------------------
     def now(self) -> float:

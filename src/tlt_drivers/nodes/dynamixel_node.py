@@ -25,14 +25,11 @@ class DynamixelDriverNode(LeanNode):
         self.config = config
         self.hw = DynamixelChainInterface(config)
         joints = config["joints"]
-        self.loop = DriverLoop(
+        self.loop = DriverLoop.for_chain(
             self,
             self.hw,
-            component=config["component"],
-            rate_hz=config["rate_hz"],
-            state_rate_hz=config["state_rate_hz"],
-            recover_period_s=config["comm"]["recover_period_s"],
-            limits={j["name"]: (j["lower"], j["upper"]) for j in joints},
+            config,
+            joints,
             trajectory_joints=[j["name"] for j in joints if j["controller"] == "trajectory"],
             group_joints=[j["name"] for j in joints if j["controller"] == "group_position"],
             trajectory_tolerances=config["trajectory"],

@@ -27,15 +27,8 @@ class TopGrippersNode(LeanNode):
         self.config = config
         self.hw = MightyZapChainInterface(config)
         acts = config["actuators"]
-        self.loop = DriverLoop(
-            self,
-            self.hw,
-            component=config["component"],
-            rate_hz=config["rate_hz"],
-            state_rate_hz=config["state_rate_hz"],
-            recover_period_s=config["comm"]["recover_period_s"],
-            limits={a["name"]: (a["lower"], a["upper"]) for a in acts},
-            group_joints=[a["name"] for a in acts],
+        self.loop = DriverLoop.for_chain(
+            self, self.hw, config, acts, group_joints=[a["name"] for a in acts],
             publish_state=self.publish_state,
         )
         self.state_pub = self.create_publisher(GripperState, ros_names.state_topic(config["component"]), 10)
