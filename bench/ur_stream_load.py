@@ -52,7 +52,7 @@ def measure(rate_hz: float, window_s: float, settle_s: float = 8.0) -> tuple[flo
                 time.sleep(settle_s)  # connected, script uploaded, streaming
                 if driver.poll() is not None:
                     raise RuntimeError(f"tlt-ur exited with {driver.returncode}")
-                pids = (emulator._proc.pid, driver.pid)
+                pids = (emulator.pid, driver.pid)
                 before, t0 = [_cpu_s(p) for p in pids], time.monotonic()
                 time.sleep(window_s)
                 after, t1 = [_cpu_s(p) for p in pids], time.monotonic()

@@ -3,7 +3,8 @@
 ``ur-rtde``'s interface constructors hold the Python interpreter lock while they block on the
 socket handshake, so an emulator in the same process as a ur-rtde client would never get to
 answer. Tests and benchmarks therefore run each emulated controller in its own process; this
-class starts it and forwards calls (faults, joint state) over a pipe, each with a bounded timeout.
+class starts it and forwards calls (faults, joint state) over a pipe, each with a bounded timeout
+(:mod:`~tlt_sim.emulators.piped_calls`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import multiprocessing as mp
 from dataclasses import asdict
 from typing import Any
 
+from tlt_sim.emulators.piped_calls import PipedCalls, answer_one
 from tlt_sim.emulators.ur_controller import URControllerConfig, URControllerEmulator
 
 _ALLOWED = {
@@ -43,28 +45,20 @@ def _serve(config: dict[str, Any], pipe, log_level: int) -> None:
     except OSError as exc:
         pipe.send(("error", f"cannot serve on {config['host']}: {exc}"))
         return
+
+    def handle(name: str, args: tuple) -> Any:
+        if name in _QUERIES:
+            return _QUERIES[name](emulator)
+        if name == "set_state":
+            return emulator.arm.set_state(*args)
+        if name in _ALLOWED:
+            return getattr(emulator, name)(*args)
+        raise AttributeError(f"no remote call {name!r}")
+
     pipe.send(("ok", None))
     try:
-        while True:
-            try:
-                name, args = pipe.recv()
-            except EOFError:
-                return
-            if name == "close":
-                pipe.send(("ok", None))
-                return
-            try:
-                if name in _QUERIES:
-                    result = _QUERIES[name](emulator)
-                elif name == "set_state":
-                    result = emulator.arm.set_state(*args)
-                elif name in _ALLOWED:
-                    result = getattr(emulator, name)(*args)
-                else:
-                    raise AttributeError(f"no remote call {name!r}")
-                pipe.send(("ok", result))
-            except Exception as exc:  # report to the caller, keep serving
-                pipe.send(("error", f"{type(exc).__name__}: {exc}"))
+        while answer_one(pipe, handle):
+            pass
     finally:
         emulator.close()
 
@@ -75,43 +69,27 @@ class URControllerProcess:
     def __init__(self, config: URControllerConfig | None = None, *, log_level: int = logging.WARNING) -> None:
         self.config = config or URControllerConfig()
         ctx = mp.get_context("spawn")
-        self._pipe, child = ctx.Pipe()
-        self._proc = ctx.Process(
+        pipe, child = ctx.Pipe()
+        process = ctx.Process(
             target=_serve, args=(asdict(self.config), child, log_level), daemon=True, name="ur-emulator"
         )
-        self._log_level = log_level
+        self._calls = PipedCalls(process, pipe, "the UR emulator process")
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process id (None before :meth:`start`)."""
+        return self._calls.process.pid
 
     def start(self, timeout: float = 20.0) -> URControllerProcess:
-        self._proc.start()
-        self._expect(timeout)
+        self._calls.start(timeout)
         return self
 
     def call(self, name: str, *args: Any, timeout: float = 5.0) -> Any:
         """Call ``name`` on the emulator (a fault or a query) and return its result."""
-        self._pipe.send((name, args))
-        return self._expect(timeout)
-
-    def _expect(self, timeout: float) -> Any:
-        if not self._pipe.poll(timeout):
-            raise TimeoutError("the UR emulator process did not answer")
-        try:
-            status, value = self._pipe.recv()
-        except EOFError as exc:
-            raise RuntimeError(f"the UR emulator process exited (code {self._proc.exitcode})") from exc
-        if status != "ok":
-            raise RuntimeError(value)
-        return value
+        return self._calls.call(name, *args, timeout=timeout)
 
     def close(self) -> None:
-        if self._proc.is_alive():
-            try:
-                self.call("close", timeout=3.0)
-            except (TimeoutError, RuntimeError, OSError, EOFError):
-                pass
-            self._proc.join(timeout=3.0)
-            if self._proc.is_alive():
-                self._proc.kill()
-                self._proc.join(timeout=3.0)
+        self._calls.close()
 
     def __enter__(self) -> URControllerProcess:
         return self.start()

@@ -10,7 +10,8 @@ own process and shares two things with the twin through shared memory, with no r
   difference (in steps of at most 2 ms) as soon as it sees it;
 * the arm's six joint positions, which the child writes after each step and :meth:`positions` reads.
 
-Faults and the few commands tests need go over a pipe (:meth:`call`), each with a bounded timeout.
+Faults and the few commands tests need go over a pipe (:meth:`call`), each with a bounded timeout
+(:mod:`tlt_sim.emulators.piped_calls`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import signal
 from dataclasses import asdict
 from typing import Any
 
+from tlt_sim.emulators.piped_calls import PipedCalls, answer_one
 from tlt_sim.emulators.ur_controller import URControllerConfig, URControllerEmulator
 
 MAX_STEP_S = 0.002
@@ -44,6 +46,12 @@ def _serve(config: dict[str, Any], pipe, sim_time, positions, log_level: int) ->
     except OSError as exc:
         pipe.send(("error", f"cannot serve on {config['host']}: {exc}"))
         return
+
+    def handle(name: str, args: tuple) -> Any:
+        if name not in _CALLS:
+            raise AttributeError(f"no remote call {name!r}")
+        return _CALLS[name](emulator, *args)
+
     seen = sim_time.value
     positions[:] = emulator.arm.positions()
     pipe.send(("ok", None))
@@ -55,21 +63,8 @@ def _serve(config: dict[str, Any], pipe, sim_time, positions, log_level: int) ->
                 emulator.advance(dt)
                 seen += dt
             positions[:] = emulator.arm.positions()
-            if not pipe.poll(0.001):
-                continue
-            try:
-                name, args = pipe.recv()
-            except EOFError:
+            if pipe.poll(0.001) and not answer_one(pipe, handle):
                 return
-            if name == "close":
-                pipe.send(("ok", None))
-                return
-            try:
-                if name not in _CALLS:
-                    raise AttributeError(f"no remote call {name!r}")
-                pipe.send(("ok", _CALLS[name](emulator, *args)))
-            except Exception as exc:  # report to the caller, keep serving
-                pipe.send(("error", f"{type(exc).__name__}: {exc}"))
     finally:
         emulator.close()
 
@@ -84,19 +79,19 @@ class URControllerHost:
         ctx = mp.get_context("spawn")
         self._time = ctx.Value("d", 0.0, lock=False)
         self._positions = ctx.Array("d", list(config.q0), lock=False)
-        self._pipe, child = ctx.Pipe()
-        self._proc = ctx.Process(
+        pipe, child = ctx.Pipe()
+        process = ctx.Process(
             target=_serve, args=(asdict(config), child, self._time, self._positions, log_level),
             daemon=True, name=f"ur-controller-{config.host}",
         )
+        self._calls = PipedCalls(process, pipe, f"the UR controller at {config.host}")
         self._started = False
 
     def start(self, timeout: float = 30.0) -> URControllerHost:
         """Start the child; returns once it serves (OSError when its address is taken)."""
-        self._proc.start()
         self._started = True
         try:
-            self._expect(timeout)
+            self._calls.start(timeout)
         except RuntimeError as exc:
             raise OSError(str(exc)) from exc
         return self
@@ -111,8 +106,7 @@ class URControllerHost:
 
     def call(self, name: str, *args: Any, timeout: float = 5.0) -> Any:
         """Call ``name`` (a fault or a command of ``_CALLS``) in the child and return its result."""
-        self._pipe.send((name, args))
-        return self._expect(timeout)
+        return self._calls.call(name, *args, timeout=timeout)
 
     def drop_link(self) -> None:
         self.call("drop_link")
@@ -120,30 +114,11 @@ class URControllerHost:
     def restore_link(self) -> None:
         self.call("restore_link")
 
-    def _expect(self, timeout: float) -> Any:
-        if not self._pipe.poll(timeout):
-            raise TimeoutError(f"the UR controller at {self.config.host} did not answer")
-        try:
-            status, value = self._pipe.recv()
-        except EOFError as exc:
-            raise RuntimeError(f"the UR controller process exited (code {self._proc.exitcode})") from exc
-        if status != "ok":
-            raise RuntimeError(value)
-        return value
-
     def close(self) -> None:
         if not self._started:
             return
         self._started = False
-        if self._proc.is_alive():
-            try:
-                self.call("close", timeout=3.0)
-            except (TimeoutError, RuntimeError, OSError, EOFError):
-                pass
-            self._proc.join(timeout=3.0)
-            if self._proc.is_alive():
-                self._proc.kill()
-                self._proc.join(timeout=3.0)
+        self._calls.close()
 
 
 __all__ = ["URControllerHost"]
