@@ -135,15 +135,13 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
             cls = model.object_class
             tally.estimated[cls] += 1
             e = obs.estimate
-            # Generators of their own, so that the poses of the parts after it are those the
-            # pipeline gives without the bench's counting.
-            points = pipelines[name].cloud(det, depth, intrinsics, rng=np.random.default_rng(0)).points
+            points = pipelines[name].cloud(det, depth, intrinsics).points
             whole = non_degenerate_at(model, points, true)
             tally.whole[cls] += whole
             shown = whole
             if truth_mask is not None:
-                truth_cloud = pipelines[name].cloud(dataclasses.replace(det, mask=truth_mask), depth,
-                                                    intrinsics, rng=np.random.default_rng(0))
+                truth = dataclasses.replace(det, mask=truth_mask)
+                truth_cloud = pipelines[name].cloud(truth, depth, intrinsics)
                 shown = truth_cloud.ok and non_degenerate_at(model, truth_cloud.points, true)
             tally.shown[cls] += shown
             noise = pipelines[name].depth_noise

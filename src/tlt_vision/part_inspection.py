@@ -112,10 +112,9 @@ def _instance(d: Detection, depth: np.ndarray, k: PinholeIntrinsics) -> _Instanc
     centre = np.array([(np.median(u) - k.cx) * zc / k.fx, (np.median(v) - k.cy) * zc / k.fy, zc])
     # Off the mask's border: a border pixel where one part occludes another may carry the
     # front part's depth and would join the two (a tiny instance keeps its border pixels).
-    rng = np.random.default_rng(0)
-    cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS, rng=rng)
+    cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS)
     if not cloud.ok:
-        cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS, rng=rng, erode=0)
+        cloud = masked_point_cloud(d.mask, depth, k, min_points=1, max_points=_GAP_POINTS, erode=0)
     if not cloud.ok:
         return None
     return _Instance(d, centre, cloud.points.astype(float))

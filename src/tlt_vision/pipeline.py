@@ -169,7 +169,6 @@ class PartPipeline:
         min_points: int = MIN_POINTS,
         merge: Sequence[str] = ("cross_frame",),
         in_pieces: Sequence[str] = ("cross_frame",),
-        seed: int = 0,
         keep_border_below: int = 0,
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
         detached: Detached | None = DEFAULT_DETACHED,
@@ -190,7 +189,6 @@ class PartPipeline:
         self.min_points = min_points
         self.merge = tuple(merge)
         self.in_pieces = tuple(in_pieces)
-        self.seed = seed
 
     def cloud(
         self,
@@ -199,12 +197,11 @@ class PartPipeline:
         intrinsics: PinholeIntrinsics,
         rgb: np.ndarray | None = None,
         depth_noise: DepthNoise | None = None,
-        rng: np.random.Generator | None = None,
     ) -> MaskedCloud:
         """The point cloud C-3PO is given for one detection (its reason when there is none), the
         depth's noise ``depth_noise`` (by default the pipeline's) filtered out; a mask of more
-        than ``max_points`` pixels gives a subset drawn with ``rng`` (by default one seeded with the
-        pipeline's seed alone, so that the same detection always gives the same cloud)."""
+        than ``max_points`` pixels gives that many, evenly spaced over it
+        (:func:`~tlt_vision.pointcloud.masked_point_cloud`)."""
         noise = depth_noise or self.depth_noise
         small = np.count_nonzero(detection.mask) < self.keep_border_below
         estimator = self.estimators.get(detection.object_class)
@@ -215,7 +212,6 @@ class PartPipeline:
             rgb,
             self.min_points,
             max_points=self.max_points,
-            rng=self._draw() if rng is None else rng,
             erode=0 if small else 1,
             extent=estimator.model.diameter if estimator is not None else None,
             smooth=0 if noise.exact else noise.window,
@@ -253,7 +249,7 @@ class PartPipeline:
         again = self.parting is not None and depth is not None
         pending: dict[str, list[tuple[int, np.ndarray]]] = {}
         for i, d in enumerate(dets):
-            cloud = self.cloud(d, depth, intrinsics, rgb, noise, self._draw(i))
+            cloud = self.cloud(d, depth, intrinsics, rgb, noise)
             if not cloud.ok:
                 out[i] = Observation(d.object_class, None, cloud.reason, d.object_id)
             elif d.object_class not in self.estimators:
@@ -290,12 +286,6 @@ class PartPipeline:
             for i, e in self._parted(refused, dets, depth, intrinsics, noise, near):
                 out[i] = replace(out[i], estimate=e)
         return [o for o in out if o is not None]
-
-    def _draw(self, *stream: int) -> np.random.Generator:
-        """The generator a cloud's point subset is drawn with: seeded by the pipeline's seed and
-        the detection's place in its frame (``stream``), never carried from one call to the next,
-        so a frame asked about twice is posed the same way whatever was asked in between."""
-        return np.random.default_rng([self.seed, *stream])
 
     def _judged(
         self,
@@ -365,7 +355,7 @@ class PartPipeline:
         items, clouds = [], []
         for i in refused:
             d = dets[i]
-            cloud = self.cloud(replace(d, mask=d.core), depth, intrinsics, rgb, noise, self._draw(i, 1))
+            cloud = self.cloud(replace(d, mask=d.core), depth, intrinsics, rgb, noise)
             if cloud.ok:
                 e = estimates[i]
                 items.append((self.estimators[d.object_class], cloud.points, e.rotation, e.translation))

@@ -177,8 +177,8 @@ def test_on_a_noisy_depth_camera_a_near_fitting_is_certified_right_and_a_far_one
 
 def test_a_frame_asked_about_again_is_posed_the_same_whatever_came_between():
     """An operator who asks for the same inspection twice gets the same answer: a mask of more
-    pixels than ``max_points`` is subsampled, and the draw depends on the frame alone, not on
-    how many frames the pipeline posed before."""
+    pixels than ``max_points`` is subsampled, and the points kept depend on the mask alone, not
+    on how many frames the pipeline posed before."""
     joint = MODELS["corner_joint"]
     depth, ids = _render([(joint, _rz(0.4), np.array([-0.02, 0.0, 0.45]))])
     other, other_ids = _render([(joint, _rz(1.1), np.array([0.03, 0.01, 0.5]))])

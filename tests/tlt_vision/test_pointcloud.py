@@ -107,6 +107,21 @@ def test_max_points_and_matrix_intrinsics():
     assert len(out.points) == 20
 
 
+def test_a_large_masks_points_are_spread_evenly_over_it():
+    """The subset C-3PO is given covers the whole mask as densely everywhere: no region left
+    thin by chance, where the certificate's Chamfer percentile would read a hole in the part."""
+    mask = np.zeros((60, 80), bool)
+    mask[5:55, 10:70] = True  # 3000 pixels, one valid depth each
+    out = masked_point_cloud(mask, np.ones(mask.shape), K, max_points=300, erode=0)
+    rows = np.round(out.points[:, 1] * K.fy / out.points[:, 2] + K.cy).astype(int)
+    per_band = np.bincount((rows - 5) // 5, minlength=10)  # ten bands of 300 pixels each
+    assert per_band.min() >= 29 and per_band.max() <= 31, per_band
+    cols = np.round(out.points[:, 0] * K.fx / out.points[:, 2] + K.cx).astype(int)
+    assert np.ptp(cols) >= 55  # across the mask's width too, not a few columns
+    again = masked_point_cloud(mask, np.ones(mask.shape), K, max_points=300, erode=0)
+    np.testing.assert_array_equal(again.points, out.points)
+
+
 def test_pixels_beyond_the_part_size_from_its_median_depth_are_dropped():
     """A learned mask straying past the part onto the floor behind it: with the part's size given,
     those pixels give no points; the part's own, whatever its depth across, all stay."""

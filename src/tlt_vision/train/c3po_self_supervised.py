@@ -320,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     pipeline = PartPipeline({}, max_points=config.raw["max_points"],
-                            keep_border_below=config.raw["keep_border_below"], seed=cfg.seed)
+                            keep_border_below=config.raw["keep_border_below"])
     print(f"{args.model}: reading clouds from {len(train_sets)} training and {len(val_sets)} "
           "validation images", flush=True)
     train = scene_clouds(train_sets, args.model, pipeline, args.limit)
