@@ -18,6 +18,12 @@ cd "$ROOT"
 # Fast DDS shared-memory files that killed runs left in /dev/shm (hundreds piled up on the
 # development machine): those no process holds go; a running system's stay.
 [ -x "$VENV/bin/fastdds" ] && "$VENV/bin/fastdds" shm clean > /dev/null 2>&1 || true
+# One OpenMP thread per process unless the caller says otherwise: three workers already share two
+# cores, and torch's intra-op threads (two per process here) only spin against each other and the
+# other workers. The vision and bench tests took 165 s on three workers with one thread, 224 with
+# the default, 326 CPU seconds against 432 (2026-12-06). Code that sets its own count (the vision
+# node's torch_threads, the trainers' --threads) still does.
+export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 echo "[test] ruff check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tests bench 2>/dev/null)
 if [ $# -gt 0 ]; then
