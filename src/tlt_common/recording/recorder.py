@@ -8,9 +8,17 @@ bytes, never deserialized) whose QoS matches the publishers'
 class or no installed definition is logged once and left out; a topic published with more than
 one type records the first.
 
-Each message is written with log time = the node clock at receipt (ROS time: sim time when the
-node runs with ``use_sim_time``, 0 until the first ``/clock``), and publish time = its
-``header.stamp`` when the type starts with a Header and the stamp is set, else the log time.
+The recorded subscriptions live on a second node, ``<name>_topics``, that no executor spins: every
+``take_period_s`` (wall time) the recorder takes whatever each of them has queued. An executor
+rebuilds its wait set over every entity of its nodes each time it wakes, and with one wake per
+message (some 70 topics, a few hundred messages a second on the twin) that bookkeeping was most
+of the recorder's CPU. The queues are deep (``SUBSCRIPTION_DEPTH``), so nothing is lost between
+takes.
+
+Each message is written with log time = the node clock when it was taken, at most one take period
+after it arrived (ROS time: sim time when the node runs with ``use_sim_time``, 0 until the first
+``/clock``), and publish time = its ``header.stamp`` when the type starts with a Header and the
+stamp is set, else the log time.
 
 Every ``flush_period_s`` the chunk in progress is closed and handed to the OS (what a killed
 recorder keeps); every ``progress_period_s`` it logs topics and messages written. The node never
@@ -19,10 +27,10 @@ closes the file: its owner calls :meth:`McapRecordingWriter.close` after spinnin
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from rclpy.clock import Clock, ClockType
+from rclpy.context import Context
 from rclpy.exceptions import InvalidHandle
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
@@ -39,9 +47,6 @@ from tlt_common.recording.message_types import UnknownMessageType, import_messag
 from tlt_common.recording.qos_profiles import offered_qos_yaml, subscription_qos
 from tlt_common.recording.topic_filter import TopicFilter
 
-# Messages one callback takes from its subscription's queue beyond the one it was called with.
-DRAIN_LIMIT = 500
-
 
 @dataclass
 class RecorderTiming:
@@ -50,12 +55,14 @@ class RecorderTiming:
     discovery_period_s: float = 0.5
     flush_period_s: float = 1.0
     progress_period_s: float = 10.0
+    take_period_s: float = 0.02
 
 
 @dataclass
 class _Recorded:
     type_name: str
     channel_id: int
+    has_header: bool
     qos: QoSProfile
     subscription: Subscription
 
@@ -79,8 +86,9 @@ class TopicRecorder(LeanNode):
         timing: RecorderTiming | None = None,
         definitions: MessageDefinitionSource | None = None,
         node_name: str = "tlt_record",
+        context: Context | None = None,
     ) -> None:
-        super().__init__(node_name)
+        super().__init__(node_name, context=context)
         self._writer = writer
         self._filter = topic_filter or TopicFilter()
         self._timing = timing or RecorderTiming()
@@ -89,7 +97,14 @@ class TopicRecorder(LeanNode):
         self._skipped: dict[str, str] = {}
         self._flushed_count = 0
         self._last_progress_count = 0
+        # Its own arguments only: a remapped node name (``-r __node:=...``) would otherwise name
+        # both nodes alike, and a sim-time parameter give it a /clock reader nobody reads.
+        self._topics_node = LeanNode(
+            f"{self.get_name()}_topics", context=self.context, use_global_arguments=False,
+            enable_rosout=False, start_parameter_services=False,
+        )
         wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(self._timing.take_period_s, self.take_queued, clock=wall)
         self.create_timer(self._timing.discovery_period_s, self.discover, clock=wall)
         self.create_timer(self._timing.flush_period_s, self.flush, clock=wall)
         self.create_timer(self._timing.progress_period_s, self._log_progress, clock=wall)
@@ -119,6 +134,14 @@ class TopicRecorder(LeanNode):
             elif not _compatible(recorded.qos, offered):
                 self._resubscribe(topic, recorded, offered)
 
+    def take_queued(self) -> int:
+        """Write every message the recorded subscriptions hold now; return how many."""
+        log_time = self.get_clock().now().nanoseconds
+        taken = 0
+        for recorded in self._recorded.values():
+            taken += self._take(recorded, log_time)
+        return taken
+
     def flush(self) -> None:
         """Close the chunk in progress if anything arrived since the last flush."""
         if self._writer.message_count != self._flushed_count:
@@ -126,10 +149,15 @@ class TopicRecorder(LeanNode):
             self._flushed_count = self._writer.message_count
 
     def stop(self) -> None:
-        """Drop every subscription (no callback writes after this) and flush."""
+        """Write what is still queued, drop every subscription and flush."""
+        self.take_queued()
         for recorded in self._recorded.values():
-            self.destroy_subscription(recorded.subscription)
+            self._topics_node.destroy_subscription(recorded.subscription)
         self.flush()
+
+    def destroy_node(self) -> None:
+        self._topics_node.destroy_node()
+        super().destroy_node()
 
     def _skip(self, topic: str, reason: str) -> None:
         self._skipped[topic] = reason
@@ -156,10 +184,8 @@ class TopicRecorder(LeanNode):
         )
         has_header = first_field_is_header(self._definitions.own_text(type_name))
         qos = subscription_qos(offered)
-        subscription = self.create_subscription(
-            msg_class, topic, self._callback(topic, channel_id, has_header), qos, raw=True
-        )
-        self._recorded[topic] = _Recorded(type_name, channel_id, qos, subscription)
+        subscription = self._subscribe(msg_class, topic, qos)
+        self._recorded[topic] = _Recorded(type_name, channel_id, has_header, qos, subscription)
         self.get_logger().info(
             f"recording {topic} ({type_name}, {qos.reliability.short_key}, "
             f"{qos.durability.short_key})"
@@ -170,36 +196,38 @@ class TopicRecorder(LeanNode):
         # never be matched. Subscribing again with the weaker QoS keeps the same channel. (If the
         # new QoS is still transient local, the publishers' stored samples arrive a second time.)
         qos = subscription_qos(offered)
-        self.destroy_subscription(recorded.subscription)
-        msg_class = import_message_type(recorded.type_name)
-        has_header = first_field_is_header(self._definitions.own_text(recorded.type_name))
-        recorded.subscription = self.create_subscription(
-            msg_class, topic, self._callback(topic, recorded.channel_id, has_header), qos, raw=True
-        )
+        self._take(recorded, self.get_clock().now().nanoseconds)
+        self._topics_node.destroy_subscription(recorded.subscription)
+        recorded.subscription = self._subscribe(import_message_type(recorded.type_name), topic, qos)
         recorded.qos = qos
         self.get_logger().info(
             f"re-subscribed {topic} ({qos.reliability.short_key}, {qos.durability.short_key}) "
             "to match a new publisher"
         )
 
-    def _callback(self, topic: str, channel_id: int, has_header: bool) -> Callable[[bytes], None]:
-        writer = self._writer
-        clock = self.get_clock()
+    def _subscribe(self, msg_class: type, topic: str, qos: QoSProfile) -> Subscription:
+        # Never called back: no executor spins the topics node; take_queued takes the messages.
+        return self._topics_node.create_subscription(
+            msg_class, topic, _never_called, qos, raw=True
+        )
 
-        def write(data: bytes) -> None:
-            log_time = clock.now().nanoseconds
-            stamp = header_stamp_ns(data) if has_header else None
-            writer.write(channel_id, data, log_time, log_time if stamp is None else stamp)
-
-        def on_message(data: bytes) -> None:
-            write(data)
-            # The executor hands over one message per pass over every entity, which is far
-            # slower than DDS can deliver; take what else is queued now (bounded, so timers and
-            # other topics still get their turn) before the reader's history overflows. The
-            # subscription is looked up each time: a re-subscription replaces it.
-            _drain(self._recorded[topic].subscription, write, DRAIN_LIMIT)
-
-        return on_message
+    def _take(self, recorded: _Recorded, log_time: int) -> int:
+        """Write what ``recorded``'s subscription holds now, logged at ``log_time``."""
+        writer, channel_id = self._writer, recorded.channel_id
+        subscription = recorded.subscription
+        taken = 0
+        try:
+            while True:
+                with subscription.handle:
+                    info = subscription.handle.take_message(subscription.msg_type, True)
+                if info is None:
+                    return taken
+                data = info[0]
+                stamp = header_stamp_ns(data) if recorded.has_header else None
+                writer.write(channel_id, data, log_time, log_time if stamp is None else stamp)
+                taken += 1
+        except InvalidHandle:  # destroyed meanwhile
+            return taken
 
     def _log_progress(self) -> None:
         total = self._writer.message_count
@@ -211,24 +239,8 @@ class TopicRecorder(LeanNode):
         self._last_progress_count = total
 
 
-def _drain(subscription: Subscription, write: Callable[[bytes], None], limit: int) -> int:
-    """Take up to ``limit`` more queued raw messages from ``subscription``; return how many.
-
-    Uses the subscription handle's ``take_message``, as rclpy's executor does; an rclpy without
-    it, or a subscription destroyed meanwhile, just takes nothing more.
-    """
-    taken = 0
-    try:
-        while taken < limit:
-            with subscription.handle:
-                info = subscription.handle.take_message(subscription.msg_type, True)
-            if info is None:
-                break
-            write(info[0])
-            taken += 1
-    except (AttributeError, InvalidHandle):
-        pass
-    return taken
+def _never_called(_data: bytes) -> None:
+    raise AssertionError("the recorder's subscriptions are taken from, never called back")
 
 
 def _compatible(requested: QoSProfile, offered: list[QoSProfile]) -> bool:
