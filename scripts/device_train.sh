@@ -17,7 +17,7 @@
 # that decides whether the new weights ship (docs/vision.md, "Benchmark").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
-DEVICE_DIR=.device
+DEVICE_DIR=${DEVICE_DIR:-.device}  # where prepare leaves what the device lacks
 SITE=/tmp/tlt-device-site
 RUN=/tmp/r
 GL_PACKAGES=(libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
