@@ -50,8 +50,8 @@ install_on_device() {
 }
 
 train() {
-    install_on_device
     : "${OUT:?train runs on the device machine, which sets OUT}"
+    install_on_device
     export INIT=${INIT:-models/vision/mask_rcnn.pt} RANKS=${RANKS:-6} WORKERS=${WORKERS:-1}
     export THREADS=${THREADS:-2} BATCH=${BATCH:-4} LR=${LR:-2e-4} COUNT=${COUNT:-9600}
     export EPOCHS=${EPOCHS:-1} BUDGET_MIN=${BUDGET_MIN:-6} RENDER_LIMIT_S=${RENDER_LIMIT_S:-80}
@@ -66,9 +66,9 @@ train() {
 }
 
 candidate() {
-    install_on_device
     : "${OUT:?candidate runs on the device machine, which sets OUT}"
     [ -f "$RUN/mask_rcnn.pt" ] || { echo "no $RUN/mask_rcnn.pt: run '$0 train' first on this machine" >&2; exit 2; }
+    install_on_device
     python3 bench/vision_candidate.py --weights "$RUN/mask_rcnn.pt" --jobs "${JOBS:-14}" \
         --work /tmp/cand | tee "$OUT/candidate.txt"
 }
