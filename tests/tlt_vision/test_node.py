@@ -33,6 +33,7 @@ from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import EndEffectorState
 from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 from tlt_sim.model import names
+from tlt_sim.model.camera_sensor import load_camera_sensors
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
 from tlt_sim.twin.settings import load_settings
@@ -60,7 +61,7 @@ class TwinHost:
         self.scene = Scene(scenario=SCENARIO, out_dir=out_dir)
         self.node = Node("twin", context=context)
         self.clock = ClockPublisher(self.node)
-        self.cameras = CameraStreams(self.node, self.scene, load_settings())
+        self.cameras = CameraStreams(self.node, self.scene, load_settings(), load_camera_sensors())
         self.rendering = True
         self.mounts = self.node.create_publisher(
             JointState, ros_names.joint_states_topic("camera_mounts"), 10

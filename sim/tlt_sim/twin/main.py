@@ -9,7 +9,9 @@ Once everything answers, the file ``$TLT_RUN_DIR/twin.ready`` appears (launch se
 
 The twin owns time: it publishes ``/clock`` and steps at ``--rtf`` (1 by default, 0 = as fast as
 the CPU allows); the drivers run with ``use_sim_time``. Cameras and ground truth are published
-on demand (:mod:`tlt_sim.twin.ros_streams`). Runs until SIGINT/SIGTERM or ``--duration`` seconds
+on demand (:mod:`tlt_sim.twin.ros_streams`), through the sensor models of ``config/twin/cameras.yaml``
+(depth noise and holes, image noise and exposure, mount errors: :mod:`tlt_sim.model.camera_sensor`;
+``--exact-cameras`` for the exact render, for diagnosis). Runs until SIGINT/SIGTERM or ``--duration`` seconds
 of sim time, then withdraws its links. ``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens
 MuJoCo's viewer window on the running model for people (:mod:`tlt_sim.twin.viewer`); without a
 display the twin refuses to start. Exit status 0, or 2 for a bad configuration or no viewer.
@@ -21,16 +23,21 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import logging
 import os
 import sys
 import time
 from pathlib import Path
 
+import mujoco
+
 from tlt_common.config_schema import ConfigError
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.stop_signals import stop_on_signals
 from tlt_drivers.gpio.config import run_dir as default_run_dir
+from tlt_sim.model import names
+from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS, load_camera_sensors, offset_mounts
 from tlt_sim.model.config import DEFAULT_EDU
 from tlt_sim.model.scene import ModelCompileError, Scene
 from tlt_sim.twin.pacing import Pacer
@@ -51,6 +58,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mission", type=Path, help="mission YAML (default: the one edu.yaml names)")
     p.add_argument("--scenario", help="scenario YAML (config/twin/scenarios/); empty for none")
     p.add_argument("--settings", type=Path, default=DEFAULT_SETTINGS, help="run settings (run.yaml)")
+    p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
+                   help="what the cameras make of the render (cameras.yaml)")
+    p.add_argument("--exact-cameras", action="store_true",
+                   help="exact colours and depth, cameras exactly on their mounts (diagnosis only)")
     p.add_argument("--rtf", type=float, help="real-time factor (0: as fast as possible)")
     p.add_argument("--run-dir", type=Path,
                    help="where device links go (default $TLT_RUN_DIR or /tmp/tlt-run)")
@@ -85,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="twin: %(message)s", stream=sys.stdout, force=True)
     try:
         settings = load_settings(args.settings)
+        sensors = load_camera_sensors(args.cameras)
+        if args.exact_cameras:
+            sensors = dataclasses.replace(sensors, realistic=False)
         changes: dict = {}
         if args.rtf is not None:
             if args.rtf < 0:
@@ -103,6 +117,9 @@ def main(argv: list[str] | None = None) -> int:
             probe()  # refuse before anything is built or served
         # An empty --scenario (a launch set's unset variable) means the nominal run.
         scene = Scene(args.edu, args.mission, args.scenario or None)
+        if sensors.realistic:
+            offset_mounts(scene.model, sensors, names.cameras())
+            mujoco.mj_forward(scene.model, scene.data)
         run_dir = args.run_dir or default_run_dir()
         twin = Twin(scene, settings, run_dir)
     except ViewerUnavailable as exc:
@@ -132,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     ready = Path(run_dir) / READY_FILE
     try:
         clock = ClockPublisher(node)
-        cameras = CameraStreams(node, scene, settings)
+        cameras = CameraStreams(node, scene, settings, sensors)
         truth = GroundTruth(node, scene, settings.ground_truth_rate_hz)
         try:
             twin.start()
@@ -141,7 +158,8 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         clock.publish(scene.time)
         ready.write_text(f"{os.getpid()}\n")
-        log.info("links up in %s (rtf %s, scenario %s)", run_dir, settings.rtf or "max", scene.scenario.name)
+        log.info("links up in %s (rtf %s, scenario %s, %s cameras)", run_dir, settings.rtf or "max",
+                 scene.scenario.name, "realistic" if sensors.realistic else "exact")
         # Hand the interpreter lock to a device thread quickly when one has bytes to answer.
         share_the_interpreter_quickly()
         pacer = Pacer(settings.rtf, min_sleep_s=YIELD_S)

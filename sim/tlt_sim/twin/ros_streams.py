@@ -8,7 +8,9 @@ Topics (names in :mod:`tlt_sim.twin.topics`):
   ``segmentation`` (32SC1 instance ids, -1 where nothing) and ``camera_info``
   (``sensor_msgs/CameraInfo``, plumb-bob with zero distortion). A camera renders only while one
   of its image topics has a subscriber (the publisher's subscription count), at most
-  ``rate_hz`` frames per simulated second, and only the images someone subscribes to;
+  ``rate_hz`` frames per simulated second, and only the images someone subscribes to. Colour and
+  depth are what the camera's sensor model (:mod:`tlt_sim.model.camera_sensor`) makes of the
+  render; the segmentation stays exact (the twin's labels, for judging and diagnosis);
 * ``/cameras/segmentation_labels`` (``std_msgs/String``, transient local): JSON
   ``{"instances": [...], "classes": [...]}``, instance id -> geom instance name and its class;
 * ``/twin/ground_truth`` (``tlt_interfaces/TransformArray``, while subscribed,
@@ -24,6 +26,7 @@ thread-safe).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections import Counter
 
@@ -38,6 +41,7 @@ from tlt_interfaces.msg import TransformArray
 
 from tlt_common.stamps import set_stamp
 from tlt_sim.model import names
+from tlt_sim.model.camera_sensor import CameraSensors
 from tlt_sim.model.geometry import mat_to_quat
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin import topics
@@ -63,11 +67,14 @@ class ClockPublisher:
 
 
 class CameraStreams:
-    """Renders and publishes the model's cameras on demand. ``renders`` counts frames per camera."""
+    """Renders and publishes the model's cameras on demand, through ``sensors`` (the cameras' models;
+    exact frames where ``sensors.realistic`` is false). ``renders`` counts frames per camera, and
+    frame n of a camera draws its sensor effects from (seed, camera, n)."""
 
-    def __init__(self, node: Node, scene: Scene, settings: TwinSettings) -> None:
+    def __init__(self, node: Node, scene: Scene, settings: TwinSettings, sensors: CameraSensors) -> None:
         self.scene = scene
         self.settings = settings
+        self.sensors = sensors
         self.period = 1.0 / settings.camera_rate_hz
         self.renders: Counter[str] = Counter()
         qos = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)
@@ -110,9 +117,18 @@ class CameraStreams:
             if not self._labels_sent:
                 self._publish_labels()
             width, height = self.settings.camera_size(camera)
+            realistic = self.sensors.realistic
+            # The depth's specular holes are found on the colours: rendered with the depth (one
+            # cheap pass without multisampling) when nobody asks for the colours.
+            colour = "rgb" in wanted or (realistic and "depth" in wanted)
             frame = self.scene.render(camera, width, height, depth="depth" in wanted,
-                                      segmentation="segmentation" in wanted, rgb="rgb" in wanted,
-                                      antialias=self.settings.camera_antialias)
+                                      segmentation="segmentation" in wanted, rgb=colour,
+                                      antialias=self.settings.camera_antialias and "rgb" in wanted)
+            if realistic:
+                rng = self.sensors.frame_rng(camera, self.renders[camera])
+                rgb, depth = self.sensors.for_camera(camera).apply(
+                    frame.rgb, frame.depth, frame.intrinsics.fx, rng)
+                frame = dataclasses.replace(frame, rgb=rgb, depth=depth)
             self.renders[camera] += 1
             frame_id = topics.camera_frame(camera)
             if "rgb" in wanted:

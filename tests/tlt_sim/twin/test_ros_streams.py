@@ -17,6 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 from tlt_interfaces.msg import TransformArray
+from tlt_sim.model.camera_sensor import load_camera_sensors
 from tlt_sim.twin import topics
 from tlt_sim.twin.ros_streams import CameraStreams, GroundTruth
 
@@ -53,7 +54,8 @@ def test_camera_renders_only_when_subscribed_and_segments_the_part_in_view(make_
     scene = twin.scene
     part = next(p for p in scene.info.parts.values() if p.kind == "vertical")
     scene.place_in_view(part.name, "zed_1", 0.6)
-    cams = CameraStreams(twin_node, scene, twin.settings.replace(camera_rate_hz=10.0))
+    cams = CameraStreams(twin_node, scene, twin.settings.replace(camera_rate_hz=10.0),
+                         load_camera_sensors())
 
     _run(twin, [cams], executor, lambda: scene.time >= 0.5, wall_s=5.0)
     assert sum(cams.renders.values()) == 0, "nobody subscribed: nothing rendered"
@@ -123,7 +125,8 @@ def test_every_renderer_is_made_before_the_first_frame(make_twin, ros, monkeypat
     monkeypatch.setattr(cameras.CameraRenderer, "__init__", counting_init)
     twin_node, probe, executor = ros
     twin = make_twin()
-    cams = CameraStreams(twin_node, twin.scene, twin.settings.replace(camera_rate_hz=10.0))
+    cams = CameraStreams(twin_node, twin.scene, twin.settings.replace(camera_rate_hz=10.0),
+                         load_camera_sensors())
     assert sorted(made) == [False, True], "the multisampled renderer for colour, the exact one for depth"
     made.clear()
 
