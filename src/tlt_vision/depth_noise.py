@@ -7,8 +7,10 @@ the fit's. With 1 % Gaussian noise added to each pixel's depth (``bench/vision.p
 0.01``) 10 % of the certifiable views of held-out seed 950 were certified, against 94 % on the
 exact depth, and a quarter of those certified were wrong.
 
-Two things answer it, both given the camera's noise (``fraction``, 1 sigma, a fraction of the
-depth; node.yaml ``depth_noise``):
+Two things answer it, both given the camera's noise (node.yaml ``depth_noise``): 1 sigma of
+``fraction`` times the depth plus ``per_m2`` times its square. A stereo camera's is the square's:
+a disparity error of ``s`` pixels moves a point at depth z by ``z^2 s / (b f)`` (baseline ``b``,
+focal length ``f`` in pixels), so ``per_m2`` is ``s / (b f)``, per metre:
 
 * Each point of a part's cloud takes the median depth of the part's own valid pixels in a
   ``window`` x ``window`` square about it (:func:`window_median`). Only the mask's pixels enter,
@@ -43,22 +45,27 @@ MEDIAN_EFFICIENCY = math.sqrt(math.pi / 2)
 
 @dataclass(frozen=True)
 class DepthNoise:
-    """The camera's depth noise (1 sigma, a fraction of the depth), the filter's window, and the
-    largest allowance for it, a fraction of the part's size."""
+    """The camera's depth noise (1 sigma: ``fraction`` of the depth plus ``per_m2`` times its
+    square), the filter's window, and the largest allowance for it, a fraction of the part's size."""
 
     fraction: float = 0.0
     window: int = 5  # pixels, odd
     max_allowance: float = 0.02
+    per_m2: float = 0.0  # 1/m: a stereo camera's disparity error over baseline times focal length
 
     @property
     def exact(self) -> bool:
-        return self.fraction <= 0.0
+        return self.fraction <= 0.0 and self.per_m2 <= 0.0
+
+    def sigma(self, depth: float) -> float:
+        """1 sigma (m) of a raw pixel's depth at ``depth`` (m)."""
+        return self.fraction * depth + self.per_m2 * depth * depth
 
     def residual(self, depth: float) -> float:
         """1 sigma (m) of a filtered point's depth at ``depth`` (m)."""
         if self.exact:
             return 0.0
-        return self.fraction * depth * MEDIAN_EFFICIENCY / self.window
+        return self.sigma(depth) * MEDIAN_EFFICIENCY / self.window
 
     def allowance(self, depth: float) -> float:
         """What the certificate allows for the residual noise at ``depth`` (m), added to a

@@ -60,6 +60,23 @@ def _band(v: list[float]) -> str | None:
 _POSE = Field("dict", schema={"position": _vec(3), "rpy": _vec(3)})
 _POSITIVE = {"minimum": 1e-6}
 
+
+def _camera_noise(value: object) -> str | None:
+    """A camera's depth noise: a fraction of the depth, or {fraction, per_m2}."""
+    def bad(v: object, top: float) -> bool:
+        return isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= top
+
+    if isinstance(value, dict):
+        unknown = set(value) - {"fraction", "per_m2"}
+        if unknown:
+            return f"unknown keys {sorted(unknown)} (fraction, per_m2)"
+        if bad(value.get("fraction", 0.0), 0.1) or bad(value.get("per_m2", 0.0), 0.1):
+            return f"fraction and per_m2 must be numbers from 0 to 0.1, got {value!r}"
+        return None
+    if bad(value, 0.1):
+        return f"expected a fraction of the depth from 0 to 0.1 or {{fraction, per_m2}}, got {value!r}"
+    return None
+
 SCHEMA = {
     "format": Field("int", choices=(1,)),
     "mission": Field("str"),
@@ -174,9 +191,10 @@ SCHEMA = {
                           doc="pixels of the square whose median depth a point takes"),
             "max_allowance": opt("float", EXACT.max_allowance, minimum=0.0, maximum=0.5,
                                  doc="the most allowed for noise, a fraction of the part's size"),
-            # A ZED's noise is not a D405's: a camera named here has its own fraction.
-            "cameras": opt("map", {}, item=Field("float", minimum=0.0, maximum=0.1),
-                           doc="a configured camera's own noise, a fraction of the depth"),
+            # A ZED's noise is not a D405's: a camera named here has its own, a fraction of the
+            # depth or {fraction, per_m2} (a stereo camera's, growing with the depth's square).
+            "cameras": opt("map", {}, item=Field("any", check=_camera_noise),
+                           doc="a configured camera's own noise"),
         },
     ),
     "free_space": opt(
@@ -364,7 +382,12 @@ class VisionConfig:
     def depth_noise_of(self, camera: str) -> DepthNoise:
         """The noise of the configured ``camera``'s depth."""
         default = self.depth_noise
-        return replace(default, fraction=self.raw["depth_noise"]["cameras"].get(camera, default.fraction))
+        own = self.raw["depth_noise"]["cameras"].get(camera)
+        if own is None:
+            return default
+        if isinstance(own, dict):
+            return replace(default, fraction=own.get("fraction", 0.0), per_m2=own.get("per_m2", 0.0))
+        return replace(default, fraction=own)
 
     @property
     def free_space(self) -> FreeSpace:

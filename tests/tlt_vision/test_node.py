@@ -55,7 +55,9 @@ CALL_S = 120.0
 
 
 class TwinHost:
-    """The model stepped on its own thread, with the twin's publishers and the drivers' joint states."""
+    """The model stepped on its own thread, with the twin's publishers and the drivers' joint states.
+    Its cameras are the twin's realistic ones (config/twin/cameras.yaml), standing on their nominal
+    mounts."""
 
     def __init__(self, context: Context, out_dir: Path) -> None:
         self.scene = Scene(scenario=SCENARIO, out_dir=out_dir)
@@ -185,6 +187,23 @@ class Rig:
         rclpy.try_shutdown(context=self.context)
 
 
+@contextlib.contextmanager
+def _exact_cameras(rig: Rig):
+    """The twin's exact depth and colours, and the node told so, for the checks of the inspection's
+    own logic on a strut 0.9 m before a lifter ZED: through the ZED's real depth there, its end
+    fittings are out of reach of a certificate (test_a_real_zeds_depth_at_0_9_m_...)."""
+    cameras = rig.twin.cameras
+    noise = rig.vision.config.raw["depth_noise"]
+    realistic, own = cameras.sensors, dict(noise["cameras"])
+    cameras.sensors = replace(realistic, realistic=False)
+    noise["cameras"] = {}
+    try:
+        yield
+    finally:
+        cameras.sensors = realistic
+        noise["cameras"] = own
+
+
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     r = Rig(tmp_path_factory.mktemp("vision_twin"))
@@ -208,6 +227,11 @@ def _show(rig: Rig, part: str, camera: str = "zed_1", distance: float = 0.9) -> 
 
 
 def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
+    with _exact_cameras(rig):
+        _a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig)
+
+
+def _a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     member = "bay1/vertical/x0_y1"
     _show(rig, "vertical_dispenser_x/2")
     good = rig.call(
@@ -240,7 +264,7 @@ def test_inspect_part_allows_for_the_noise_of_the_camera_asked_for(rig):
     member, request = "bay1/vertical/x0_y1", InspectPart.Request
     noise = rig.vision.config.raw["depth_noise"]
     _show(rig, "vertical_dispenser_x/2")
-    try:
+    with _exact_cameras(rig):
         noise["cameras"] = {"zed_2": 0.01}
         other = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
                          request(member_id=member, part_kind="vertical", camera="zed_left")).report
@@ -248,8 +272,6 @@ def test_inspect_part_allows_for_the_noise_of_the_camera_asked_for(rig):
         noise["cameras"] = {"zed_1": 0.01}
         noisy = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
                          request(member_id=member, part_kind="vertical", camera="zed_left")).report
-    finally:
-        noise["cameras"] = {}
     assert not noisy.passed
     assert any("depth too noisy to certify" in r for r in noisy.reasons), list(noisy.reasons)
     fittings = [p for p in noisy.poses if p.object_class == "end_fitting"]
@@ -265,13 +287,32 @@ def _segmenting_with(rig: Rig, segmenter):
     rig.vision.segmenter = segmenter
     try:
         _show(rig, "vertical_dispenser_x/2")
-        yield rig.call(
-            InspectPart,
-            ros_names.VISION_INSPECT_PART,
-            InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
-        ).report
+        with _exact_cameras(rig):
+            report = rig.call(
+                InspectPart,
+                ros_names.VISION_INSPECT_PART,
+                InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+            ).report
+        yield report
     finally:
         rig.vision.segmenter = labels
+
+
+def test_a_real_zeds_depth_at_0_9_m_cannot_certify_end_fittings_and_the_report_says_so(rig):
+    """Through the ZED 2i's depth (config/twin/cameras.yaml) and with the node told its noise
+    (node.yaml depth_noise.cameras), a good strut 0.9 m away is posed, its tube certified, and its
+    end fittings refused as out of the noise's reach: never passed on a guess."""
+    _show(rig, "vertical_dispenser_x/2")
+    report = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+    ).report
+    assert not report.passed
+    assert any("depth too noisy to certify" in r for r in report.reasons), list(report.reasons)
+    tubes = [p for p in report.poses if p.object_class == "strut_tube"]
+    assert tubes and all(p.certified for p in tubes)
+    assert not any(p.certified for p in report.poses if p.object_class == "end_fitting")
 
 
 def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_them(rig):

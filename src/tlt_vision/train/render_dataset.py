@@ -56,6 +56,7 @@ its xy plane) to the camera's optical frame (x right, y down, z forward; ``intri
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -95,6 +96,9 @@ class RenderSettings:
     presented_jitter_rad: float = 0.12  # each arm joint about its inspection pose (normal, sd)
     close_below: float = 0.7  # m: nearer views use the D405's optics, further ones the ZED's
     bend_deg: tuple[float, float] = (3.0, 15.0)  # range of a bent tube's kink
+    # The twin's camera models (config/twin/cameras.yaml) the images are taken through; "" for the
+    # exact render.
+    cameras: str = ""
 
 
 # -- geometry helpers ------------------------------------------------------------------------------
@@ -181,6 +185,11 @@ class TwinRenderer:
         from tlt_common.mission.schema import load_mission
 
         self.settings = settings
+        self.sensors = None
+        if settings.cameras:
+            from tlt_sim.model.camera_sensor import load_camera_sensors
+
+            self.sensors = load_camera_sensors(settings.cameras)
         mission = load_mission(settings.mission)
         rng = np.random.default_rng([settings.seed, 0])
         table = defect_table(mission, settings.defective_fraction, rng, settings.bend_deg)
@@ -426,11 +435,17 @@ class TwinRenderer:
             "held": self._held, "presented": self._presented, "scatter": self._scatter, "bay": self._bay,
             "feeder": self._feeder,
         }[kind](rng)
-        return self._capture(camera), kind
+        return self._capture(camera, rng), kind
 
-    def _capture(self, camera: str) -> Sample:
+    def _capture(self, camera: str, rng: np.random.Generator | None = None) -> Sample:
+        """The sample ``camera`` sees now; ``rng`` draws its sensor effects (with ``cameras``)."""
         s = self.settings
         frame = self.scene.render(camera, s.width, s.height, antialias=s.antialias)
+        if self.sensors is not None:
+            rng = rng if rng is not None else np.random.default_rng([s.seed, 2])
+            sensor = self.sensors.for_camera(camera)
+            rgb, depth = sensor.apply(frame.rgb, frame.depth, frame.intrinsics.fx, rng)
+            frame = dataclasses.replace(frame, rgb=rgb, depth=depth)
         seg = frame.segmentation
         counts = np.bincount(seg[seg >= 0].ravel(), minlength=len(frame.labels.instance_names))
         keep = [int(i) for i in np.flatnonzero(counts >= s.min_pixels) if int(i) in self.recipes]
