@@ -52,8 +52,8 @@ def vision_figures(figures: dict[str, Any]) -> dict[str, float | None]:
     """The table's figures of one ``bench/vision.py --json`` file: mask AP50 as the node segments,
     the share certified of the views non-degenerate at the true pose, the same of the views the
     twin's mask shows enough of (``shown``: segmentation's losses counted; None from a file written
-    before 2026-12-05's late evening), the share of the certified within the ADD-S goal (None where
-    there is nothing to divide)."""
+    by a bench/vision.py that did not count them), the share of the certified within the ADD-S
+    goal (None where there is nothing to divide)."""
     poses = figures["poses"]
     shown = poses.get("views_shown", 0)
     return {

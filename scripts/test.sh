@@ -5,10 +5,9 @@
 # $TLT_TEST_WORKERS pytest-xdist workers (3 by default; each test file stays on one worker, in
 # order, with its module fixtures), then the system tests one at a time, since each starts the
 # whole system and the nominal build takes every core it can get. Most of the first stage waits
-# on the wall clock (arms moving at their real speed, links timing out): on two cores it used
-# about one and a half of them with three workers and took 5.8 minutes, 7.1 with two (one core's
-# worth); tests/tlt_ars/test_ars_requests.py, one stack in file order, takes 6.5 of them on its
-# own worker. Both stages run; the exit status is the first failing one's.
+# on the wall clock (arms moving at their real speed, links timing out), so on two cores three
+# workers finish it sooner than two; tests/tlt_ars/test_ars_requests.py, one stack in file order,
+# takes most of it on its own worker. Both stages run; the exit status is the first failing one's.
 # With arguments, they go to one plain pytest run.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -20,9 +19,8 @@ cd "$ROOT"
 [ -x "$VENV/bin/fastdds" ] && "$VENV/bin/fastdds" shm clean > /dev/null 2>&1 || true
 # One OpenMP thread per process unless the caller says otherwise: three workers already share two
 # cores, and torch's intra-op threads (two per process here) only spin against each other and the
-# other workers. The vision and bench tests took 165 s on three workers with one thread, 224 with
-# the default, 326 CPU seconds against 432 (2026-12-06). Code that sets its own count (the vision
-# node's torch_threads, the trainers' --threads) still does.
+# other workers; with one thread each the vision and bench tests finish sooner and use less CPU.
+# Code that sets its own count (the vision node's torch_threads, the trainers' --threads) still does.
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 echo "[test] ruff check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tests bench 2>/dev/null)

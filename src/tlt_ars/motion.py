@@ -435,7 +435,7 @@ class ExecuteTrajectory(ActionGoal):
         # states while planning kept the executor busy is waited out, as PlanMotion does, up to
         # timeouts.planning_s, after which building the goal fails with the reason. So is a UR
         # driver reconnecting after a lost link (about a second): sent at once, the goal of the next
-        # attempt was aborted too, and a Retreat after the part was riveted failed its request.
+        # attempt would be aborted too, and a Retreat after the part was riveted fail its request.
         waited = self.ctx.clock() - self._waiting_since
         if self._send_future is None and waited <= self.ctx.config.timeouts["planning_s"]:
             if self.ctx.arm_q() is None:

@@ -264,8 +264,8 @@ class SubtreeBuilder:
             name,
             [
                 self._move("Move To Inspection", lambda: pose_goal(ctx.config.inspection_pose_for(kind))),
-                # The CRS's camera compares the part with where the arm says it holds it: a whole
-                # run failed a good cross frame, every corner 6 mm off, seen before the arm stood.
+                # The CRS's camera compares the part with where the arm says it holds it: seen before
+                # the arm stands, a good cross frame is off by millimetres at every corner and fails.
                 Settle("Settle", ctx),
                 present,
                 _fallback("Inspection", [passed, discard]),
@@ -301,8 +301,8 @@ class SubtreeBuilder:
 
     def measure_alignment(self, name: str) -> Sequence:
         """Measure the held or placed part with the EE cameras; a measurement that did not see it
-        (a whole run once found one of a placed cross frame's two corner joints missing from a
-        view, then both on a second look) is taken once more before it is judged."""
+        (one of a placed cross frame's two corner joints can be missing from a view and both there
+        on a second look) is taken once more before it is judged."""
         ctx = self.ctx
         return _seq(
             name,
@@ -447,7 +447,7 @@ class SubtreeBuilder:
                 ),
                 self._move("Fine Approach Joint", lambda: chosen(ctx, "joint", contact=True)),
                 # Nothing held to align first, so the gun would fire the moment the controller's
-                # path ends; a near vertical's affix rivet in a whole run missed its strut end.
+                # path ends, and a near vertical's affix rivet can miss its strut end.
                 Settle("Settle", ctx),
                 self.rivet_member("rivet", record=record),
             ],
@@ -477,8 +477,8 @@ class SubtreeBuilder:
         """Fig. 32: load a rivet, grab, inspect, place and rivet the member."""
         rivet = _rivet(member, "add")
         later = _phase(defer)
-        # A diagonal's 0.25 m of width take 16.7 s, more than the dispenser approach they were
-        # beside: the arm stood 8-12 s at the dispenser waiting for the slide. Commanded before
+        # A diagonal's 0.25 m of width take 16.7 s, more than the dispenser approach they run
+        # beside, so the arm would stand seconds at the dispenser waiting for the slide. Commanded before
         # the rivet is loaded (gun a and the camera sit on the slide's fixed side; every motion
         # meanwhile is planned over the rest of its move), Extend Width finds it there or nearer.
         diagonal = member.kind == "diagonal"

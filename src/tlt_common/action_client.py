@@ -20,7 +20,7 @@ class SerialisedActionClient(ActionClient):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         # Before the base class adds this client to its node: an executor already spinning that
-        # node may take data from it at once (a clean clone's spin thread died on the missing lock).
+        # node may take data from it at once (its spin thread would die on the missing lock).
         self._serial = threading.RLock()
         super().__init__(*args, **kwargs)
 

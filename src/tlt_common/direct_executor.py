@@ -4,8 +4,8 @@ rclpy's executors wrap every callback in a ``Task`` that runs a coroutine, keep 
 each later wait walks, and trigger the executor's guard condition when the callback is taken and
 again when it is done, so every callback costs one more wait that finds nothing to do. A driver
 node on the twin wakes twice per ``/clock`` message (the clock, then its timer), 50 times per
-simulated second; that bookkeeping was a third of its CPU (0.47 against 0.31 ms per ``/clock``
-message for a node with a timer, a publisher and a subscription, measured alone).
+simulated second; for a node with a timer, a publisher and a subscription that bookkeeping is
+about a third of its CPU.
 
 :class:`DirectExecutor` takes a ready timer or subscription whose callback is a plain function and
 calls it on the spinning thread, with no task, coroutine or guard trigger: the spinning thread

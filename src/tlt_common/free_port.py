@@ -2,8 +2,8 @@
 
 The usual way (bind port 0, read the port, close) returns a port from the kernel's ephemeral
 range, which the next socket bound to port 0 anywhere on the machine may get before the process
-meant to bind it does: the mission job's test saw it exit 2 (an OSError, by all signs "address
-already in use" on its ground port) before it sent anything. Ports above that range are never
+meant to bind it does, and that process then fails with "address already in use" before it sends
+anything. Ports above that range are never
 handed out for port 0, so a port drawn there at random and found free stays free but for another
 such draw.
 """

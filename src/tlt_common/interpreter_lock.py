@@ -4,10 +4,9 @@ Our nodes run work on one thread (pose estimation, motion planning, a tree's tic
 reader) beside an executor's threads that take /clock, joint states and images at tens to hundreds
 of hertz. A thread that gives the lock up (every torch or numpy call, every blocking read, every
 lock or event wait) and wants it back while a busy thread holds it waits up to the switch interval,
-5 ms by default. A part inspection makes thousands of such hand-overs: in the vision node's tests it
-took 1 s with the executor idle and up to 60 s with it busy; a one-bay build of the CRS tree against
-stand-in ARSs took 24-32 s instead of 3, each goal, result and service call a few hand-overs.
-Half a millisecond keeps that wait small and costs the executor little. Every node's ``main`` sets
+5 ms by default. A part inspection makes thousands of such hand-overs, and each goal, result and
+service call of a build a few, so with a busy executor those waits come to many times the work
+itself. Half a millisecond keeps that wait small and costs the executor little. Every node's ``main`` sets
 it, and so does the test session, which hosts nodes side by side.
 """
 

@@ -3,8 +3,8 @@
 rclpy gives every publisher and subscription two default event handlers (incompatible QoS,
 incompatible type), each a waitable that the executor enters, counts, adds and polls every time
 it builds its wait set, that is, on every message and timer. In the CRS's node, with some hundred of
-them, that bookkeeping was most of its CPU, and the whole system on the twin ran at 0.84 of real
-time with them and 0.91 without (idle, 2 cores). The handlers only log a warning on a
+them, that bookkeeping is most of its CPU, and the whole system on the twin runs measurably
+slower with them. The handlers only log a warning on a
 misconfiguration that this project's fixed QoS profiles do not produce.
 
 :class:`LeanNode` passes ``use_default_callbacks=False`` when a caller gives no

@@ -2,8 +2,8 @@
 
 A node with ``use_sim_time`` whose ``/clock`` stops does nothing at all: every timer, tick and
 timeout is on that clock, so it sends no telemetry and logs nothing, and it looks hung. Whether the
-twin stopped, or this process stopped hearing it (a CRS restarted after a SIGKILL once heard no
-``/clock`` for two minutes while the rest of the system ran on), is what an engineer needs to know
+twin stopped, or this process stopped hearing it (a CRS restarted after a SIGKILL can hear no
+``/clock`` for minutes while the rest of the system runs on), is what an engineer needs to know
 first. :func:`watch_sim_clock` starts a thread, on the wall clock and outside the executor, that
 logs a warning and every thread's stack when ROS time has stood still for ``stall_s`` seconds of
 wall time after the first ``/clock``, and a note when it moves again.

@@ -1,7 +1,7 @@
 """SIGINT and SIGTERM as a request to stop, for processes that shut rclpy down themselves.
 
 rclpy's own handler shuts the context down from the signal, while the process's executor threads,
-timers and publishers may be using it: a CRS process once died of a segmentation fault on SIGINT
+timers and publishers may be using it, and the process can die of a segmentation fault on SIGINT
 (exit status -11). A process that calls :func:`stop_on_signals` before ``rclpy.init(...,
 signal_handler_options=SignalHandlerOptions.NO)`` leaves its spin loop when the returned list is
 non-empty, stops its work, shuts its executor down and destroys its nodes with the context still

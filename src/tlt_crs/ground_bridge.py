@@ -16,7 +16,7 @@ A ``CRS_UP`` event goes to the ground when the bridge starts (a restarted CRS is
 ``mission_step`` goes out whenever the tree's running leaf, the current bay or the run state
 changes, with the CRS's ROS time: the ground's record of when each step of each member ran. The
 change is noted at the end of every tick and sent from the telemetry timer, so a step that runs
-for a single tick is still reported (sampled on a timer instead, a quick foundation rivet went
+for a single tick is still reported (sampled on a timer instead, a quick foundation rivet can go
 unseen on a loaded machine). Every bay inspection verdict is also reported as an event
 (``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``), as Inspection Check reports each part's.
 """
@@ -72,8 +72,8 @@ class GroundBridge:
         except Exception as exc:
             _log.warning("CRS_UP not sent to the ground: %s", exc)
         self._forward_ars_tree_statuses()
-        # Telemetry has its own group: in the node's default one it waited behind the device
-        # subscriptions' callbacks, and on a loaded machine the tree status never went out.
+        # Telemetry has its own group: in the node's default one it waits behind the device
+        # subscriptions' callbacks, and on a loaded machine the tree status may never go out.
         telemetry = MutuallyExclusiveCallbackGroup()
         for kind, send in (
             ("tree_status", self.send_tree_status),

@@ -88,7 +88,7 @@ class CrsNode(LeanNode):
         self.commands: CommandQueue = self.processor.queue
         self.root = build_crs_tree(self.ctx, self.processor)
         # The root is ticked directly: py_trees' BehaviourTree.tick walks every node after each tick
-        # for its visitors (about 10 ms for a 10-bay tree), which the guards are there to avoid.
+        # for its visitors (milliseconds for a 10-bay tree), which the guards are there to avoid.
         self.tick_count = 0
         self.shape = TreeShape.of(self.root)
         self.status_publisher = TreeStatusPublisher(

@@ -119,7 +119,7 @@ class HoldWhilePaused(py_trees.decorators.Decorator):
             return
         self.feedback_message = ""
         # py_trees' Decorator.tick (2.6) written out rather than ``yield from super().tick()``:
-        # this decorator sits above Build Tower, and a second generator frame here was passed
+        # this decorator sits above Build Tower, and a second generator frame here would be passed
         # through by every node ticked below it.
         self.logger.debug(f"{self.__class__.__name__}.tick()")
         if self.status != Status.RUNNING:

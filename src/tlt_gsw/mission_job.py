@@ -422,7 +422,7 @@ def add_mission_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--key-file", help="key file (default: link.yaml key_file or $TLT_GROUND_KEY_FILE)")
     p.add_argument("--key-id", type=int)
     p.add_argument("--archive", help="archive SQLite file (default: link.yaml gsw.archive)")
-    # A one-bay build took 62 min of wall time on a loaded 2-core machine.
+    # Generous: a one-bay build can take about an hour of wall time on a loaded 2-core machine.
     p.add_argument("--timeout", type=float, default=14400.0, help="give up after this many s (exit 3)")
     p.add_argument(
         "--fault-timeout", type=float, default=300.0,

@@ -60,8 +60,8 @@ def _rows(steps: list[StepSpan]) -> list[tuple[str, str]]:
 
 def timeline_origin(summary: MissionSummary) -> float:
     """The sim time the x axis starts at: the first step that ran. A CRS reports its mission step
-    from the moment it is up, well before Start (a two-bay job's first 55 s were Start refused as
-    "not ready"), and a run's first packet would leave that much empty axis."""
+    from the moment it is up, well before Start (which can be refused as "not ready" for the better
+    part of a minute), and a run's first packet would leave that much empty axis."""
     ran = [s.sim_start for s in summary.steps if s.step]
     return min(ran) if ran else summary.sim_start or 0.0
 

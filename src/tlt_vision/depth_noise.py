@@ -3,9 +3,8 @@
 The twin's depth is exact; a real camera's is not. A stereo camera's (the lifter's ZEDs) is about
 1 % of the depth at a few metres, and moves each point along its ray by more than a certificate
 threshold: the 90th percentile of the Chamfer distances of a right pose is then the noise's, not
-the fit's. With 1 % Gaussian noise added to each pixel's depth (``bench/vision.py --depth-noise
-0.01``) 10 % of the certifiable views of held-out seed 950 were certified, against 94 % on the
-exact depth, and a quarter of those certified were wrong.
+the fit's. With such noise added to each pixel's depth (``bench/vision.py --depth-noise 0.01``)
+few of the certifiable views are certified, and many of those few are wrong.
 
 Two things answer it, both given the camera's noise (node.yaml ``depth_noise``): 1 sigma of
 ``fraction`` times the depth plus ``per_m2`` times its square. A stereo camera's is the square's:
@@ -20,10 +19,10 @@ focal length ``f`` in pixels), so ``per_m2`` is ``s / (b f)``, per metre:
   the 90th percentile of the noise's own distances, added in quadrature, at the cloud's depth.
   Where that allowance is over ``max_allowance`` of the part's size (2 %, the accuracy the issue
   holds certified poses to), the depth cannot place the part that well, and no pose is certified,
-  with that reason (:meth:`DepthNoise.too_noisy`). Without that bound, allowing up to twice each
-  threshold certified a quarter of the poses wrong (a rivet at 0.8 m, a fitting turned 17 degrees
-  at 1 m), and at 0.5 % noise more than at 1 %: the same allowance then comes at twice the depth,
-  where a part is a few pixels across and the window a large share of it.
+  with that reason (:meth:`DepthNoise.too_noisy`). Without that bound, a generous allowance
+  certifies wrong poses (a small part far away, a fitting turned by degrees), and more of them at
+  lower noise: the same allowance then comes at a greater depth, where a part is a few pixels
+  across and the window a large share of it.
 
 The residual assumes noise independent from pixel to pixel, as the benches draw it; a real
 camera's is correlated over a few pixels, which the filter takes down less: give as ``fraction``

@@ -195,8 +195,8 @@ def _on_tube(
         centre = centre + float((mid - centre) @ axis) * axis
     elif len(fittings) == 1:
         # One fitting fixes it as well, when it lies within what the tube alone tells: read
-        # against the tube alone, a good fitting was "out of place" by 5-11 mm along the axis,
-        # and the missing one's place as far off.
+        # against the tube alone, a good fitting would be "out of place" by millimetres along the
+        # axis, and the missing one's place as far off.
         axial = float((np.asarray(fittings[0].translation) - centre) @ axis)
         slip = axial - math.copysign(offset, axial)
         if abs(slip) <= TUBE_AXIAL_UNCERTAINTY:
@@ -251,9 +251,9 @@ def inspect_cross_frame(
 
     The frame's pose says which corner joint is at which corner (the nearest within four times
     the position tolerance); the best rigid fit of the square's corners onto those joints then
-    judges where each stands. The frame's own pose is less precise than its corner joints' (C-3PO
-    on a 0.75 m frame moved a good frame's corners 6 mm between two runs on one image), so it is
-    not the reference for the corners' positions.
+    judges where each stands. The frame's own pose is less precise than its corner joints' (C-3PO's
+    pose of a 0.75 m frame can move a good frame's corners millimetres between two runs on one
+    image), so it is not the reference for the corners' positions.
     """
     used = tuple(o.estimate for o in observations if o.estimate is not None)
     if not any(o.object_class == "cross_frame" for o in observations):
@@ -444,7 +444,7 @@ def inspect_bay(
 
     A certified corner joint pose counts for the expected joint nearest it when within ``gate``
     (m): the inward views also show the dispensers' stacked cross frames, and matched to any
-    joints in view a good bay once failed with every joint "off by" 33 cm. Of two poses for one
+    joints in view a good bay would fail with every joint "off by" tens of centimetres. Of two poses for one
     joint the better certified counts. The bay passes when at least ``min_joints`` joints are
     matched, from both of its frames (the verticals' lengths are then in the check), and, after
     the best rigid fit of their places onto them, none is off by more than ``tol.position``: the

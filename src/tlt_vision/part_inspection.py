@@ -29,9 +29,9 @@ decided again with those certified. If it still fails, and the caller can segmen
 the frame again (``closer``: Mask R-CNN on a crop about each missing fitting's place, enlarged,
 ``segmentation.second_look_closer``), the end fittings found there are posed and counted the
 same way. It passes if it now passes; otherwise the first decision stands, with the reasons of
-what was seen with confidence. Mask R-CNN scores a held vertical's fitting beside the rivet gun
-under 0.3 now and then, or misses it in the whole frame; lowering ``min_score`` for every
-detection instead poses every low-scored piece of every frame (9 % more frame time at 0.2). A
+what was seen with confidence. Mask R-CNN can score a held vertical's fitting beside the rivet gun
+low, or miss it in the whole frame; lowering ``min_score`` for every detection instead would pose
+every low-scored piece of every frame, at a cost in frame time. A
 strut missing a fitting has none to certify at its place (its bare tube end, the fitting's length
 away, may fit the fitting model but not there), so it still fails.
 """
@@ -162,7 +162,7 @@ def select_part(
     groups = [g for g in _joined(found, gap) if any(i in anchors for i in g)]
     if anchors_per_part is not None:
         # A held strut before a lifted bay: the bay's near vertical, riveted to its diagonal,
-        # showed more tube than the strut and was inspected in its place.
+        # can show more tube than the strut and would be inspected in its place.
         parts = [g for g in groups if len(_lines(g, anchor)) <= anchors_per_part]
         groups = parts or groups
     best = max(groups, key=lambda g: sum(_pixels(i) for i in g if i.detection.object_class == anchor))
@@ -335,8 +335,8 @@ class PartInspector:
             ("strut_tube", "end_fitting"),
             "strut_tube",
             length / 2 + 0.1,
-            # Not only within reach: 5 pixels of a racked strut's fitting near a held one's tube
-            # were taken for a third fitting, which could not be measured, and failed good struts.
+            # Not only within reach: a few pixels of a racked strut's fitting near a held one's
+            # tube would count as a third fitting, which cannot be measured, and fail good struts.
             gap=raw["part_gap"],
             anchors_per_part=1,
             **common,

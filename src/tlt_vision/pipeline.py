@@ -38,8 +38,8 @@ A mask's border pixels are dropped (their depth may be what lies behind the part
 mask smaller than ``keep_border_below`` pixels: on a small corner joint (100-300 pixels at a metre)
 the border is most of the mask, and without it the cube's corners go unseen, so a good joint read
 as a degenerate view, a missing joint. There a border pixel is kept only when its depth lies within
-``BORDER_DEPTH_MARGIN`` of the depths the mask's interior spans (1% of a joint's border pixels
-in the twin read the floor a metre behind it).
+``BORDER_DEPTH_MARGIN`` of the depths the mask's interior spans (a few of a joint's border pixels
+read the floor a metre behind it).
 """
 
 from __future__ import annotations
@@ -350,8 +350,8 @@ class PartPipeline:
         """For the ``refused`` detections (indices) that carry a core, ``(index, estimate)`` of
         those whose core's cloud, refined from the whole mask's pose, is certified and lies within
         the whole mask; every core of the frame refined in one batch. Refined, not posed afresh:
-        keypoints and a corrector's run of their own for the few refused joints cost the poses of
-        a frame 20-30 % more."""
+        keypoints and a corrector's run of their own for the few refused joints would add a large
+        share to the cost of a frame's poses."""
         items, clouds = [], []
         for i in refused:
             d = dets[i]

@@ -11,12 +11,12 @@ part and what lies behind it ("flying pixels", on the twin's renders as on real 
 on a small part they are a large share of the mask; one such pixel a metre behind the part is
 enough to fail its certificate. Given the part's size (``extent``), pixels whose depth lies further
 than that from the mask's median depth are dropped too: a learned mask strays a pixel or two past
-a part's outline, onto whatever lies behind it (Mask R-CNN's end-fitting masks: 2-35 % of their
-pixels, 0.3-5 m behind the fitting), which no point of the part can be.
+a part's outline, onto whatever lies behind it (for Mask R-CNN's end-fitting masks, a sizeable
+share of their pixels, up to metres behind the fitting), which no point of the part can be.
 
 A learned mask also strays onto what lies behind the part within that span: a diagonal tube's
-mask took in a few pixels of the floor 0.4 m behind its end (1-2 % of its cloud), which pulled
-C-3PO's tube 5 cm along its axis and failed a good strut. Such pixels make pieces of the cloud no
+mask can take in a few pixels of the floor behind its end, enough to pull C-3PO's tube
+centimetres along its axis and fail a good strut. Such pixels make pieces of the cloud no
 chain of close points joins to the part: :func:`detached_pieces` finds them (a cloud is one
 rigid part, seen whole or cut by what stands in front of it, and each piece of it is large).
 A compact part (an end fitting, a corner joint) is rarely cut so, but its learned mask often takes
@@ -108,7 +108,7 @@ def detached_pieces(points: np.ndarray, detached: Detached, object_class: str | 
     n = len(p)
     if n == 0:
         return np.zeros(0, dtype=bool)
-    # Pairs from a k-d tree: a tube's 500 points took 16 ms as an N x N distance matrix, 0.6 ms so.
+    # Pairs from a k-d tree: an N x N distance matrix is far slower for a tube's hundreds of points.
     pairs = cKDTree(p).query_pairs(detached.link_of(object_class), output_type="ndarray")
     links = coo_matrix((np.ones(len(pairs), dtype=bool), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, label = connected_components(links, directed=False)
@@ -177,8 +177,8 @@ def masked_point_cloud(
     v, u = np.nonzero(valid)
     if max_points is not None and n > max_points:
         # Evenly spaced, not drawn: every region of the mask kept as densely as the rest, and the
-        # same mask always the same points. On the five held-out sets a random draw certified
-        # 95.6-95.7 % of the views (two seeds), evenly spaced points 95.9 %.
+        # same mask always the same points; on held-out sets it certifies at least as many views
+        # as a random draw.
         pick = np.linspace(0, n - 1, max_points).round().astype(np.intp)
         v, u = v[pick], u[pick]
     z = window_median(depth, valid, v, u, smooth) if smooth > 1 else depth[v, u].astype(np.float64)

@@ -1,15 +1,15 @@
 """The arms' own end effectors taken out of a frame's depth before the parts in it are posed.
 
 A part presented for inspection sits in the jaws of an end effector whose rivet guns hang right
-beside its end fittings. A learned mask strays onto them (Mask R-CNN's end-fitting masks took in a
-whole gun: Chamfer p90 32 mm against a 2.5 mm threshold; its tube masks took in the jaws closed on
-the tube), and no depth cut can tell a gun from the fitting at its side. The arms' joint states
+beside its end fittings. A learned mask strays onto them (an end-fitting mask can take in a whole
+gun, far past the certificate's threshold; a tube mask the jaws closed on the tube), and no depth
+cut can tell a gun from the fitting at its side. The arms' joint states
 say where every EE body is, so, as robots filter their own bodies out of their sensors, the pixels
 whose depth falls inside an EE body (grown by ``margin``) are given no depth: nothing of them
 reaches a cloud, and the free-space check (:mod:`tlt_vision.pose.free_space`) does not count them
 either. A detection lying almost wholly on those pixels is of the end effector itself (a rivet gun
-taken for an end fitting, whose mask kept a fringe of depth at its edge and failed a good strut for
-"no depth"): :func:`off_own_ee` sets it aside before the part is chosen (``own_share``).
+taken for an end fitting, whose mask keeps a fringe of depth at its edge and would fail a good strut
+for "no depth"): :func:`off_own_ee` sets it aside before the part is chosen (``own_share``).
 
 The bodies are configured in the flange frame with the width joint at 0 (node.yaml
 ``ee_self_filter``): boxes for the rigid ones, and a capsule for each jaw, turned about its hinge
@@ -154,7 +154,7 @@ def drop_inside(
 
     Each shape is tested only on the pixels that can see into its bounding box (a window of the
     image, and depths within the box's): the bodies cover a small part of a frame, and testing
-    every pixel of a 640x480 frame against the twenty-odd bodies of two end effectors took
+    every pixel of a 640x480 frame against the twenty-odd bodies of two end effectors would take
     seconds."""
     d = np.asarray(depth, dtype=np.float32)
     out = d.copy()

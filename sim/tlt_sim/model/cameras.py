@@ -129,8 +129,8 @@ class CameraRenderer:
     """Offscreen renderer bound to one model; ``close`` frees the GL context.
 
     ``antialias`` (the default) renders with the model's multisampling (``visual/quality
-    offsamples``), as the vision's detectors were trained on. Without it a frame costs a third to
-    40 % less CPU on OSMesa and segmentation edges are exact (multisampling blends the id colours
+    offsamples``), as the vision's detectors were trained on. Without it a frame costs markedly
+    less CPU on OSMesa and segmentation edges are exact (multisampling blends the id colours
     of neighbouring geoms at their borders into ids of geoms that are not there), but the frames
     differ at every edge from what those detectors learned on.
     """

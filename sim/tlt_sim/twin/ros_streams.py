@@ -94,7 +94,7 @@ class CameraStreams:
         self._labels_sent = False
         # The renderers every camera's frames need, made now, before the device links are served:
         # making one holds the interpreter lock for a third of a second (longer on a loaded
-        # machine), and made on the first frame mid-run it starved the pty threads past every
+        # machine), and made on the first frame mid-run it would starve the pty threads past every
         # serial driver's packet timeout at once. Rendering itself lets go of the lock.
         width = max(settings.camera_size(camera)[0] for camera in names.cameras())
         height = max(settings.camera_size(camera)[1] for camera in names.cameras())

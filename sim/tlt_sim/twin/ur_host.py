@@ -2,7 +2,7 @@
 
 The controller's RTDE stream must reach the driver every 2 ms and the driver declares the link dead
 after 0.5 s of silence. Inside the twin process its threads share one interpreter lock with the
-simulation loop and six pty threads, and on a loaded machine they were starved past that limit. So
+simulation loop and six pty threads, and on a loaded machine they would be starved past that limit. So
 each :class:`URControllerHost` runs one :class:`URControllerEmulator` (``clock="external"``) in its
 own process and shares two things with the twin through shared memory, with no round trip per step:
 

@@ -5,7 +5,7 @@ so how high the tag stands depends on how many parts the mission fills the rack 
 mission's vertical rack holds eight struts, the one-bay's five, and its tag stands 0.21 m higher.
 The coarse poses in ``config/ars/<ars>.yaml`` were found and checked in the twin for the tags of
 one mission (``poses.dispensers_mission``, :mod:`.coarse_pose_search`); from them, in another
-mission, the camera would look under the tag (a two-bay build once faulted on "tag not in view").
+mission, the camera would look under the tag and the build fault on "tag not in view".
 
 :func:`follow_tags` moves each pose with its tag: the tool, and so the camera on it, is moved by
 the same rigid motion that takes the configured mission's tag to this mission's, so the camera

@@ -6,9 +6,9 @@ caller replaces as the world changes (``set_group``), and the arm's current conf
 query. Collision checking goes through pinocchio's ``GeometryModel`` and coal: the arm's links are
 capsules on the joints of the DH chain, the end effector is boxes on the flange, the carried part
 capsules on the flange (``attach``). ``computeCollisions`` then runs forward kinematics and every
-pair test in one C++ call, about 20-50 us a configuration for this scene (docs/motion-planning.md has
-the measurement against a numpy capsule-capsule version, which was slower once the Python call
-overhead and the boxes are counted).
+pair test in one C++ call, tens of microseconds a configuration for this scene
+(docs/motion-planning.md compares it with a numpy capsule-capsule version, which is slower once the
+Python call overhead and the boxes are counted).
 
 Every shape is inflated by ``padding`` so that a path checked at a finite resolution keeps a
 margin. A query never changes the scene; a changed group rebuilds the model on the next query.

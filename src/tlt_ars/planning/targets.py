@@ -148,8 +148,8 @@ def placement_targets(cfg: SceneConfig, mission: object, member: object, arm: st
     if member.kind in ("vertical", "diagonal"):
         (p0, p1) = member_segments(member, origin)[0]
         add = [r.joint for r in getattr(member, "rivets", ()) if r.step == "add"]
-        # A whole run placed a near vertical with gun 0 at the wrong end: its add rivet joined the
-        # bottom joint, and the affix rivet meant for it found that end taken.
+        # Either gun may face either end: with gun 0 at the wrong end of a near vertical, its add
+        # rivet would join the bottom joint, and the affix rivet meant for it find that end taken.
         signs = (1.0, -1.0) if not add else (1.0,) if add[0] == member.joints[0][0] else (-1.0,)
         return _holding(strut_targets(p0, p1, base, approach, signs=signs), mission, member.kind)
     return []

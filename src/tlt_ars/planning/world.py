@@ -331,8 +331,8 @@ def dispenser_shapes(cfg: SceneConfig, mission: Any) -> list[Shape]:
 def tag_post_shape(cfg: SceneConfig, mission: Any, name: str, dispenser: Any) -> Box:
     """The post that holds ``dispenser``'s AprilTag (full dispenser), from the dispenser's origin
     up. It stands where the D405 looks to locate the dispenser: a joint-space path to a coarse pose
-    that did not know of it ran an end effector's gun bracket into it and overloaded the width
-    servo in a whole-system run."""
+    that does not know of it can run an end effector's gun bracket into it and overload the width
+    servo."""
     racks = cfg.raw["dispensers"]
     spec = racks["tag_post"]
     kind = dispenser.part_kind

@@ -362,10 +362,10 @@ def _ignore_routes_with_linkdown(namespace: str) -> None:
     answer that cannot come, queued up to ``unres_qlen_bytes`` per neighbour (as large as a socket's
     whole send buffer) and charged to the sending socket until resolution fails some 3 s later. Fast
     DDS sends everything of a participant through one blocking socket, so during a cut its writes and
-    discovery announcements, to the processes of its own host too, stalled for 5 to 12 s of a 12 s
-    cut. Past the 3 s lease participants of one host can drop each other, and after the heal an ARS
-    stayed deaf to its own driver now and then; with this it has not since. A real Jetson with its
-    cable pulled does the same (docs/deployment.md).
+    discovery announcements, to the processes of its own host too, stall for most of a cut. Past
+    the 3 s lease participants of one host can drop each other, and after the heal an ARS can stay
+    deaf to its own driver. A real Jetson with its cable pulled does the same
+    (docs/deployment.md).
     """
     # /proc/sys/net is the namespace's own inside it; "all" counts for every interface.
     setting = "/proc/sys/net/ipv4/conf/all/ignore_routes_with_linkdown"

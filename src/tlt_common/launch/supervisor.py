@@ -202,8 +202,8 @@ class Supervisor:
         elif proc.restarts:
             # Fast DDS 2.14 can leave the shared-memory port of a process that died (SIGKILL) so
             # that its restarted successor matches every topic and receives nothing on some
-            # (eProsima/Fast-DDS#5053, #2811): a restarted ARS X once never got /clock and never
-            # ticked. Over UDP it does.
+            # (eProsima/Fast-DDS#5053, #2811): a restarted ARS may then never get /clock and never
+            # tick. Over UDP it does.
             env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")
         proc.restart_at = None
         proc.returncode = None
@@ -361,8 +361,8 @@ class Supervisor:
 
     def _on_signal(self, *_: object) -> None:
         # Only counted: a handler runs in the main thread between two of its bytecodes, and the
-        # main thread lives in Event.wait, whose lock Event.set would take again and never get (a
-        # launcher once sat through SIGINT and SIGTERM without a word until SIGKILL).
+        # main thread lives in Event.wait, whose lock Event.set would take again and never get (the
+        # launcher would then sit through SIGINT and SIGTERM without a word until SIGKILL).
         self._signals += 1
 
     def _say(self, text: str) -> None:

@@ -11,8 +11,8 @@ one type records the first.
 The recorded subscriptions live on a second node, ``<name>_topics``, that no executor spins: every
 ``take_period_s`` (wall time) the recorder takes whatever each of them has queued. An executor
 rebuilds its wait set over every entity of its nodes each time it wakes, and with one wake per
-message (some 70 topics, a few hundred messages a second on the twin) that bookkeeping was most
-of the recorder's CPU. The queues are deep (``SUBSCRIPTION_DEPTH``), so nothing is lost between
+message (some 70 topics, a few hundred messages a second on the twin) that bookkeeping would be
+most of the recorder's CPU. The queues are deep (``SUBSCRIPTION_DEPTH``), so nothing is lost between
 takes.
 
 Each message is written with log time = the node clock when it was taken, at most one take period

@@ -140,8 +140,8 @@ class MotionGoal(ActionGoal):
     """A trajectory goal of a CRS actuator; the node pre-empts it on Pause (see module docstring).
 
     Waits for the result as long as the trajectory itself takes plus ``margin``: a raise by a bay
-    (0.75 m at 0.01 m/s) takes 75 s, longer than any fixed bound for a gripper's motion (a two-bay
-    build once faulted there, "no result within 60 s", while the lifter was still raising).
+    (0.75 m at 0.01 m/s) takes 75 s, longer than any fixed bound for a gripper's motion (a fixed
+    60 s bound would fault the build with "no result" while the lifter is still raising).
     """
 
     hold_on_pause = True
@@ -382,8 +382,8 @@ class Actuators:
         """Turn the ZED mounts, then wait until their joint states stand still at the goal.
 
         The mounts' trajectory ends while the servos still trail it, and vision places a frame by
-        the joint states near its stamp: a whole run inspected its good bay as the mounts came to
-        rest, and every corner joint came out 5-8 mm off."""
+        the joint states near its stamp: a bay inspected as the mounts come to rest has every
+        corner joint millimetres off, and a good bay fails."""
         from sensor_msgs.msg import JointState
 
         setup = self.ctx.config.camera_mounts

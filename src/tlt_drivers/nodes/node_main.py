@@ -7,8 +7,8 @@ node because a driver blocks in its control loop on a serial exchange (a MightyZ
 stops answering holds its loop for the 50 ms response timeout): on one executor that would hold
 the lifter's 50 Hz command stream past the firmware's 40 ms watchdog. One process for several
 (``tlt-drivers``) because every process is a DDS participant of its own, woken for every
-``/clock`` step and discovery change: on the twin, three processes for the eight drivers took 5 %
-less of the idle system's CPU than eight (docs/system.md, which says why the launch sets keep eight).
+``/clock`` step and discovery change, so fewer processes for the eight drivers take less of the
+idle system's CPU than eight (docs/system.md says why the launch sets keep eight).
 
 A bad argument or configuration is a message and exit code 2, never a traceback; a node whose
 callback raises takes the process down with exit code 1 (the launcher restarts it) after every

@@ -210,8 +210,8 @@ class URLink:
     def _discard(self, which: str) -> None:
         """Disconnect a dead interface (joining its thread) and drop it; a fresh one replaces it.
 
-        ur-rtde's own ``reconnect`` on an object whose receive thread has died aborted the
-        process now and then (a C++ terminate) in this project's tests; building a new object
+        ur-rtde's own ``reconnect`` on an object whose receive thread has died can abort the
+        process (a C++ terminate); building a new object
         after ``disconnect`` has joined the old thread goes through the library's well-trodden
         constructor instead.
         """

@@ -94,7 +94,7 @@ def boxes_from_masks(masks: torch.Tensor) -> torch.Tensor:
     """Tight (x1, y1, x2, y2) pixel-edge boxes (N, 4) of non-empty masks (N, H, W)."""
     if masks.shape[0] == 0:
         return torch.zeros((0, 4), device=masks.device)
-    # amax of the bytes: torch's any over one axis of a (N, H, W) bool took 5 ms on the CPU, this 0.3.
+    # amax of the bytes: torch's any over one axis of a (N, H, W) bool is many times slower on the CPU.
     as_bytes = masks.to(torch.bool).view(torch.uint8)
     rows, cols = as_bytes.amax(dim=2) > 0, as_bytes.amax(dim=1) > 0
     h, w = masks.shape[-2:]

@@ -17,7 +17,7 @@ def nms(boxes: torch.Tensor, scores: torch.Tensor, iou_threshold: float, max_kee
         return torch.zeros(0, dtype=torch.long, device=boxes.device)
     order = torch.sort(scores, descending=True, stable=True).indices
     # The walk runs in numpy on the CPU, computing the overlaps of a box only once it is kept: the
-    # full IoU matrix of an RPN's few thousand boxes took most of the time, a torch op per step
+    # full IoU matrix of an RPN's few thousand boxes would take most of the time, a torch op per step
     # costs microseconds, and on a GPU each step's branch would wait for the device.
     b = boxes[order].detach().to("cpu", torch.float32).numpy()
     x1, y1, x2, y2 = b[:, 0], b[:, 1], b[:, 2], b[:, 3]

@@ -1,8 +1,8 @@
 """Place a part seen from its side along its own axis, by its mask.
 
 An end fitting seen from the side shows a band of its cylinder and no face: the Chamfer fit of
-C-3PO (and its certificate) is the same wherever along the model that band lies, and certified
-fittings came out 2-17 mm along their axis on the twin's own masks (docs/vision.md). The image
+C-3PO (and its certificate) is the same wherever along the model that band lies, so a certified
+fitting can come out several millimetres along its axis even on the twin's own masks. The image
 still says where the fitting ends. Slid too far, the posed model's near side overhangs its mask
 where nothing in front hides it (the thinner tube, or the background, is what the camera saw
 there); slid right, the overhang is only where an occluder stands in front.
@@ -12,13 +12,12 @@ there); slid right, the overhang is only where an occluder stands in front.
 mask where the camera saw something not ``hidden_margin`` nearer than the point, and
 takes the slide with the fewest, when the pose as it was overhangs by ``min_overhang`` points or
 more and the slide removes at least ``min_gain`` of that: a view whose overhang hardly changes
-along the axis says nothing about it, and the pose stays. On the held-out images (seed 900) the
-certified end fittings within the ADD-S goal went from 92.7 to 99.5 % on the twin's masks, and
-from 92.7 to 97.6 % on Mask R-CNN's (models/vision/history.md). config/vision/node.yaml
-``axial_slide`` turns it on for end fittings. It needs masks that end where the part does: with
-the Mask R-CNN weights before 2026-11-28 it slid good held struts' fittings out of their place on
-the tube, and ``bench/inspection.py`` rejected 1 and 3 of 72 good struts (seeds 1100 and 1200);
-with the weights since, and with the twin's masks, none.
+along the axis says nothing about it, and the pose stays. It raises the share of certified end
+fittings within the ADD-S goal on held-out images, on the twin's masks and on Mask R-CNN's
+(models/vision/history.md). config/vision/node.yaml ``axial_slide`` turns it on for end fittings.
+It needs masks that end where the part does: a mask that stops short of the fitting's end slides
+a good fitting out of its place on the tube, which ``bench/inspection.py`` shows as good struts
+rejected.
 """
 
 from __future__ import annotations
@@ -57,7 +56,7 @@ def overhangs(
     """For each of S placings of camera-frame surface ``points`` (S, N, 3), with their ``normals``
     (N, 3): how many face the camera and project into the image outside ``mask`` where the depth
     seen is not ``hidden_margin`` nearer than them; (S,). All placings at once: the slides tried
-    for one fitting are tens, and one by one their per-call overhead was most of the cost."""
+    for one fitting are tens, and one by one their per-call overhead would be most of the cost."""
     placings, n = points.shape[:2]
     flat = points.reshape(-1, 3)
     facing = np.flatnonzero(np.einsum("sij,ij->si", points, normals).reshape(-1) < 0)

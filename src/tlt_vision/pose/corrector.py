@@ -15,8 +15,8 @@ iterate, so the objective it returns is never above the one it started from.
 about the cloud's centre and a translation, each element on its own) on the same objective plus a
 free-space term (the camera saw each point, so the ray just in front of it is outside the part).
 Moving keypoints through a registration is slow to settle a large part's rotation: a cross
-frame's was left a fraction of a degree off, 5-8 mm at its corners, more than the corner-joint
-tolerance. And a thin tube fits almost as well from behind (the observed front surface on the
+frame's can be left a fraction of a degree off, millimetres at its corners, more than the
+corner-joint tolerance. And a thin tube fits almost as well from behind (the observed front surface on the
 model's back one, one diameter too near), which the free-space term rules out; a second start one
 tube diameter further away lets the refinement reach the right side; an end fitting, about as
 long as it is wide, fitted with its axis a quarter turn off, reaches its fit from a start turned
@@ -24,8 +24,8 @@ that much. Every start of every element runs in one batch of steps. An element k
 corrected pose unless a refined one has a lower objective, and the model is unchanged, so a bent
 tube still does not fit a straight one. The objective is a sum of squared residuals (each
 point's distance to the surface, and its ray's depth inside the part), so Gauss-Newton steps
-converge in a few iterations where a quasi-Newton method on the sum of the whole batch took
-thirty, and each element stops when its step no longer gains.
+converge in a few iterations where a quasi-Newton method on the sum of the whole batch takes
+several times as many, and each element stops when its step no longer gains.
 """
 
 from __future__ import annotations
@@ -251,8 +251,8 @@ def refine_pose(
     ``trim`` (one for the batch, or (B,)) leaves that fraction of each cloud's points, those
     farthest from the posed surface, out of the Chamfer term, in the steps and in the choice
     between starts (a trimmed least squares; the certificate's 90th percentile leaves out as many):
-    a mask that took in part of a neighbouring fitting pulled the whole fit towards it, off a pose
-    its cloud certifies at. The objective returned is then the trimmed one too.
+    a mask that takes in part of a neighbouring fitting would pull the whole fit towards it, off a
+    pose its cloud certifies at. The objective returned is then the trimmed one too.
     """
     observed, rot, t = observed.detach(), rot.detach().to(observed.dtype), t.detach().to(observed.dtype)
     cloud = _Observed.of(observed, mask, trim)
@@ -299,7 +299,7 @@ class _Observed:
         kept = torch.ceil(count * (1.0 - torch.as_tensor(trim, dtype=m.dtype))).clamp(min=1.0)
         # Free space: the camera saw each point, so the ray just in front of it is outside the
         # part. Without it a thin tube seen along a strip fits as well from behind (the points on
-        # the far side of a tube moved one diameter towards the camera), 2.4 cm off with a
+        # the far side of a tube moved one diameter towards the camera): centimetres off with a
         # sub-millimetre fit.
         ray = observed / torch.linalg.vector_norm(observed, dim=-1, keepdim=True).clamp(min=1e-9)
         centre = (observed * m[..., None]).sum(1) / count[:, None]

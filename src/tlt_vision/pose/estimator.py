@@ -143,7 +143,7 @@ class PoseEstimator:
         # Refinement starts (model-frame turn, depth offset): as corrected, and one tube diameter
         # further (a tube fitted from behind); with ``turned_starts`` also the model's z axis turned
         # a quarter about its x and about its y axis: an end fitting, about as long as it is wide,
-        # was fitted end-on where the camera saw its side (or side-on seen end-on), 4-6 mm off.
+        # can be fitted end-on where the camera saw its side (or side-on seen end-on), millimetres off.
         radii = self.surface.seg_r
         self.starts: list[tuple[np.ndarray, float]] = [(np.eye(3), 0.0)]
         if radii.numel():
@@ -151,8 +151,8 @@ class PoseEstimator:
         if turned_starts:
             self.starts += [(turn, 0.0) for turn in _QUARTER_TURNS]
         # With ``tilted_deg``, also turned that far either way about each model axis: a corner
-        # joint seen by one face was fitted 18-46 degrees turned (Chamfer p90 4-7 mm, uncertified)
-        # where a start within about 30 degrees of the truth finds the right fit.
+        # joint seen by one face can be fitted tens of degrees turned (and left uncertified) where
+        # a start within about 30 degrees of the truth finds the right fit.
         if tilted_deg:
             self.starts += [(turn, 0.0) for turn in tilted_turns(tilted_deg)]
         # The fraction of its cloud's points farthest from the model the refinement leaves out
@@ -320,8 +320,8 @@ def refined_together(
     The refinement (:func:`~tlt_vision.pose.corrector.refine_pose`, each estimator's starts,
     trim and ``refine_iterations``) starts from the pose given: a part of a cloud whose pose is
     known about, its corner joint's cloud less the frame side its mask took in, whose fit the side
-    had pulled off. The starts matter: from a joint's pose turned by the side, the given start
-    alone led to a certified fit turned off the truth (tests/tlt_vision/test_core_pose.py). Each
+    pulled off. The starts matter: from a joint's pose turned by the side, the given start
+    alone leads to a certified fit turned off the truth (tests/tlt_vision/test_core_pose.py). Each
     is certified as any estimate."""
     if not items:
         return []

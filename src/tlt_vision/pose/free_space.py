@@ -6,16 +6,17 @@ hidden (the part's back, or behind whatever occludes it), but a pose can fit eve
 and still put model surface in front of what the camera saw: a rivet seen end-on shows only its
 head, a disc, and the rivet lying across that disc fits the disc as well (Chamfer p90 under its
 3 mm threshold, both end keypoints near the disc) while its length stands out on either side,
-in front of the tray behind. Held-out feeder views certified such poses 90 degrees off.
+in front of the tray behind: the certificate alone passes such poses 90 degrees off.
 
 The depth image rules that out. The posed model's surface sample is projected into the image; a
 point is *in free space* when the depth there is more than ``margin`` beyond it, the depth being
 the nearest within ``window`` pixels, so that a point on the part's own silhouette is compared
 with the part rather than with the background a pixel away. Points outside the image or where the
 depth has no return are not counted either way. A certified pose with more than ``max_fraction``
-of its projected points in free space loses its certificate, with that reason. On the held-out
-sets (twin masks) every wrongly certified rivet had 36-48 % of its points in free space, no pose
-within the ADD-S goal more than 12 % (a long tube's, at its silhouette), most none.
+of its projected points in free space loses its certificate, with that reason. ``max_fraction``
+lies between the share a wrongly certified rivet puts in free space and the most a right pose
+shows (a long tube's, at its silhouette); it was chosen on held-out renders
+(models/vision/history.md).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Pose a refused compact part again on the larger of two pieces of its cloud.
 
 Racked end fittings stand side by side, nearer than the cloud's link (``detached.links``) parts
-them, and a learned mask sometimes takes in a neighbour's pixels (20-60 % of the mask on seed
-901's held-out images): the fit then lies across the two parts and the certificate rightly
+them, and a learned mask sometimes takes in a neighbour's pixels (up to more than half of the
+mask): the fit then lies across the two parts and the certificate rightly
 refuses it. The mask's instance still has most of its pixels on its own part. So a cloud of the
 classes in ``classes`` whose pose was not certified is parted in two about two centres (a 2-means
 in space); where each piece holds at least ``min_share`` of the points and the centres lie at
@@ -10,14 +10,12 @@ least ``min_separation`` of the part's size apart, the larger piece is posed and
 cloud is (certificate, axial slide, free space), and its pose is taken only when certified and
 when the posed model, where the camera could see it, lies within the mask: at least ``in_mask``
 of its visible surface points project into the mask grown by ``mask_margin`` pixels. A half of
-one part posed off its place spills out of the mask; without that check two fits of 58 and 53
-degrees off were certified on seed 970.
+one part posed off its place spills out of the mask; without that check such a half, fitted
+tens of degrees off, can pass the certificate.
 
-On six held-out sets of 30-40 images (seeds 900, 901, 950, 960, 970, 980; shipped weights,
-2026-12-04) the share of the views non-degenerate at the true pose that are certified on the
-model's masks went from 93.4-95.7 % to 94.6-97.6 % (docs/vision.md); of the poses it added, a
-quarter are 1.5-2.3 mm off by ADD-S, slid 4-8 mm along their axis (the piece left out is where
-the fitting ends), none grossly wrong.
+On held-out image sets it raises the share of views certified on the model's masks
+(models/vision/history.md). Some of the poses it adds lie a few millimetres along their axis
+(the piece left out is where the fitting ends); none is grossly wrong.
 """
 
 from __future__ import annotations

@@ -3,9 +3,8 @@
 The twin, like the pose pipeline, takes each side of a cross frame as an instance of its own; the
 semantic head draws the pixels of two sides meeting at a corner joint as one region where the
 joint's pixels do not part them (an L, or a U of three sides), and the depth does not jump there
-(:mod:`tlt_vision.segmentation.depth_split`). Such a region matches none of its sides: on
-``bench/vision.py``'s seed-950 images, 31 of the 329 frame sides were lost so, most of them the
-large sides of a frame held close to the camera.
+(:mod:`tlt_vision.segmentation.depth_split`). Such a region matches none of its sides, and a
+frame side is lost so, most often the large sides of a frame held close to the camera.
 
 Every side is straight, and its points lie within about its radius of one line in space. A piece
 whose points lie so about their principal axis (the ``quantile`` of their distances to it within
@@ -19,12 +18,11 @@ without depth goes with the nearest pixel that has one. Each piece is then taken
 
 A real depth camera's noise moves a point along its ray, by more than a part's radius at a few
 metres (a ZED's 1 %, 2 cm at 2 m): given ``depth_noise`` (that fraction), a point may lie twice it
-further from its line. On seed 950's images with 1 % Gaussian noise added to each pixel's depth,
-mask AP50 0.798 without the cut, 0.805 with it and no allowance (tubes 0.597 -> 0.559: straight
-tubes cut apart), 0.821 with ``depth_noise`` 0.01 (tubes 0.613, frame sides 0.688 -> 0.785); the
-same setting on the exact depth gives 0.841 against 0.844. Measuring in the image instead, where
-the noise is only a scale, did worse on exact depth (frame sides 0.785 against 0.853): two sides
-seen at a slant lie nearer one line there than in space.
+further from its line. Without that allowance, noisy depth cuts straight tubes apart; with it,
+the cut recovers frame sides on noisy depth and costs next to nothing on exact depth
+(models/vision/history.md). The straightness is measured in space, not in the image, where the
+noise would be only a scale: two sides seen at a slant lie nearer one line in the image than in
+space.
 """
 
 from __future__ import annotations

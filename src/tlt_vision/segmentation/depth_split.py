@@ -3,36 +3,36 @@
 The semantic head's instances are connected regions of one class in the image
 (:mod:`tlt_vision.segmentation.semantic`). Where a tube crosses in front of another, or a rack's
 tube meets the frame side behind it, the two touch in the image and come out as one region whose
-mask matches neither part: on bench/vision.py's held-out images, a quarter of the tubes and
-two-fifths of the cross-frame sides the model missed were merged so. In the depth image the two
+mask matches neither part; many of the tubes and cross-frame sides the model misses are merged
+so. In the depth image the two
 lie apart: neighbouring pixels of one part differ in depth by little, pixels of parts one in front
 of the other by the gap between them. :func:`split_by_depth` cuts each region between neighbouring
 pixels whose depths differ by more than ``jump + jump_per_m * depth`` and keeps each piece as an
 instance of its own. A pixel without depth joins its neighbours (no jump can be seen there).
 
-The head also draws many small regions on the machine and the racks, which are tube-like too (on
-those images, two in three of its tube regions, most under 60 pixels), each scored by its mean
-class probability, as high as a part's. A piece of ``area`` pixels is scored the mean probability
+The head also draws many small regions on the machine and the racks, which are tube-like too
+(most of its tube regions, most of them small), each scored by its mean class probability, as
+high as a part's. A piece of ``area`` pixels is scored the mean probability
 of its class over its own pixels (the result's ``semantic_probs``; the region's score without
 them) times the share of them where that probability is over one half (:func:`piece_score`) times
 ``min(1, area / full_score_area)``: the ranking puts whole parts first, and with the segmenter's
 ``min_score`` the fragments drop out. Pieces under ``min_area`` pixels are dropped. The share
 matters when the head's map is read generously (node.yaml ``semantic_background_weight``): the
 pixels it doubts then keep a tube whole through its narrow stretches, but also join into streaks
-of doubt on no part; a part is mostly pixels the head is sure of (seeds 960-980 at a weight of
-0.15: mask AP50 0.813 -> 0.820, tubes 0.71 -> 0.74; at 1 it changes next to nothing).
+of doubt on no part; a part is mostly pixels the head is sure of, so the share scores the
+streaks down and the parts not.
 
 A tube that something crosses in front of is seen in pieces, each too little of it to match it.
 Given the camera matrix, :func:`split_by_depth` then joins pieces of one class that lie on one line
 in space: directions within ``join_angle_deg``, each one's centre within ``join_offset`` of the
 other's axis, their ends at most ``join_gap`` apart along it. A joined piece is scored the mean of
-its pieces' scores, weighted by their areas. On bench/vision.py's held-out images this took the
-mask AP50 of tubes 0.48 -> 0.55 and of frame sides 0.61 -> 0.65 (seed 900).
+its pieces' scores, weighted by their areas. This raises the mask AP50 of tubes and of frame
+sides on bench/vision.py's held-out images (models/vision/history.md).
 
 Many of the head's regions that are no part at all are still tube-like in colour, but not as wide as
-a part: on seed 950's images, of the tube pieces scoring 0.3 or more, 260 matched no tube against
-182 that did, and a matched piece is about as wide in the image as its tube at its depth (mean width
-0.54 to 1.08 of it, 5th to 95th percentile) where the unmatched ones spread from 0.19 to 1.86. Given
+a part: among well-scored tube pieces, those that match no tube outnumber those that do, and a
+matched piece is about as wide in the image as its tube at its depth where the unmatched ones
+spread far narrower and wider. Given
 ``radii`` (each thin class's part radius), a piece whose mean width (its pixels over its length
 along its principal image axis) is outside ``width_band`` times ``2 * radius * fx / depth`` (its
 median depth) is scored ``width_penalty`` times lower. The width is measured in pixels, so the
@@ -252,7 +252,7 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
     bend = (BendSplit(tolerance=split.bend_tolerance, depth_noise=split.depth_noise, min_area=split.min_area)
             if split.bend_tolerance is not None else None)
     # Within each mask's own box: a thin part is a sliver of the frame, and whole-frame arrays for
-    # each region took 38 ms a frame, against 21 ms so.
+    # each region cost nearly twice the time a frame.
     for i, (x0, y0, x1, y1) in zip(regions.tolist(), boxes_from_masks(masks[regions]).int().tolist(),
                                    strict=True):
         box = np.s_[y0:y1, x0:x1]

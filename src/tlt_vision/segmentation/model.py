@@ -98,7 +98,7 @@ class MaskRCNN(nn.Module):
             found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area,
                                             self.cfg.semantic_background_weight, self.cfg.semantic_vote)
             # ``mask_probs`` stay the box branch's alone, whose detections come first: a region's
-            # probability is its mask, and a frame's regions as full-size floats took 10 ms.
+            # probability is its mask, and a frame's regions as full-size floats would cost time.
             for key in r:
                 if key != "mask_probs":
                     r[key] = torch.cat([r[key], found[key].to(r[key].dtype)])

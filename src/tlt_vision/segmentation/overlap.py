@@ -1,17 +1,16 @@
 """Pixels two box-branch masks of one class both claim, given to the one more sure of them.
 
 Each Mask R-CNN mask is predicted in its own box, on its own: two end fittings side by side in a
-strut rack, or two rivets in a feeder, get masks that each take in part of the other. On
-bench/vision.py's seed 900, 5 of the 7 end fittings seen well enough to certify whose clouds
-failed the certificate even at their true pose shared 17-1210 pixels with another end-fitting
-detection. :func:`resolve_overlaps` gives each pixel that two masks of one of the chosen classes
-share to the one whose mask probability there is higher, as a panoptic merge does, and leaves
-every other pixel where it was. Two masks that share more than ``duplicate`` of the smaller one
-are two detections of one part, not two parts: splitting them would leave that part two halves,
-so they are left as they are (seed 900 with every overlap split: end-fitting mask AP50 0.842 ->
-0.753). It needs the model's ``mask_probs`` of its box branch's detections, (B, H, W) for the first
-B, a semantic head's regions after them (no class of theirs can be named); a result without them
-is returned as it is.
+strut rack, or two rivets in a feeder, get masks that each take in part of the other; most of the
+end fittings seen well enough to certify whose clouds fail the certificate even at their true pose
+share pixels with another end-fitting detection. :func:`resolve_overlaps` gives each pixel that two
+masks of one of the chosen classes share to the one whose mask probability there is higher, as a
+panoptic merge does, and leaves every other pixel where it was. Two masks that share more than
+``duplicate`` of the smaller one are two detections of one part, not two parts: splitting them would
+leave that part two halves, so they are left as they are (splitting every overlap lowers the end
+fittings' mask AP50). It needs the model's ``mask_probs`` of its box branch's detections, (B, H, W)
+for the first B, a semantic head's regions after them (no class of theirs can be named); a result
+without them is returned as it is.
 """
 
 from __future__ import annotations
@@ -64,7 +63,7 @@ def resolve_overlaps(
 def _split_pairs(masks: torch.Tensor, duplicate: float) -> list[tuple[int, int]]:
     """The pairs (a < b, in order) of ``masks`` (N, H, W) that share a pixel but not more than
     ``duplicate`` of the smaller; counted within the two boxes' intersection, since masks share no
-    pixel outside it (over whole frames, as floats, these counts took 5 ms a frame)."""
+    pixel outside it (over whole frames, as floats, these counts would cost milliseconds a frame)."""
     boxes = boxes_from_masks(masks).int().tolist()
     areas = [int(m[y0:y1, x0:x1].sum()) for m, (x0, y0, x1, y1) in zip(masks, boxes, strict=True)]
     pairs = []

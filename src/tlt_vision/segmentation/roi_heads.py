@@ -82,7 +82,7 @@ def paste_masks(probs: torch.Tensor, boxes: torch.Tensor, image_size: tuple[int,
 
     Each mask is sampled (bilinear, zero outside the mask) over its box and a margin of one mask
     cell and a pixel, beyond which every sample is zero: sampling a frame's thirty masks over
-    the whole image took a tenth of its segmentation time."""
+    the whole image would take a tenth of its segmentation time."""
     h, w = image_size
     out = probs.new_zeros((probs.shape[0], h, w))
     cells = probs.shape[-1]

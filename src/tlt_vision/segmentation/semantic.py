@@ -2,7 +2,7 @@
 
 A strut tube or a cross-frame side lying across the view is a line a few pixels wide: the anchors
 of the region proposal network barely overlap its box, and a 28x28 mask stretched over that box
-cannot draw it (models/vision/history.md: tubes had a mask AP50 of 0.02). A per-pixel class map at
+cannot draw it (models/vision/history.md). A per-pixel class map at
 stride 2 draws such a line directly. Its regions of one class, split where they do not touch, are
 that class's instances: tubes of one strut are separated by their end fittings, frame sides by
 their corner joints, racked tubes that touch in the image by the gap the head is taught to leave
@@ -58,8 +58,8 @@ def label_map(target: dict[str, torch.Tensor], size: tuple[int, int], gap: int =
     not overlap; where they would, the later one wins). With ``gap``, an instance's pixels within
     ``gap`` pixels (a square window) of another instance of its class are background: two racked
     tubes touching in the image are then two regions of the map the head learns to draw, where
-    they would be one (models/vision/history.md: the twin's own map, cut so, gives regions of
-    tube AP50 0.79 at a gap of 2 pixels, 0.66 uncut)."""
+    they would be one (the twin's own map, cut so, gives better tube regions than uncut;
+    models/vision/history.md)."""
     device = target["labels"].device
     labels = torch.zeros(size, dtype=torch.long, device=device)
     ids = torch.zeros(size, dtype=torch.long, device=device)
@@ -104,8 +104,8 @@ SURE = 0.5
 def pixel_classes(probs: torch.Tensor, background_weight: float = 1.0) -> torch.Tensor:
     """(H, W) long: each pixel's class in the probabilities ``probs`` (C, H, W), class 0 the
     background, whose probability counts ``background_weight`` times (1: the most probable)."""
-    # max, not argmax: torch's argmax over the leading dim of a (C, H, W) map took 54 ms on a
-    # 640x480 image on the CPU, max's indices 3 ms.
+    # max, not argmax: torch's argmax over the leading dim of a (C, H, W) map is an order of
+    # magnitude slower on the CPU than max's indices.
     if background_weight == 1.0:
         return probs.max(dim=0).indices
     best = probs[1:].max(dim=0)

@@ -1,17 +1,16 @@
 """Box-branch masks trimmed of the pixels the semantic head holds to be a thin part.
 
 An end fitting sits on the end of its tube, at the tube's depth, and its mask from the box branch
-(56x56 over its box) often takes in a band of that tube: on bench/vision.py's seed 900, 18 of the 23
-end fittings seen well enough to certify whose pose was not certified had masks whose clouds fail
-the certificate even at the fitting's true pose (30-200 pixels of tube in a 60-650 pixel mask). No
+(56x56 over its box) often takes in a band of that tube, enough that the cloud fails the
+certificate even at the fitting's true pose; most end fittings seen well enough to certify whose
+pose is not certified are refused so. No
 depth cut separates them, but the semantic head, which classifies every pixel, knows tube from
 fitting there. :func:`trim_by_semantic` takes from the masks of the ``labels`` given (box-branch
 classes, none of the head's own) the pixels where the head's probability of any of its classes is
 above ``above``. An instance left with no pixel is dropped.
 
-A corner joint's mask takes in the frame sides it joins in the same way (10-70 pixels of a 50-400
-pixel mask on the held-out images), but trimmed outright its masks lost more than the certificate
-gained (mask AP50 0.964 -> 0.918 on seed 950). So the classes in ``cores`` keep their masks whole
+A corner joint's mask takes in the frame sides it joins in the same way, but trimmed outright its
+masks lose more (in mask AP50) than the certificate gains. So the classes in ``cores`` keep their masks whole
 and :func:`semantic_cores` gives each its trimmed mask beside it as its *core*
 (``core_masks``): where the whole mask's pose is refused, the pipeline fits the core's cloud from
 that pose (:mod:`tlt_vision.pipeline`).

@@ -15,7 +15,7 @@ Each ``NNNNN.npz`` holds (``N`` instances, ``H`` x ``W`` pixels):
 ``depth``        (H, W) float32    metres along the optical axis, 0 where nothing was hit
 ``masks``        (N, H, W) bool    one mask per visible part instance (stored bit-packed
                                    along W as ``masks_packed``: the bool array is eight
-                                   times larger and compressing it took as long as rendering)
+                                   times larger and compressing it takes as long as rendering)
 ``labels``       (N,) int64        1-based into ``classes`` (0 is the background)
 ``names``        (N,) str          the twin's instance name (``bay1/vertical_x0_y0/tube``)
 ``poses``        (N, 4, 4) float64 model-to-camera transform of each part (optical frame)

@@ -30,7 +30,7 @@ With ``--node-config config/vision/node.yaml`` the validation AP (in training, a
 epoch, and with ``--evaluate``) is that of the masks as the vision node makes them
 (:meth:`tlt_vision.segmentation_source.MaskRcnnSegmenter.refine`: its inference settings, the
 depth cut of thin parts, the trim and the exclusive overlaps), not the model's alone: the figure
-the benchmark holds to its goal, and on the shipped weights 0.64 against 0.91.
+the benchmark holds to its goal.
 
 An input that cannot be used (not an image set, another class list, no images, unreadable or
 mismatched checkpoint or weights) ends the command with exit status 2 and the path and reason on
@@ -139,8 +139,8 @@ def load_sample(
     size = scaled_size(h, w, max_size)
     image = resize_image(rgb_to_tensor(s.rgb), size)[0]
     masks = resize_masks(torch.as_tensor(s.masks, dtype=torch.bool), size)
-    # Counted in numpy: torch's sum of a bool (N, H*W) took 33 ms a full-size image, most of the
-    # loader's time.
+    # Counted in numpy: torch's sum of a bool (N, H*W) is slow enough to be most of the loader's
+    # time.
     keep = torch.from_numpy(np.count_nonzero(masks.flatten(1).numpy(), axis=1) >= min_area)
     masks, labels = masks[keep], labels[keep]
     return image, {"boxes": boxes_from_masks(masks), "labels": labels, "masks": masks}
