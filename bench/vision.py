@@ -28,9 +28,12 @@ detected part, and prints against the issue's goals:
 and every posed part's model where C-3PO put it, green when certified and red when not
 (tlt_vision.pose_picture).
 
-The twin's images are exact. ``--depth-noise F`` adds Gaussian noise of F times each pixel's depth
-(a stereo camera's, about 0.01 at a few metres; drawn the same for each image every run), to see
-what of the figures holds on a real camera's depth, and tells the node's pipeline so (node.yaml
+The images are taken through the twin's camera models (``--camera-model realistic``, the
+default: config/twin/cameras.yaml's depth noise, holes, image noise and exposure; docs/cameras.md),
+and the pipeline is told each camera's noise as the node is (node.yaml ``depth_noise.cameras``);
+``--camera-model exact`` renders them exact, for diagnosis. ``--depth-noise F`` adds Gaussian
+noise of F times each pixel's depth (drawn the same for each image every run), to see what of the
+figures holds on a real camera's depth, and tells the node's pipeline so (node.yaml
 ``depth_noise``), which then also reports the views within the noise's reach;
 ``--image-noise S`` adds S grey levels of Gaussian noise to the colours.
 
@@ -41,7 +44,8 @@ from the request; here from the twin's instance name); an unmatched tube detecti
 vertical one.
 
     .venv/bin/python bench/vision.py [--weights models/vision/mask_rcnn.pt] [--count 40]
-        [--seed 900] [--images DIR] [--threads 2] [--depth-noise 0.01] [--image-noise 3]
+        [--seed 900] [--images DIR] [--threads 2] [--camera-model realistic|exact]
+        [--depth-noise 0.01] [--image-noise 3]
         [--picture vision_poses.png] [--picture-frames 4] [--json figures.json]
 
 ``--json PATH`` also writes the figures as JSON (``bench/vision_candidate.py`` reads them).
@@ -52,6 +56,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import statistics
 import sys
 import tempfile
@@ -63,9 +68,11 @@ from typing import Any
 
 import numpy as np
 import torch
+from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS
+from tlt_sim.model.config import load_edu
 
 from tlt_common.mission.schema import load_mission
-from tlt_vision.depth_noise import with_noise
+from tlt_vision.depth_noise import EXACT, DepthNoise, with_noise
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline, detection_of, detections_from_mask_rcnn
@@ -119,14 +126,17 @@ class PoseTally:
         return sum(table.values())
 
 
-def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally) -> None:
+def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally,
+                   noise: DepthNoise = EXACT) -> None:
     """Pose ``items`` [(Detection, model name, true 4x4 pose, the twin's mask of the part, or None
-    where the detection's mask is the twin's)] and count them into ``tally``."""
+    where the detection's mask is the twin's)] on depth of the camera's ``noise`` and count them
+    into ``tally``."""
     by_model: dict[str, list[tuple[Detection, np.ndarray, np.ndarray | None]]] = defaultdict(list)
     for det, name, true, truth_mask in items:
         by_model[name].append((det, true, truth_mask))
     for name, group in by_model.items():
-        observations = pipelines[name].observe([d for d, _, _ in group], depth, intrinsics)
+        observations = pipelines[name].observe([d for d, _, _ in group], depth, intrinsics,
+                                               depth_noise=noise)
         model = estimators[name].model
         for (det, true, truth_mask), obs in zip(group, observations, strict=True):
             if obs.estimate is None:
@@ -135,16 +145,15 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
             cls = model.object_class
             tally.estimated[cls] += 1
             e = obs.estimate
-            points = pipelines[name].cloud(det, depth, intrinsics).points
+            points = pipelines[name].cloud(det, depth, intrinsics, depth_noise=noise).points
             whole = non_degenerate_at(model, points, true)
             tally.whole[cls] += whole
             shown = whole
             if truth_mask is not None:
                 truth = dataclasses.replace(det, mask=truth_mask)
-                truth_cloud = pipelines[name].cloud(truth, depth, intrinsics)
+                truth_cloud = pipelines[name].cloud(truth, depth, intrinsics, depth_noise=noise)
                 shown = truth_cloud.ok and non_degenerate_at(model, truth_cloud.points, true)
             tally.shown[cls] += shown
-            noise = pipelines[name].depth_noise
             reach = whole and not noise.too_noisy(float(np.median(points[:, 2])), model.diameter)
             tally.reach[cls] += reach
             right = add_s(model, e.rotation, e.translation, true[:3, :3], true[:3, 3]) < (
@@ -270,6 +279,19 @@ def with_depth_noise(sample: Sample, fraction: float, index: int) -> Sample:
     return dataclasses.replace(sample, depth=noisy)
 
 
+class CameraOptics:
+    """Which of the node's cameras took an image, from its focal length: the renders use the lifter
+    ZED's optics or the EE D405's (config/twin/edu.yaml cameras), whose noise differs."""
+
+    def __init__(self) -> None:
+        fovy = load_edu()["cameras"]
+        self.fovy = {"zed_1": fovy["zed_fovy_deg"], "ars_x/d405_a": fovy["d405_fovy_deg"]}
+
+    def __call__(self, k: np.ndarray, height: int) -> str:
+        fovy = math.degrees(2 * math.atan(height / 2 / float(k[1, 1])))
+        return min(self.fovy, key=lambda camera: abs(self.fovy[camera] - fovy))
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--weights", type=Path, default=ROOT / "models/vision/mask_rcnn.pt")
@@ -279,6 +301,9 @@ def main() -> int:
     p.add_argument("--mission", type=Path, default=ROOT / "missions/one_bay.yaml")
     p.add_argument("--config", type=Path, default=ROOT / "config/vision/node.yaml")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--camera-model", choices=("realistic", "exact"), default="realistic",
+                   help="the images through the twin's camera models (config/twin/cameras.yaml), the "
+                        "node told each camera's noise (node.yaml depth_noise.cameras); or exact")
     p.add_argument("--depth-noise", type=float, default=0.0,
                    help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
     p.add_argument("--image-noise", type=float, default=0.0,
@@ -297,7 +322,10 @@ def main() -> int:
     mission = load_mission(args.mission)
     config = load_config(args.config, args.mission)
     # The node is configured with its camera's noise (node.yaml depth_noise); so is the bench.
+    if args.camera_model == "exact":
+        config = config.with_exact_depth()
     config.raw["depth_noise"]["fraction"] = args.depth_noise
+    camera_of = CameraOptics()
     segmenter = MaskRcnnSegmenter.from_config(config, args.weights)
     model, max_size = segmenter.model, segmenter.max_size
     classes = list(model.cfg.classes)
@@ -314,8 +342,9 @@ def main() -> int:
         if root is None:
             root = Path(tmp)
             print(f"rendering {args.count} held-out images (seed {args.seed}) ...", flush=True)
-            render_set(root, args.count, RenderSettings(seed=args.seed, mission=str(args.mission)),
-                       progress_every=10)
+            cameras = str(DEFAULT_CAMERAS) if args.camera_model == "realistic" else ""
+            render_set(root, args.count, RenderSettings(seed=args.seed, mission=str(args.mission),
+                                                        cameras=cameras), progress_every=10)
         images = ImageSet(root)
         if images.classes != classes:
             print(f"{root}: classes {images.classes} differ from the model's {classes}", file=sys.stderr)
@@ -331,6 +360,7 @@ def main() -> int:
             if args.image_noise:
                 s = with_image_noise(s, args.image_noise, i)
             intrinsics = Intrinsics.from_matrix(s.intrinsics)
+            noise = config.depth_noise_of(camera_of(s.intrinsics, s.depth.shape[0]))
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
             pred = segmenter.refine(rgb_only, s.depth, s.intrinsics)
@@ -338,7 +368,7 @@ def main() -> int:
             dets = detections_from_mask_rcnn(pred, classes, min_score)
             # Every detected part posed, as a frame's worth of work.
             frame_items = [d for d in dets if d.object_class in POSED]
-            observations = frame_pipeline.observe(frame_items, s.depth, intrinsics)
+            observations = frame_pipeline.observe(frame_items, s.depth, intrinsics, depth_noise=noise)
             frame_s.append(time.perf_counter() - t0)
             if args.picture and len(pictured) < args.picture_frames:
                 pictured.append(PosedFrame(f"{images.path(i).name}", s.rgb, s.intrinsics, frame_items,
@@ -367,13 +397,14 @@ def main() -> int:
                 if float(scores[best]) >= 0.5 and best not in used:
                     used.add(best)
                     matched.append((detection_of(pred, classes, best), item_name, pose, s.masks[j]))
-            pose_instances(pipelines, estimators, matched, s.depth, intrinsics, from_model)
-            pose_instances(pipelines, estimators, truth, s.depth, intrinsics, from_twin)
+            pose_instances(pipelines, estimators, matched, s.depth, intrinsics, from_model, noise)
+            pose_instances(pipelines, estimators, truth, s.depth, intrinsics, from_twin, noise)
             print(f"  image {i + 1}/{len(images)}: {len(dets)} detections, {len(matched)} matched, "
                   f"frame {frame_s[-1]:.2f} s", flush=True)
 
     print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
           f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
+          + f", {args.camera_model} cameras"
           + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else "")
           + (f", image noise {args.image_noise:g} grey levels" if args.image_noise else ""))
     cut = ("cut where the depth jumps" if segmenter.depth_split
@@ -400,7 +431,8 @@ def main() -> int:
     if args.json:
         figures = {
             "weights": str(args.weights), "images": len(images), "source": str(root) if args.images else None,
-            "seed": None if args.images else args.seed, "depth_noise": args.depth_noise,
+            "seed": None if args.images else args.seed, "camera_model": args.camera_model,
+            "depth_noise": args.depth_noise,
             "image_noise": args.image_noise, "threads": args.threads,
             **{f"mask_ap50_{key}": {"mean": r["map"],
                                     "per_class": {classes[k - 1]: v for k, v in r["per_class"].items()}}

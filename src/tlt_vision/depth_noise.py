@@ -56,8 +56,8 @@ class DepthNoise:
     def exact(self) -> bool:
         return self.fraction <= 0.0 and self.per_m2 <= 0.0
 
-    def sigma(self, depth: float) -> float:
-        """1 sigma (m) of a raw pixel's depth at ``depth`` (m)."""
+    def sigma(self, depth: float | np.ndarray) -> float | np.ndarray:
+        """1 sigma (m) of a raw pixel's depth at ``depth`` (m; one or an array)."""
         return self.fraction * depth + self.per_m2 * depth * depth
 
     def residual(self, depth: float) -> float:

@@ -653,8 +653,13 @@ def build_node(
     return VisionNode(load_config(config_path, mission), **kw)
 
 
+# The twin's camera models (config/twin/cameras.yaml) and their exact diagnosis.
+CAMERA_MODELS = ("realistic", "exact")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``tlt-vision [--config node.yaml] [--mission M.yaml] [--ros-args ...]``; 2 when refused."""
+    """``tlt-vision [--config node.yaml] [--mission M.yaml] [--camera-model realistic|exact]
+    [--ros-args ...]``; 2 when refused."""
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args: list[str] = []
     if "--ros-args" in argv:
@@ -663,10 +668,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="tlt-vision", description="The TLT vision node (paper §V.E).")
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="vision node configuration")
     parser.add_argument("--mission", type=Path, help="mission file (overrides the configuration's)")
+    parser.add_argument("--camera-model", choices=CAMERA_MODELS, default="realistic",
+                        help="exact: the depth is the twin's exact render (tlt twin run --camera-model "
+                             "exact), for diagnosis; realistic: each camera's noise as node.yaml gives it")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         config = load_config(args.config, args.mission)
+        if args.camera_model == "exact":
+            config = config.with_exact_depth()
         mission = load_mission(config.mission_path)
     except ConfigError as exc:
         print(f"tlt-vision: refused: {exc}", file=sys.stderr)

@@ -9,6 +9,7 @@ the reason; nothing is returned half-checked.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -379,6 +380,13 @@ class VisionConfig:
         raw = self.raw["depth_noise"]
         return DepthNoise(raw["fraction"], raw["window"], raw["max_allowance"])
 
+    def with_exact_depth(self) -> VisionConfig:
+        """This configuration with every camera's depth taken as exact: for the twin's exact
+        cameras (``tlt twin run --camera-model exact``), a diagnosis."""
+        raw = copy.deepcopy(self.raw)
+        raw["depth_noise"].update(fraction=0.0, cameras={})
+        return VisionConfig(raw, self.source)
+
     def depth_noise_of(self, camera: str) -> DepthNoise:
         """The noise of the configured ``camera``'s depth."""
         default = self.depth_noise
@@ -449,7 +457,7 @@ class VisionConfig:
             return None
         band = raw["width_band"]
         return DepthSplit(**{**raw, "width_band": tuple(band) if band else None,
-                             "depth_noise": self.depth_noise.fraction,
+                             "depth_noise": self.depth_noise,
                              "vote": self.raw["segmentation"]["semantic_vote"]})
 
     @property

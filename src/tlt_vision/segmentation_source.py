@@ -38,6 +38,7 @@ import numpy as np
 
 from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frame import CameraFrame
+from tlt_vision.depth_noise import DepthNoise
 from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
 from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
 from tlt_vision.segmentation.overlap import ExclusiveOverlaps, resolve_overlaps
@@ -88,7 +89,7 @@ class MaskRcnnSegmenter:
     def __init__(self, model: MaskRCNN, max_size: int | None, min_score: float,
                  depth_split: DepthSplit | None = None, radii: Mapping[str, float] | None = None,
                  trim: SemanticTrim | None = None, overlaps: ExclusiveOverlaps | None = None,
-                 camera_noise: Mapping[str, float] | None = None,
+                 camera_noise: Mapping[str, DepthNoise] | None = None,
                  inference: Mapping[str, Any] | None = None) -> None:
         """Segment with ``model`` at ``max_size`` (the image size it was trained at); ValueError
         for a trim or overlap rule naming a class its semantic head segments."""
@@ -135,7 +136,7 @@ class MaskRcnnSegmenter:
 
         options = {"depth_split": config.depth_split, "radii": thin_part_radii(),
                    "trim": config.semantic_trim, "overlaps": config.exclusive_overlaps,
-                   "camera_noise": config.raw["depth_noise"]["cameras"],
+                   "camera_noise": {camera: config.depth_noise_of(camera) for camera in config.cameras},
                    "inference": config.mask_rcnn_inference}
         if model is not None:
             return cls(model, max_size, config.score_floor, **options)

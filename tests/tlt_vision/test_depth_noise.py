@@ -56,14 +56,24 @@ def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_c
     from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
 
     raw = load_yaml(DEFAULT_CONFIG)
-    assert config_from_dict(raw).depth_noise.exact  # the twin's depth
+    shipped = config_from_dict(raw)
+    assert shipped.depth_noise.exact  # a camera named nowhere
+    # Each shipped camera's is a stereo camera's, growing with the depth's square.
+    zed = shipped.depth_noise_of("zed_1")
+    assert zed.fraction == 0 and zed.sigma(2.0) == pytest.approx(4 * zed.sigma(1.0))
+    assert shipped.with_exact_depth().depth_noise_of("zed_1").exact
     raw["depth_noise"] = {"fraction": 0.005, "cameras": {"ars_x/d405_a": 0.001}}
     config = config_from_dict(raw)
     assert config.depth_noise == DepthNoise(fraction=0.005, window=5, max_allowance=0.02)
     assert config.pipeline_options["depth_noise"] == config.depth_noise
-    assert config.depth_split.depth_noise == 0.005
+    assert config.depth_split.depth_noise == config.depth_noise
     assert config.depth_noise_of("zed_1") == config.depth_noise
     assert config.depth_noise_of("ars_x/d405_a") == DepthNoise(fraction=0.001, window=5, max_allowance=0.02)
+    raw["depth_noise"]["cameras"] = {"zed_1": {"per_m2": 0.008}}
+    assert config_from_dict(raw).depth_noise_of("zed_1").sigma(2.0) == pytest.approx(0.032)
+    raw["depth_noise"]["cameras"] = {"zed_1": {"per_m2": -1}}
+    with pytest.raises(ConfigError, match=r"depth_noise\.cameras\.zed_1.*per_m2"):
+        config_from_dict(raw)
     raw["depth_noise"]["cameras"] = {"d405": 0.001}  # an alias is not a camera's name
     with pytest.raises(ConfigError, match=r"depth_noise\.cameras\.d405.*unknown camera"):
         config_from_dict(raw)

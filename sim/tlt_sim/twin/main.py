@@ -9,12 +9,13 @@ Once everything answers, the file ``$TLT_RUN_DIR/twin.ready`` appears (launch se
 
 The twin owns time: it publishes ``/clock`` and steps at ``--rtf`` (1 by default, 0 = as fast as
 the CPU allows); the drivers run with ``use_sim_time``. Cameras and ground truth are published
-on demand (:mod:`tlt_sim.twin.ros_streams`), through the sensor models of ``config/twin/cameras.yaml``
-(depth noise and holes, image noise and exposure, mount errors: :mod:`tlt_sim.model.camera_sensor`;
-``--exact-cameras`` for the exact render, for diagnosis). Runs until SIGINT/SIGTERM or ``--duration`` seconds
-of sim time, then withdraws its links. ``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens
-MuJoCo's viewer window on the running model for people (:mod:`tlt_sim.twin.viewer`); without a
-display the twin refuses to start. Exit status 0, or 2 for a bad configuration or no viewer.
+on demand (:mod:`tlt_sim.twin.ros_streams`), the cameras through the sensor models of
+``config/twin/cameras.yaml`` (depth noise and holes, image noise and exposure, mount errors:
+:mod:`tlt_sim.model.camera_sensor`; ``--camera-model exact`` for the exact render, for
+diagnosis). Runs until SIGINT/SIGTERM or ``--duration`` seconds of sim time, then withdraws its
+links. ``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens MuJoCo's viewer window on the
+running model for people (:mod:`tlt_sim.twin.viewer`); without a display the twin refuses to
+start. Exit status 0, or 2 for a bad configuration or no viewer.
 
     python -m tlt_sim.twin.main --scenario config/twin/scenarios/device_faults.yaml --rtf 0
 """
@@ -60,8 +61,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--settings", type=Path, default=DEFAULT_SETTINGS, help="run settings (run.yaml)")
     p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
                    help="what the cameras make of the render (cameras.yaml)")
-    p.add_argument("--exact-cameras", action="store_true",
-                   help="exact colours and depth, cameras exactly on their mounts (diagnosis only)")
+    p.add_argument("--camera-model", choices=("realistic", "exact"),
+                   help="exact: the render's colours and depth, cameras exactly on their mounts (for "
+                        "diagnosis); default: cameras.yaml's `realistic`")
     p.add_argument("--rtf", type=float, help="real-time factor (0: as fast as possible)")
     p.add_argument("--run-dir", type=Path,
                    help="where device links go (default $TLT_RUN_DIR or /tmp/tlt-run)")
@@ -97,8 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         settings = load_settings(args.settings)
         sensors = load_camera_sensors(args.cameras)
-        if args.exact_cameras:
-            sensors = dataclasses.replace(sensors, realistic=False)
+        if args.camera_model:
+            sensors = dataclasses.replace(sensors, realistic=args.camera_model == "realistic")
         changes: dict = {}
         if args.rtf is not None:
             if args.rtf < 0:

@@ -35,6 +35,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 from scipy.ndimage import label as ndimage_label
 
+from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.segmentation.region_pixels import RegionPoints, neighbour_pairs
 
 _EIGHT = np.ones((3, 3), dtype=bool)
@@ -45,9 +46,9 @@ class BendSplit:
     """When a region is bent, and how near its line a point must lie (radii of the part)."""
 
     tolerance: float = 2.0
-    # The camera's depth noise, a fraction of the depth (1 sigma): a point may lie twice that
-    # further from its line. 0 for the twin's exact depth.
-    depth_noise: float = 0.0
+    # The camera's depth noise (1 sigma at each point's depth): a point may lie twice that further
+    # from its line.
+    depth_noise: DepthNoise = EXACT
     quantile: float = 0.9
     min_area: int = 30
     hypotheses: int = 64
@@ -105,7 +106,7 @@ def straight_pieces(mask: np.ndarray, seen: RegionPoints, radius: float, split: 
     rows = seen.index[ys, xs]
     known = rows >= 0
     points = seen.points[rows[known]]
-    tol = split.tolerance * radius + 2 * split.depth_noise * points[:, 2]
+    tol = split.tolerance * radius + 2 * split.depth_noise.sigma(points[:, 2])
     rng = np.random.default_rng(0)
     label = np.full(len(points), -1)
     left_over = np.arange(len(points))

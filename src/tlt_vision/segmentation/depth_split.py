@@ -55,6 +55,7 @@ import torch
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.bend_split import BendSplit, straight_pieces
 from tlt_vision.segmentation.region_pixels import RegionPoints, neighbour_pairs
@@ -102,8 +103,8 @@ class DepthSplit:
     # A piece bent in space cut into straight ones, points within this many of its part's radius
     # of their line (needs ``radii``; :mod:`tlt_vision.segmentation.bend_split`); None: not cut.
     bend_tolerance: float | None = None
-    # The depth camera's noise, a fraction of the depth (1 sigma), which the bend cut allows for.
-    depth_noise: float = 0.0
+    # The depth camera's noise, which the bend cut allows for.
+    depth_noise: DepthNoise = EXACT
     # Each piece of the class with the most probability summed over it, scored by the thin
     # classes' probabilities together times that class's share (:func:`voted`); False: of its
     # region's class, scored by that class's probabilities.

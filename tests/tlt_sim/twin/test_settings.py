@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import yaml
+from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS
 from tlt_sim.twin.main import main
 from tlt_sim.twin.settings import DEFAULT_SETTINGS, load_settings
 
@@ -39,4 +40,9 @@ def test_main_refuses_bad_input_with_status_2(tmp_path, capsys):
     assert "--rtf" in capsys.readouterr().err
     assert main(["--scenario", str(tmp_path / "missing.yaml"), "--run-dir", str(tmp_path)]) == 2
     assert "missing.yaml" in capsys.readouterr().err
+    cameras = tmp_path / "cameras.yaml"
+    cameras.write_text(DEFAULT_CAMERAS.read_text().replace("seed: 0", "seed: -3"))
+    assert main(["--cameras", str(cameras), "--run-dir", str(tmp_path)]) == 2
+    assert "cameras.yaml: seed" in capsys.readouterr().err
+    cameras.unlink()
     assert not list(tmp_path.iterdir()), "nothing was started"

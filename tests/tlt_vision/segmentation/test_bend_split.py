@@ -3,6 +3,7 @@ import pytest
 import torch
 from scipy.ndimage import label
 
+from tlt_vision.depth_noise import DepthNoise
 from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.bend_split import BendSplit, straight_pieces
 from tlt_vision.segmentation.depth_split import DepthSplit, split_by_depth
@@ -128,7 +129,7 @@ def test_with_the_cameras_depth_noise_allowed_for_a_straight_side_stays_whole_an
     bars, depth = _sides((np.s_[20:28], np.s_[20:280]), (np.s_[28:280], np.s_[20:28]), shape=(300, 300))
     noisy = depth * (1 + 0.02 * np.random.default_rng(3).standard_normal(depth.shape))
     assert len(_cut(bars[0], noisy, BendSplit())) > 1
-    allowed = BendSplit(depth_noise=0.02)
+    allowed = BendSplit(depth_noise=DepthNoise(fraction=0.02))
     assert len(_cut(bars[0], noisy, allowed)) == 1
     # With the allowance (11 cm here) the first line takes a wider band of the other side.
     _each_side_found(_cut(bars[0] | bars[1], noisy, allowed), bars, iou=0.8)

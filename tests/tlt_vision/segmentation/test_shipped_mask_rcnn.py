@@ -56,6 +56,7 @@ VOTE_GAIN_FLOORS = {1: 0.015, 3: 0.01}  # tubes 0.034 and frame sides 0.023 meas
 
 @pytest.fixture(scope="module")
 def held_out(tmp_path_factory) -> ImageSet:
+    """Exact renders (the model's own figures; the node segments them with its depth taken as exact)."""
     out = tmp_path_factory.mktemp("held_out")
     render_set(out, IMAGES, RenderSettings(seed=HELD_OUT_SEED), progress_every=IMAGES)
     return ImageSet(out)
@@ -67,13 +68,13 @@ def results(held_out) -> dict[str, dict]:
     with no region cut where it bends (``unbent``), with the node's inference settings but for
     the class vote (``unvoted``), and with all of them (``node``)."""
     model, manifest = load_mask_rcnn(WEIGHTS)
-    node = MaskRcnnSegmenter.from_config(load_config()).model
+    node = MaskRcnnSegmenter.from_config(load_config().with_exact_depth()).model
     assert node.cfg != model.cfg, "node.yaml sets no inference setting"
     assert node.cfg.semantic_vote, "node.yaml segmentation.semantic_vote is off"
-    unvoted = MaskRcnnSegmenter.from_config(load_config()).model
+    unvoted = MaskRcnnSegmenter.from_config(load_config().with_exact_depth()).model
     unvoted.set_inference(semantic_vote=False)
     assert held_out.classes == list(model.cfg.classes)
-    voted = load_config().depth_split
+    voted = load_config().with_exact_depth().depth_split
     assert voted is not None, "config/vision/node.yaml has no segmentation.depth_split"
     assert voted.vote, "node.yaml's semantic_vote does not reach the depth cut"
     split = dataclasses.replace(voted, vote=False)
@@ -138,7 +139,7 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
     """As node.py builds it: with the frame's depth each tube or frame-side mask is one part (one
     piece in depth, or pieces on one line); without depth (a frame that lacks it) the regions stay
     as the head drew them, some holding two parts or more."""
-    config = load_config()
+    config = load_config().with_exact_depth()
     split = config.depth_split
     seg = MaskRcnnSegmenter.from_config(config)
     thin = ("strut_tube", "cross_frame")
@@ -160,7 +161,7 @@ def test_the_nodes_segmenter_leaves_no_pixel_in_two_end_fittings_but_duplicates(
     """As node.py builds it, the segmenter makes end-fitting masks exclusive: on the model's masks
     of these frames, which do share pixels, two end fittings then share none unless they share
     more than ``duplicate`` of the smaller (one fitting found twice)."""
-    config = load_config()
+    config = load_config().with_exact_depth()
     rule = config.exclusive_overlaps
     assert rule is not None and "end_fitting" in rule.classes
     seg = MaskRcnnSegmenter.from_config(config)
@@ -230,7 +231,7 @@ def test_the_trainers_validation_as_the_node_segments_scores_the_nodes_masks(hel
     n = 10
     as_node = evaluate(model, held_out, max_size, n, node)
     assert model.inference_settings() == own
-    seg = MaskRcnnSegmenter.from_config(load_config())
+    seg = MaskRcnnSegmenter.from_config(load_config().with_exact_depth())
     acc = MaskAP(len(held_out.classes))
     for i in range(n):
         sample = held_out[i]
@@ -245,7 +246,7 @@ def test_the_nodes_segmenter_gives_corner_joints_a_core_within_their_mask(held_o
     """As node.py builds it, a corner joint whose mask takes in what the semantic head holds to be
     a frame side or tube carries its mask less those pixels as its core, also when a region of
     the frame is looked at again enlarged (masks of the frame's size)."""
-    config = load_config()
+    config = load_config().with_exact_depth()
     assert config.semantic_trim is not None and "corner_joint" in config.semantic_trim.cores
     seg = MaskRcnnSegmenter.from_config(config)
     cored, closer_cored = 0, 0
