@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from tlt_tools.vision_training.render_dataset import ARMS, inspection_joints
 
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
@@ -42,7 +43,6 @@ from tlt_vision.node_config import VisionConfig, load_config
 from tlt_vision.part_inspection import LookCloser, PartInspector
 from tlt_vision.segmentation_source import TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
-from tlt_vision.train.render_dataset import ARMS, inspection_joints
 
 ROOT = Path(__file__).resolve().parents[1]
 CAUGHT_GOAL = 0.99

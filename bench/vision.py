@@ -70,6 +70,8 @@ import numpy as np
 import torch
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS
 from tlt_sim.model.config import load_edu
+from tlt_tools.vision_training.dataset import ImageSet, Sample, instance_model
+from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
 
 from tlt_common.mission.schema import load_mission
 from tlt_vision.depth_noise import EXACT, DepthNoise, with_noise
@@ -82,8 +84,6 @@ from tlt_vision.pose_picture import PosedFrame, write_pose_picture
 from tlt_vision.segmentation.evaluate import MaskAP, mask_iou
 from tlt_vision.segmentation.inference import detect_rgb
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
-from tlt_vision.train.dataset import ImageSet, Sample, instance_model
-from tlt_vision.train.render_dataset import RenderSettings, render_set
 
 ROOT = Path(__file__).resolve().parents[1]
 POSED = ("strut_tube", "end_fitting", "corner_joint", "rivet")

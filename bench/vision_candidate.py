@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         images = args.work / f"held_out_{seed}_{args.count}"
         if not (images / "index.json").exists():
             renders.append(Job(f"render held-out seed {seed}", [
-                python, "-m", "tlt_vision.train.render_dataset", "--out", str(images),
+                python, "-m", "tlt_tools.vision_training.render_dataset", "--out", str(images),
                 "--count", str(args.count), "--seed", str(seed)], images / "index.json",
                 args.work / f"render_{seed}.log"))
     print(f"rendering {len(renders)} held-out sets into {args.work} ...", flush=True)

@@ -45,7 +45,7 @@ install_on_device() {
     [ -f "$vendor" ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
         --target "$SITE" "$DEVICE_DIR"/wheels/*.whl
-    export PYTHONPATH="$SITE:src:sim" MUJOCO_GL=egl PYTHONUNBUFFERED=1
+    export PYTHONPATH="$SITE:src:sim:tools" MUJOCO_GL=egl PYTHONUNBUFFERED=1
     nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
 }
 

@@ -23,7 +23,7 @@ cd "$ROOT"
 # Code that sets its own count (the vision node's torch_threads, the trainers' --threads) still does.
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 echo "[test] ruff check"
-"$VENV/bin/ruff" check --quiet $(ls -d src sim tests bench 2>/dev/null)
+"$VENV/bin/ruff" check --quiet $(ls -d src sim tools tests bench 2>/dev/null)
 if [ $# -gt 0 ]; then
     echo "[test] pytest $*"
     exec "$VENV/bin/python" -m pytest "$@"

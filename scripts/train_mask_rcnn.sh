@@ -12,7 +12,7 @@
 # shards may render before what they have is used (240), and MODEL: the trainer's options for the
 # model (default the shipped model's: full-size images, 56x56 masks, anchors 16-128, the semantic
 # head for tubes and frame sides; models/vision/README.md). PYTHON (python3) must import the project
-# (PYTHONPATH=src:sim, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
+# (PYTHONPATH=src:sim:tools, or the venv) with CUDA torch and MuJoCo; MUJOCO_GL=egl renders on the GPU.
 # INIT: weights to start from (the trainer's --init; INIT=models/vision/mask_rcnn.pt continues the
 # shipped model, so each lent machine's minutes add to the last's). SCENES: the training images'
 # scene weights (render_dataset's --scenes, e.g. "held=0.2 presented=0.3 ..."; default its own).
@@ -58,7 +58,7 @@ log() { echo "[train_mask_rcnn $(date -u +%H:%M:%S)] $*"; }
 
 smoke_train() {
     # shellcheck disable=SC2086
-    "$PYTHON" -m tlt_vision.train.mask_rcnn --train "$data/smoke" --val "$data/smoke" \
+    "$PYTHON" -m tlt_tools.vision_training.mask_rcnn --train "$data/smoke" --val "$data/smoke" \
         --out "$out/smoke_out/w.pt" --epochs 1 --batch 1 --ranks $(( RANKS > 1 ? 2 : 1 )) \
         --device "$DEVICE" $MODEL ${NODE_CONFIG:+--node-config "$NODE_CONFIG"} > "$out/smoke.log"
     rm -rf "$out/smoke_out"
@@ -80,7 +80,7 @@ else
     rm -f "$data/rendered"
     # 1. Fail fast: two rendered images and one training step on the device.
     log "smoke test: render 2 images, train one step on $DEVICE"
-    "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/smoke" --count 2 --seed 999 --progress-every 2
+    "$PYTHON" -m tlt_tools.vision_training.render_dataset --out "$data/smoke" --count 2 --seed 999 --progress-every 2
     smoke_train
 
     # 2. The shards and the validation set, in parallel.
@@ -88,12 +88,12 @@ else
     log "rendering $COUNT images in $SHARDS shards of $per, and $VAL validation images"
     pids=()
     for k in $(seq 0 $(( SHARDS - 1 ))); do
-        timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/train_$k" \
+        timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_tools.vision_training.render_dataset --out "$data/train_$k" \
             --count "$per" --seed $(( SEED_BASE + k )) --progress-every 50 ${SCENES:+--scenes $SCENES} \
             > "$data/render_$k.log" 2>&1 &
         pids+=($!)
     done
-    timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_vision.train.render_dataset --out "$data/val" --count "$VAL" \
+    timeout "$RENDER_LIMIT_S" "$PYTHON" -m tlt_tools.vision_training.render_dataset --out "$data/val" --count "$VAL" \
         --seed 1 --progress-every 20 > "$data/render_val.log" 2>&1 &
     pids+=($!)
     for pid in "${pids[@]}"; do wait "$pid" || true; done
@@ -105,14 +105,14 @@ for k in $(seq 0 $(( SHARDS - 1 ))); do
     [ -f "$data/train_$k/index.json" ] && shards+=("$data/train_$k")
 done
 [ ${#shards[@]} -gt 0 ] || { log "no shard rendered an image set"; exit 1; }
-rendered=$("$PYTHON" -c "import sys; from tlt_vision.train.dataset import ImageSet
+rendered=$("$PYTHON" -c "import sys; from tlt_tools.vision_training.dataset import ImageSet
 print(sum(len(ImageSet(p)) for p in sys.argv[1:]))" "${shards[@]}")
 log "rendered $rendered training images in ${#shards[@]} shards"
 
 # 3. Train within the budget, validating each epoch; the best epoch's weights are kept.
 log "training on $DEVICE for at most $BUDGET_MIN min"
 # shellcheck disable=SC2086
-"$PYTHON" -m tlt_vision.train.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
+"$PYTHON" -m tlt_tools.vision_training.mask_rcnn --train "${shards[@]}" --val "$data/val" --val-limit 60 \
     --out "$out/mask_rcnn.pt" --epochs "$EPOCHS" --batch "$BATCH" --lr "$LR" --device "$DEVICE" \
     --ranks "$RANKS" --workers "$WORKERS" --threads "$THREADS" --time-budget-min "$BUDGET_MIN" \
     --log-every 50 --sensor-noise "$NOISE" --blur "$BLUR" $MODEL \

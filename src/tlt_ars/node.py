@@ -130,8 +130,7 @@ class ActiveGoal:
 def _coarse_poses_for_mission(config: ArsConfig, scene: Any) -> ArsConfig:
     """The configured coarse dispenser poses moved with their tags to this mission's racks
     (:mod:`tlt_ars.planning.coarse_pose_transfer`); ConfigError naming the pose when one cannot."""
-    from tlt_ars.planning.coarse_pose_search import NoCoarsePose
-    from tlt_ars.planning.coarse_pose_transfer import follow_tags
+    from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, follow_tags
 
     joints = {n: p.joints for n, p in config.dispenser_poses.items() if p.joints is not None}
     try:

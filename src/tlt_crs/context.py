@@ -29,6 +29,7 @@ from tlt_common.mission.schema import Mission
 from tlt_common.mission.tower_model import TowerModel
 from tlt_crs.config import CrsConfig
 from tlt_crs.index_record import IndexRecord
+from tlt_crs.inspection_desk import InspectionDesk
 
 _log = logging.getLogger("tlt_crs")
 
@@ -135,8 +136,6 @@ class CrsContext:
         self.clock = MissionClock(self.ros_seconds)
         self.cache = TopicCache(node, self.ros_seconds)
         self.board = Board(registry.namespace)
-        from tlt_crs.behaviours.inspection import InspectionDesk
-
         self.desk = InspectionDesk()
         self.stopped = False
         self.link_fault = ""  # why the build is held for a device link (clears itself: LifterLinkWatch)

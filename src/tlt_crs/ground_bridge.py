@@ -25,29 +25,48 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from typing import Any
+from collections.abc import Callable
+from typing import Any, Protocol
 
+import py_trees
 from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from tlt_common import ros_names
-from tlt_common.bt.status_codec import encode
+from tlt_common.bt.status_codec import TreeShape, encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
 from tlt_common.periodic_timer import create_periodic_timer
+from tlt_crs.commands import CommandQueue
+from tlt_crs.context import CrsContext
 from tlt_crs.ground_link.link import GroundCommand, GroundLink
-from tlt_crs.node import CrsNode
 
 _log = logging.getLogger("tlt_crs.ground_bridge")
 # Status bytes per tree_status packet: the definition allows 1024; 256 keeps packets small.
 STATUS_BYTES_PER_PACKET = 256
 
 
-class GroundBridge:
-    """Connects a :class:`GroundLink` to a :class:`CrsNode`; the node's timers send telemetry."""
+class CrsTree(Protocol):
+    """What the bridge uses of the CRS node (:class:`tlt_crs.node.CrsNode`, which builds the bridge
+    in its process's ``main``): its context (whose ``node`` runs the bridge's timers and
+    subscriptions), its command queue, and its tree as it ticks."""
 
-    def __init__(self, node: CrsNode, link: GroundLink) -> None:
+    ctx: CrsContext
+    commands: CommandQueue
+    root: py_trees.behaviour.Behaviour
+    shape: TreeShape
+    tick_count: int
+    tick_listeners: list[Callable[[], None]]
+
+    def progress(self) -> Any: ...
+
+
+class GroundBridge:
+    """Connects a :class:`GroundLink` to the CRS node (:class:`CrsTree`); the node's timers send
+    telemetry."""
+
+    def __init__(self, node: CrsTree, link: GroundLink) -> None:
         self.node = node
         self.link = link
         link.validator = self._validate
@@ -86,14 +105,14 @@ class GroundBridge:
         ):
             rate = link.defs.packet(kind).rate_hz
             if rate:
-                create_periodic_timer(node, 1.0 / rate, send, callback_group=telemetry)
+                create_periodic_timer(node.ctx.node, 1.0 / rate, send, callback_group=telemetry)
         self._member_ids = {m.id for m in node.ctx.mission.members}
         self._last_step: tuple[Any, ...] | None = None
         self._last_progress: tuple[int, ...] | None = None
         self._steps: deque[tuple[dict[str, Any], bool]] = deque()
         node.tick_listeners.append(self.note_step)
         create_periodic_timer(
-            node, 1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry
+            node.ctx.node, 1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry
         )
         self._report_bay_inspections()
 
@@ -129,7 +148,7 @@ class GroundBridge:
         from tlt_interfaces.msg import TreeStatus
 
         for ars in ros_names.ARS_AGENTS:
-            self.node.create_subscription(
+            self.node.ctx.node.create_subscription(
                 TreeStatus, ros_names.tree_status_topic(ars), self.forward_tree_status, 10
             )
 

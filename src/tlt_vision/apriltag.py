@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from tlt_common.config_schema import Field, load_validated
+from tlt_common.mission.tag_mounts import black_square_side
 from tlt_vision.cad.models import CONFIG_DIR
 
 APRILTAG_FILE = CONFIG_DIR / "apriltag.yaml"
@@ -48,7 +49,7 @@ class TagConfig:
     @classmethod
     def load(cls, path: str | Path = APRILTAG_FILE) -> TagConfig:
         d = load_validated(path, SCHEMA)
-        side = d["printed_size"] * CELLS / (CELLS + 2 * d["quiet_zone_cells"])
+        side = black_square_side(d["printed_size"], d["quiet_zone_cells"])
         return cls(side, d["corner_refinement"], d["max_reprojection_error"], d["edge_refinement"])
 
 

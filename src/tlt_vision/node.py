@@ -56,6 +56,7 @@ from tlt_common.executor_stop import stop_executor
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
+from tlt_common.mission.tag_mounts import tag_mount
 from tlt_common.spin_loop import spin
 from tlt_common.stamps import set_stamp
 from tlt_common.stop_signals import stop_on_signals
@@ -69,7 +70,6 @@ from tlt_vision.pipeline import Detection, detections_near
 from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
-from tlt_vision.tag_mounts import tag_mount
 from tlt_vision.weights import WeightsError
 
 log = logging.getLogger("tlt.vision")

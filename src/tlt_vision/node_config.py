@@ -18,6 +18,7 @@ import numpy as np
 
 from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_common.mission.tag_mounts import TAG_MOUNT_SCHEMA
 from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED
 from tlt_vision.pointcloud import Detached
@@ -333,18 +334,7 @@ SCHEMA = {
     "site": Field("dict", schema={"base_origin": _vec(3), "build_level": Field("float")}),
     "rivet_in_gun_radius": Field("float", **_POSITIVE),
     "bay_cameras": Field("list", item=Field("str"), min_items=1),
-    "tag_mount": Field(
-        "dict",
-        schema={
-            "end_gap": Field("float", minimum=0.0),
-            "above_top": Field("float"),
-            "first_slot_height": Field("float"),
-            "slot_pitch": Field("float", minimum=0.0),
-            "rivet_top": Field("float"),
-            "rivet_extent": Field("float", minimum=0.0),
-            "rpy": _vec(3),
-        },
-    ),
+    "tag_mount": Field("dict", schema=TAG_MOUNT_SCHEMA),
 }
 
 

@@ -54,8 +54,8 @@ from tlt_vision.node_config import VisionConfig
 from tlt_vision.pipeline import Detection, PartPipeline, detections_near
 from tlt_vision.pointcloud import PinholeIntrinsics, masked_point_cloud
 from tlt_vision.pose.corrector import CorrectorConfig
+from tlt_vision.pose.detector_weights import load_detector
 from tlt_vision.pose.estimator import PoseEstimator
-from tlt_vision.train.c3po_supervised import load_detector
 from tlt_vision.weights import WeightsError, read_manifest
 
 STRUT_KINDS = ("vertical", "diagonal")

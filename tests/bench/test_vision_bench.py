@@ -7,8 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from tlt_vision.train.dataset import Sample
+from tlt_tools.vision_training.dataset import Sample
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,10 @@ import pytest
 import yaml
 from tlt_sim.model import names
 from tlt_sim.model.scene import Scene
+from tlt_tools.coarse_pose_search import Setup
 
 from tlt_ars.config import default_config_path
-from tlt_ars.planning.coarse_pose_search import NoCoarsePose, Setup
-from tlt_ars.planning.coarse_pose_transfer import follow_tags
+from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, follow_tags
 from tlt_ars.planning.kinematics import pose_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml

@@ -191,7 +191,7 @@ def test_a_rivet_whose_mask_took_in_its_neighbour_in_the_feeder_is_posed_from_it
     as the model's masks do (a tenth to a third more pixels). With the node's configuration (rivets'
     own 1 cm link, their largest piece kept) every one is certified at its true pose; with the
     common 2 cm link the neighbour's points stay and pull the fit off."""
-    render_dataset = pytest.importorskip("tlt_vision.train.render_dataset")
+    render_dataset = pytest.importorskip("tlt_tools.vision_training.render_dataset")
     from tlt_common.mission.schema import load_mission
     from tlt_vision.node_config import load_config
     from tlt_vision.part_inspection import load_estimators

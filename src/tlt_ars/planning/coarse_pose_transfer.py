@@ -1,11 +1,11 @@
 """Coarse dispenser poses carried over to the mission being built.
 
-A part rack carries its AprilTag just above its top slot (:func:`tlt_vision.tag_mounts.tag_mount`),
+A part rack carries its AprilTag just above its top slot (:func:`tlt_common.mission.tag_mounts.tag_mount`),
 so how high the tag stands depends on how many parts the mission fills the rack with: the two-bay
 mission's vertical rack holds eight struts, the one-bay's five, and its tag stands 0.21 m higher.
 The coarse poses in ``config/ars/<ars>.yaml`` were found and checked in the twin for the tags of
-one mission (``poses.dispensers_mission``, :mod:`.coarse_pose_search`); from them, in another
-mission, the camera would look under the tag and the build fault on "tag not in view".
+one mission (``poses.dispensers_mission``, :mod:`tlt_tools.coarse_pose_search`); from them, in
+another mission, the camera would look under the tag and the build fault on "tag not in view".
 
 :func:`follow_tags` moves each pose with its tag: the tool, and so the camera on it, is moved by
 the same rigid motion that takes the configured mission's tag to this mission's, so the camera
@@ -22,13 +22,26 @@ from pathlib import Path
 
 import numpy as np
 
-from tlt_ars.planning.coarse_pose_search import NoCoarsePose, Setup
 from tlt_ars.planning.kinematics import IkFailed, invert
-from tlt_ars.planning.world import SceneConfig, build_scene
+from tlt_ars.planning.world import SceneConfig, build_scene, dispenser_frame
+from tlt_common.mission.schema import Mission, load_mission
+from tlt_common.mission.tag_mounts import TagMounting
 
 # Tags closer than this (m, and about the same in rad) to where the poses were made for count as
 # not moved: the configured, twin-checked joints are then kept exactly.
 _SAME_TAG = 1e-6
+
+
+class NoCoarsePose(RuntimeError):
+    """No configuration of an arm sees a dispenser's tag as asked; the message says why."""
+
+
+def dispenser_tag_pose(
+    scene: SceneConfig, mission: Mission, mounting: TagMounting, dispenser: str
+) -> np.ndarray:
+    """World pose of ``dispenser``'s tag (x right, y up as printed, z out of the face), where the
+    twin mounts it."""
+    return dispenser_frame(scene, mission.dispensers[dispenser]) @ mounting.pose(mission, dispenser)
 
 
 def follow_tags(
@@ -38,21 +51,25 @@ def follow_tags(
     mission: str | Path,
     scene: SceneConfig,
     other_arm_q: Sequence[float] | None = None,
+    mounting: TagMounting | None = None,
 ) -> dict[str, np.ndarray]:
     """``poses`` (dispenser -> joints, viewing the tags of mission file ``made_for``) moved to the
     tags of mission file ``mission``. ``other_arm_q`` places the other arm for the collision
-    check (default: its home)."""
-    before = Setup.load(made_for, scene=scene)
-    after = Setup(scene, before.vision, before.tag, Setup.load(mission, scene=scene).mission, before.camera)
+    check (default: its home); ``mounting`` is where the tags are mounted (default: the vision
+    configuration's)."""
+    mounting = mounting or TagMounting.load()
+    before, after = load_mission(made_for), load_mission(mission)
     kin = scene.kinematics(arm)
     collision = None
     out: dict[str, np.ndarray] = {}
     for dispenser, joints in poses.items():
         q = np.asarray(joints, dtype=float)
-        if dispenser not in after.mission.dispensers or dispenser not in before.mission.dispensers:
+        if dispenser not in after.dispensers or dispenser not in before.dispensers:
             out[dispenser] = q  # not used by this mission (check_against_mission said which are)
             continue
-        move = after.tag_pose(dispenser) @ invert(before.tag_pose(dispenser))
+        move = dispenser_tag_pose(scene, after, mounting, dispenser) @ invert(
+            dispenser_tag_pose(scene, before, mounting, dispenser)
+        )
         if np.max(np.abs(move - np.eye(4))) <= _SAME_TAG:
             out[dispenser] = q
             continue
@@ -64,7 +81,7 @@ def follow_tags(
                 f"{np.linalg.norm(move[:3, 3]):.3f} m: {exc}"
             ) from exc
         if collision is None:
-            collision = build_scene(scene, arm, after.mission, other_arm_q=other_arm_q)
+            collision = build_scene(scene, arm, after, other_arm_q=other_arm_q)
         if collision.in_collision(moved):
             raise NoCoarsePose(
                 f"{arm}: the coarse pose for {dispenser}, moved {np.linalg.norm(move[:3, 3]):.3f} m with "
@@ -74,4 +91,4 @@ def follow_tags(
     return out
 
 
-__all__ = ["follow_tags"]
+__all__ = ["NoCoarsePose", "dispenser_tag_pose", "follow_tags"]

@@ -2,8 +2,10 @@
 
 :class:`GpioLines` maps the names of ``config/hardware/gpio_<arm>.yaml`` (``rivet_gun_left``,
 ``limit_switch``, ...) to line indices of a backend: the Linux character device on the Jetsons
-(:class:`~tlt_drivers.gpio.chardev.CharDevLines`) or the twin's emulated chip
-(:class:`tlt_sim.emulators.gpio_chip.EmulatedLines`). Levels are logical: ``True`` is "active"
+(:class:`~tlt_drivers.gpio.chardev.CharDevLines`), or the shared memory file the twin plays the
+board through (:class:`~tlt_drivers.gpio.shared_memory.SharedMemoryLines`). The backend is handed
+in: :class:`GpioLines` takes one, and :func:`open_gpio` opens the one the configuration names
+unless the caller (the twin, a test) hands it its own. Levels are logical: ``True`` is "active"
 (a firing rivet gun, a pressed switch) whatever the wiring's polarity. An unknown name, or a
 write to an input / read of an output's name as input, raises ``KeyError``/``ValueError`` naming
 the line and what it is.
@@ -15,6 +17,7 @@ from pathlib import Path
 from typing import Protocol
 
 from .config import GpioConfig, load_gpio_config
+from .shared_memory import SharedGpioState, SharedMemoryLines
 
 
 class LineBackend(Protocol):
@@ -70,18 +73,19 @@ class GpioLines:
         self.backend.close()
 
 
-def open_gpio(config: GpioConfig | str | Path) -> GpioLines:
-    """Request the configured lines from the configured backend."""
+def open_gpio(config: GpioConfig | str | Path, backend: LineBackend | None = None) -> GpioLines:
+    """The configured lines over ``backend``, or, when none is handed in, over the backend the
+    configuration names (``chardev``: the character device; ``emulator``: the shared memory file)."""
     if not isinstance(config, GpioConfig):
         config = load_gpio_config(config)
-    if config.backend == "chardev":
-        from .chardev import CharDevLines
+    if backend is None:
+        if config.backend == "chardev":
+            from .chardev import CharDevLines
 
-        backend: LineBackend = CharDevLines(config.chip, config.consumer, config.lines)
-    else:
-        from tlt_sim.emulators.gpio_chip import EmulatedGpioChip, EmulatedLines
-
-        backend = EmulatedLines(EmulatedGpioChip(config.emulator_state), config.lines, owns_chip=True)
+            backend = CharDevLines(config.chip, config.consumer, config.lines)
+        else:
+            state = SharedGpioState(config.emulator_state)
+            backend = SharedMemoryLines(state, config.lines, owns_state=True)
     return GpioLines(config, backend)
 
 

@@ -1,4 +1,5 @@
-"""Named EE lines over the emulated chip, and the GPIO configuration files."""
+"""Named EE lines over the shared memory link and the twin's chip on it, and the GPIO
+configuration files."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from tlt_sim.emulators.gpio_chip import EmulatedGpioChip
 from tlt_common.config_schema import ConfigError
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.gpio.lines import open_gpio
+from tlt_drivers.gpio.shared_memory import SharedGpioState, SharedMemoryLines
 
 
 @pytest.fixture
@@ -49,8 +51,9 @@ def test_outputs_reach_the_twin_and_inputs_come_from_it(config) -> None:
 
 
 def test_in_process_writes_call_back_at_once(config) -> None:
-    gpio = open_gpio(config)
-    chip = gpio.backend.chip
+    chip = EmulatedGpioChip(config.emulator_state)  # the twin hands the driver its chip
+    gpio = open_gpio(config, SharedMemoryLines(chip, config.lines, owns_state=True))
+    assert gpio.backend.state is chip
     fired = []
     chip.add_output_callback(lambda line, level, edges: fired.append((line, level)))
     gpio.write_output("rivet_gun_right", True)
@@ -60,6 +63,23 @@ def test_in_process_writes_call_back_at_once(config) -> None:
     gpio.close()
     with pytest.raises(ValueError):  # the mapping is released
         chip.level(1)
+
+
+def test_the_configured_backend_opens_unless_one_is_handed_in(config) -> None:
+    opened = open_gpio(config)  # backend: emulator, so the shared memory file
+    assert isinstance(opened.backend, SharedMemoryLines)
+    assert isinstance(opened.backend.state, SharedGpioState)
+    assert str(opened.backend.state.path) == config.emulator_state
+    opened.close()
+    chardev = dataclasses.replace(config, backend="chardev", chip=str(config.emulator_state) + ".none")
+    with pytest.raises(OSError):  # the configured character device, which this machine lacks
+        open_gpio(chardev)
+    handed = SharedMemoryLines(SharedGpioState(), config.lines, owns_state=True)
+    gpio = open_gpio(chardev, handed)  # handed in: the configuration's device is not opened
+    assert gpio.backend is handed
+    gpio.write_output("rivet_gun_left", True)
+    assert gpio.read_output("rivet_gun_left") is True
+    gpio.close()
 
 
 def test_wrong_names_and_directions_are_refused(config) -> None:

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD, DynamixelServo
-from tlt_sim.emulators.gpio_chip import EmulatedGpioChip, EmulatedLines
+from tlt_sim.emulators.gpio_chip import EmulatedGpioChip
 from tlt_sim.model import ik, names
 from tlt_sim.model.geometry import frame_from_axes
 from tlt_sim.model.scene import Scene
@@ -20,6 +20,7 @@ from tlt_sim.twin.bindings import ServoJointBinding, URArmBinding
 
 from tlt_common import json_lines
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
+from tlt_drivers.gpio.shared_memory import SharedMemoryLines
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand
 
 # MX-106(2.0) control table addresses the EE driver writes.
@@ -119,7 +120,7 @@ def test_ee_limit_switch_input_and_rivet_gun_output_through_gpio(make_twin):
     twin = make_twin()
     gpio = load_gpio_config(CONFIG_DIR / "gpio_x.yaml")
     chip = EmulatedGpioChip(twin.run_dir / "gpio_x.state")
-    lines = EmulatedLines(chip, gpio.lines)
+    lines = SharedMemoryLines(chip, gpio.lines)
     index = {spec.name: i for i, spec in enumerate(gpio.lines)}
     width = names.width_joint("ars_x")
     assert lines.get(index["limit_switch"]) is False  # the carriage starts 5 mm off the switch

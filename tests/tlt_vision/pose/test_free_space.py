@@ -84,7 +84,7 @@ def test_checked_takes_the_certificate_only_from_a_pose_standing_in_free_space()
 
 
 # -- rivets seen end-on in the twin ----------------------------------------------------------------
-render_dataset = pytest.importorskip("tlt_vision.train.render_dataset")
+render_dataset = pytest.importorskip("tlt_tools.vision_training.render_dataset")
 ROOT = Path(__file__).resolve().parents[3]
 
 

@@ -15,6 +15,8 @@ import statistics
 from collections import defaultdict
 
 import pytest
+from tlt_tools.vision_training.dataset import ImageSet, instance_model
+from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
 
 from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config
@@ -22,8 +24,6 @@ from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.errors import add_s, non_degenerate_at, rotation_error_deg
-from tlt_vision.train.dataset import ImageSet, instance_model
-from tlt_vision.train.render_dataset import RenderSettings, render_set
 
 HELD_OUT_SEED = 903
 IMAGES = 12

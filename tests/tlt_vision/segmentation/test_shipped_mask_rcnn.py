@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from tlt_tools.vision_training.dataset import ImageSet
+from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
 
 from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.camera_frame import CameraFrame
@@ -36,8 +38,6 @@ from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
 from tlt_vision.segmentation.overlap import ExclusiveOverlaps
 from tlt_vision.segmentation.semantic_trim import SemanticTrim
 from tlt_vision.segmentation_source import MaskRcnnSegmenter
-from tlt_vision.train.dataset import ImageSet
-from tlt_vision.train.render_dataset import RenderSettings, render_set
 from tlt_vision.weights import WeightsError
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -221,7 +221,7 @@ def test_the_trainers_validation_as_the_node_segments_scores_the_nodes_masks(hel
     """``mask_rcnn --node-config``: a model in training validated on the masks the node would make
     of it (the figure the benchmark holds to its goal), the model's own inference settings in force
     again after each validation."""
-    from tlt_vision.train.mask_rcnn import evaluate, node_segmenter
+    from tlt_tools.vision_training.mask_rcnn import evaluate, node_segmenter
 
     model, manifest = load_mask_rcnn(WEIGHTS)
     max_size = manifest["settings"]["max_size"]

@@ -1,4 +1,4 @@
-"""The coarse-pose search (tlt_ars.planning.coarse_pose_search): the pinhole view of a tag, the
+"""The coarse-pose search (tlt_tools.coarse_pose_search): the pinhole view of a tag, the
 camera views it tries, and the configurations it returns, checked against the project's own
 kinematics and collision scene (the twin's rendering of the chosen poses is
 tests/tlt_ars/test_coarse_poses.py)."""
@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 import yaml
+from tlt_tools import coarse_pose_search as cps
 
-from tlt_ars.planning import coarse_pose_search as cps
 from tlt_ars.planning.kinematics import pose_matrix, rot_x
 from tlt_ars.planning.world import build_scene
 from tlt_common.config_schema import load_yaml

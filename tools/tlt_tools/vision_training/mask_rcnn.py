@@ -1,9 +1,10 @@
 """Train the plain-torch Mask R-CNN on rendered image sets, and evaluate its mask AP50.
 
 Train (``--train`` one or more sets, read as one, and optionally ``--val``, in the format of
-:mod:`tlt_vision.train.dataset`)::
+:mod:`tlt_tools.vision_training.dataset`)::
 
-    python -m tlt_vision.train.mask_rcnn --train DIR [DIR ...] [--val DIR] --out build/vision/mask_rcnn.pt \\
+    python -m tlt_tools.vision_training.mask_rcnn --train DIR [DIR ...] [--val DIR] \\
+        --out build/vision/mask_rcnn.pt \\
         [--epochs 20] [--batch 4] [--lr 1e-3] [--seed 0] [--threads 2] [--max-size 320] \\
         [--device cpu|cuda] [--workers N] [--ranks N] [--time-budget-min M] [--config key=value ...]
         [--resume CKPT] [--init WEIGHTS]
@@ -21,7 +22,7 @@ starts fresh), so that short runs on lent machines can build on each other.
 
 Evaluate saved weights::
 
-    python -m tlt_vision.train.mask_rcnn --evaluate build/vision/mask_rcnn.pt --val DIR [--threads 2]
+    python -m tlt_tools.vision_training.mask_rcnn --evaluate build/vision/mask_rcnn.pt --val DIR [--threads 2]
 
 prints AP50 per class and mean and the mean inference time per image (as the node runs it:
 :func:`tlt_vision.segmentation.inference.detect_rgb`, full-size image in, full-size masks out).
@@ -52,6 +53,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
+from tlt_tools.vision_training.data_parallel import Ranks, run_ranks
+from tlt_tools.vision_training.dataset import DatasetError, ImageSet, ImageSets
 from tlt_vision.ops.boxes import boxes_from_masks
 from tlt_vision.segmentation.config import MaskRCNNConfig
 from tlt_vision.segmentation.evaluate import MaskAP
@@ -66,8 +69,6 @@ from tlt_vision.segmentation.inference import (
     weights_settings,
 )
 from tlt_vision.segmentation.model import MaskRCNN, train_step
-from tlt_vision.train.data_parallel import Ranks, run_ranks
-from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets
 from tlt_vision.weights import WeightsError, read_manifest, save_weights
 
 if TYPE_CHECKING:
@@ -768,7 +769,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tlt_vision.train.mask_rcnn",
+    p = argparse.ArgumentParser(prog="python -m tlt_tools.vision_training.mask_rcnn",
                                 description=__doc__.split("\n")[0])
     p.add_argument("--train", nargs="+",
                    help="training image sets (directories with index.json), read as one")

@@ -7,16 +7,7 @@ import copy
 import numpy as np
 import pytest
 import torch
-
-from tlt_common.mission.schema import load_mission
-from tlt_vision.cad.models import models_for_mission
-from tlt_vision.cad.views import random_rotation, synthetic_view
-from tlt_vision.ops.registration import transform
-from tlt_vision.pipeline import PartPipeline
-from tlt_vision.pose.corrector import CorrectorConfig
-from tlt_vision.pose.detector import symmetric_keypoint_loss
-from tlt_vision.pose.estimator import PoseEstimator
-from tlt_vision.train.c3po_self_supervised import (
+from tlt_tools.vision_training.c3po_self_supervised import (
     SceneCloud,
     SelfSupervisedConfig,
     evaluate,
@@ -25,12 +16,22 @@ from tlt_vision.train.c3po_self_supervised import (
     train_epoch,
     train_self_supervised,
 )
-from tlt_vision.train.c3po_supervised import SupervisedConfig, load_detector, train_supervised
-from tlt_vision.train.dataset import ImageSet, write_index
+from tlt_tools.vision_training.c3po_supervised import SupervisedConfig, train_supervised
+from tlt_tools.vision_training.dataset import ImageSet, write_index
+
+from tlt_common.mission.schema import load_mission
+from tlt_vision.cad.models import models_for_mission
+from tlt_vision.cad.views import random_rotation, synthetic_view
+from tlt_vision.ops.registration import transform
+from tlt_vision.pipeline import PartPipeline
+from tlt_vision.pose.corrector import CorrectorConfig
+from tlt_vision.pose.detector import symmetric_keypoint_loss
+from tlt_vision.pose.detector_weights import load_detector
+from tlt_vision.pose.estimator import PoseEstimator
 from tlt_vision.weights import read_manifest
 
 pytest.importorskip("tlt_sim.model.scene")
-from tlt_vision.train.render_dataset import main as render
+from tlt_tools.vision_training.render_dataset import main as render
 
 MISSION = "missions/one_bay.yaml"
 CORRECTOR = CorrectorConfig(max_iterations=200, step=0.02, decay=0.98, patience=20, refine_iterations=30)

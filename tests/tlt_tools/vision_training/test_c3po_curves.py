@@ -1,8 +1,7 @@
 from pathlib import Path
 
 from PIL import Image
-
-from tlt_vision.train.c3po_curves import histories, main
+from tlt_tools.vision_training.c3po_curves import histories, main
 
 MODELS = Path(__file__).resolve().parents[3] / "models" / "vision"
 

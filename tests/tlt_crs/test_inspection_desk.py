@@ -8,7 +8,7 @@ import threading
 
 from tlt_interfaces.msg import InspectionReport
 
-from tlt_crs.behaviours.inspection import InspectionDesk
+from tlt_crs.inspection_desk import InspectionDesk
 
 MEMBER = "bay1/vertical/x0_y1"
 

@@ -7,7 +7,10 @@ keypoints, and the loss takes the best of the model's symmetric relabellings. Af
 prints the training and validation keypoint errors and the fraction of validation views whose pose
 (detector + corrector) is certified. It writes ``<out>.pt`` and its manifest (:mod:`weights`).
 
-Run: ``python -m tlt_vision.train.c3po_supervised --model end_fitting --out build/vision/end_fitting.pt``
+Run::
+
+    python -m tlt_tools.vision_training.c3po_supervised --model end_fitting \\
+        --out build/vision/end_fitting.pt
 """
 
 from __future__ import annotations
@@ -17,7 +20,6 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -28,11 +30,8 @@ from tlt_vision.cad.models import CadModel, models_for_mission
 from tlt_vision.cad.views import random_rotation, synthetic_view
 from tlt_vision.ops.registration import transform
 from tlt_vision.pose.detector import KeypointDetector, symmetric_keypoint_loss
+from tlt_vision.pose.detector_weights import save_detector
 from tlt_vision.pose.estimator import PoseEstimator
-from tlt_vision.weights import WeightsError, load_weights, save_weights
-
-KIND = "c3po_detector"
-VERSION = "1"
 
 
 @dataclass(frozen=True)
@@ -129,31 +128,6 @@ def train_supervised(
             f"(keypoint RMS {rms_mm:.1f} mm){cert}, {time.monotonic() - t0:.1f} s"
         )
     return det, history
-
-
-def save_detector(
-    det: KeypointDetector, model: CadModel, path: str | Path, training: dict, history: list[dict]
-) -> Path:
-    """Write ``det`` and its manifest (``training``: how it was trained; ``history``: per epoch)."""
-    settings = {
-        "model": model.name,
-        "num_keypoints": det.num_keypoints,
-        "scale": float(det.scale),
-        "width": det.width,
-    }
-    extra = {"training": training, "history": history}
-    return save_weights(det, path, KIND, VERSION, [model.object_class], settings, extra)
-
-
-def load_detector(path: str | Path, model: CadModel, width: int) -> KeypointDetector:
-    """A detector for ``model`` with the weights at ``path``; WeightsError if they do not fit it."""
-    det = KeypointDetector(len(model.keypoint_names), model.diameter / 2, width)
-    manifest = load_weights(det, path, KIND, [model.object_class])
-    if manifest["settings"].get("model") != model.name:
-        raise WeightsError(
-            path, f"weights are for model {manifest['settings'].get('model')!r}, expected {model.name!r}"
-        )
-    return det
 
 
 def main(argv: list[str] | None = None) -> int:

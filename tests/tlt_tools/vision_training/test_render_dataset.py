@@ -9,15 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from tlt_tools.vision_training.dataset import ImageSet
 
 from tlt_vision.cad.models import models_for_mission
 from tlt_vision.segmentation.config import CLASSES
-from tlt_vision.train.dataset import ImageSet
 
 pytest.importorskip("tlt_sim.model.scene")
 from tlt_sim.model import names
-
-from tlt_vision.train.render_dataset import (
+from tlt_tools.vision_training.render_dataset import (
     ARMS,
     PREVIEW,
     ZED,

@@ -1,6 +1,6 @@
 """Rendered training images on disk: one directory, an ``index.json`` and one ``.npz`` per image.
 
-The image renderer (:mod:`tlt_vision.train.render_dataset`) writes it and the Mask R-CNN trainer,
+The image renderer (:mod:`tlt_tools.vision_training.render_dataset`) writes it and the Mask R-CNN trainer,
 the self-supervised C-3PO and the vision benchmarks read it, so the format lives here once.
 
 ``index.json``::

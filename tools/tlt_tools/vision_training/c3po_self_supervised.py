@@ -19,7 +19,7 @@ sides joined into one part) through :meth:`tlt_vision.pipeline.PartPipeline.clou
 
 Run::
 
-    python -m tlt_vision.train.c3po_self_supervised --model corner_joint \\
+    python -m tlt_tools.vision_training.c3po_self_supervised --model corner_joint \\
         --images /tmp/vis/ssl --val /tmp/vis/val --out build/vision/corner_joint.pt --plot curves.png
 
 It writes ``<out>.pt`` with its manifest (the settings of the detector it started from, the
@@ -43,16 +43,16 @@ import torch
 
 from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import load_mission
+from tlt_tools.vision_training.dataset import DatasetError, ImageSet, ImageSets, instance_model, instance_part
 from tlt_vision.cad.models import CadModel
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
 from tlt_vision.pipeline import Detection, PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.detector import KeypointDetector, symmetric_keypoint_loss
+from tlt_vision.pose.detector_weights import save_detector
 from tlt_vision.pose.errors import add_s
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, padded_batch
-from tlt_vision.train.c3po_supervised import save_detector
-from tlt_vision.train.dataset import DatasetError, ImageSet, ImageSets, instance_model, instance_part
 from tlt_vision.weights import WeightsError, read_manifest
 
 ADD_S_FRACTION = 0.02  # of the part's size: the accuracy bar for a certified pose

@@ -22,7 +22,7 @@ The pinhole check does not see occlusions (the gripper, a rack upright) or how w
 copes; :func:`verify_in_twin` renders a candidate in the twin and runs the vision's detector on
 it, and ``main`` keeps the first candidate that passes.
 
-``python -m tlt_ars.planning.coarse_pose_search [--ars ars_x] [--verify]`` prints the poses as the
+``python -m tlt_tools.coarse_pose_search [--ars ars_x] [--verify]`` prints the poses as the
 ``poses.dispensers`` YAML of config/ars/<ars>.yaml.
 """
 
@@ -38,22 +38,19 @@ from typing import Any
 
 import numpy as np
 
+from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, dispenser_tag_pose
 from tlt_ars.planning.kinematics import VELOCITY_LIMIT, IkFailed, invert, pose_matrix
-from tlt_ars.planning.world import SceneConfig, build_scene, dispenser_frame, load_scene_config
+from tlt_ars.planning.world import SceneConfig, build_scene, load_scene_config
 from tlt_common.mission.schema import load_mission
+from tlt_common.mission.tag_mounts import TagMounting, printed_size
 from tlt_vision.apriltag import TagConfig
 from tlt_vision.node_config import VisionConfig, load_config, pose_of
-from tlt_vision.tag_mounts import printed_size, tag_mount
 
 DEFAULT_MISSION = "missions/one_bay.yaml"  # every mission shares the dispenser layout
 ARMS = ("ars_x", "ars_y")
 # The twin's D405 (config/twin/edu.yaml cameras.d405_fovy_deg) and its frame shape (run.yaml).
 D405_FOVY_DEG = 58.0
 D405_ASPECT = 4.0 / 3.0
-
-
-class NoCoarsePose(RuntimeError):
-    """No configuration of ``arm`` sees ``dispenser``'s tag as asked; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -127,10 +124,9 @@ class Setup:
 
     def tag_pose(self, dispenser: str) -> np.ndarray:
         """World pose of ``dispenser``'s tag (x right, y up as printed, z out of the face), where the
-        twin mounts it: vision's rule (:func:`tlt_vision.tag_mounts.tag_mount`)."""
-        disp = self.mission.dispensers[dispenser]
-        mount = tag_mount(self.vision.raw["tag_mount"], self.mission, dispenser, self.tag.tag_side)
-        return dispenser_frame(self.scene, disp) @ mount
+        twin mounts it: the shared rule (:func:`tlt_common.mission.tag_mounts.tag_mount`)."""
+        mounting = TagMounting(self.vision.raw["tag_mount"], self.tag.tag_side)
+        return dispenser_tag_pose(self.scene, self.mission, mounting, dispenser)
 
 
 def _rot_axis(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -303,7 +299,7 @@ def _format(value: list[float]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Print coarse dispenser poses as ``poses.dispensers`` YAML; 1 when a dispenser has none."""
     parser = argparse.ArgumentParser(
-        prog="python -m tlt_ars.planning.coarse_pose_search",
+        prog="python -m tlt_tools.coarse_pose_search",
         description="Find coarse dispenser poses from which the EE camera sees the dispenser's tag well.",
     )
     parser.add_argument("--ars", choices=ARMS, action="append", help="arm (repeatable; default both)")

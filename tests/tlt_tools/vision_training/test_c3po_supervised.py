@@ -1,7 +1,8 @@
 import pytest
+from tlt_tools.vision_training.c3po_supervised import main
 
 from tlt_vision.cad.models import build_models
-from tlt_vision.train.c3po_supervised import load_detector, main
+from tlt_vision.pose.detector_weights import load_detector
 from tlt_vision.weights import WeightsError, read_manifest
 
 

@@ -2,11 +2,11 @@
 
 Each detector's manifest keeps its training history (``extra.history``: per epoch the training
 loss and, where measured, the validation loss and the fraction of validation clouds whose
-corrected pose is certified; :mod:`tlt_vision.train.c3po_supervised`, :mod:`.c3po_self_supervised`).
+corrected pose is certified; :mod:`tlt_tools.vision_training.c3po_supervised`, :mod:`.c3po_self_supervised`).
 This draws every given detector's certified fraction against the 95 % goal, and its losses, so
 the shipped models' training can be seen without training them again::
 
-    python -m tlt_vision.train.c3po_curves models/vision/{end_fitting,corner_joint,rivet}.pt \\
+    python -m tlt_tools.vision_training.c3po_curves models/vision/{end_fitting,corner_joint,rivet}.pt \\
         --out models/vision/c3po_curves.png
 """
 

@@ -1,8 +1,8 @@
 """Render the vision training images from the MuJoCo twin: RGB-D, instance masks, classes, poses.
 
-Run: ``python -m tlt_vision.train.render_dataset --out DIR --count N [--seed S] [--width 640
+Run: ``python -m tlt_tools.vision_training.render_dataset --out DIR --count N [--seed S] [--width 640
 --height 480] [--mission missions/one_bay.yaml] [--defective-fraction 0.2]``. It writes the image
-set of :mod:`tlt_vision.train.dataset` (``index.json``, ``NNNNN.npz``) and ``preview.png``, a
+set of :mod:`tlt_tools.vision_training.dataset` (``index.json``, ``NNNNN.npz``) and ``preview.png``, a
 contact sheet of the first images with their masks outlined and named.
 
 Each image is drawn from its own generator seeded by ``(seed, image index)``, so a seed gives the
@@ -67,9 +67,9 @@ from typing import Any
 import numpy as np
 
 from tlt_common.config_schema import ConfigError, load_yaml
+from tlt_tools.vision_training.dataset import Sample, write_index, write_sample
 from tlt_vision.cad.views import random_rotation
 from tlt_vision.segmentation.config import CLASSES
-from tlt_vision.train.dataset import Sample, write_index, write_sample
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_MISSION = REPO_ROOT / "missions" / "one_bay.yaml"

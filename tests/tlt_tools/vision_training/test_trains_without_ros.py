@@ -24,10 +24,10 @@ class NoRos:
 
 sys.meta_path.insert(0, NoRos())
 
-import tlt_vision.train.render_dataset
+import tlt_tools.vision_training.render_dataset
 from tlt_vision.segmentation.config import MaskRCNNConfig
 from tlt_vision.segmentation.model import MaskRCNN
-from tlt_vision.train.mask_rcnn import node_segmenter
+from tlt_tools.vision_training.mask_rcnn import node_segmenter
 
 node_segmenter("config/vision/node.yaml", MaskRCNN(MaskRCNNConfig()), None)
 print("ok")
@@ -35,7 +35,7 @@ print("ok")
 
 
 def test_render_and_node_validation_import_no_ros() -> None:
-    env_path = f"{ROOT / 'src'}:{ROOT / 'sim'}"
+    env_path = f"{ROOT / 'src'}:{ROOT / 'sim'}:{ROOT / 'tools'}"
     done = subprocess.run(
         [sys.executable, "-c", PROBE], cwd=ROOT, capture_output=True, text=True, timeout=120,
         env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin", "HOME": "/tmp"},

@@ -10,14 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-
-from tlt_vision.ops.boxes import boxes_from_masks
-from tlt_vision.segmentation.config import CLASSES
-from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
-from tlt_vision.segmentation.model import MaskRCNN
-from tlt_vision.train.data_parallel import Ranks
-from tlt_vision.train.dataset import ImageSet, Sample, write_index, write_sample
-from tlt_vision.train.mask_rcnn import (
+from tlt_tools.vision_training.data_parallel import Ranks
+from tlt_tools.vision_training.dataset import ImageSet, Sample, write_index, write_sample
+from tlt_tools.vision_training.mask_rcnn import (
     Augment,
     augment,
     build_config,
@@ -33,6 +28,11 @@ from tlt_vision.train.mask_rcnn import (
     parse_args,
     parse_overrides,
 )
+
+from tlt_vision.ops.boxes import boxes_from_masks
+from tlt_vision.segmentation.config import CLASSES
+from tlt_vision.segmentation.inference import detect_rgb, load_mask_rcnn
+from tlt_vision.segmentation.model import MaskRCNN
 from tlt_vision.weights import WeightsError, read_manifest
 
 SIZE = 48
