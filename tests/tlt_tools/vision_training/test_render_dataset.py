@@ -212,3 +212,22 @@ def test_unwritable_out_exits_2(tmp_path, capsys):
     blocker.write_text("")
     assert main(["--out", str(Path(blocker) / "set"), "--count", "1"]) == 2
     assert "cannot write" in capsys.readouterr().err
+
+
+def test_images_through_the_camera_models_have_the_cameras_holes_and_noise_and_reproduce(tmp_path):
+    from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS
+
+    exact = TwinRenderer(RenderSettings(width=W, height=H, seed=5))
+    real = TwinRenderer(RenderSettings(width=W, height=H, seed=5, cameras=str(DEFAULT_CAMERAS)))
+    try:
+        (a, _), (b, _), (again, _) = exact.sample(0), real.sample(0), real.sample(0)
+    finally:
+        exact.close()
+        real.close()
+    assert np.array_equal(a.masks, b.masks) and np.array_equal(a.poses, b.poses), "the same scene"
+    assert np.array_equal(b.rgb, again.rgb) and np.array_equal(b.depth, again.depth), "one seed, one image"
+    seen = a.depth > 0
+    assert ((b.depth == 0) & seen).sum() > 0.005 * seen.sum(), "the real camera's holes"
+    both = seen & (b.depth > 0)
+    assert 0 < np.median(np.abs(b.depth[both] - a.depth[both])) < 0.01, "noise of millimetres"
+    assert not np.array_equal(a.rgb, b.rgb)

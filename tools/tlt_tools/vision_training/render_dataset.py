@@ -594,6 +594,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=True,
                    help="multisampled RGB (as the detectors see); --no-antialias is cheaper")
     p.add_argument("--progress-every", type=int, default=1, help="print progress every k images")
+    p.add_argument("--cameras", type=Path,
+                   help="take the images through these camera models (config/twin/cameras.yaml); "
+                        "default: the exact render")
     p.add_argument("--scenes", nargs="+", metavar="KIND=WEIGHT",
                    help=f"how often each scene kind is drawn (relative; kinds left out are not drawn): "
                         f"{', '.join(SCENES)}; default {_weights_text(RenderSettings().scenes)}")
@@ -630,6 +633,7 @@ def main(argv: list[str] | None = None) -> int:
         min_pixels=args.min_pixels,
         antialias=args.antialias,
         scenes=scenes,
+        cameras=str(args.cameras) if args.cameras else "",
     )
     try:
         render_set(args.out, args.count, settings, progress_every=args.progress_every)
