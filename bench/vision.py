@@ -284,7 +284,7 @@ class CameraOptics:
     ZED's optics or the EE D405's (config/twin/edu.yaml cameras), whose noise differs."""
 
     def __init__(self) -> None:
-        fovy = load_edu()["cameras"]
+        fovy = load_edu()[0]["cameras"]
         self.fovy = {"zed_1": fovy["zed_fovy_deg"], "ars_x/d405_a": fovy["d405_fovy_deg"]}
 
     def __call__(self, k: np.ndarray, height: int) -> str:

@@ -58,11 +58,22 @@ class Tolerances:
 
 @dataclass(frozen=True)
 class InspectionReport:
+    """A verdict on one part or bay. ``cannot_judge``: not a verdict; the view showed nothing
+    wrong but could not settle what it must (a part seen where it should be but not placed well
+    enough to certify), and ``reasons`` say what: look again, never discard on it."""
+
     target_id: str
     target_kind: str
     passed: bool
     reasons: tuple[str, ...]
     poses: tuple[PoseEstimate, ...] = field(default=())
+    cannot_judge: bool = False
+
+
+# An uncertified end fitting posed within this distance (m) of where an end's fitting should be is
+# that fitting, seen but not placed well enough to check: about half a fitting's length, far
+# more than a certified pose's error and far less than the distance to a neighbour in a rack.
+FITTING_SEEN_WITHIN = 0.03
 
 
 def _split(observations: Sequence[Observation], cls: str) -> tuple[list[PoseEstimate], list[str]]:
@@ -146,6 +157,7 @@ def inspect_strut(
         reasons.append(f"expected one strut tube, found {len(tubes)}: a broken or bent tube")
     fittings, fitting_bad = _split(observations, "end_fitting")
     fittings = _one_per_place(fittings, tol.position)
+    unsure: list[str] = []
     if len(fittings) == 2:
         between, to_chord = _coaxial(*fittings)
         if between > tol.angle or to_chord > tol.angle:
@@ -156,26 +168,59 @@ def inspect_strut(
     elif len(fittings) > 2:
         reasons.append(f"expected two end fittings, found {len(fittings)}")
     if len(tubes) == 1:
-        reasons.extend(_fittings_on_tube(tubes[0], fittings, length, parts, tol))
+        seen = [o for o in observations if o.object_class == "end_fitting" and o.estimate is not None
+                and not o.estimate.certified]
+        placed, unplaced, accounted = _fittings_on_tube(tubes[0], fittings, seen, length, parts, tol)
+        reasons.extend(placed)
+        unsure.extend(unplaced)
+        taken = {id(o) for o in accounted}
+        fitting_bad = [r for o, r in zip(_uncertified(observations, "end_fitting"), fitting_bad, strict=True)
+                       if id(o) not in taken]
     elif len(fittings) < 2:
         reasons.append(f"missing end fitting: {len(fittings)} of 2 found")
     reasons.extend(fitting_bad)
-    return InspectionReport(target_id, kind, not reasons, tuple(reasons), used)
+    if reasons:
+        return InspectionReport(target_id, kind, False, tuple(reasons + unsure), used)
+    return InspectionReport(target_id, kind, not unsure, tuple(unsure), used, cannot_judge=bool(unsure))
+
+
+def _uncertified(observations: Sequence[Observation], cls: str) -> list[Observation]:
+    """The observations of ``cls`` :func:`_split` gives a reason for, in its order."""
+    return [o for o in observations
+            if o.object_class == cls and (o.estimate is None or not o.estimate.certified)]
 
 
 def _fittings_on_tube(
-    tube: PoseEstimate, fittings: list[PoseEstimate], length: float, parts: Mapping[str, Any], tol: Tolerances
-) -> list[str]:
-    """Reasons why the fittings are not one at each end of ``tube``, on its axis, parallel to it."""
+    tube: PoseEstimate,
+    fittings: list[PoseEstimate],
+    seen: Sequence[Observation],
+    length: float,
+    parts: Mapping[str, Any],
+    tol: Tolerances,
+) -> tuple[list[str], list[str], list[Observation]]:
+    """Why the certified ``fittings`` are not one at each end of ``tube``, on its axis, parallel
+    to it; for an end without one where an uncertified fitting of ``seen`` stands within
+    :data:`FITTING_SEEN_WITHIN` of its place, why it cannot be judged instead (the fitting is
+    there; the view cannot place it well enough to check it); and the observations so taken."""
     reasons, missing = _on_tube(tube, fittings, length, parts, tol)
+    unsure: list[str] = []
+    accounted: list[Observation] = []
     for where in missing.values():
         # A tube is the same end for end: "a" and "b" follow the estimated axis, so the reason
         # also says where the fitting should be.
         xyz = ", ".join(f"{v:.3f}" for v in where)
+        near = [o for o in seen
+                if np.linalg.norm(np.asarray(o.estimate.translation) - where) <= FITTING_SEEN_WITHIN]
+        if near:
+            accounted.extend(near)
+            why = near[0].estimate.certificate.reason or "not certified"
+            unsure.append(f"cannot judge the end fitting at ({xyz}) m in the camera frame: seen there, "
+                          f"its pose not certified ({why})")
+            continue
         reasons.append(
             f"missing end fitting: {2 - len(missing)} of 2 found, none at ({xyz}) m in the camera frame"
         )
-    return reasons
+    return reasons, unsure, accounted
 
 
 def _on_tube(

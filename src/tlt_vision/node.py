@@ -235,6 +235,7 @@ class VisionNode(LeanNode):
         msg.header.frame_id = frame_id
         msg.target_id, msg.target_kind = report.target_id, report.target_kind
         msg.passed = bool(report.passed)
+        msg.cannot_judge = bool(report.cannot_judge)
         msg.reasons = list(report.reasons)
         msg.poses = [
             self._certified_pose(e, stamp, frame_id, object_ids.get(id(e), "")) for e in report.poses

@@ -76,3 +76,13 @@ def test_views_left_uncertified_are_reported_by_the_certificates_reason(bench, c
         "views_shown_certified": 0, "add_s_ok": 0,
         "median_rotation_deg": None, "median_translation_mm": None,
     }
+
+
+def test_an_images_camera_is_told_by_its_optics_so_the_pipeline_knows_its_noise(bench):
+    import math
+
+    optics = bench.CameraOptics()
+    for camera, fovy in (("zed_1", 70.0), ("ars_x/d405_a", 58.0)):
+        for height in (120, 480):
+            k = np.diag([1.0, height / 2 / math.tan(math.radians(fovy) / 2), 1.0])
+            assert optics(k, height) == camera

@@ -144,6 +144,10 @@ def ee_test_config(port: str) -> dict:
     )
 
 
+
+# A verdict of ``inspection_verdicts``: vision could not judge the part (InspectionReport.cannot_judge).
+CANNOT_JUDGE = "cannot judge"
+
 class Gpio:
     """The EE's GPIO: the limit switch closes when the width servo is at or below its zero."""
 
@@ -283,6 +287,8 @@ def pose_msg(m: np.ndarray) -> Pose:
 class Stack:
     """The whole ARS test set-up; see the module docstring."""
 
+    CANNOT_JUDGE = CANNOT_JUDGE
+
     def __init__(self) -> None:
         # RTDE at 125 Hz, as the twin streams it (a CB3's rate): the driver's own tests run the
         # e-Series' 500 Hz, and here the quarter rate took test_ars_requests.py from 343 to 294 CPU
@@ -313,7 +319,8 @@ class Stack:
         self.ars = ArsNode(self.ars_config, context=self.context)
         self.scene, self.mission = self.ars.ctx.scene, self.ars.ctx.mission
         self.world = World(self)
-        self.inspection_verdicts: list[bool | None] = []  # next verdicts (None: not inspected); none: pass
+        # Next verdicts (None: not inspected; CANNOT_JUDGE: no verdict); none left: pass.
+        self.inspection_verdicts: list[bool | str | None] = []
         self.misread_alignments = 0  # this many next CheckAlignment answers read the part 2 cm off
         self.inspection_gate: threading.Event | None = None  # set: the CRS stand-in answers
         self.inspections: list[str] = []
@@ -375,6 +382,10 @@ class Stack:
         if passed is None:  # the CRS did not inspect it (say, restarted and not expecting it yet)
             response.report.not_inspected = True
             response.report.reasons = ["the CRS is not expecting a part for inspection"]
+            return response
+        if passed == CANNOT_JUDGE:  # vision saw nothing wrong but could not settle it
+            response.report.cannot_judge = True
+            response.report.reasons = ["cannot judge the end fitting: depth too noisy to certify"]
             return response
         response.report.passed = passed and self.world.held is not None
         if not response.report.passed:

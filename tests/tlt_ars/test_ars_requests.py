@@ -67,7 +67,8 @@ def test_add_member_vertical_loads_rivet_grabs_inspects_places_and_rivets(stack)
     state = stack.ars.ctx.state
     rivets, struts = state.remaining["rivet_dispenser_x"], state.remaining["vertical_dispenser_x"]
     fired = len(stack.gpio.fired)
-    stack.inspection_verdicts[:] = [None]  # the first presentation is not inspected: shown again, kept
+    # The first presentation is not inspected, the second not judged: shown again each time, kept.
+    stack.inspection_verdicts[:] = [None, stack.CANNOT_JUDGE]
     handle = add_member(stack, "bay1/vertical/x0_y0", VERTICAL, feedback)
     assert handle.accepted  # the acknowledgement
     result = stack.result(handle)
@@ -88,7 +89,7 @@ def test_add_member_vertical_loads_rivet_grabs_inspects_places_and_rivets(stack)
     assert state.remaining["vertical_dispenser_x"] == struts - 1
     assert stack.gpio.fired[fired:] == ["rivet_gun_left"]  # the rivet gun fired once, through GPIO
     assert stack.world.held is None and not stack.ee_states[-1].part_grasped
-    assert stack.inspections[-2:] == ["bay1/vertical/x0_y0"] * 2
+    assert stack.inspections[-3:] == ["bay1/vertical/x0_y0"] * 3
     assert any(f.step.endswith("/Inspect Member/Present Part") for f in feedback)
 
 

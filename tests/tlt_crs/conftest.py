@@ -179,7 +179,7 @@ class ArsStandIn:
                 if report is not None and report.report.passed:
                     passed = True
                     break
-                if report is None or report.report.not_inspected:
+                if report is None or report.report.not_inspected or report.report.cannot_judge:
                     time.sleep(0.1)  # not judged: the real ARS keeps the part and presents it again
                     continue
                 discarded += 1
@@ -221,8 +221,11 @@ INSPECTION_CAMERA = {"ars_x": "zed_right", "ars_y": "zed_left"}
 class VisionStandIn:
     """Vision's inspection services, the ones the CRS calls."""
 
+    CANNOT_JUDGE = "cannot judge"  # a verdict of ``part_verdicts``: no verdict, the part is kept
+
     def __init__(self, node: Node, group: ReentrantCallbackGroup) -> None:
-        self.part_verdicts: dict[str, list[bool]] = {}  # member id -> verdicts of successive parts
+        # member id -> verdicts of successive looks: True, False, or CANNOT_JUDGE (no verdict)
+        self.part_verdicts: dict[str, list[bool | str]] = {}
         self.bay_passes = True
         self.part_calls: list[str] = []
         self.part_cameras: list[str] = []
@@ -253,11 +256,16 @@ class VisionStandIn:
         self.part_calls.append(request.member_id)
         self.part_cameras.append(request.camera)
         verdicts = self.part_verdicts.get(request.member_id, [])
-        passed = verdicts.pop(0) if verdicts else True
+        verdict = verdicts.pop(0) if verdicts else True
+        passed = verdict is True
         time.sleep(self.part_delay_s)
         response.report.target_id = request.member_id
         response.report.passed = passed
-        response.report.reasons = [] if passed else ["strut_tube chamfer 0.02 m above threshold"]
+        response.report.cannot_judge = verdict == self.CANNOT_JUDGE
+        response.report.reasons = (
+            [] if passed else ["cannot judge the end fitting: depth too noisy to certify"]
+            if verdict == self.CANNOT_JUDGE else ["strut_tube chamfer 0.02 m above threshold"]
+        )
         return response
 
     def _bay(self, request: Any, response: Any) -> Any:

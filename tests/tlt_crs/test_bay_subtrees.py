@@ -122,6 +122,30 @@ def test_too_many_failed_parts_fail_the_request_and_cancel_the_ars_goal(rig, crs
     crs.wait_for(lambda: rig.recorder.requests[0].outcome in ("canceled", "failed"), what="ARS goal ended")
 
 
+def test_a_part_vision_cannot_judge_is_kept_and_looked_at_again_not_discarded(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    undecided = rig.vision.CANNOT_JUDGE
+    rig.vision.part_verdicts[member.id] = [undecided, undecided, True]
+    assert crs.tick_until(add_diagonal(ctx, member), timeout=60.0) == Status.SUCCESS
+    assert rig.vision.part_calls == [member.id] * 3  # one part, looked at three times
+    assert ctx.model.discarded.get("diagonal_dispenser_x", 0) == 0
+    assert ctx.model.states[member.id] == RIVETED
+
+
+def test_a_part_vision_never_judges_becomes_a_fault_after_the_looks_allowed(rig, crs, tmp_path):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+    ctx.board.set("inspection_looks", 2)
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    rig.vision.part_verdicts[member.id] = [rig.vision.CANNOT_JUDGE] * 4
+    subtree = add_diagonal(ctx, member)
+    assert crs.tick_until(subtree, timeout=60.0) == Status.FAILURE
+    decorator = subtree.children[1].children[1]
+    assert "vision could not judge the part in 2 looks" in decorator.feedback_message
+    assert ctx.model.discarded.get("diagonal_dispenser_x", 0) == 0
+    assert ctx.model.states[member.id] == NOT_PLACED
+
+
 def test_ars_failure_result_leaves_the_member_unplaced_with_the_reason(rig, crs, tmp_path):
     ctx = crs.make_context(rig, crs.fast_config(tmp_path))
     member = _member(ctx, "bay1/diagonal/face_y1")

@@ -349,3 +349,46 @@ def test_a_held_strut_is_aligned_from_its_end_fittings():
     one = held_part_alignment("vertical", fittings, seen[:1], at_place, TOL, gate=0.1)
     assert not one.aligned and one.held is None
     assert one.reason == "1 end fitting(s) of the part seen within 100 mm of their place; 2 needed"
+
+
+def _refused(o: Observation, why: str = "depth too noisy to certify") -> Observation:
+    """``o`` with its pose left uncertified for ``why``, as on a depth too noisy to place it."""
+    e = o.estimate
+    cert = dataclasses.replace(e.certificate, certified=False, reason=why)
+    return dataclasses.replace(o, estimate=dataclasses.replace(e, certificate=cert))
+
+
+def test_a_fitting_seen_at_its_place_but_not_certified_cannot_be_judged_not_missing():
+    obs = _strut(np.random.default_rng(5))
+    fittings = [i for i, o in enumerate(obs) if o.object_class == "end_fitting"]
+    obs[fittings[1]] = _refused(obs[fittings[1]])
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and rep.cannot_judge
+    assert len(rep.reasons) == 1 and rep.reasons[0].startswith("cannot judge the end fitting at (")
+    assert "depth too noisy to certify" in rep.reasons[0]
+    # Both refused: still no verdict.
+    obs[fittings[0]] = _refused(obs[fittings[0]])
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert rep.cannot_judge and len(rep.reasons) == 2
+
+
+def test_a_missing_fitting_is_a_verdict_though_the_other_cannot_be_judged():
+    obs = _strut(np.random.default_rng(6), missing="b")
+    fitting = next(i for i, o in enumerate(obs) if o.object_class == "end_fitting")
+    obs[fitting] = _refused(obs[fitting])
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and not rep.cannot_judge
+    assert any(r.startswith("missing end fitting: 0 of 2 found") for r in rep.reasons), rep.reasons
+    assert any(r.startswith("cannot judge the end fitting") for r in rep.reasons), rep.reasons
+
+
+def test_an_uncertified_fitting_away_from_both_ends_is_not_taken_for_either():
+    obs = _strut(np.random.default_rng(7), missing="b")
+    fitting = next(i for i, o in enumerate(obs) if o.object_class == "end_fitting")
+    stray = obs[fitting].estimate
+    moved = dataclasses.replace(stray, translation=stray.translation + np.array([0.0, 0.1, 0.0]))
+    obs.append(_refused(Observation("end_fitting", moved)))
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and not rep.cannot_judge
+    assert any(r.startswith("missing end fitting: 1 of 2") for r in rep.reasons), rep.reasons
+    assert any(r.startswith("end_fitting: pose not certified") for r in rep.reasons), rep.reasons

@@ -301,18 +301,29 @@ def _segmenting_with(rig: Rig, segmenter):
 def test_a_real_zeds_depth_at_0_9_m_cannot_certify_end_fittings_and_the_report_says_so(rig):
     """Through the ZED 2i's depth (config/twin/cameras.yaml) and with the node told its noise
     (node.yaml depth_noise.cameras), a good strut 0.9 m away is posed, its tube certified, and its
-    end fittings refused as out of the noise's reach: never passed on a guess."""
+    end fittings refused as out of the noise's reach: the report says it cannot judge them, never
+    a pass on a guess and never a missing fitting that is there."""
     _show(rig, "vertical_dispenser_x/2")
     report = rig.call(
         InspectPart,
         ros_names.VISION_INSPECT_PART,
         InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
     ).report
-    assert not report.passed
+    assert not report.passed and report.cannot_judge
     assert any("depth too noisy to certify" in r for r in report.reasons), list(report.reasons)
+    assert all(r.startswith("cannot judge the end fitting") for r in report.reasons), list(report.reasons)
     tubes = [p for p in report.poses if p.object_class == "strut_tube"]
     assert tubes and all(p.certified for p in tubes)
     assert not any(p.certified for p in report.poses if p.object_class == "end_fitting")
+    # A fitting that is not there is missing however noisy the depth: a verdict, not a doubt.
+    _show(rig, "vertical_dispenser_x/0")  # built without end fitting b
+    missing = rig.call(
+        InspectPart,
+        ros_names.VISION_INSPECT_PART,
+        InspectPart.Request(member_id="bay1/vertical/x0_y1", part_kind="vertical", camera="zed_1"),
+    ).report
+    assert not missing.passed and not missing.cannot_judge
+    assert any(r.startswith("missing end fitting") for r in missing.reasons), list(missing.reasons)
 
 
 def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_them(rig):

@@ -77,7 +77,8 @@ class PresentPart(ServiceCall):
     ``RequestData.alignment`` = None (the part was moved since any earlier alignment).
     RUNNING: waiting for the CRS's service or its answer; after no answer, or an answer that judged
     nothing (``not_inspected``: the CRS was not expecting the part, say restarted and not started
-    again, or it withdrew it), presenting again after ``PRESENT_AGAIN_S``.
+    again, or it withdrew it; ``cannot_judge``: vision saw nothing wrong but could not settle it),
+    presenting again after ``PRESENT_AGAIN_S``.
     SUCCESS: a report judged the part, passed or not (:class:`PartPassed` tells which).
     FAILURE: no judgement within ``timeouts.present_part_s`` (time paused not counted); the part
     is kept (never discarded for a failure of the hand-off, only for a judgement).
@@ -127,6 +128,9 @@ class PresentPart(ServiceCall):
         report = response.report
         if report.not_inspected:
             return False, "; ".join(report.reasons) or "not inspected"
+        if report.cannot_judge and not report.passed:
+            # No verdict: the part is kept and presented again, never discarded on it.
+            return False, "vision cannot judge the part: " + ("; ".join(report.reasons) or "no reason given")
         self.report = report
         self.ctx.data.alignment = None
         return True, ""

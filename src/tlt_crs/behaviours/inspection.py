@@ -99,9 +99,11 @@ def presentation_lost(request: ArsRequest, since: float) -> str:
 class ForwardResult(Action):
     """Answer the ARS's waiting call with vision's report (the forwarded result).
 
-    Reads: the report of ``inspect``; the inspection desk. Writes: ``passed``, ``reasons``; an
-    event ``INSPECTION_PASSED`` (info) or ``INSPECTION_FAILED`` (warning) whose text starts with
-    the member id, so the ground can count inspections per member.
+    Reads: the report of ``inspect``; the inspection desk. Writes: ``passed``, ``cannot_judge``,
+    ``reasons``; an event ``INSPECTION_PASSED`` (info), ``INSPECTION_FAILED`` (warning) or, where
+    vision could not judge the part (no verdict: the ARS keeps it and presents it again),
+    ``INSPECTION_UNDECIDED`` (warning), whose text starts with the member id, so the ground can
+    count inspections per member.
     SUCCESS when forwarded to a call waiting for it, whether the part passed or not.
     RUNNING while no call for the member waits (the ARS gave its call up and has not presented the
     part again yet). FAILURE if there is nothing to forward, or, while waiting for a call, as
@@ -114,6 +116,7 @@ class ForwardResult(Action):
         self.ctx = request.ctx
         self.inspect = inspect
         self.passed = False
+        self.cannot_judge = False
         self.reasons: list[str] = []
         self._started = 0.0
 
@@ -126,6 +129,7 @@ class ForwardResult(Action):
             return self.fail("no inspection report to forward")
         report = response.report
         self.passed = bool(report.passed)
+        self.cannot_judge = not self.passed and bool(report.cannot_judge)
         self.reasons = list(report.reasons)
         member = self.req.member.id
         if not self.ctx.desk.answer(member, report):
@@ -134,20 +138,29 @@ class ForwardResult(Action):
                 return self.fail(why)
             self.feedback_message = "the ARS gave its call up: waiting for it to present the part again"
             return Status.RUNNING
-        self.feedback_message = "passed" if self.passed else "failed: " + "; ".join(self.reasons)
+        reasons = "; ".join(self.reasons) or "no reason given"
         if self.passed:
+            self.feedback_message = "passed"
             self.ctx.event(1, "INSPECTION_PASSED", f"{member}: part passed inspection")
+        elif self.cannot_judge:
+            self.feedback_message = "cannot judge: " + reasons
+            self.ctx.event(2, "INSPECTION_UNDECIDED", f"{member}: vision cannot judge the part: {reasons}")
         else:
+            self.feedback_message = "failed: " + reasons
             reasons = "; ".join(self.reasons) or "no reason given"
             self.ctx.event(2, "INSPECTION_FAILED", f"{member}: part failed inspection: {reasons}")
         return Status.SUCCESS
 
 
 class UntilPartPasses(py_trees.decorators.Decorator):
-    """Repeat Inspection Check while parts fail, up to blackboard ``inspection_attempts`` parts.
+    """Repeat Inspection Check while parts fail, up to blackboard ``inspection_attempts`` parts,
+    and while vision cannot judge the part presented, up to ``inspection_looks`` looks at it.
 
-    SUCCESS: a part passed. RUNNING: checking, or waiting for the next part after a failed one.
-    FAILURE: the check failed, or ``inspection_attempts`` parts failed (reasons of the last one).
+    SUCCESS: a part passed. RUNNING: checking, or waiting for the next part after a failed one, or
+    for the same part presented again after a look that could not judge it (a look does not count
+    as a failed part: the ARS keeps the part). FAILURE: the check failed, ``inspection_attempts``
+    parts failed (reasons of the last one), or ``inspection_looks`` looks in a row could not judge
+    the part (the fault then asks the operator).
     """
 
     def __init__(self, ctx: CrsContext, child: py_trees.behaviour.Behaviour, forward: ForwardResult) -> None:
@@ -157,9 +170,11 @@ class UntilPartPasses(py_trees.decorators.Decorator):
         self.ctx = ctx
         self.forward = forward
         self.failures = 0
+        self.looks = 0
 
     def initialise(self) -> None:
         self.failures = 0
+        self.looks = 0
 
     def update(self) -> Status:
         status = self.decorated.status
@@ -171,9 +186,19 @@ class UntilPartPasses(py_trees.decorators.Decorator):
         if self.forward.passed:
             self.feedback_message = "part passed inspection"
             return Status.SUCCESS
+        reasons = "; ".join(self.forward.reasons) or "no reason given"
+        if self.forward.cannot_judge:
+            self.looks += 1
+            looks = int(self.ctx.board.get("inspection_looks", 3))
+            if self.looks >= looks:
+                self.feedback_message = f"vision could not judge the part in {self.looks} looks: {reasons}"
+                return Status.FAILURE
+            self.feedback_message = f"look {self.looks} could not judge the part ({reasons}); looking again"
+            self.decorated.stop(Status.INVALID)
+            return Status.RUNNING
+        self.looks = 0
         self.failures += 1
         attempts = int(self.ctx.board.get("inspection_attempts", 2))
-        reasons = "; ".join(self.forward.reasons) or "no reason given"
         if self.failures >= attempts:
             self.feedback_message = f"{self.failures} part(s) failed inspection, last: {reasons}"
             return Status.FAILURE
