@@ -316,23 +316,38 @@ def inspect_cross_frame(
     hw = bay_width / 2
     square = np.array([[x, y, 0.0] for x, y in ((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))])
     joints, joint_bad = _split(observations, "corner_joint")
+    seen = [o for o in _uncertified(observations, "corner_joint") if o.estimate is not None]
+    taken: set[int] = set()  # ids of the uncertified joints taken as seen at their corner
+    unsure: list[str] = []
     found: dict[int, int] = {}  # corner -> index into joints
     for i, c in enumerate(square @ rot.T + t):
         dists = [np.linalg.norm(np.asarray(j.translation) - c) for j in joints]
         order = [int(k) for k in np.argsort(dists) if k not in found.values()] if joints else []
-        if not order or dists[order[0]] > tol.position * 4:
-            reasons.append(f"missing corner joint at corner {i}")
-        else:
+        if order and dists[order[0]] <= tol.position * 4:
             found[i] = order[0]
+            continue
+        near = [o for o in seen if np.linalg.norm(np.asarray(o.estimate.translation) - c) <= tol.position * 4]
+        if near:
+            # The joint is there; the view could not place it well enough to check it.
+            taken.update(id(o) for o in near)
+            why = near[0].estimate.certificate.reason or "not certified"
+            unsure.append(f"cannot judge the corner joint at corner {i}: seen there, its pose not "
+                          f"certified ({why})")
+        else:
+            reasons.append(f"missing corner joint at corner {i}")
     if any(r.startswith("missing corner joint") for r in reasons):
-        reasons.extend(joint_bad)
-    elif found:
+        reasons.extend(r for o, r in zip(_uncertified(observations, "corner_joint"), joint_bad, strict=True)
+                       if id(o) not in taken)
+    elif len(found) > 1:
         corners = list(found)
         residuals = _rigid_residuals(
             square[corners], np.array([np.asarray(joints[found[i]].translation) for i in corners])
         )
         reasons += [f"corner joint at corner {i} off by {r * 1000:.1f} mm"
                     for i, r in zip(corners, residuals, strict=True) if r > tol.position]  # fmt: skip
+    if unsure and not reasons:
+        return InspectionReport(target_id, "cross_frame", False, tuple(unsure), used, cannot_judge=True)
+    reasons += unsure
     return InspectionReport(target_id, "cross_frame", not reasons, tuple(reasons), used)
 
 

@@ -392,3 +392,17 @@ def test_an_uncertified_fitting_away_from_both_ends_is_not_taken_for_either():
     assert not rep.passed and not rep.cannot_judge
     assert any(r.startswith("missing end fitting: 1 of 2") for r in rep.reasons), rep.reasons
     assert any(r.startswith("end_fitting: pose not certified") for r in rep.reasons), rep.reasons
+
+
+def test_a_corner_joint_seen_at_its_corner_but_not_certified_cannot_be_judged_not_missing():
+    obs = _cross_frame(np.random.default_rng(8))
+    joints = [i for i, o in enumerate(obs) if o.object_class == "corner_joint"]
+    obs[joints[2]] = _refused(obs[joints[2]])
+    rep = inspect_cross_frame("c", MISSION.bay_width, obs, TOL)
+    assert not rep.passed and rep.cannot_judge
+    assert len(rep.reasons) == 1 and rep.reasons[0].startswith("cannot judge the corner joint at corner 2")
+    # A joint that is not there is still a verdict beside a doubtful one.
+    gone = _cross_frame(np.random.default_rng(8), drop_corner=0)
+    gone[2] = _refused(gone[2])
+    rep = inspect_cross_frame("c", MISSION.bay_width, gone, TOL)
+    assert not rep.passed and not rep.cannot_judge and "missing corner joint at corner 0" in rep.reasons
