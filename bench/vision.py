@@ -304,6 +304,9 @@ def main() -> int:
     p.add_argument("--camera-model", choices=("realistic", "exact"), default="realistic",
                    help="the images through the twin's camera models (config/twin/cameras.yaml), the "
                         "node told each camera's noise (node.yaml depth_noise.cameras); or exact")
+    p.add_argument("--lighting", default="",
+                   help="light the images by this preset of config/twin/lighting.yaml (lunar: a low, "
+                        "hard sun) instead of the renderer's random lights")
     p.add_argument("--depth-noise", type=float, default=0.0,
                    help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
     p.add_argument("--image-noise", type=float, default=0.0,
@@ -343,8 +346,9 @@ def main() -> int:
             root = Path(tmp)
             print(f"rendering {args.count} held-out images (seed {args.seed}) ...", flush=True)
             cameras = str(DEFAULT_CAMERAS) if args.camera_model == "realistic" else ""
-            render_set(root, args.count, RenderSettings(seed=args.seed, mission=str(args.mission),
-                                                        cameras=cameras), progress_every=10)
+            settings = RenderSettings(seed=args.seed, mission=str(args.mission), cameras=cameras,
+                                      lighting=args.lighting)
+            render_set(root, args.count, settings, progress_every=10)
         images = ImageSet(root)
         if images.classes != classes:
             print(f"{root}: classes {images.classes} differ from the model's {classes}", file=sys.stderr)
@@ -405,6 +409,7 @@ def main() -> int:
     print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
           f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
           + f", {args.camera_model} cameras"
+          + (f", {args.lighting} light" if args.lighting else "")
           + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else "")
           + (f", image noise {args.image_noise:g} grey levels" if args.image_noise else ""))
     cut = ("cut where the depth jumps" if segmenter.depth_split

@@ -160,12 +160,11 @@ class CameraRenderer:
         self._scene = mujoco.MjvScene(model, maxgeom=max(1000, 2 * model.ngeom))
         self.option = mujoco.MjvOption()
         self.option.sitegroup[:] = 0  # sites are bookkeeping points, not things a camera sees
-        for flag in (
-            mujoco.mjtRndFlag.mjRND_SHADOW,
-            mujoco.mjtRndFlag.mjRND_REFLECTION,
-            mujoco.mjtRndFlag.mjRND_SKYBOX,
-        ):
+        for flag in (mujoco.mjtRndFlag.mjRND_REFLECTION, mujoco.mjtRndFlag.mjRND_SKYBOX):
             self._scene.flags[flag] = False  # CPU rendering: these cost most and tell vision nothing
+        # Shadows cost as much; they are drawn only where a light casts them (a hard, low sun:
+        # tlt_sim.model.lighting).
+        self._scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(np.any(model.light_castshadow))
         self.labels = GeomLabels(model)
         extent = model.stat.extent
         self._near, self._far = model.vis.map.znear * extent, model.vis.map.zfar * extent

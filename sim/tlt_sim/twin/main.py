@@ -12,10 +12,11 @@ the CPU allows); the drivers run with ``use_sim_time``. Cameras and ground truth
 on demand (:mod:`tlt_sim.twin.ros_streams`), the cameras through the sensor models of
 ``config/twin/cameras.yaml`` (depth noise and holes, image noise and exposure, mount errors:
 :mod:`tlt_sim.model.camera_sensor`; ``--camera-model exact`` for the exact render, for
-diagnosis). Runs until SIGINT/SIGTERM or ``--duration`` seconds of sim time, then withdraws its
-links. ``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens MuJoCo's viewer window on the
-running model for people (:mod:`tlt_sim.twin.viewer`); without a display the twin refuses to
-start. Exit status 0, or 2 for a bad configuration or no viewer.
+diagnosis), by the light of ``config/twin/lighting.yaml`` (``--lighting lunar``: a low, hard
+sun). Runs until SIGINT/SIGTERM or ``--duration`` seconds of sim time, then withdraws its links.
+``--viewer`` (or ``viewer.enabled`` in ``run.yaml``) opens MuJoCo's viewer window on the running
+model for people (:mod:`tlt_sim.twin.viewer`); without a display the twin refuses to start.
+Exit status 0, or 2 for a bad configuration or no viewer.
 
     python -m tlt_sim.twin.main --scenario config/twin/scenarios/device_faults.yaml --rtf 0
 """
@@ -40,6 +41,7 @@ from tlt_drivers.gpio.config import run_dir as default_run_dir
 from tlt_sim.model import names
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS, load_camera_sensors, offset_mounts
 from tlt_sim.model.config import DEFAULT_EDU
+from tlt_sim.model.lighting import apply_lighting, load_lighting
 from tlt_sim.model.scene import ModelCompileError, Scene
 from tlt_sim.twin.pacing import Pacer
 from tlt_sim.twin.settings import DEFAULT_SETTINGS, load_settings
@@ -61,6 +63,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--settings", type=Path, default=DEFAULT_SETTINGS, help="run settings (run.yaml)")
     p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
                    help="what the cameras make of the render (cameras.yaml)")
+    p.add_argument("--lighting", help="a preset of config/twin/lighting.yaml (lunar: a low, hard sun), or "
+                   "`model` for the model's own lights; default: the file's `lighting`")
     p.add_argument("--camera-model", choices=("realistic", "exact"),
                    help="exact: the render's colours and depth, cameras exactly on their mounts (for "
                         "diagnosis); default: cameras.yaml's `realistic`")
@@ -99,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         settings = load_settings(args.settings)
         sensors = load_camera_sensors(args.cameras)
+        lighting = load_lighting(name=args.lighting)
         if args.camera_model:
             sensors = dataclasses.replace(sensors, realistic=args.camera_model == "realistic")
         changes: dict = {}
@@ -119,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
             probe()  # refuse before anything is built or served
         # An empty --scenario (a launch set's unset variable) means the nominal run.
         scene = Scene(args.edu, args.mission, args.scenario or None)
+        apply_lighting(scene.model, lighting)
         if sensors.realistic:
             offset_mounts(scene.model, sensors, names.cameras())
             mujoco.mj_forward(scene.model, scene.data)

@@ -231,3 +231,14 @@ def test_images_through_the_camera_models_have_the_cameras_holes_and_noise_and_r
     both = seen & (b.depth > 0)
     assert 0 < np.median(np.abs(b.depth[both] - a.depth[both])) < 0.01, "noise of millimetres"
     assert not np.array_equal(a.rgb, b.rgb)
+
+
+def test_images_lit_by_the_lunar_sun_are_darker_than_by_the_random_lights():
+    lit = TwinRenderer(RenderSettings(width=W, height=H, seed=6))
+    moon = TwinRenderer(RenderSettings(width=W, height=H, seed=6, lighting="lunar"))
+    try:
+        means = [(lit.sample(i)[0].rgb.mean(), moon.sample(i)[0].rgb.mean()) for i in range(3)]
+    finally:
+        lit.close()
+        moon.close()
+    assert all(dark < bright for bright, dark in means), means

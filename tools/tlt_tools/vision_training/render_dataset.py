@@ -99,6 +99,9 @@ class RenderSettings:
     # The twin's camera models (config/twin/cameras.yaml) the images are taken through; "" for the
     # exact render.
     cameras: str = ""
+    # A preset of config/twin/lighting.yaml every image is lit by instead of the random lights
+    # (lunar: a low, hard sun); "" for the random lights.
+    lighting: str = ""
 
 
 # -- geometry helpers ------------------------------------------------------------------------------
@@ -190,6 +193,11 @@ class TwinRenderer:
             from tlt_sim.model.camera_sensor import load_camera_sensors
 
             self.sensors = load_camera_sensors(settings.cameras)
+        self.lighting = None
+        if settings.lighting:
+            from tlt_sim.model.lighting import load_lighting
+
+            self.lighting = load_lighting(name=settings.lighting)
         mission = load_mission(settings.mission)
         rng = np.random.default_rng([settings.seed, 0])
         table = defect_table(mission, settings.defective_fraction, rng, settings.bend_deg)
@@ -279,6 +287,10 @@ class TwinRenderer:
         m.light_ambient[:] = rng.uniform(0.0, 0.2)
         m.vis.headlight.ambient[:] = rng.uniform(0.1, 0.45)
         m.vis.headlight.diffuse[:] = rng.uniform(0.2, 0.7)
+        if self.lighting is not None:
+            from tlt_sim.model.lighting import apply_lighting
+
+            apply_lighting(m, self.lighting)
 
     def _place_camera(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
         """Move camera ``name`` (its optics) to a world pose, in its body's frame."""
@@ -594,6 +606,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=True,
                    help="multisampled RGB (as the detectors see); --no-antialias is cheaper")
     p.add_argument("--progress-every", type=int, default=1, help="print progress every k images")
+    p.add_argument("--lighting", default="",
+                   help="light every image by this preset of config/twin/lighting.yaml (lunar) "
+                        "instead of random lights")
     p.add_argument("--cameras", type=Path,
                    help="take the images through these camera models (config/twin/cameras.yaml); "
                         "default: the exact render")
@@ -634,6 +649,7 @@ def main(argv: list[str] | None = None) -> int:
         antialias=args.antialias,
         scenes=scenes,
         cameras=str(args.cameras) if args.cameras else "",
+        lighting=args.lighting,
     )
     try:
         render_set(args.out, args.count, settings, progress_every=args.progress_every)
