@@ -84,7 +84,12 @@ class CrsNode(LeanNode):
         from tlt_interfaces.srv import SetBlackboardValue
 
         self.ctx = CrsContext(self, config, mission, model, registry, index=index)
-        self.processor = CommandProcessor(self.ctx)
+        self.finished = False
+        self._interrupt = False
+        # What a command does to the node: the callbacks read the tree only when a command runs.
+        self.processor = CommandProcessor(
+            self.ctx, hold=self._hold_motions, stop_tree=self._request_interrupt, on_stopped=self._stopped
+        )
         self.commands: CommandQueue = self.processor.queue
         self.root = build_crs_tree(self.ctx, self.processor)
         # The root is ticked directly: py_trees' BehaviourTree.tick walks every node after each tick
@@ -94,14 +99,9 @@ class CrsNode(LeanNode):
         self.status_publisher = TreeStatusPublisher(
             self, "crs", topic=ros_names.tree_status_topic("crs"), period_s=1.0 / config.status_rate_hz
         )
-        self.finished = False
         # Called at the end of each tick, under the context's lock (the ground bridge notes steps).
         self.tick_listeners: list[Callable[[], None]] = []
-        self._interrupt = False
         self._model_changed = False
-        self.processor.hold = self._hold_motions
-        self.processor.stop_tree = self._request_interrupt
-        self.processor.on_stopped = self._stopped
         model.listeners.append(self._on_model_change)
 
         self._progress_type = MissionProgress
