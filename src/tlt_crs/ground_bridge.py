@@ -86,7 +86,7 @@ class GroundBridge:
         # so a GSW following the build knows that a CRS (re)started and needs its Start again.
         mission, model = node.ctx.mission, node.ctx.model
         built = f"{model.bays_built()}/{mission.bay_count} bay(s) built"
-        self._send_event(1, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
+        self._send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
         self._forward_ars_tree_statuses()
         # Telemetry has its own group: in the node's default one it waits behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status may never go out.
