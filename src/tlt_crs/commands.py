@@ -4,11 +4,18 @@ Interface for the ground link (or any other front end)::
 
     queue.submit("set_blackboard_value", {"key": "clear_fault", "value": True}, on_ack)
 
-``on_ack(stage, reason)`` is called with ``AckStage.ACCEPTED`` or ``AckStage.REJECTED`` (with the
-reason) from within ``submit``; an accepted command is then executed by the tree's Process Ground
-Command step (one per tick) and acknowledged again with ``COMPLETED`` or ``FAILED`` (reason). A
-rejected or failed command changes nothing. ``queue.check(name, params)`` returns the refusal
-reason without queueing, for a link that wants to refuse before it acknowledges on its own.
+A command is validated twice, with the same rules (:meth:`CommandProcessor.check`): when it
+arrives, and again when the tree's Process Ground Command step (one per tick) executes it, since
+the CRS's state may have changed while it waited. Its acknowledgements go to ``on_ack(stage,
+reason)``: ``REJECTED`` (with the reason) when refused on arrival, or ``ACCEPTED`` exactly once
+and then one of ``COMPLETED`` or ``FAILED`` (reason), the latter also when the execution check
+refuses it. A rejected or failed command changes nothing.
+
+``submit`` does the arrival check and the acceptance itself. A front end that acknowledges on its
+own (the CCSDS ground link, which refuses a bad packet and a command the CRS refuses with one
+``rejected`` ack) calls ``queue.check(name, params)`` on arrival, acknowledges, and hands the
+accepted command over with ``queue.put_accepted(name, params, on_outcome)``, whose callback hears
+only ``COMPLETED`` or ``FAILED``.
 
 Commands and their parameters (the names of ``config/ccsds/definitions.yaml``):
 
@@ -72,7 +79,8 @@ class Command:
 
 
 class CommandQueue:
-    """Thread-safe queue of accepted commands; ``submit`` checks and acknowledges at once."""
+    """Thread-safe queue of accepted commands, with the arrival check (``check``: why a command
+    would be refused now, None if it would not)."""
 
     def __init__(self, check: Callable[[str, Mapping[str, Any]], str | None]) -> None:
         self._check = check
@@ -81,6 +89,7 @@ class CommandQueue:
         self._ids = itertools.count(1)
 
     def check(self, name: str, params: Mapping[str, Any] | None = None) -> str | None:
+        """Why ``name`` with ``params`` would be refused on arrival now; None if it would be accepted."""
         try:
             return self._check(name, dict(params or {}))
         except Exception as exc:  # a checker bug must be a refusal, not a crash of the caller
@@ -89,15 +98,29 @@ class CommandQueue:
     def submit(
         self, name: str, params: Mapping[str, Any] | None = None, on_ack: AckCallback | None = None
     ) -> Command:
+        """Check the command, then acknowledge it REJECTED, or ACCEPTED and queue it."""
         command = Command(name, dict(params or {}), on_ack, next(self._ids))
         refusal = self.check(name, command.params)
         if refusal:
             command.ack(AckStage.REJECTED, refusal)
             return command
+        # Acknowledged before it is queued: the tree's outcome can never overtake the acceptance.
+        command.ack(AckStage.ACCEPTED, "")
+        self._append(command)
+        return command
+
+    def put_accepted(
+        self, name: str, params: Mapping[str, Any] | None = None, on_outcome: AckCallback | None = None
+    ) -> Command:
+        """Queue a command its front end has already checked and acknowledged as accepted;
+        ``on_outcome`` hears only COMPLETED or FAILED."""
+        command = Command(name, dict(params or {}), on_outcome, next(self._ids))
+        self._append(command)
+        return command
+
+    def _append(self, command: Command) -> None:
         with self._lock:
             self._items.append(command)
-        command.ack(AckStage.ACCEPTED, "")
-        return command
 
     def pop(self) -> Command | None:
         if not self._items:  # the tick's common case; a command appended meanwhile waits a tick
@@ -174,23 +197,34 @@ class _Operation:
 
 
 class CommandProcessor:
-    """Checks and executes commands against one CRS context.
+    """Checks and executes commands against one CRS context, with what the CRS node does for them:
 
-    ``hold`` is called on Pause (the node pre-empts running actuator motions); ``stop`` on Stop
-    (the node interrupts the tree and puts the lifter in Safe, then shuts down).
+    * ``hold``: on Pause (and a hold the CRS decides), pre-empt the running actuator motions;
+    * ``stop_tree``: on Stop, interrupt the tree (the processor then puts the lifter in Safe and
+      forwards STOP);
+    * ``on_stopped``: once Stop has run its course, end the node.
     """
 
-    def __init__(self, ctx: CrsContext) -> None:
+    def __init__(
+        self,
+        ctx: CrsContext,
+        *,
+        hold: Callable[[], None],
+        stop_tree: Callable[[], None],
+        on_stopped: Callable[[], None],
+    ) -> None:
         self.ctx = ctx
         self.queue = CommandQueue(self.check)
-        self.hold: Callable[[], None] = lambda: None
-        self.stop_tree: Callable[[], None] = lambda: None
-        self.on_stopped: Callable[[], None] = lambda: None
+        self._hold = hold
+        self._stop_tree = stop_tree
+        self._on_stopped = on_stopped
         self._operations: list[_Operation] = []
         self.last = ""
 
     # ----- checks (no state change) -----
     def check(self, name: str, params: Mapping[str, Any]) -> str | None:
+        """Why the command would be refused in the CRS's state now (None: it would not); the rules
+        of the table above, applied on arrival and again on execution."""
         ctx = self.ctx
         if name not in COMMANDS:
             return f"unknown command '{name}' (known: {', '.join(COMMANDS)})"
@@ -257,7 +291,7 @@ class CommandProcessor:
         """Hold the build as Pause does (mission clock, the CRS's running motions, PAUSE to each
         ARS), for ``reason`` rather than the operator; :meth:`release_build` ends it."""
         self.ctx.clock.pause(reason)
-        self.hold()
+        self._hold()
         self._forward(Command("pause", {}))
 
     def release_build(self, reason: str) -> None:
@@ -272,7 +306,8 @@ class CommandProcessor:
         command = self.queue.pop()
         if command is None:
             return False
-        refusal = self.check(command.name, command.params)  # the state may have changed since submit
+        # The execution check: the state may have changed since the command was accepted.
+        refusal = self.check(command.name, command.params)
         self.last = command.name
         if refusal:
             command.ack(AckStage.FAILED, refusal)
@@ -307,7 +342,7 @@ class CommandProcessor:
 
     def _do_pause(self, command: Command) -> None:
         self.ctx.clock.pause()
-        self.hold()
+        self._hold()
         self.ctx.event(1, "PAUSED", "pause command: tree halted, actuators holding")
         self._forward(command)
 
@@ -322,7 +357,7 @@ class CommandProcessor:
         ctx = self.ctx
         ctx.stopped = True
         ctx.board.set("started", False)
-        self.stop_tree()
+        self._stop_tree()
         ctx.event(2, "STOPPING", "stop command: canceling work, lifter to Safe, shutting down")
         steps: list[Any] = [
             _ServiceStep(
@@ -341,7 +376,7 @@ class CommandProcessor:
             )
         limit = max(ctx.config.timeouts.forward_s, ctx.config.timeouts.service_s)
         self._operations.append(
-            _Operation(command, steps, ctx.ros_seconds() + limit, False, lambda ok, why: self.on_stopped())
+            _Operation(command, steps, ctx.ros_seconds() + limit, False, lambda ok, why: self._on_stopped())
         )
 
     def _do_set_blackboard_value(self, command: Command) -> None:

@@ -8,7 +8,8 @@ One :class:`CrsContext` is built per CRS node (or per test) and handed to the su
 * ``cache`` holds the sensor topics (its ages are plain ROS time: a stale sensor is stale even
   when paused);
 * ``board`` reads and writes the py_trees blackboard keys of ``config/crs/writable_blackboard.yaml``;
-* ``event`` publishes ``tlt_interfaces/Event`` on ``/events`` and logs it.
+* ``event`` publishes ``tlt_interfaces/Event`` on ``/events``, logs it and tells each of
+  ``event_listeners`` (the ground bridge adds the ground link's sender).
 """
 
 from __future__ import annotations
@@ -143,6 +144,8 @@ class CrsContext:
         self.lock = threading.RLock()
         self._event_pub = node.create_publisher(Event, ros_names.EVENTS, 50)
         self._event_type = Event
+        # Told of every event after it is published: (severity, code, text).
+        self.event_listeners: list[Callable[[int, str, str], None]] = []
         from tlt_interfaces.msg import GripperState, LifterState
 
         self._hardware_topics = {
@@ -316,6 +319,11 @@ class CrsContext:
         self._event_pub.publish(msg)
         level = {0: logging.DEBUG, 1: logging.INFO, 2: logging.WARNING}.get(severity, logging.ERROR)
         _log.log(level, "[%s] %s", code, text)
+        for listener in self.event_listeners:
+            try:
+                listener(severity, code, text)
+            except Exception as exc:  # the ROS event went out; a listener's fault is not the tree's
+                _log.warning("event %s not passed on: %s", code, exc)
 
 
 __all__ = ["Board", "CrsContext", "MissionClock", "RunState"]

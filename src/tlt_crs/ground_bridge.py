@@ -1,31 +1,35 @@
 """The CCSDS ground link inside the CRS process: ground commands into the tree, telemetry out.
 
-Commands arrive authenticated on the link's receive thread. Each is checked against the CRS's
-state before the link acknowledges it (a Pause while not started, a blackboard write outside the
-writable registry or an actuator command while building is refused with the reason, and never
-acts), then queued for the tree, which processes it on its next tick (Fig. 13); the outcome goes
-back to the ground as the completed or failed acknowledgement.
+The bridge opens the link itself, handing it the CRS's command path. A command is validated once
+when it arrives, on the link's receive thread: the link's packet checks (size, CRC,
+authentication, replay, parameters), then the CRS's rules for its state (a Pause while not
+started, a blackboard write outside the writable registry or an actuator command while building is
+refused with the reason, and never acts). A refused command gets one *rejected* acknowledgement;
+an accepted one gets one *accepted* acknowledgement and is queued for the tree, which validates it
+again against the state it finds and executes it on its next tick (Fig. 13). The outcome goes back
+as one *completed* or *failed* acknowledgement.
 
 Telemetry, each packet at its rate in the definitions file: the CRS tree's encoded status
 (``tree_status``, one packet per part; the ARSs' as their TreeStatus messages arrive), mission
 progress (``hk_mission``), the tower model (``hk_tower``), and housekeeping from the mechanisms'
 state topics (``hk_lifter``, ``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once
-its topic has been heard); and every CRS event.
+its topic has been heard).
 
-A ``CRS_UP`` event goes to the ground when the bridge starts (a restarted CRS is seen as one).
+Every CRS event goes to the ground (the bridge is one of the context's event listeners), and a
+``CRS_UP`` event when the bridge starts (a restarted CRS is seen as one).
+
 ``mission_step`` goes out whenever the tree's running leaf, the current bay or the run state
 changes, with the CRS's ROS time: the ground's record of when each step of each member ran. The
 change is noted at the end of every tick and sent from the telemetry timer, so a step that runs
 for a single tick is still reported (sampled on a timer instead, a quick foundation rivet can go
-unseen on a loaded machine). Every bay inspection verdict is also reported as an event
-(``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``), as Inspection Check reports each part's.
+unseen on a loaded machine).
 """
 
 from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 import py_trees
@@ -63,33 +67,26 @@ class CrsTree(Protocol):
 
 
 class GroundBridge:
-    """Connects a :class:`GroundLink` to the CRS node (:class:`CrsTree`); the node's timers send
-    telemetry."""
+    """The CCSDS ground link of one CRS node (:class:`CrsTree`): opens the link from
+    ``link_config`` (:func:`tlt_common.ccsds.link_config.load_link_config`) with the CRS's command
+    path, and sends telemetry on the node's timers. :meth:`start` starts receiving commands.
 
-    def __init__(self, node: CrsTree, link: GroundLink) -> None:
+    Raises what :meth:`GroundLink.from_config` raises (ConfigError, KeyFileError,
+    ReplayStateError, OSError) before it touches the node.
+    """
+
+    def __init__(self, node: CrsTree, link_config: Mapping[str, Any]) -> None:
         self.node = node
-        self.link = link
-        link.validator = self._validate
-        link.on_command = self._on_command
+        self.link = GroundLink.from_config(
+            link_config, validator=self._check_on_arrival, on_command=self._queue_for_the_tree
+        )
         # Every CRS event also goes to the ground, where operators read the event log.
-        publish_event = node.ctx.event
-
-        def event(severity: int, code: str, text: str) -> None:
-            publish_event(severity, code, text)
-            try:
-                link.send_event(Severity(min(int(severity), Severity.CRITICAL)), code, text)
-            except Exception as exc:  # the ROS event went out; a ground link fault is not the tree's
-                _log.warning("event %s not sent to the ground: %s", code, exc)
-
-        node.ctx.event = event
+        node.ctx.event_listeners.append(self._send_event)
         # The node announced itself (CRS_UP) before this bridge existed; the ground hears it here,
         # so a GSW following the build knows that a CRS (re)started and needs its Start again.
         mission, model = node.ctx.mission, node.ctx.model
         built = f"{model.bays_built()}/{mission.bay_count} bay(s) built"
-        try:
-            link.send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
-        except Exception as exc:
-            _log.warning("CRS_UP not sent to the ground: %s", exc)
+        self._send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
         self._forward_ars_tree_statuses()
         # Telemetry has its own group: in the node's default one it waits behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status may never go out.
@@ -103,7 +100,7 @@ class GroundBridge:
             ("hk_ee", self.send_end_effectors),
             ("hk_arm_joints", self.send_arm_joints),
         ):
-            rate = link.defs.packet(kind).rate_hz
+            rate = self.link.defs.packet(kind).rate_hz
             if rate:
                 create_periodic_timer(node.ctx.node, 1.0 / rate, send, callback_group=telemetry)
         self._member_ids = {m.id for m in node.ctx.mission.members}
@@ -114,7 +111,15 @@ class GroundBridge:
         create_periodic_timer(
             node.ctx.node, 1.0 / node.ctx.config.tick_rate_hz, self.send_steps, callback_group=telemetry
         )
-        self._report_bay_inspections()
+
+    def start(self) -> GroundBridge:
+        """Start receiving ground commands."""
+        self.link.start()
+        return self
+
+    def close(self) -> None:
+        """Stop receiving and close the link."""
+        self.link.close()
 
     def send_housekeeping(self) -> None:
         """Every housekeeping packet now (the last word of a stopping CRS)."""
@@ -125,20 +130,30 @@ class GroundBridge:
             except Exception as exc:  # one packet that cannot be built must not cost the others
                 _log.warning("housekeeping not sent: %s", exc)
 
-    def _validate(self, command: GroundCommand) -> tuple[Reason, str] | None:
+    # ----- commands: validated on arrival, then queued for the tree -----
+    def _check_on_arrival(self, command: GroundCommand) -> tuple[Reason, str] | None:
+        """The CRS's rules for its state now, after the link's packet checks: a refusal becomes
+        the command's one *rejected* acknowledgement, else the link acknowledges it *accepted*."""
         refusal = self.node.commands.check(command.name, command.params)
         return (Reason.REFUSED, refusal) if refusal else None
 
-    def _on_command(self, command: GroundCommand) -> None:
-        def on_ack(stage: AckStage, reason: str) -> None:
-            # The link acknowledged acceptance itself; a refusal that raced the check above is a
-            # failure to execute, with the CRS's reason.
+    def _queue_for_the_tree(self, command: GroundCommand) -> None:
+        """Queue an accepted command; its outcome (the tree's execution check included) is its
+        one *completed* or *failed* acknowledgement."""
+
+        def on_outcome(stage: AckStage, reason: str) -> None:
             if stage is AckStage.COMPLETED:
                 self.link.complete(command, True)
-            elif stage in (AckStage.FAILED, AckStage.REJECTED):
+            else:
                 self.link.complete(command, False, Reason.EXECUTION_FAILED, reason)
 
-        self.node.commands.submit(command.name, command.params, on_ack)
+        self.node.commands.put_accepted(command.name, command.params, on_outcome)
+
+    def _send_event(self, severity: int, code: str, text: str) -> None:
+        try:
+            self.link.send_event(Severity(min(int(severity), Severity.CRITICAL)), code, text)
+        except Exception as exc:  # the ROS event went out; a ground link fault is not the tree's
+            _log.warning("event %s not sent to the ground: %s", code, exc)
 
     def _forward_ars_tree_statuses(self) -> None:
         """Forward the ARSs' encoded tree statuses to the ground as they come, part by part. The
@@ -281,25 +296,6 @@ class GroundBridge:
                     "status": part.status,
                 },
             )
-
-    def _report_bay_inspections(self) -> None:
-        """Wrap the verdict check of every ``Inspect Bay n`` call so each verdict becomes an event
-        (the tree's Test Bay only fails on a bad bay; a pass would otherwise leave no trace)."""
-        for behaviour in self.node.root.iterate():
-            check = getattr(behaviour, "response_ok", None)
-            if check is None or not behaviour.name.startswith("Inspect Bay "):
-                continue
-            bay = behaviour.name.removeprefix("Inspect Bay ")
-
-            def reported(response: Any, check=check, bay=bay) -> tuple[bool, str]:
-                ok, reason = check(response)
-                if ok:
-                    self.node.ctx.event(1, "BAY_INSPECTION_PASSED", f"bay {bay} passed inspection")
-                else:
-                    self.node.ctx.event(2, "BAY_INSPECTION_FAILED", f"bay {bay} failed inspection: {reason}")
-                return ok, reason
-
-            behaviour.response_ok = reported
 
     def _step_of(self, tip: Any) -> tuple[int | None, str, str]:
         """(bay, member or phase, step) of the running leaf ``tip``; bay None outside a bay's

@@ -9,8 +9,9 @@
   model change, and ``/events``.
 * Serves ``/crs/set_blackboard_value`` (the writable registry decides) and ``/crs/inspect_part``
   (the ARS's part inspection; see :mod:`tlt_crs.behaviours.inspection`).
-* Takes ground commands from :attr:`CrsNode.commands` (``submit(name, params, on_ack)``, see
-  :mod:`tlt_crs.commands`), the in-process interface the CCSDS ground link plugs into.
+* Takes ground commands through :attr:`CrsNode.commands` (see :mod:`tlt_crs.commands`):
+  ``submit(name, params, on_ack)`` in process (``--autostart``, tests), and with ``--ground-link``
+  over CCSDS (:mod:`tlt_crs.ground_bridge`, which checks each command on arrival and queues it).
 * Pause holds the build (running lifter/gripper/camera goals are canceled so the actuators hold;
   ARS goals keep their place and the ARSs get PAUSE); Resume continues; Stop cancels the work, puts
   the lifter in Safe, forwards STOP and ends the process with status 0.
@@ -84,7 +85,12 @@ class CrsNode(LeanNode):
         from tlt_interfaces.srv import SetBlackboardValue
 
         self.ctx = CrsContext(self, config, mission, model, registry, index=index)
-        self.processor = CommandProcessor(self.ctx)
+        self.finished = False
+        self._interrupt = False
+        # What a command does to the node: the callbacks read the tree only when a command runs.
+        self.processor = CommandProcessor(
+            self.ctx, hold=self._hold_motions, stop_tree=self._request_interrupt, on_stopped=self._stopped
+        )
         self.commands: CommandQueue = self.processor.queue
         self.root = build_crs_tree(self.ctx, self.processor)
         # The root is ticked directly: py_trees' BehaviourTree.tick walks every node after each tick
@@ -94,14 +100,9 @@ class CrsNode(LeanNode):
         self.status_publisher = TreeStatusPublisher(
             self, "crs", topic=ros_names.tree_status_topic("crs"), period_s=1.0 / config.status_rate_hz
         )
-        self.finished = False
         # Called at the end of each tick, under the context's lock (the ground bridge notes steps).
         self.tick_listeners: list[Callable[[], None]] = []
-        self._interrupt = False
         self._model_changed = False
-        self.processor.hold = self._hold_motions
-        self.processor.stop_tree = self._request_interrupt
-        self.processor.on_stopped = self._stopped
         model.listeners.append(self._on_model_change)
 
         self._progress_type = MissionProgress
@@ -282,22 +283,20 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, TowerModelError, OSError) as exc:
             print(f"tlt-crs: refused: {exc}", file=sys.stderr)
             return 2
-        link = bridge = None
+        bridge = None
         if args.ground_link is not None:
             from tlt_common.ccsds.auth import KeyFileError, ReplayStateError
             from tlt_common.ccsds.link_config import load_link_config
             from tlt_crs.ground_bridge import GroundBridge
-            from tlt_crs.ground_link.link import GroundLink
 
             try:
-                link = GroundLink.from_config(load_link_config(args.ground_link))
+                bridge = GroundBridge(node, load_link_config(args.ground_link))
             except (ConfigError, KeyFileError, ReplayStateError, OSError) as exc:
                 print(f"tlt-crs: refused: ground link: {exc}", file=sys.stderr)
                 node.destroy_node()
                 return 2
-            bridge = GroundBridge(node, link)
-            link.start()
-            _log.info("ground link on %s:%d", *link.address)
+            bridge.start()
+            _log.info("ground link on %s:%d", *bridge.link.address)
         if args.autostart:
             _autostart_when_ready(node)
         executor = DirectMultiThreadedExecutor(num_threads=4)
@@ -322,8 +321,8 @@ def main(argv: list[str] | None = None) -> int:
             silence_watch.stop()
             node.interrupt()
             node.ctx.desk.close("the CRS is stopping")
-            if link is not None:
-                link.close()
+            if bridge is not None:
+                bridge.close()
             # Callbacks still running when the node is destroyed use freed handles: give them
             # time to return first (the context is still valid: tlt_common.stop_signals).
             for exc in stop_executor(executor, 5.0):

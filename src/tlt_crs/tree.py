@@ -267,8 +267,14 @@ def bay_test(ctx: CrsContext, bay: int, actuators: Actuators) -> py_trees.behavi
     from tlt_interfaces.srv import InspectBay
 
     def inspection_ok(response: Any) -> tuple[bool, str]:
+        # Each verdict is an event: Test Bay only fails on a bad bay, and a pass would leave no trace.
         report = response.report
-        return bool(report.passed), "; ".join(report.reasons)
+        reasons = "; ".join(report.reasons)
+        if report.passed:
+            ctx.event(1, "BAY_INSPECTION_PASSED", f"bay {bay} passed inspection")
+        else:
+            ctx.event(2, "BAY_INSPECTION_FAILED", f"bay {bay} failed inspection: {reasons}")
+        return bool(report.passed), reasons
 
     inspect = ServiceCall(
         f"Inspect Bay {bay}",
