@@ -81,7 +81,7 @@ class GroundBridge:
             except Exception as exc:  # the ROS event went out; a ground link fault is not the tree's
                 _log.warning("event %s not sent to the ground: %s", code, exc)
 
-        node.ctx.event = event
+        node.ctx.event = event  # type: ignore[method-assign]  # the context's method, replaced after construction
         # The node announced itself (CRS_UP) before this bridge existed; the ground hears it here,
         # so a GSW following the build knows that a CRS (re)started and needs its Start again.
         mission, model = node.ctx.mission, node.ctx.model
@@ -299,7 +299,8 @@ class GroundBridge:
                     self.node.ctx.event(2, "BAY_INSPECTION_FAILED", f"bay {bay} failed inspection: {reason}")
                 return ok, reason
 
-            behaviour.response_ok = reported
+            # The "Inspect Bay" leaves are service calls, which have response_ok; the walk sees Behaviours.
+            behaviour.response_ok = reported  # type: ignore[attr-defined]
 
     def _step_of(self, tip: Any) -> tuple[int | None, str, str]:
         """(bay, member or phase, step) of the running leaf ``tip``; bay None outside a bay's
