@@ -24,6 +24,10 @@ cd "$ROOT"
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 echo "[test] ruff check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tools tests bench 2>/dev/null)
+# The packages and settings are in pyproject.toml ([tool.mypy]); its cache under build/ makes a
+# second run read only the files that changed.
+echo "[test] mypy"
+"$VENV/bin/mypy"
 if [ $# -gt 0 ]; then
     echo "[test] pytest $*"
     exec "$VENV/bin/python" -m pytest "$@"

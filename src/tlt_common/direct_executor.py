@@ -114,7 +114,7 @@ class DirectExecutor(SingleThreadedExecutor):
     """``SingleThreadedExecutor`` that calls plain timer and subscription callbacks directly."""
 
     def _make_handler(self, entity: Any, node: Any, take_from_wait_list: Callable) -> Any:
-        call = None
+        call: Callable[[Any], None] | None = None
         if take_from_wait_list == self._take_timer:
             call = _call_timer
         elif take_from_wait_list == self._take_subscription:
@@ -148,6 +148,7 @@ class DirectMultiThreadedExecutor(MultiThreadedExecutor):
     def _spin_once_impl(
         self, timeout_sec: Any = None, wait_condition: Callable[[], bool] = lambda: False
     ) -> None:
+        entity: Any  # any waitable; rclpy annotates it with a TypeVar bound to nothing
         try:
             handler, entity, _node = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
         except (ExternalShutdownException, ShutdownException, TimeoutException, ConditionReachedException):

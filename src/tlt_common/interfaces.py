@@ -59,7 +59,7 @@ def iter_interfaces(package: str = PACKAGE) -> Iterator[tuple[str, str, type]]:
                 yield kind, name, cls
 
 
-def message_parts(kind: str, cls: type) -> dict[str, type]:
+def message_parts(kind: str, cls: type[Any]) -> dict[str, type]:
     """The message classes that make up an interface: itself, Request/Response, Goal/Result/Feedback."""
     if kind == "msg":
         return {"message": cls}
@@ -68,7 +68,7 @@ def message_parts(kind: str, cls: type) -> dict[str, type]:
     return {"goal": cls.Goal, "result": cls.Result, "feedback": cls.Feedback}
 
 
-def describe(cls: type) -> list[str]:
+def describe(cls: type[Any]) -> list[str]:
     """``type name`` lines for a message class's fields."""
     return [f"{ftype} {fname}" for fname, ftype in cls.get_fields_and_field_types().items()]
 
@@ -99,7 +99,7 @@ def _scalar(slot: Any, seed: int) -> Any:
     return low + (seed * 7919 + 1) % (high - low + 1) if low < 0 else (seed * 7919 + 1) % (high + 1)
 
 
-def sample_message(cls: type, seed: int = 1) -> Any:
+def sample_message(cls: type[Any], seed: int = 1) -> Any:
     """An instance of ``cls`` with every field set from ``seed`` (different seeds, different values)."""
     msg = cls()
     for i, (name, slot) in enumerate(zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES, strict=True)):

@@ -70,12 +70,15 @@ def _active_default() -> GripperSetup:
     return GripperSetup(tuple(f"active_gripper_{i}" for i in range(1, 5)), 1.5, 0.0, 1.5)
 
 
+DEFAULT_WRITABLE_BLACKBOARD = REPO_CONFIG.parent / "writable_blackboard.yaml"
+
+
 @dataclass(frozen=True)
 class CrsConfig:
     mission: Path
     state_file: Path  # tower model (tlt_common.mission.tower_model)
     progress_file: Path  # which bays the payload was indexed for (tlt_crs.index_record)
-    writable_blackboard: Path = REPO_CONFIG.parent / "writable_blackboard.yaml"
+    writable_blackboard: Path = DEFAULT_WRITABLE_BLACKBOARD
     tick_rate_hz: float = 10.0
     progress_rate_hz: float = 2.0
     status_rate_hz: float = 5.0
@@ -165,7 +168,7 @@ def load_config(path: str | Path, **overrides: Any) -> CrsConfig:
         else state.with_name(state.stem + ".indexed.json"),
         writable_blackboard=_path(base, data["writable_blackboard"])
         if data["writable_blackboard"]
-        else CrsConfig.__dataclass_fields__["writable_blackboard"].default,
+        else DEFAULT_WRITABLE_BLACKBOARD,
         tick_rate_hz=data["tick_rate_hz"],
         progress_rate_hz=data["progress_rate_hz"],
         status_rate_hz=data["status_rate_hz"],

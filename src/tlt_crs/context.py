@@ -224,7 +224,9 @@ class CrsContext:
         topic = ros_names.state_topic(ee)
         if why := self._state_trouble(topic):
             return why
-        state = self.cache.latest(topic)[0]
+        entry = self.cache.latest(topic)
+        assert entry is not None  # _state_trouble found it
+        state = entry[0]
         if state.fault:
             return f"fault ({state.fault_reason or 'no reason'})"
         return "" if state.calibrated else "width joint not calibrated yet"
@@ -262,7 +264,9 @@ class CrsContext:
         topic = self._hardware_topics[name][0]
         why = self._state_trouble(topic)
         if not why and name == ros_names.LIFTER:
-            state = self.cache.latest(topic)[0]
+            entry = self.cache.latest(topic)
+            assert entry is not None  # _state_trouble found it
+            state = entry[0]
             if not state.link_ok:
                 return f"link down ({state.fault or 'no reason'})"
         return why

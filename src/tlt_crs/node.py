@@ -325,8 +325,8 @@ def main(argv: list[str] | None = None) -> int:
                 bridge.close()
             # Callbacks still running when the node is destroyed use freed handles: give them
             # time to return first (the context is still valid: tlt_common.stop_signals).
-            for exc in stop_executor(executor, 5.0):
-                node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
+            for error in stop_executor(executor, 5.0):
+                node.get_logger().warning(f"a callback ended with {error!r} at shutdown")
             node.destroy_node()
         return 0
     finally:

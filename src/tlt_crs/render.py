@@ -39,9 +39,9 @@ def folded(node: py_trees.behaviour.Behaviour, depth: int) -> py_trees.behaviour
         count = sum(1 for _ in node.iterate()) - 1
         return _Shown(f"{node.name} (+{count})")
     children = [folded(c, depth - 1) for c in node.children]
-    if kind == "fallback":
+    if isinstance(node, py_trees.composites.Selector):  # node_kind's "fallback"
         return py_trees.composites.Selector(node.name, memory=node.memory, children=children)
-    if kind == "sequence":
+    if isinstance(node, py_trees.composites.Sequence):
         return py_trees.composites.Sequence(node.name, memory=node.memory, children=children)
     if kind == "decorator":
         return py_trees.decorators.PassThrough(node.name, children[0])

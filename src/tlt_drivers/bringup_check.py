@@ -337,11 +337,11 @@ class BringupCheck(LeanNode):
                 )
                 if not reply.accepted:
                     raise CheckFailed(f"rivet gun {level} refused: {reply.reason}")
-                self.wait_for(
-                    topic,
-                    lambda m, on=(level == "on"): m.rivet_gun_output[0] == on,
-                    f"rivet gun output {level}",
-                )
+
+                def gun_output_is(m: EndEffectorState, on: bool = level == "on") -> bool:
+                    return m.rivet_gun_output[0] == on
+
+                self.wait_for(topic, gun_output_is, f"rivet gun output {level}")
             return "GPIO output pulsed on and off"
 
         self.run_check(component, "rivet gun output", rivet_gun)

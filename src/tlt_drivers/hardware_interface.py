@@ -137,3 +137,11 @@ class HardwareInterface:
             self.state = target
             return True
         return False
+
+
+class JointGroupInterface(HardwareInterface):
+    """A hardware interface over named joints (a servo chain): ``read`` fills ``position``,
+    ``write`` sends ``command``, both keyed by joint name."""
+
+    position: dict[str, float]
+    command: dict[str, float]

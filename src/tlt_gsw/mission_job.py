@@ -29,13 +29,13 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
 from tlt_common.bt.status_codec import Reassembler, StatusCodecError, StatusPart, TreeShape, unpack_statuses
 from tlt_common.ccsds.auth import CommandSequencer, KeyFileError, KeyRing, ReplayStateError
-from tlt_common.ccsds.codec import Packet
+from tlt_common.ccsds.codec import Packet, ParseResult
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
 from tlt_common.ccsds.reasons import AckStage
@@ -89,7 +89,7 @@ class Progress:
     def say(self, text: str) -> None:
         print(text, file=self.out, flush=True)
 
-    def _sim(self, fields: dict[str, Any]) -> str:
+    def _sim(self, fields: Mapping[str, Any]) -> str:
         sim = float(fields["sim_time"])
         if self.sim_start is None:
             # Recordings, events and the summary's faults carry the CRS's own ROS time; say once
@@ -144,7 +144,7 @@ class Progress:
             self.say(f"  FAULT cleared after {now - (self.fault_since or now):.1f} s: {self.fault}")
             self.fault, self.fault_since = "", None
 
-    def _tree_status(self, f: dict[str, Any], now: float) -> None:
+    def _tree_status(self, f: Mapping[str, Any], now: float) -> None:
         if self._reassembler is not None:
             part = StatusPart(
                 "crs", f["shape_hash"], f["tick"], f["node_count"], f["part_index"], f["part_count"],
@@ -266,9 +266,13 @@ def run_mission(
     """
     seen: list[Packet] = []
     progress = Progress(out, tree)
-    link.on_packet = lambda result: (
-        (seen.append(result), progress.packet(result, clock())) if isinstance(result, Packet) else None
-    )
+
+    def on_packet(result: ParseResult) -> None:
+        if isinstance(result, Packet):
+            seen.append(result)
+            progress.packet(result, clock())
+
+    link.on_packet = on_packet
     started = clock()
     code, _ = _start(link, out, start_timeout, seen)
     if code != EXIT_BUILT:

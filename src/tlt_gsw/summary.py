@@ -258,9 +258,9 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
                 commands_since_fault.append(command)
             continue
         if record.kind == "ack":
-            command = by_security_seq.get(int(f.get("security_seq", -1)))
-            if command is not None:
-                command.stage, command.reason, command.detail = f["stage"], f["reason"], f["detail"]
+            acked = by_security_seq.get(int(f.get("security_seq", -1)))
+            if acked is not None:
+                acked.stage, acked.reason, acked.detail = f["stage"], f["reason"], f["detail"]
             continue
         if record.kind == "mission_step":
             if summary.sim_start is None:

@@ -19,6 +19,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
+from matplotlib.artist import Artist
 from matplotlib.patches import Patch
 
 from tlt_gsw.summary import MissionSummary, StepSpan
@@ -107,7 +108,7 @@ def plot_timeline(summary: MissionSummary, path: str | Path, *, title: str | Non
         ax.set_xlabel("sim time since the first step [s]")
         ax.set_xlim(first, max(end, 1e-3) * 1.02)
         ax.grid(axis="x", alpha=0.3)
-        handles = [Patch(color=c, label=label) for label, c in used.items()]
+        handles: list[Artist] = [Patch(color=c, label=label) for label, c in used.items()]
         if summary.faults:
             handles.append(Patch(color="#d62728", alpha=0.3, label="fault (raised to cleared)"))
         if any(not i.passed and not i.bay_inspection for i in summary.inspections):

@@ -57,7 +57,7 @@ class Action(py_trees.behaviour.Behaviour):
         super().__init__(name)
         self.strict = self.strict_default if strict is None else strict
 
-    def tick(self):  # type: ignore[override]
+    def tick(self):
         # py_trees' Behaviour.tick (2.6) step for step, with the status check added. Written out
         # rather than wrapping super().tick(): a wrapping generator cost every action a second
         # generator frame per tick, a tenth of a bare leaf's tick.

@@ -100,7 +100,8 @@ def _clients_of(node: Node) -> dict[tuple[str, str], Any]:
     clients = getattr(node, "_tlt_shared_clients", None)
     if clients is None:
         clients = {}
-        node._tlt_shared_clients = clients
+        # An attribute of the project's own on rclpy's Node, which does not declare it.
+        node._tlt_shared_clients = clients  # type: ignore[attr-defined]
     return clients
 
 
@@ -635,7 +636,14 @@ class TreeStatusPublisher:
         """Publish (when due) after every tick of ``tree``."""
         self._root = tree.root
         self.refresh()
-        tree.add_post_tick_handler(lambda t: self.publish(self.shape, t.count + 1) if self._take_due() else 0)
+
+        def publish_after_tick(t: py_trees.trees.BehaviourTree) -> None:
+            if self._take_due():
+                shape = self.shape
+                assert shape is not None  # the root was set above
+                self.publish(shape, t.count + 1)
+
+        tree.add_post_tick_handler(publish_after_tick)
 
 
 __all__ = [

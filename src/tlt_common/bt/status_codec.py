@@ -28,8 +28,9 @@ from __future__ import annotations
 
 import hashlib
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import py_trees
 from py_trees.common import Status
@@ -126,7 +127,7 @@ class TreeShape:
         ]
 
     @classmethod
-    def from_definition(cls, definition: Sequence[dict[str, object]]) -> TreeShape:
+    def from_definition(cls, definition: Sequence[Mapping[str, Any]]) -> TreeShape:
         """Rebuild a shape (without behaviours) from :meth:`definition`; refuses an inconsistent one."""
         nodes: list[ShapeNode] = []
         open_parents: list[list[int]] = []  # [index, children still to come]
@@ -310,11 +311,11 @@ def decode(parts: Iterable[StatusPart | bytes], shape: TreeShape) -> DecodedStat
     Raises :class:`StatusCodecError` when the parts are from a different tree shape, from several
     ticks or agents, incomplete, duplicated or inconsistent.
     """
-    parts = [p if isinstance(p, StatusPart) else StatusPart.from_bytes(p) for p in parts]
-    if not parts:
+    decoded = [p if isinstance(p, StatusPart) else StatusPart.from_bytes(p) for p in parts]
+    if not decoded:
         raise StatusCodecError("no parts to decode")
-    head = parts[0]
-    for p in parts:
+    head = decoded[0]
+    for p in decoded:
         if p.shape_hash != shape.hash or p.node_count != len(shape):
             raise StatusCodecError(
                 f"status of agent '{p.agent}' is for a tree of shape {p.shape_hash:08x}"
@@ -324,7 +325,7 @@ def decode(parts: Iterable[StatusPart | bytes], shape: TreeShape) -> DecodedStat
         if (p.agent, p.tick_count, p.part_count) != (head.agent, head.tick_count, head.part_count):
             raise StatusCodecError("parts come from different agents, ticks or splits")
     by_index = {}
-    for p in parts:
+    for p in decoded:
         if p.part_index in by_index:
             raise StatusCodecError(f"part {p.part_index} given twice")
         by_index[p.part_index] = p

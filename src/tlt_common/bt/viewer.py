@@ -54,6 +54,7 @@ def placeholder_tree(shape: TreeShape) -> py_trees.behaviour.Behaviour:
     children: dict[int, list[py_trees.behaviour.Behaviour]] = {}
     for node in reversed(shape.nodes):
         kids = list(reversed(children.pop(node.index, [])))
+        b: py_trees.behaviour.Behaviour
         if node.kind == "sequence":
             b = py_trees.composites.Sequence(node.name, memory=False, children=kids)
         elif node.kind == "fallback":

@@ -9,14 +9,20 @@ from __future__ import annotations
 import ipaddress
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from tlt_common.config_schema import ConfigError, Field, load_validated, opt
 
 DEFAULT_PATH = Path(__file__).resolve().parents[3] / "config" / "ccsds" / "link.yaml"
 ENV_PATH = "TLT_CCSDS_LINK_CONFIG"
 
-_PORT = {"minimum": 0, "maximum": 65535}
+
+class _Range(TypedDict):
+    minimum: float
+    maximum: float
+
+
+_PORT: _Range = {"minimum": 0, "maximum": 65535}
 SCHEMA = {
     "key_file": opt("str", ""),
     "key_id": Field("int", minimum=0, maximum=0xFFFF),

@@ -6,7 +6,7 @@ import threading
 from collections import Counter
 from dataclasses import dataclass, field
 
-from tlt_common.ccsds.codec import ParseResult
+from tlt_common.ccsds.codec import ParseResult, Rejection
 from tlt_common.ccsds.reasons import Reason
 from tlt_common.ccsds.sequence import GapTracker
 
@@ -31,7 +31,7 @@ class LinkStats:
         with self._lock:
             self.packets_rx += 1
             self.bytes_rx += size
-            if not result.ok:
+            if isinstance(result, Rejection):
                 self.rejections += 1
                 self.by_reason[result.reason.label] += 1
                 if result.reason is Reason.BAD_CRC:

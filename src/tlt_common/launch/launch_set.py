@@ -304,12 +304,12 @@ def _place(specs: list[ProcessSpec], placement: dict[str, str], hosts: tuple[Hos
                               f"no host {host!r} {undeclared}")
     placed = []
     for i, spec in enumerate(specs):
-        host = placement.get(spec.name, spec.host)
-        if spec.host and host != spec.host:
+        placed_host = placement.get(spec.name, spec.host)
+        if spec.host and placed_host != spec.host:
             raise ConfigError(source, f"placement.{spec.name}",
                               f"{spec.name} already runs on host {spec.host!r}")
-        if host and host not in declared:
+        if placed_host and placed_host not in declared:
             raise ConfigError(source, f"processes[{i}].host",
-                              f"no host {host!r} {undeclared}")
-        placed.append(dataclasses.replace(spec, host=host))
+                              f"no host {placed_host!r} {undeclared}")
+        placed.append(dataclasses.replace(spec, host=placed_host))
     return placed

@@ -24,7 +24,8 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TextIO
+from types import FrameType
+from typing import Any, TextIO
 
 from tlt_common.launch.dds_profile import host_environment, render_profile
 from tlt_common.launch.hosts import HostNetwork, HostsError, default_run_name, enter_namespace, namespace_name
@@ -33,6 +34,10 @@ from tlt_common.launch.launch_set import LaunchSet, ProcessSpec
 _POLL_S = 0.05
 _LAST_LINES = 15
 
+# A signal's handler as signal.signal takes and returns it.
+_Handler = Callable[[int, FrameType | None], Any] | int | None
+
+_prctl: Callable[..., int] | None
 try:
     _prctl = ctypes.CDLL("libc.so.6", use_errno=True).prctl
 except OSError:  # not Linux: no parent-death signal, the process groups still get signalled
@@ -351,10 +356,10 @@ class Supervisor:
             pass
 
     # --- signals and output -----------------------------------------------------------------------------
-    def _install_signal_handlers(self) -> dict[int, object]:
+    def _install_signal_handlers(self) -> dict[int, _Handler]:
         if threading.current_thread() is not threading.main_thread():
             return {}
-        previous = {}
+        previous: dict[int, _Handler] = {}
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, self._on_signal)
         return previous

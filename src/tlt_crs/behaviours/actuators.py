@@ -90,7 +90,7 @@ class WaitFor(Action):
             entry is not None
             and self.ctx.ros_seconds() - entry[1] <= self.ctx.config.timeouts.sensor_max_age_s
         )
-        if fresh and self.predicate(entry[0]):
+        if fresh and entry is not None and self.predicate(entry[0]):
             self.feedback_message = f"'{self.topic}' confirms"
             return Status.SUCCESS
         if self.ctx.clock() - self._started > self.timeout:

@@ -316,7 +316,7 @@ class GroundLink:
             self._ack(
                 rejection.seq_count or 0,
                 rejection.security_seq or 0,
-                rejection.command_id if rejection.authenticated else 0,
+                (rejection.command_id or 0) if rejection.authenticated else 0,
                 AckStage.REJECTED,
                 rejection.reason,
                 rejection.detail,

@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray, String
@@ -76,7 +77,7 @@ class TrajectoryActionServer:
         self._now = now
         self._feedback_every = max(1, feedback_every)
         self._ticks = 0
-        self._pending: list[tuple[ExecutingGoal, object, Future]] = []
+        self._pending: list[tuple[ExecutingGoal, ServerGoalHandle, Future]] = []
         self.executed = executed_trajectories.ExecutedTrajectoryPublisher(node, component)
         self.server = ActionServer(
             node,

@@ -40,7 +40,7 @@ from dynamixel_sdk import (
 
 from tlt_drivers.dynamixel import control_table as ct
 from tlt_drivers.dynamixel.joint_scale import JointScale
-from tlt_drivers.hardware_interface import HardwareInterface
+from tlt_drivers.hardware_interface import JointGroupInterface
 
 ERRNUM_CRC = 3
 ERRBIT_ALERT = 0x80
@@ -100,7 +100,7 @@ class ServoJoint:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-class DynamixelChainInterface(HardwareInterface):
+class DynamixelChainInterface(JointGroupInterface):
     """State: :attr:`position`, :attr:`velocity`, :attr:`effort`, :attr:`moving`, :attr:`hardware_error`
     per joint. Commands: :attr:`command` (joint units; position modes) and :attr:`command_velocity`
     (velocity mode). Controllers write commands between ``read`` and ``write``."""
@@ -283,6 +283,7 @@ class DynamixelChainInterface(HardwareInterface):
             if self._read1(joint, ct.ADDR_OPERATING_MODE, "read operating mode") != mode:
                 self._write1(joint, ct.ADDR_OPERATING_MODE, mode, f"set operating mode {joint.mode}")
             if joint.mode == "current_based_position":
+                assert joint.goal_current_ma is not None  # the config schema requires it for this mode
                 units = round(joint.goal_current_ma / ct.CURRENT_UNIT_MA)
                 self._write2(joint, ct.ADDR_GOAL_CURRENT, units, "set goal current")
             profile = abs(joint.scale.velocity_to_raw(joint.max_velocity))
@@ -320,6 +321,7 @@ class DynamixelChainInterface(HardwareInterface):
 
     # --- control cycle -----------------------------------------------------------------------------------
     def _sync_read_once(self) -> tuple[int, int, dict[int, tuple[bytes, int]]]:
+        assert self._sync_read is not None  # called only while the port is open
         result = self._sync_read.txPacket()
         if result != COMM_SUCCESS:
             return result, 0, {}

@@ -108,11 +108,17 @@ class SharedGpioState:
 
 
 class _Spec(Protocol):
-    line: int
-    direction: str
-    active_low: bool
-    bias: str
-    initial: bool
+    # Read-only members, so that a frozen dataclass (gpio.config.LineSpec) matches.
+    @property
+    def line(self) -> int: ...
+    @property
+    def direction(self) -> str: ...
+    @property
+    def active_low(self) -> bool: ...
+    @property
+    def bias(self) -> str: ...
+    @property
+    def initial(self) -> bool: ...
 
 
 class SharedMemoryLines:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 from rclpy.task import Future
 from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import HardwareStatus, LifterState
@@ -67,7 +68,7 @@ _OUTCOMES = {
 
 @dataclass
 class _Goal:
-    handle: object
+    handle: ServerGoalHandle
     done: Future
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import binascii
 import enum
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 SYNC = b"\xa5\x5a"
@@ -249,7 +249,7 @@ class StateTelemetry:
 
 Message = VelocityCommand | ModeRequest | StateRequest | ModeReply | StateTelemetry
 
-_DECODERS = {
+_DECODERS: dict[MsgType, Callable[[bytes], Message]] = {
     MsgType.VELOCITY_COMMAND: VelocityCommand.decode,
     MsgType.MODE_REQUEST: ModeRequest.decode,
     MsgType.STATE_REQUEST: StateRequest.decode,

@@ -21,7 +21,7 @@ from typing import Any
 
 import serial
 
-from tlt_drivers.hardware_interface import HardwareInterface
+from tlt_drivers.hardware_interface import JointGroupInterface
 from tlt_drivers.mightyzap import protocol as mz
 
 
@@ -33,7 +33,7 @@ class MightyZapFault(RuntimeError):
     """An actuator reported an error that stops it (overload, input voltage)."""
 
 
-class MightyZapChainInterface(HardwareInterface):
+class MightyZapChainInterface(JointGroupInterface):
     """State: :attr:`position` (m), :attr:`current` (raw), :attr:`hardware_error` per actuator.
     Command: :attr:`command` (m)."""
 

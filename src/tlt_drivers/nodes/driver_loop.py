@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.timer import Timer
 from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
@@ -23,7 +24,7 @@ from tlt_common.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers.group_position import JointGroupPositionController
 from tlt_drivers.controllers.ros_adapters import GroupPositionCommandSubscriber, TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
-from tlt_drivers.hardware_interface import HardwareInterface, Lifecycle
+from tlt_drivers.hardware_interface import JointGroupInterface, Lifecycle
 from tlt_drivers.loop_time import loop_clock
 
 
@@ -33,7 +34,7 @@ class DriverLoop:
     def __init__(
         self,
         node: Node,
-        hw: HardwareInterface,
+        hw: JointGroupInterface,
         *,
         component: str,
         rate_hz: float,
@@ -98,14 +99,14 @@ class DriverLoop:
         self.status_pub = node.create_publisher(
             HardwareStatus, ros_names.hardware_status_topic(component), 10
         )
-        self._timer = None
+        self._timer: Timer | None = None
         self._clock = loop_clock(node)
 
     @classmethod
     def for_chain(
         cls,
         node: Node,
-        hw: HardwareInterface,
+        hw: JointGroupInterface,
         config: Mapping[str, Any],
         members: Sequence[Mapping[str, Any]],
         **controllers: Any,

@@ -166,8 +166,10 @@ class URNode(LeanNode):
         msg = JointState()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.name = list(self.config.joint_names)
-        msg.position = list(self.hw.reading.q)
-        msg.velocity = list(self.hw.reading.qd)
+        reading = self.hw.reading
+        assert reading is not None  # the caller publishes only after a reading
+        msg.position = list(reading.q)
+        msg.velocity = list(reading.qd)
         self._joint_pub.publish(msg)
 
     def _publish_status(self) -> None:

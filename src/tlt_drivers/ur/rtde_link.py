@@ -271,7 +271,9 @@ class URLink:
         """Seconds before :meth:`open_control` may call ur-rtde's reconnect (0 when it may)."""
         if self.control is None or self.control_connected:
             return 0.0
-        return max(0.0, self.control_settle_s - (self._clock() - self._control_down_since))
+        down_since = self._control_down_since
+        assert down_since is not None  # control_connected has just timed the outage
+        return max(0.0, self.control_settle_s - (self._clock() - down_since))
 
     @property
     def control_connected(self) -> bool:

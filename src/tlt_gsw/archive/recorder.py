@@ -213,7 +213,7 @@ class Recorder:
         assert conn is not None
         conn.execute("BEGIN IMMEDIATE")
         (next_id,) = conn.execute("SELECT COALESCE(MAX(id), 0) + 1 FROM packets").fetchone()
-        packet_rows = []
+        packet_rows: list[tuple[object, ...]] = []
         field_rows = []
         field_ids = self._field_ids
         for direction, recorded_at, raw, result in batch:

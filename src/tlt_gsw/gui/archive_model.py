@@ -274,6 +274,7 @@ class ArchiveModel:
     def query_packets(self, selection: str, limit: int) -> list[PacketSummary]:
         """The newest ``limit`` packets up to the position that match ``selection``: ``"rejected"``
         (status not ok), ``"tx"`` (sent), or a packet kind (read through the kind index)."""
+        args: list[int | str]
         if selection == "rejected":
             where, args = "status != 'ok' AND id <= ?", [self.position]
             order = "id DESC"

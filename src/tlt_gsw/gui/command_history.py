@@ -64,7 +64,7 @@ class CommandHistory(QtWidgets.QTableWidget):
     def row_texts(self) -> list[list[str]]:
         """The table's text, row by row (what an operator reads; used by the tests)."""
         return [
-            [self.item(r, c).text() if self.item(r, c) else "" for c in range(self.columnCount())]
+            [item.text() if (item := self.item(r, c)) else "" for c in range(self.columnCount())]
             for r in range(self.rowCount())
         ]
 

@@ -61,7 +61,8 @@ class CommandPanel(QtWidgets.QGroupBox):
     ) -> None:
         super().__init__("Commands", parent)
         self.defs = defs
-        self.sender = sender
+        # Not ``self.sender``: that would hide QObject.sender().
+        self._sender = sender
         self.pending: list[tuple[str, Future]] = []
         self.confirm: Callable[[CommandDef, Mapping[str, Any]], bool] = self._ask
         self.buttons: dict[str, QtWidgets.QPushButton] = {}
@@ -199,13 +200,13 @@ class CommandPanel(QtWidgets.QGroupBox):
 
     def send(self, name: str, params: Mapping[str, Any]) -> Future | None:
         """Send ``name`` (after confirmation if hazardous); return the future, or None if not sent."""
-        if self.sender is None:
+        if self._sender is None:
             return None
         cmd = self.defs.command(name)
         if cmd.hazardous and not self.confirm(cmd, params):
             self._report(f"{name} cancelled by the operator")
             return None
-        future = self.sender(name, dict(params))
+        future = self._sender(name, dict(params))
         self.pending.append((name, future))
         self._report(f"{name} queued")
         return future

@@ -189,7 +189,7 @@ def write_demo_archive(
     layout = TowerLayout.standard(2)
     with Recorder(path) as recorder:
         w = _Writer(recorder, defs, keyring)
-        commands = {
+        commands: dict[float, tuple[str, dict[str, Any]]] = {
             2.0: ("start", {}), 12.0: ("pause", {}), 16.0: ("resume", {}),
             24.0: ("set_blackboard_value", {"key": "lifter_speed", "value": 0.5}),
             30.0: ("set_actuator_state", {"actuator": "camera_mounts", "state": "inspect_bay"}),

@@ -101,7 +101,7 @@ class EventLog(QtWidgets.QWidget):
     def row_texts(self) -> list[list[str]]:
         """The rows shown (tests)."""
         return [
-            [self.table.item(r, c).text() for c in range(self.table.columnCount())]
+            [item.text() if (item := self.table.item(r, c)) else "" for c in range(self.table.columnCount())]
             for r in range(self.table.rowCount())
         ]
 

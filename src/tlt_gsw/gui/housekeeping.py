@@ -82,7 +82,9 @@ class HousekeepingPage(QtWidgets.QWidget):
     def show_snapshots(self, snapshots: Iterable[HousekeepingSnapshot]) -> None:
         """Show the newest packet (per agent) of this kind, with limit colours."""
         newest = None
-        for snap in sorted(snapshots, key=lambda s: str(s.fields.get(self.instance_field, ""))):
+        field = self.instance_field
+        by_instance = sorted(snapshots, key=lambda s: "" if field is None else str(s.fields.get(field, "")))
+        for snap in by_instance:
             instance = str(snap.fields.get(self.instance_field, "")) if self.instance_field else ""
             column = self._column(instance)
             newest = snap if newest is None or snap.recorded_at > newest.recorded_at else newest

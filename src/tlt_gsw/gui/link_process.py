@@ -122,7 +122,11 @@ def _serve(settings: LinkSettings, requests: Any, results: Any) -> None:
                 break
             if item:
                 rid, name, params = item
-                worker.submit(name, params).add_done_callback(lambda f, rid=rid: report(rid, f))
+
+                def report_this(future: Future, rid: int = rid) -> None:
+                    report(rid, future)
+
+                worker.submit(name, params).add_done_callback(report_this)
             if time.monotonic() >= next_health and recorder is not None:
                 next_health = time.monotonic() + HEALTH_PERIOD_S
                 results.put(

@@ -45,10 +45,14 @@ class PacketTableModel(QtCore.QAbstractTableModel):
         self._text = {pid: text for pid, text in self._text.items() if pid in keep}
         self.endResetModel()
 
-    def rowCount(self, parent: QtCore.QModelIndex = QtCore.QModelIndex()) -> int:  # noqa: B008
+    def rowCount(
+        self, parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex()  # noqa: B008
+    ) -> int:
         return 0 if parent.isValid() else len(self.rows)
 
-    def columnCount(self, parent: QtCore.QModelIndex = QtCore.QModelIndex()) -> int:  # noqa: B008
+    def columnCount(
+        self, parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex()  # noqa: B008
+    ) -> int:
         return len(COLUMNS)
 
     def headerData(self, section: int, orientation: QtCore.Qt.Orientation, role: int = 0) -> Any:
@@ -72,7 +76,7 @@ class PacketTableModel(QtCore.QAbstractTableModel):
             self._text[row.id] = text
         return text
 
-    def data(self, index: QtCore.QModelIndex, role: int = 0) -> Any:
+    def data(self, index: QtCore.QModelIndex | QtCore.QPersistentModelIndex, role: int = 0) -> Any:
         row = self.rows[index.row()]
         if role == QtCore.Qt.ItemDataRole.DisplayRole:
             return self._cells(row)[index.column()]

@@ -20,6 +20,7 @@ class ReplayBar(QtWidgets.QFrame):
 
     seek_requested = QtCore.Signal(int)
     step_requested = QtCore.Signal(int)  # -1 back, +1 forward
+    slider: QtWidgets.QSlider  # made below the buttons whose handlers read it
 
     def __init__(self, first: int, last: int, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
