@@ -304,6 +304,8 @@ def main() -> int:
     p.add_argument("--camera-model", choices=("realistic", "exact"), default="realistic",
                    help="the images through the twin's camera models (config/twin/cameras.yaml), the "
                         "node told each camera's noise (node.yaml depth_noise.cameras); or exact")
+    p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
+                   help="the camera models the realistic images are taken through (cameras.yaml)")
     p.add_argument("--lighting", default="",
                    help="light the images by this preset of config/twin/lighting.yaml (lunar: a low, "
                         "hard sun) instead of the renderer's random lights")
@@ -345,7 +347,7 @@ def main() -> int:
         if root is None:
             root = Path(tmp)
             print(f"rendering {args.count} held-out images (seed {args.seed}) ...", flush=True)
-            cameras = str(DEFAULT_CAMERAS) if args.camera_model == "realistic" else ""
+            cameras = str(args.cameras) if args.camera_model == "realistic" else ""
             settings = RenderSettings(seed=args.seed, mission=str(args.mission), cameras=cameras,
                                       lighting=args.lighting)
             render_set(root, args.count, settings, progress_every=10)

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
 from tlt_sim.model import names
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS, load_camera_sensors
 from tlt_sim.model.lighting import apply_lighting, load_lighting
