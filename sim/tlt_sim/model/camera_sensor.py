@@ -64,11 +64,11 @@ _OPTICAL = Rotation.from_matrix(np.diag([1.0, -1.0, -1.0]))
 
 @dataclass(frozen=True)
 class StereoDepth:
-    """A stereo depth camera's errors; pixel figures at the native resolution ``native_width``."""
+    """A stereo depth camera's errors; pixel figures at its native resolution, whose focal length is
+    ``focal_px`` (a render of focal length ``fx`` has ``fx / focal_px`` pixels per native pixel)."""
 
     baseline_m: float
     focal_px: float
-    native_width: int
     disparity_sigma_px: float
     correlation_px: float = 0.0
     min_range_m: float = 0.0
@@ -273,7 +273,7 @@ def _sensor(doc: dict[str, Any]) -> CameraSensor:
     d, i, m = doc["depth"], doc["image"], doc["mount"]
     return CameraSensor(
         depth=StereoDepth(
-            baseline_m=d["baseline_m"], focal_px=d["focal_px"], native_width=d["native_width"],
+            baseline_m=d["baseline_m"], focal_px=d["focal_px"],
             disparity_sigma_px=d["disparity_sigma_px"], correlation_px=d["correlation_px"],
             min_range_m=d["min_range_m"], max_range_m=d["max_range_m"], edge_px=d["edge_px"],
             edge_jump=d["edge_jump"], occlusion=d["occlusion"], thin_px=d["thin_px"],
@@ -300,7 +300,6 @@ _CAMERA = {
     "depth": Field("dict", schema={
         "baseline_m": Field("float", minimum=0.001, maximum=1.0, doc="stereo baseline"),
         "focal_px": Field("float", minimum=10.0, maximum=10000.0, doc="focal length, native pixels"),
-        "native_width": Field("int", minimum=16, maximum=8192, doc="native image width, pixels"),
         "disparity_sigma_px": Field("float", minimum=0.0, maximum=5.0, doc="sub-pixel disparity error"),
         "correlation_px": opt("float", 0.0, minimum=0.0, maximum=20.0),
         "min_range_m": opt("float", 0.0, minimum=0.0, maximum=10.0),

@@ -129,7 +129,7 @@ def test_a_thin_bar_loses_pixels_a_wide_one_keeps_them():
     depth = np.full((120, 200), 2.0)
     depth[:, 40:42] = 1.0  # 2 px: thinner than the matcher's window
     depth[:, 120:160] = 1.0  # 40 px
-    model = StereoDepth(0.12, 514.0, 1280, 0.0, thin_px=4.0, thin_dropout=0.5, occlusion=False)
+    model = StereoDepth(0.12, 514.0, 0.0, thin_px=4.0, thin_dropout=0.5, occlusion=False)
     out = model.apply(depth, None, 514.0, np.random.default_rng(3))
     assert (out[:, 40:42] == 0).mean() == pytest.approx(0.5, abs=0.1)
     assert (out[:, 125:155] == 0).mean() == 0
@@ -142,7 +142,7 @@ def test_specular_spots_and_out_of_range_pixels_have_no_depth():
     rgb = np.full((60, 80, 3), 120, dtype=np.uint8)
     rgb[30:34, 40:44] = 255
     rgb[:, 70:] = 255  # bright, but no highlight: as bright as all about it
-    model = StereoDepth(0.018, 649.0, 1280, 0.0, min_range_m=0.07, specular_luminance=250.0)
+    model = StereoDepth(0.018, 649.0, 0.0, min_range_m=0.07, specular_luminance=250.0)
     out = model.apply(depth, rgb, 216.0, np.random.default_rng(4))
     assert (out[30:34, 40:44] == 0).all()
     assert (out[:, :10] == 0).all()
