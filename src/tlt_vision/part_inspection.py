@@ -5,8 +5,8 @@
 From one frame's detections (instance masks and classes, from the twin's labels or Mask R-CNN),
 its depth image and intrinsics it answers the InspectPart decision for a strut or a cross frame
 (:meth:`PartInspector.inspect`), and the instances and observations CheckAlignment needs. It needs
-no ROS: the vision node (:mod:`tlt_vision.node`) wraps it in its services, and tests run it on the
-twin's renders directly.
+no ROS: the vision node's handlers (:mod:`tlt_vision.services`) wrap it in its services, and
+tests run it on the twin's renders directly.
 
 Which instances are the part (:func:`select_part`), among those in the working depth range: with a
 ``gap``, the instances are joined into parts, two instances being of one part when a chain of

@@ -71,7 +71,8 @@ def _seen(tmp_path: Path, shift_bottom_frame: float = 0.0) -> list[Observation]:
 
 
 def _expected() -> dict[str, np.ndarray]:
-    """Bay 1's corner joints in the world while it is built (the node's ``_tower_origin``)."""
+    """Bay 1's corner joints in the world while it is built
+    (:func:`tlt_vision.services.world.tower_origin`)."""
     site = CONFIG.raw["site"]
     origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, site["build_level"] + MISSION.bay_height])
     return {k: origin + np.asarray(p) for k, p in bay_joints(MISSION, 1).items()}

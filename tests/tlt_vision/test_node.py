@@ -283,8 +283,8 @@ def test_inspect_part_allows_for_the_noise_of_the_camera_asked_for(rig):
 def _segmenting_with(rig: Rig, segmenter):
     """The node segmenting with ``segmenter`` (as Mask R-CNN would, from the twin's labels), and
     a good vertical before zed_1; yields InspectPart's report on it."""
-    labels = rig.vision.segmenter
-    rig.vision.segmenter = segmenter
+    labels = rig.vision.detector.segmenter
+    rig.vision.detector.segmenter = segmenter
     try:
         _show(rig, "vertical_dispenser_x/2")
         with _exact_cameras(rig):
@@ -295,7 +295,7 @@ def _segmenting_with(rig: Rig, segmenter):
             ).report
         yield report
     finally:
-        rig.vision.segmenter = labels
+        rig.vision.detector.segmenter = labels
 
 
 def test_a_real_zeds_depth_at_0_9_m_cannot_certify_end_fittings_and_the_report_says_so(rig):
@@ -330,7 +330,7 @@ def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_
     """Fittings scored between second_look_score and min_score (Mask R-CNN's, here the twin's
     labels rescored): InspectPart poses them where the certified tube misses its fittings, and
     the good strut passes; the node's other requests get only detections scoring min_score."""
-    labels = rig.vision.segmenter
+    labels = rig.vision.detector.segmenter
     seg = rig.vision.config.raw["segmentation"]
     doubtful = (seg["second_look_score"] + seg["min_score"]) / 2
 
@@ -345,16 +345,17 @@ def test_inspect_part_looks_again_at_doubtful_fittings_other_requests_never_see_
     with _segmenting_with(rig, Rescored()) as good:
         assert good.passed, list(good.reasons)
         assert sorted(p.object_class for p in good.poses) == ["end_fitting", "end_fitting", "strut_tube"]
-        frame = rig.vision._grab("zed_1", rig.vision._frame_streams(), rig.vision._deadline())
-        assert not [d for d in rig.vision._segment(frame) if d.object_class == "end_fitting"]
-        assert [d for d in rig.vision._segment(frame, doubtful=True) if d.object_class == "end_fitting"]
+        detector = rig.vision.detector
+        frame = rig.vision.frames.grab("zed_1", detector.streams(), rig.vision.frames.deadline())
+        assert not [d for d in detector.detect(frame) if d.object_class == "end_fitting"]
+        assert [d for d in detector.detect(frame, doubtful=True) if d.object_class == "end_fitting"]
 
 
 def test_inspect_part_looks_closer_where_the_frame_showed_no_fitting(rig):
     """A segmenter that finds no end fitting in the whole frame and finds them in the regions it
     is asked to look at again (Mask R-CNN's closer look): InspectPart asks it at the configured
     scale, and the good strut passes on what it finds there."""
-    labels = rig.vision.segmenter
+    labels = rig.vision.detector.segmenter
     scale = rig.vision.config.raw["segmentation"]["second_look_closer"]["scale"]
     asked = []
 
@@ -743,9 +744,9 @@ def test_an_arms_end_effector_is_taken_out_of_the_depth_where_the_twin_has_it(ri
     rig.twin.do(present_arm)
     time.sleep(1.0)  # joint states and frames of the arm standing there
     node = rig.vision
-    frame = node._grab("zed_2", node._frame_streams(), node._deadline())  # zed_2 faces ARS X
+    frame = node.frames.grab("zed_2", node.detector.streams(), node.frames.deadline())  # zed_2 faces ARS X
     depth = frame.get("depth")
-    dropped = (depth > 0) & (node._without_own_ee(frame) == 0)
+    dropped = (depth > 0) & (node.part_handler.without_own_ee(frame) == 0)
 
     def in_the_twins_boxes(scene: Scene) -> np.ndarray:
         position, rotation = scene.camera_pose("zed_2")
