@@ -8,7 +8,10 @@ so. In the depth image the two
 lie apart: neighbouring pixels of one part differ in depth by little, pixels of parts one in front
 of the other by the gap between them. :func:`split_by_depth` cuts each region between neighbouring
 pixels whose depths differ by more than ``jump + jump_per_m * depth`` and keeps each piece as an
-instance of its own. A pixel without depth joins its neighbours (no jump can be seen there).
+instance of its own. A pixel without depth takes the depth of the region's nearest pixel that has
+one: a hole inside a part joins it, and the holes a stereo camera leaves along an edge (its
+occlusion shadow, the matcher's window straddling two surfaces) do not bridge the part to what
+lies behind it.
 
 The head also draws many small regions on the machine and the racks, which are tube-like too
 (most of its tube regions, most of them small), each scored by its mean class probability, as
@@ -52,6 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.ndimage import distance_transform_edt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -122,6 +126,15 @@ def depth_pieces(mask: np.ndarray, depth: np.ndarray, split: DepthSplit) -> list
     index[ys, xs] = np.arange(n)
     z = depth[ys, xs].astype(np.float64)
     known = np.isfinite(z) & (z > 0)
+    if known.any() and not known.all():
+        # A pixel without depth takes the depth of the region's nearest pixel that has one: a hole
+        # inside a part joins it, and the band of holes a stereo camera leaves along an edge does
+        # not bridge the part to what lies behind it.
+        has = np.zeros(mask.shape, dtype=bool)
+        has[ys[known], xs[known]] = True
+        _, (iy, ix) = distance_transform_edt(~has, return_indices=True)
+        z = np.where(known, z, depth[iy[ys, xs], ix[ys, xs]])
+        known[:] = True
     firsts, seconds = [], []
     for a, y2, x2 in neighbour_pairs(ys, xs, mask.shape):
         b = index[y2, x2]

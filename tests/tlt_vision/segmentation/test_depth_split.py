@@ -73,6 +73,15 @@ def test_pixels_without_depth_do_not_cut_a_part():
     assert sorted(int(p.sum()) for p in depth_pieces(mask, depth, SPLIT)) == [54, 108]
 
 
+def test_holes_where_two_parts_meet_do_not_join_them():
+    """A stereo camera has no depth along an edge: the holes where the tube behind meets the one in
+    front take the depth of the nearer of them, so the region is still cut in two."""
+    mask, depth = _tee()
+    depth[18:21, 17:22] = np.nan
+    pieces = depth_pieces(mask, depth, SPLIT)
+    assert len(pieces) == 2 and sum(int(p.sum()) for p in pieces) == int(mask.sum())
+
+
 def test_pieces_are_scored_by_area_and_small_ones_dropped_box_classes_untouched():
     mask, depth = _tee()
     speck = np.zeros_like(mask)
