@@ -70,46 +70,30 @@ def strut_geoms(
     ends = {"a": np.zeros(3), "b": np.array([0.0, 0.0, length])}
     tube_a, tube_b = np.array([0, 0, half + fl]), np.array([0, 0, length - half - fl])
     tube_mass = mass * 0.7
+
+    def tube(name: str, a: np.ndarray, b: np.ndarray, weight: float) -> None:
+        sub(
+            body,
+            "geom",
+            name=name,
+            class_="part",
+            type="capsule",
+            size=(p["tube_radius"],),
+            fromto=(*a, *b),
+            material="strut_tube",
+            mass=weight,
+        )
+
     if defect is not None and defect.kind == "bent_tube":
         # A kink at mid-length: the second half turns by bend_deg about x, carrying end b with it.
         mid = np.array([0.0, 0.0, length / 2])
         bend = rot_x(math.radians(defect.bend_deg))
         ends["b"] = mid + bend @ (ends["b"] - mid)
         tube_b = mid + bend @ (tube_b - mid)
-        sub(
-            body,
-            "geom",
-            name=f"{prefix}/tube",
-            class_="part",
-            type="capsule",
-            size=(p["tube_radius"],),
-            fromto=(*tube_a, *mid),
-            material="strut_tube",
-            mass=tube_mass / 2,
-        )
-        sub(
-            body,
-            "geom",
-            name=f"{prefix}/tube#1",
-            class_="part",
-            type="capsule",
-            size=(p["tube_radius"],),
-            fromto=(*mid, *tube_b),
-            material="strut_tube",
-            mass=tube_mass / 2,
-        )
+        tube(f"{prefix}/tube", tube_a, mid, tube_mass / 2)
+        tube(f"{prefix}/tube#1", mid, tube_b, tube_mass / 2)
     else:
-        sub(
-            body,
-            "geom",
-            name=f"{prefix}/tube",
-            class_="part",
-            type="capsule",
-            size=(p["tube_radius"],),
-            fromto=(*tube_a, *tube_b),
-            material="strut_tube",
-            mass=tube_mass,
-        )
+        tube(f"{prefix}/tube", tube_a, tube_b, tube_mass)
     axis_b = (ends["b"] - tube_b) / np.linalg.norm(ends["b"] - tube_b)
     spans = {
         "a": (ends["a"] + [0, 0, half], ends["a"] + [0, 0, half + fl]),
