@@ -1,7 +1,7 @@
 """The twin and the motion planner describe one machine: the lifter posts, the arm bases and the
 dispenser racks' uprights the arms plan around (config/planning/scene.yaml) are where the twin
-builds them (config/twin/edu.yaml, generate.py). A difference puts every grasp and placement off by
-it, or lets a planned path run the end effector into something."""
+builds them (config/twin/edu.yaml, tlt_sim.model.generate). A difference puts every grasp and
+placement off by it, or lets a planned path run the end effector into something."""
 
 from __future__ import annotations
 
