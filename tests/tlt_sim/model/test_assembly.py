@@ -151,9 +151,9 @@ def test_bays_stack_as_the_lifter_raises_them(tmp_path):
     lifter = [names.lifter_joint(i) for i in range(4)]
     # Fast-forward the lead screws and pins: the real travel takes 15 s at 0.05 m/s.
     for joint in lifter:
-        scene._vmax[scene._index(joint)] = 0.5
+        scene.servos._vmax[scene.servos._index(joint)] = 0.5
     for i in range(4):
-        scene._vmax[scene._index(names.top_gripper(i))] = 0.1
+        scene.servos._vmax[scene.servos._index(names.top_gripper(i))] = 0.1
         scene.command_position(names.top_gripper(i), 0.0)
     scene.advance(0.5)
     assert scene.assembly.pins == [None] * 4
