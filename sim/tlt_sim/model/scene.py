@@ -64,8 +64,9 @@ class Scene:
     (:class:`Assembly`: grasps, holds, rivets), :attr:`end_effectors` (:class:`EndEffectors`: EE
     signals and tool points), :attr:`truth` (:class:`GroundTruth`: poses, parts, dispensers, forces),
     :attr:`staging` (:class:`Staging`: parts and arms set at rest) and :attr:`cameras`
-    (:class:`CameraViews`: frames and camera poses). The methods below hand each call to its
-    collaborator.
+    (:class:`CameraViews`: frames and camera poses). The methods below are the API the device
+    emulators, tools and tests share, each handed to its collaborator; the more specialised reads
+    are made on the collaborators themselves (``scene.truth.contact_force(...)``).
     """
 
     def __init__(
@@ -199,10 +200,6 @@ class Scene:
         return self.assembly.compression_test(self.advance, force_n, settle_s)
 
     # -- actuators (servos) ------------------------------------------------------------------
-    @property
-    def actuated_joints(self) -> list[str]:
-        return self.servos.joints
-
     def command_position(self, joint: str, position: float) -> None:
         self.servos.command_position(joint, position)
 
@@ -224,17 +221,11 @@ class Scene:
     def effort(self, joint: str) -> float:
         return self.servos.effort(joint)
 
-    def setpoint(self, joint: str) -> float:
-        return self.servos.setpoint(joint)
-
     def max_velocity(self, joint: str) -> float:
         return self.servos.max_velocity(joint)
 
     def limits(self, joint: str) -> tuple[float, float]:
         return self.servos.limits(joint)
-
-    def at_target(self, joints: list[str], tolerance: float = 1e-3) -> bool:
-        return self.servos.at_target(joints, tolerance)
 
     def set_joint_state(self, joint: str, position: float, velocity: float = 0.0) -> None:
         self.servos.set_joint_state(joint, position, velocity)
@@ -265,9 +256,6 @@ class Scene:
     def site_position(self, site: str) -> np.ndarray:
         return self.truth.site_position(site)
 
-    def tower_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.truth.tower_pose()
-
     def joint_position_world(self, joint_id: str) -> np.ndarray:
         return self.truth.joint_position_world(joint_id)
 
@@ -280,26 +268,11 @@ class Scene:
     def placement(self, release: Release) -> Placement:
         return self.truth.placement(release)
 
-    def part_end(self, name: str, end: str) -> np.ndarray:
-        return self.truth.part_end(name, end)
-
     def dispenser_count(self, dispenser: str) -> int:
         return self.truth.dispenser_count(dispenser)
 
     def next_part(self, dispenser: str) -> str | None:
         return self.truth.next_part(dispenser)
-
-    def active_constraints(self, prefix: str = "") -> list[str]:
-        return self.truth.active_constraints(prefix)
-
-    def constraint_force(self, name: str) -> np.ndarray:
-        return self.truth.constraint_force(name)
-
-    def contact_force(self, body: str) -> np.ndarray:
-        return self.truth.contact_force(body)
-
-    def contacts_of(self, prefix: str) -> list[tuple[str, str]]:
-        return self.truth.contacts_of(prefix)
 
     # -- staging (tests, data generation, pictures) ------------------------------------------
     def place_part(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
@@ -341,9 +314,6 @@ class Scene:
 
     def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
         return self.cameras.camera_pose(camera)
-
-    def camera_fovy(self, camera: str) -> float:
-        return self.cameras.camera_fovy(camera)
 
 
 __all__ = ["ModelCompileError", "Scene", "compile_model"]
