@@ -23,9 +23,10 @@ import numpy as np
 
 from tlt_common.mission.schema import Member, Mission
 from tlt_sim.model import names, ur10e
-from tlt_sim.model.assembly import Assembly, CompressionResult, Release, RivetShot
+from tlt_sim.model.assembly import Assembly, Release, RivetShot
 from tlt_sim.model.camera_views import CameraViews
 from tlt_sim.model.cameras import CameraRenderer, Frame
+from tlt_sim.model.compression import CompressionResult, compression_test
 from tlt_sim.model.config import DEFAULT_EDU, load_edu
 from tlt_sim.model.end_effectors import EndEffectors
 from tlt_sim.model.generate import ModelInfo, PartInfo, build_model
@@ -197,7 +198,8 @@ class Scene:
         return True
 
     def compression_test(self, force_n: float = 200.0, settle_s: float = 0.3) -> CompressionResult:
-        return self.assembly.compression_test(self.advance, force_n, settle_s)
+        """See :func:`tlt_sim.model.compression.compression_test`."""
+        return compression_test(self.assembly, self.advance, force_n, settle_s)
 
     # -- actuators (servos) ------------------------------------------------------------------
     def command_position(self, joint: str, position: float) -> None:
