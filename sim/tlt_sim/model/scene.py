@@ -258,6 +258,9 @@ class Scene:
     def site_position(self, site: str) -> np.ndarray:
         return self.truth.site_position(site)
 
+    def tower_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.truth.tower_pose()
+
     def joint_position_world(self, joint_id: str) -> np.ndarray:
         return self.truth.joint_position_world(joint_id)
 

@@ -178,7 +178,7 @@ class GroundTruth:
     def poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Object name -> (world position, rotation matrix), as published."""
         s = self.scene
-        out = {"tower": s.truth.tower_pose()}
+        out = {"tower": s.tower_pose()}
         for part in s.info.parts.values():
             out[part.body] = s.body_pose(part.body)
         for arm in names.ARMS:
