@@ -1,4 +1,4 @@
-"""Assembly physics of the twin: grasps, gripper holds, rivets and the bay compression test.
+"""Assembly physics of the twin: grasps, gripper holds and rivets.
 
 Everything that joins two bodies is an equality constraint declared inactive by the generator
 and switched on here with the bodies' pose at that instant, so nothing jumps:
@@ -74,18 +74,6 @@ class Release:
     time: float
     position: np.ndarray
     rotation: np.ndarray
-
-
-@dataclass
-class CompressionResult:
-    force_n: float
-    displacement_m: float  # bottom cross frame towards the top one, under the force
-    top: str
-    bottom: str
-
-    @property
-    def stiffness_n_per_m(self) -> float:
-        return self.force_n / self.displacement_m if self.displacement_m > 0 else float("inf")
 
 
 class Assembly:
@@ -179,14 +167,16 @@ class Assembly:
         self.m.eq_data[i, 6:10] = rel
         self.d.eq_active[i] = 1
 
-    def _connect(self, name: str, point: np.ndarray) -> None:
+    def connect(self, name: str, point: np.ndarray) -> None:
+        """Switch connect ``name`` on at world ``point``, both bodies where they are now."""
         i = self.eq[name]
         b1, b2 = self.m.eq_obj1id[i], self.m.eq_obj2id[i]
         for k, b in ((0, b1), (3, b2)):
             self.m.eq_data[i, k : k + 3] = self.d.xmat[b].reshape(3, 3).T @ (point - self.d.xpos[b])
         self.d.eq_active[i] = 1
 
-    def _off(self, name: str) -> None:
+    def switch_off(self, name: str) -> None:
+        """Lift equality ``name``: the bodies it joined move apart freely again."""
         self.d.eq_active[self.eq[name]] = 0
 
     # -- per-step update ---------------------------------------------------------------------
@@ -253,10 +243,10 @@ class Assembly:
             p = self.site_pos(tip)
             best = self._nearest_corner(p, i, reach)
             if best is not None:
-                self._connect(f"{kind}/{i}/{best}", self.site_pos(names.corner_site(best, i)))
+                self.connect(f"{kind}/{i}/{best}", self.site_pos(names.corner_site(best, i)))
                 holds[i] = best
         elif not engaged and holds[i] is not None:
-            self._off(f"{kind}/{i}/{holds[i]}")
+            self.switch_off(f"{kind}/{i}/{holds[i]}")
             holds[i] = None
             self._settle_parts()
 
@@ -367,7 +357,7 @@ class Assembly:
             return None
         pos, rot = self.body_pose(body)
         self.releases.append(Release(arm, self.parts_by_body[body].name, float(self.d.time), pos, rot))
-        self._off(f"grasp/{arm}/{body}")
+        self.switch_off(f"grasp/{arm}/{body}")
         self.held[arm] = None
         self._slip_at.pop(arm, None)
         self._settle_parts()
@@ -474,7 +464,7 @@ class Assembly:
                 name = f"foundation/{i}/{cf}"
                 near = np.linalg.norm(self.site_pos(names.corner_site(cf, i)) - pad) <= reach
                 if near and not self.d.eq_active[self.eq[name]]:
-                    self._connect(name, self.site_pos(names.corner_site(cf, i)))
+                    self.connect(name, self.site_pos(names.corner_site(cf, i)))
                     shot.joined.append(name)
         self._settle_parts()
         return shot
@@ -491,45 +481,10 @@ class Assembly:
         self._weld(name, self.site_pos(names.corner_site(cross_frame, corner)))
         return name
 
-    # -- bay compression test ----------------------------------------------------------------
-    def compression_test(self, step, force_n: float, settle_s: float) -> CompressionResult:
-        """Push the cross frame the Active Grippers hold towards the one the Top Grippers hold.
-
-        The lifter's push reaches the bottom frame through the Active Grippers; here it is a force
-        of ``force_n`` on that frame while the latches' constraints are lifted, so that the bay's
-        struts and rivets carry all of it. Returns the displacement along the tower axis after
-        ``settle_s`` of simulated time. Fails (ValueError) unless both grippers hold a frame.
-        """
-        tops = {p for p in self.pins if p}
-        bottoms = {p for p in self.latches if p}
-        if len(tops) != 1 or len(bottoms) != 1 or tops == bottoms:
-            raise ValueError(
-                f"compression test needs the Top Grippers on one cross frame and the Active Grippers on"
-                f" another (top: {sorted(tops)}, active: {sorted(bottoms)})"
-            )
-        top, bottom = tops.pop(), bottoms.pop()
-        b = self._body(bottom)
-        axis = self.body_pose(top)[1][:, 2]
-        latched = [(i, f"active/{i}/{bottom}") for i, h in enumerate(self.latches) if h == bottom]
-        for _, name in latched:
-            self._off(name)
-        step(settle_s)
-        before = self.d.xpos[b].copy() - self.body_pose(top)[0]
-        self.d.xfrc_applied[b, :3] = axis * force_n
-        try:
-            step(settle_s)
-            after = self.d.xpos[b].copy() - self.body_pose(top)[0]
-        finally:
-            self.d.xfrc_applied[b, :] = 0.0
-        step(settle_s)
-        for i, name in latched:
-            self._connect(name, self.site_pos(names.corner_site(bottom, i)))
-        return CompressionResult(force_n, float((after - before) @ axis), top, bottom)
-
 
 def _corner_xy(info: ModelInfo, i: int) -> tuple[float, float]:
     x, y = names.CORNER_XY[i]
     return x * info.mission.bay_width, y * info.mission.bay_width
 
 
-__all__ = ["Assembly", "CompressionResult", "Release", "RivetShot"]
+__all__ = ["Assembly", "Release", "RivetShot"]

@@ -4,38 +4,37 @@
 mission and a scenario, compiles it, and steps it. Device emulators drive it by joint name:
 ``command_position`` / ``command_velocity`` set what an actuator aims for (moved at no more than
 the joint's rated speed, as the real controllers do), ``position`` / ``velocity`` / ``effort`` read
-it back. Grasps, gripper holds and rivets follow :mod:`tlt_sim.model.assembly` after every step.
-Cameras render only when :meth:`Scene.render` is called.
+it back (:mod:`tlt_sim.model.servos`). Grasps, gripper holds and rivets follow
+:mod:`tlt_sim.model.assembly` after every step. Cameras render only when :meth:`Scene.render` is
+called (:mod:`tlt_sim.model.camera_views`); the true state is read through
+:mod:`tlt_sim.model.ground_truth` and parts are set at rest through :mod:`tlt_sim.model.staging`.
 
 A model MuJoCo refuses raises :class:`ModelCompileError` with MuJoCo's message and the XML file.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numpy as np
 
 from tlt_common.mission.schema import Member, Mission
 from tlt_sim.model import names, ur10e
-from tlt_sim.model.assembly import Assembly, CompressionResult, Release, RivetShot
+from tlt_sim.model.assembly import Assembly, Release, RivetShot
+from tlt_sim.model.camera_views import CameraViews
+from tlt_sim.model.cameras import CameraRenderer, Frame
+from tlt_sim.model.compression import CompressionResult, compression_test
 from tlt_sim.model.config import DEFAULT_EDU, load_edu
+from tlt_sim.model.end_effectors import EndEffectors
 from tlt_sim.model.generate import ModelInfo, PartInfo, build_model
-from tlt_sim.model.geometry import frame_from_axes, mat_to_quat
-from tlt_sim.model.placement import Placement, placement_of
+from tlt_sim.model.ground_truth import GroundTruth
+from tlt_sim.model.placement import Placement
 from tlt_sim.model.scenario import NOMINAL, Scenario, load_scenario
-
-
-def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors that make a right-handed frame with unit ``u``."""
-    a = np.cross(u, [0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.cross(u, [1.0, 0.0, 0.0])
-    a /= np.linalg.norm(a)
-    return a, np.cross(u, a)
+from tlt_sim.model.servos import Servos
+from tlt_sim.model.staging import Staging
 
 
 class ModelCompileError(RuntimeError):
@@ -60,6 +59,15 @@ class Scene:
 
     ``scenario`` is a :class:`Scenario` or a path to a scenario YAML file; ``out_dir`` receives the
     generated XML and textures (a fresh temporary folder by default).
+
+    The scene owns the clock (:meth:`step`) and composes one collaborator per concern, built on the
+    same model and data: :attr:`servos` (:class:`Servos`: the actuated joints), :attr:`assembly`
+    (:class:`Assembly`: grasps, holds, rivets), :attr:`end_effectors` (:class:`EndEffectors`: EE
+    signals and tool points), :attr:`truth` (:class:`GroundTruth`: poses, parts, dispensers, forces),
+    :attr:`staging` (:class:`Staging`: parts and arms set at rest) and :attr:`cameras`
+    (:class:`CameraViews`: frames and camera poses). The methods below are the API the device
+    emulators, tools and tests share, each handed to its collaborator; the more specialised reads
+    are made on the collaborators themselves (``scene.truth.contact_force(...)``).
     """
 
     def __init__(
@@ -86,28 +94,20 @@ class Scene:
         self.model = compile_model(self.info.xml_path)
         self.data = mujoco.MjData(self.model)
         self.edu, self.mission, self.scenario = edu, mission, scenario
-        self._actuators = {self.model.actuator(i).name: i for i in range(self.model.nu)}
-        self._joint_qpos = {n: int(self.model.jnt_qposadr[self.model.joint(n).id]) for n in self._actuators}
-        self._joint_dof = {n: int(self.model.jnt_dofadr[self.model.joint(n).id]) for n in self._actuators}
-        nu = self.model.nu
-        self._vmax = np.array([self._max_velocity(self.model.actuator(i).name) for i in range(nu)])
-        self._lo = self.model.actuator_actrange[:, 0].copy()
-        self._hi = self.model.actuator_actrange[:, 1].copy()
-        self._actadr = self.model.actuator_actadr.copy()
-        self._target = np.zeros(nu)
-        self._velocity = np.zeros(nu)
-        self._velocity_mode = np.zeros(nu, dtype=bool)
-        self._speed = self._vmax.copy()  # present speed limit of each setpoint (<= rated)
-        self._busy = False
-        # Setpoint velocities are recomputed every control period (about 10 ms) or on a command.
-        self._control_steps = max(1, round(0.01 / self.model.opt.timestep))
-        self._tick = 0
-        self.assembly = Assembly(self.model, self.data, self.info)
-        self._renderers: dict[bool, Any] = {}  # antialias -> CameraRenderer
+        model, data, info = self.model, self.data, self.info
+        self.servos = Servos(model, data, self._rated_velocity)
+        self.assembly = Assembly(model, data, info)
+        self.end_effectors = EndEffectors(edu, self.servos, self.assembly)
+        self.truth = GroundTruth(model, data, info, mission, self.assembly)
+        self.cameras = CameraViews(model, data)
+        self.staging = Staging(
+            model, data, info, edu, mission, self.assembly, self.servos, self.truth, self.cameras
+        )
         self.reset()
 
     # -- lifecycle ---------------------------------------------------------------------------
-    def _max_velocity(self, joint: str) -> float:
+    def _rated_velocity(self, joint: str) -> float:
+        """The rated speed (m/s or rad/s) of an actuated joint, from the EDU description."""
         e = self.edu
         if joint.startswith("lifter_joint"):
             return e["lifter"]["max_velocity"]
@@ -135,31 +135,13 @@ class Scene:
         start.update({names.top_gripper(i): self.edu["top_grippers"]["stroke"] for i in range(4)})
         for arm in names.ARMS:
             start.update(zip(names.arm_joints(arm), self.edu["arms"][arm]["home"], strict=True))
-        for joint, value in start.items():
-            self.data.qpos[self._joint_qpos[joint]] = value
-            self.data.act[self._actadr[self._actuators[joint]]] = value
-        self._target[:] = self.data.act[self._actadr]
-        self._velocity[:] = 0.0
-        self._velocity_mode[:] = False
-        self._speed[:] = self._vmax
-        self._busy = False
-        self.data.ctrl[:] = 0.0
+        self.servos.reset(start)
         mujoco.mj_forward(self.model, self.data)
         self.assembly.update()
-        # The scenario's members that start built stand as the build would have left them; their
-        # rivets came out of the feeders.
-        for member_id in self.scenario.built:
-            self.stage_member(member_id)
-            for rivet in self.mission.member(member_id).rivets:
-                self.assembly.rivets_left[rivet.dispenser] -= 1
-        if self.scenario.built:
-            mujoco.mj_forward(self.model, self.data)
-            self.assembly.update()
+        self.staging.stage_built(self.scenario.built)
 
     def close(self) -> None:
-        for r in self._renderers.values():
-            r.close()
-        self._renderers.clear()
+        self.cameras.close()
 
     def __enter__(self) -> Scene:
         return self
@@ -179,125 +161,17 @@ class Scene:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps; setpoint velocities follow the commands every control
         period, assembly rules are applied after every step."""
-        m, d, update = self.model, self.data, self.assembly.update
+        m, d, control, update = self.model, self.data, self.servos.update, self.assembly.update
         for _ in range(n):
-            if self._tick == 0 and self._busy:
-                self._control()
+            control()
             mujoco.mj_step(m, d)
             update()
-            self._tick = (self._tick + 1) % self._control_steps
-
-    def _control(self) -> None:
-        """Set each setpoint's velocity: commanded, or what reaches the target by the next period."""
-        period = self._control_steps * self.model.opt.timestep
-        act = self.data.act[self._actadr]
-        gap = self._target - act
-        # minimum/maximum rather than np.clip: the same numbers at a fraction of the call overhead.
-        towards = np.minimum(np.maximum(gap / period, -self._speed), self._speed)
-        self.data.ctrl[:] = np.where(self._velocity_mode, self._velocity, towards)
-        # Nothing left to move: no work until the next command.
-        self._busy = bool(self._velocity_mode.any()) or bool((np.abs(gap) > 1e-12).any())
-        if not self._busy:
-            self.data.ctrl[:] = 0.0
 
     def advance(self, seconds: float) -> None:
         """Step for ``seconds`` of simulated time (rounded to whole steps)."""
         self.step(max(0, round(seconds / self.timestep)))
 
-    # -- actuators ---------------------------------------------------------------------------
-    @property
-    def actuated_joints(self) -> list[str]:
-        return list(self._actuators)
-
-    def _index(self, joint: str) -> int:
-        try:
-            return self._actuators[joint]
-        except KeyError:
-            raise KeyError(f"no actuated joint named {joint!r}") from None
-
-    def command_position(self, joint: str, position: float) -> None:
-        """Aim ``joint`` at ``position`` (m or rad), clamped to its range; moves at rated speed."""
-        i = self._index(joint)
-        if not math.isfinite(position):
-            raise ValueError(f"{joint}: position must be finite, got {position}")
-        self._target[i] = min(max(position, self._lo[i]), self._hi[i])
-        self._velocity_mode[i] = False
-        self._speed[i] = self._vmax[i]
-        self._wake()
-
-    def command_positions(self, joints: list[str], positions: list[float]) -> None:
-        """Move several joints together, each slowed so that all arrive at once (a UR ``movej``)."""
-        if len(joints) != len(positions):
-            raise ValueError(f"{len(joints)} joints but {len(positions)} positions")
-        for joint, position in zip(joints, positions, strict=True):
-            self.command_position(joint, position)
-        idx = [self._index(j) for j in joints]
-        span = np.abs(self._target[idx] - self.data.act[self._actadr[idx]])
-        duration = float(np.max(span / self._vmax[idx])) if idx else 0.0
-        if duration > 0:
-            self._speed[idx] = np.maximum(span / duration, 1e-9)
-
-    def command_velocity(self, joint: str, velocity: float) -> None:
-        """Drive ``joint`` at ``velocity`` (clamped to its rated speed) until told otherwise."""
-        i = self._index(joint)
-        if not math.isfinite(velocity):
-            raise ValueError(f"{joint}: velocity must be finite, got {velocity}")
-        self._velocity[i] = max(-self._vmax[i], min(self._vmax[i], velocity))
-        self._velocity_mode[i] = True
-        self._target[i] = self._setpoint_of(i)
-        self._wake()
-
-    def hold(self, joint: str) -> None:
-        """Stop ``joint`` where its setpoint is now."""
-        i = self._index(joint)
-        self._velocity_mode[i] = False
-        self._target[i] = self._setpoint_of(i)
-        self._wake()
-
-    def position(self, joint: str) -> float:
-        self._index(joint)
-        return float(self.data.qpos[self._joint_qpos[joint]])
-
-    def velocity(self, joint: str) -> float:
-        self._index(joint)
-        return float(self.data.qvel[self._joint_dof[joint]])
-
-    def effort(self, joint: str) -> float:
-        """Force (N) or torque (N m) the joint's actuator applies now."""
-        return float(self.data.actuator_force[self._index(joint)])
-
-    def _wake(self) -> None:
-        self._busy = True
-        self._tick = 0  # act on the command at the next step
-
-    def _setpoint_of(self, i: int) -> float:
-        return float(self.data.act[self._actadr[i]])
-
-    def setpoint(self, joint: str) -> float:
-        """Where the joint's servo aims now (it moves towards the commanded target)."""
-        return self._setpoint_of(self._index(joint))
-
-    def max_velocity(self, joint: str) -> float:
-        return float(self._vmax[self._index(joint)])
-
-    def limits(self, joint: str) -> tuple[float, float]:
-        i = self._index(joint)
-        return float(self._lo[i]), float(self._hi[i])
-
-    def at_target(self, joints: list[str], tolerance: float = 1e-3) -> bool:
-        return all(abs(self.position(j) - self._target[self._index(j)]) <= tolerance for j in joints)
-
-    def set_joint_state(self, joint: str, position: float, velocity: float = 0.0) -> None:
-        """Place ``joint`` directly (no dynamics) and make that its setpoint; for initial states."""
-        i = self._index(joint)
-        self.data.qpos[self._joint_qpos[joint]] = position
-        self.data.qvel[self._joint_dof[joint]] = velocity
-        self.data.act[self._actadr[i]] = self._target[i] = position
-        self.data.ctrl[i] = 0.0
-        self._velocity_mode[i] = False
-        mujoco.mj_forward(self.model, self.data)
-
-    def run_until(self, done, timeout_s: float, check_every: int = 10) -> bool:
+    def run_until(self, done: Callable[[], bool], timeout_s: float, check_every: int = 10) -> bool:
         """Step until ``done()`` is true (checked every few steps) or ``timeout_s`` of sim time."""
         end = self.time + timeout_s
         while self.time < end:
@@ -317,297 +191,134 @@ class Scene:
         """Drive ``arm`` through joint waypoints, joints in step; False if one is not reached in time."""
         joints = names.arm_joints(arm)
         for q in waypoints:
-            self.command_positions(joints, [float(v) for v in q])
-            if not self.run_until(lambda: self.at_target(joints, tolerance), timeout_s):
+            self.servos.command_positions(joints, [float(v) for v in q])
+            if not self.run_until(lambda: self.servos.at_target(joints, tolerance), timeout_s):
                 return False
         self.advance(settle_s)
         return True
 
-    def ee_point(self, arm: str, which: str) -> np.ndarray:
-        """EE-frame point of ``which``: 'grasp' (midway between the grippers at the present width),
-        'gun_a' or 'gun_b' (the rivet gun muzzles)."""
-        e = self.edu["end_effector"]
-        w = self.position(names.width_joint(arm))
-        s, d, g = e["grip_spacing"], e["grasp_depth"], e["rivet_gun_offset"]
-        points = {"grasp": (w / 2, 0.0, d), "gun_a": (-s / 2 - g, 0.0, d), "gun_b": (s / 2 + w + g, 0.0, d)}
-        return np.array(points[which])
+    def compression_test(self, force_n: float = 200.0, settle_s: float = 0.3) -> CompressionResult:
+        """See :func:`tlt_sim.model.compression.compression_test`."""
+        return compression_test(self.assembly, self.advance, force_n, settle_s)
 
-    # -- end effector I/O (GPIO) -------------------------------------------------------------
+    # -- actuators (servos) ------------------------------------------------------------------
+    def command_position(self, joint: str, position: float) -> None:
+        self.servos.command_position(joint, position)
+
+    def command_positions(self, joints: list[str], positions: list[float]) -> None:
+        self.servos.command_positions(joints, positions)
+
+    def command_velocity(self, joint: str, velocity: float) -> None:
+        self.servos.command_velocity(joint, velocity)
+
+    def hold(self, joint: str) -> None:
+        self.servos.hold(joint)
+
+    def position(self, joint: str) -> float:
+        return self.servos.position(joint)
+
+    def velocity(self, joint: str) -> float:
+        return self.servos.velocity(joint)
+
+    def effort(self, joint: str) -> float:
+        return self.servos.effort(joint)
+
+    def max_velocity(self, joint: str) -> float:
+        return self.servos.max_velocity(joint)
+
+    def limits(self, joint: str) -> tuple[float, float]:
+        return self.servos.limits(joint)
+
+    def set_joint_state(self, joint: str, position: float, velocity: float = 0.0) -> None:
+        self.servos.set_joint_state(joint, position, velocity)
+
+    # -- end effectors -----------------------------------------------------------------------
+    def ee_point(self, arm: str, which: str) -> np.ndarray:
+        return self.end_effectors.ee_point(arm, which)
+
     def limit_switch(self, arm: str) -> bool:
-        """The EE limit switch: pressed while the width joint is at its zero."""
-        return self.position(names.width_joint(arm)) < self.edu["end_effector"]["limit_switch_below"]
+        return self.end_effectors.limit_switch(arm)
 
     def load_rivet(self, arm: str, side: str) -> bool:
-        return self.assembly.load_rivet(arm, side)
+        return self.end_effectors.load_rivet(arm, side)
 
     def rivet_loaded(self, arm: str, side: str) -> bool:
-        return self.assembly.loaded[(arm, side)]
+        return self.end_effectors.rivet_loaded(arm, side)
 
     def fire_rivet(self, arm: str, side: str) -> RivetShot:
-        return self.assembly.fire_rivet(arm, side)
+        return self.end_effectors.fire_rivet(arm, side)
 
     def holding(self, arm: str) -> str | None:
-        return self.assembly.held[arm]
+        return self.end_effectors.holding(arm)
 
     # -- ground truth ------------------------------------------------------------------------
     def body_pose(self, body: str) -> tuple[np.ndarray, np.ndarray]:
-        """World position and rotation matrix of ``body``."""
-        return self.assembly.body_pose(body)
+        return self.truth.body_pose(body)
 
     def site_position(self, site: str) -> np.ndarray:
-        return self.assembly.site_pos(site)
+        return self.truth.site_position(site)
 
     def tower_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """The tower frame (mission joint coordinates) in the world: the payload's cross frame."""
-        return self.body_pose("payload")
+        return self.truth.tower_pose()
 
     def joint_position_world(self, joint_id: str) -> np.ndarray:
-        pos, rot = self.tower_pose()
-        return pos + rot @ np.asarray(self.mission.joints[joint_id], dtype=float)
+        return self.truth.joint_position_world(joint_id)
 
     def part(self, name: str) -> PartInfo:
-        return self.info.parts[name]
+        return self.truth.part(name)
 
     def part_state(self, name: str) -> str:
-        return self.assembly.state[name]
+        return self.truth.part_state(name)
 
     def placement(self, release: Release) -> Placement:
-        """Where ``release`` left its part against the mission's places (the twin's truth)."""
-        part = self.info.parts[release.part]
-        points = [release.position + release.rotation @ p for p in part.ends.values()]
-        return placement_of(part.name, part.kind, points, self.mission, self.joint_position_world)
-
-    def part_end(self, name: str, end: str) -> np.ndarray:
-        part = self.info.parts[name]
-        return self.assembly.part_point(part, part.ends[end])
+        return self.truth.placement(release)
 
     def dispenser_count(self, dispenser: str) -> int:
-        """Parts (or rivets) still in ``dispenser``."""
-        if dispenser in self.assembly.rivets_left:
-            return self.assembly.rivets_left[dispenser]
-        return sum(
-            1
-            for p in self.info.parts.values()
-            if p.dispenser == dispenser and self.assembly.state[p.name] == "stowed"
-        )
+        return self.truth.dispenser_count(dispenser)
 
     def next_part(self, dispenser: str) -> str | None:
-        stowed = [
-            p
-            for p in self.info.parts.values()
-            if p.dispenser == dispenser and self.assembly.state[p.name] == "stowed"
-        ]
-        return min(stowed, key=lambda p: p.index).name if stowed else None
-
-    def active_constraints(self, prefix: str = "") -> list[str]:
-        return self.assembly.active(prefix)
-
-    def constraint_force(self, name: str) -> np.ndarray:
-        """Force (first 3 rows, N) an active equality transmits; zeros when inactive."""
-        i = self.assembly.eq[name]
-        rows = np.nonzero(
-            (self.data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY) & (self.data.efc_id == i)
-        )[0]
-        return self.data.efc_force[rows[:3]].copy() if len(rows) else np.zeros(3)
-
-    def contact_force(self, body: str) -> np.ndarray:
-        """Total contact force (N, world frame) that other bodies exert on ``body`` now."""
-        b = self.model.body(body).id
-        total, wrench = np.zeros(3), np.zeros(6)
-        for i in range(self.data.ncon):
-            c = self.data.contact[i]
-            b1, b2 = self.model.geom_bodyid[c.geom1], self.model.geom_bodyid[c.geom2]
-            if b not in (b1, b2):
-                continue
-            mujoco.mj_contactForce(self.model, self.data, i, wrench)
-            # The contact frame's first axis is the normal from geom1 to geom2: it pushes geom2 along it.
-            world = c.frame.reshape(3, 3).T @ wrench[:3]
-            total += world if b == b2 else -world
-        return total
-
-    def contacts_of(self, prefix: str) -> list[tuple[str, str]]:
-        """(own geom, other geom) names of the contacts now of geoms whose names start with ``prefix``."""
-        out = []
-        for i in range(self.data.ncon):
-            c = self.data.contact[i]
-            a, b = self.model.geom(c.geom1).name, self.model.geom(c.geom2).name
-            if b.startswith(prefix) and not a.startswith(prefix):
-                a, b = b, a
-            if a.startswith(prefix) and (a, b) not in out:
-                out.append((a, b))
-        return out
+        return self.truth.next_part(dispenser)
 
     # -- staging (tests, data generation, pictures) ------------------------------------------
     def place_part(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
-        """Put a free part at a world pose at rest (no dynamics), as if it had been set there."""
-        part = self.info.parts[name]
-        jid = self.model.body(part.body).jntadr[0]
-        adr, dof = self.model.jnt_qposadr[jid], self.model.jnt_dofadr[jid]
-        self.data.qpos[adr : adr + 3] = position
-        self.data.qpos[adr + 3 : adr + 7] = mat_to_quat(rotation)
-        self.data.qvel[dof : dof + 6] = 0.0
-        mujoco.mj_forward(self.model, self.data)
+        self.staging.place_part(name, position, rotation)
 
     def place_in_view(self, part: str, camera: str, distance: float = 0.45) -> None:
-        """Put ``part`` across ``camera``'s view, centred ``distance`` in front of it (data generation,
-        inspection tests)."""
-        pos, rot = self.camera_pose(camera)  # optical frame: z forward, x right, y down
-        info = self.info.parts[part]
-        centre = pos + distance * rot[:, 2]
-        if info.kind == "cross_frame":
-            self.place_part(
-                part,
-                centre - (rot[:, 0] + rot[:, 1]) * info.length / 2,
-                np.column_stack([rot[:, 0], rot[:, 1], rot[:, 2]]),
-            )
-        else:
-            self.place_part(part, centre - rot[:, 0] * info.length / 2, frame_from_axes(rot[:, 1], rot[:, 0]))
+        self.staging.place_in_view(part, camera, distance)
 
     def pose_arm(self, arm: str, joints: np.ndarray) -> None:
-        """Set ``arm``'s six joints at rest (no dynamics), as if it had moved there."""
-        for joint, value in zip(names.arm_joints(arm), joints, strict=True):
-            self.set_joint_state(joint, float(value))
-        mujoco.mj_forward(self.model, self.data)
+        self.staging.pose_arm(arm, joints)
 
     def seat_in_grasp(self, part: str, arm: str, roll: float = 0.0, slide: float = 0.0) -> None:
-        """Put strut ``part`` where ``arm``'s closed jaws hold it (data generation, the inspection
-        bench): its axis along the grasp line, its middle ``slide`` m along the line from the
-        grasp's centre, turned ``roll`` rad about its axis, the jaws closed on it as a grasp
-        leaves them. Nothing is welded."""
-        for side in ("a", "b"):
-            self.set_joint_state(names.grasp_joint(arm, side), self.edu["end_effector"]["jaw_contact"])
-        info = self.info.parts[part]
-        centre, axis = self.assembly.grasp_line(arm)
-        middle = (info.ends["a"] + info.ends["b"]) / 2
-        along = info.ends["b"] - info.ends["a"]
-        p, q = _perpendiculars(axis)
-        p, q = math.cos(roll) * p + math.sin(roll) * q, -math.sin(roll) * p + math.cos(roll) * q
-        along = along / np.linalg.norm(along)
-        rotation = np.column_stack([axis, p, q]) @ np.column_stack([along, *_perpendiculars(along)]).T
-        self.place_part(part, centre + slide * axis - rotation @ middle, rotation)
+        self.staging.seat_in_grasp(part, arm, roll, slide)
 
     def member_pose(self, member: Member, kind: str) -> tuple[np.ndarray, np.ndarray]:
-        """World pose a part's body takes when it is ``member`` (mission joints, present tower)."""
-        points = [self.joint_position_world(j) for j, _ in member.joints]
-        _, tower = self.tower_pose()
-        if kind == "cross_frame":
-            return points[0], tower
-        axis = (points[1] - points[0]) / np.linalg.norm(points[1] - points[0])
-        x = np.cross(axis, tower[:, 2])
-        x = tower[:, 0] if np.linalg.norm(x) < 1e-6 else x / np.linalg.norm(x)
-        return points[0], np.column_stack([x, np.cross(axis, x), axis])
+        return self.staging.member_pose(member, kind)
 
     def stage_member(self, member_id: str, part: str | None = None, rivet: bool = True) -> str:
-        """Set a part as ``member_id`` (next part of its dispenser unless named), riveted as the
-        mission says. A cross frame is taken by the Active Grippers. Returns the part's name."""
-        member = self.mission.member(member_id)
-        part = part or self.next_part(member.dispenser)
-        if part is None:
-            raise ValueError(f"dispenser {member.dispenser} is empty")
-        info = self.info.parts[part]
-        pos, rot = self.member_pose(member, info.kind)
-        self.place_part(part, pos, rot)
-        self.assembly.state[part] = "placed"
-        if info.kind == "cross_frame":
-            for i in range(4):
-                self.set_joint_state(names.active_gripper(i), self.edu["active_grippers"]["range"][1])
-            self.assembly.update()
-        elif rivet:
-            for r in member.rivets:
-                self._stage_rivet(info, r.joint)
-        return part
-
-    def _stage_rivet(self, part: PartInfo, joint: str) -> None:
-        target = self.joint_position_world(joint)
-        end = min(
-            part.ends, key=lambda e: np.linalg.norm(self.assembly.part_point(part, part.ends[e]) - target)
-        )
-        reach = self.edu["end_effector"]["rivet_reach"]
-        for cf in self.info.cross_frames:
-            for i in range(4):
-                corner = self.site_position(names.corner_site(cf, i))
-                if np.linalg.norm(corner - target) <= reach:
-                    self.assembly.rivet(part, end, cf, i)
+        return self.staging.stage_member(member_id, part, rivet)
 
     def stage_bay(self, bay: int, skip_rivets: tuple[tuple[str, str], ...] = ()) -> dict[str, str]:
-        """Stage every member of ``bay``; ``skip_rivets`` lists (member id, joint id) left out."""
-        placed = {}
-        for member in self.mission.bay_members(bay):
-            part = self.stage_member(member.id, rivet=False)
-            placed[member.id] = part
-            if member.kind != "cross_frame":
-                for r in member.rivets:
-                    if (member.id, r.joint) not in skip_rivets:
-                        self._stage_rivet(self.info.parts[part], r.joint)
-        mujoco.mj_forward(self.model, self.data)
-        return placed
-
-    def compression_test(self, force_n: float = 200.0, settle_s: float = 0.3) -> CompressionResult:
-        return self.assembly.compression_test(self.advance, force_n, settle_s)
+        return self.staging.stage_bay(bay, skip_rivets)
 
     # -- cameras -----------------------------------------------------------------------------
-    def renderer(self, width: int = 640, height: int = 480, antialias: bool = True):
-        """The offscreen renderer, made on first use with a buffer of at least ``width`` x ``height``
-        (remade larger when a bigger frame is asked for, up to the model's offscreen size); one with
-        the model's multisampling (``antialias``), another without it when that is asked for."""
-        from tlt_sim.model.cameras import CameraRenderer
-
-        r = self._renderers.get(antialias)
-        if r is not None and (width > r.max_width or height > r.max_height):
-            width, height = max(width, r.max_width), max(height, r.max_height)
-            self._renderers.pop(antialias).close()
-            r = None
-        if r is None:
-            # A small buffer is much cheaper to make with OSMesa than the model's largest.
-            limit_w, limit_h = self.model.vis.global_.offwidth, self.model.vis.global_.offheight
-            r = self._renderers[antialias] = CameraRenderer(
-                self.model, min(max(width, 640), limit_w), min(max(height, 480), limit_h), antialias
-            )
-        return r
+    def renderer(self, width: int = 640, height: int = 480, antialias: bool = True) -> CameraRenderer:
+        return self.cameras.renderer(width, height, antialias)
 
     def render(
         self,
-        camera: Any,
+        camera: str | mujoco.MjvCamera,
         width: int = 320,
         height: int = 240,
         depth: bool = True,
         segmentation: bool = True,
         antialias: bool = True,
         rgb: bool = True,
-    ):
-        """Render ``camera`` (name or free ``mujoco.MjvCamera``) now; see :class:`cameras.Frame`.
-        Only the images asked for are made (``rgb``, ``depth``, ``segmentation``). ``antialias``
-        (multisampling, the model's setting) is what the vision's detectors were trained on;
-        ``False`` is cheaper on the CPU.
-
-        Depth and segmentation always come from a single-sample pass: resolved, a multisampled
-        depth buffer gives each pixel the depth of one sample off the pixel's centre (the cloud a
-        depth camera would give moved by a third of a pixel: 1-1.5 mm at a metre, which showed as
-        that bias in every certified pose), and blended id colours name geoms that are not there."""
-        limit_w, limit_h = self.model.vis.global_.offwidth, self.model.vis.global_.offheight
-        if not (0 < width <= limit_w and 0 < height <= limit_h):
-            raise ValueError(f"frame {width}x{height} exceeds the offscreen buffer {limit_w}x{limit_h}")
-        if not (antialias and rgb):
-            return self.renderer(width, height, False).render(
-                self.data, camera, width, height, depth, segmentation, rgb
-            )
-        multisampled = self.renderer(width, height, True)
-        colour = multisampled.render(self.data, camera, width, height, depth=False, segmentation=False)
-        if not (depth or segmentation):
-            return colour
-        exact = self.renderer(width, height, False)
-        frame = exact.render(self.data, camera, width, height, depth, segmentation, rgb=False)
-        return dataclasses.replace(frame, rgb=colour.rgb)
+    ) -> Frame:
+        return self.cameras.render(camera, width, height, depth, segmentation, antialias, rgb)
 
     def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
-        """Optical frame (x right, y down, z forward) of ``camera`` in the world."""
-        cid = self.model.camera(camera).id
-        return self.data.cam_xpos[cid].copy(), self.data.cam_xmat[cid].reshape(3, 3) @ np.diag(
-            [1.0, -1.0, -1.0]
-        )
-
-    def camera_fovy(self, camera: str) -> float:
-        return float(self.model.cam_fovy[self.model.camera(camera).id])
+        return self.cameras.camera_pose(camera)
 
 
 __all__ = ["ModelCompileError", "Scene", "compile_model"]

@@ -181,7 +181,7 @@ class URArmBinding:
         worst = max(range(len(off)), key=lambda i: abs(off[i]))
         if abs(off[worst]) > self.pushed_rad:
             arm = self.joints[0].split("/", 1)[0]
-            touching = ", ".join(f"{a} on {b}" for a, b in scene.contacts_of(f"{arm}/")) or "none"
+            touching = ", ".join(f"{a} on {b}" for a, b in scene.truth.contacts_of(f"{arm}/")) or "none"
             log.warning("%s held off its commanded joints (%s %.1f mrad) at %.3f s: contacts %s",
                         arm, self.joints[worst], 1000 * off[worst], scene.time, touching)
         self._reported = True  # one look per commanded pose

@@ -33,8 +33,8 @@ def test_strut_is_picked_carried_placed_riveted_and_holds_under_compression(scen
     placing = frame(bottom - top, [-0.3, 1.0, 0.0])
     m.to((top + bottom) / 2, placing)
     assert np.linalg.norm(scene.body_pose(scene.part(part).body)[0] - start) > 1.0  # carried
-    assert np.linalg.norm(scene.part_end(part, "a") - top) < 2e-3
-    assert np.linalg.norm(scene.part_end(part, "b") - bottom) < 2e-3
+    assert np.linalg.norm(scene.truth.part_end(part, "a") - top) < 2e-3
+    assert np.linalg.norm(scene.truth.part_end(part, "b") - bottom) < 2e-3
 
     shot_a, shot_b = scene.fire_rivet(arm, "a"), scene.fire_rivet(arm, "b")
     cross_frame = scene.part(scene.assembly.latches[0].split("part/")[1]).body
@@ -49,8 +49,8 @@ def test_strut_is_picked_carried_placed_riveted_and_holds_under_compression(scen
             scene.stage_member(member.id)
     result = scene.compression_test(force_n=200.0, settle_s=0.3)
     assert 0.0 < result.displacement_m < 0.005
-    assert np.linalg.norm(scene.part_end(part, "a") - top) < 2e-3
-    assert np.linalg.norm(scene.part_end(part, "b") - bottom) < 2e-3
+    assert np.linalg.norm(scene.truth.part_end(part, "a") - top) < 2e-3
+    assert np.linalg.norm(scene.truth.part_end(part, "b") - bottom) < 2e-3
 
 
 def test_released_part_that_nothing_holds_falls(scene, mover):
@@ -63,7 +63,7 @@ def test_released_part_that_nothing_holds_falls(scene, mover):
     body = scene.part(part).body
     assert scene.body_pose(body)[0][2] < 0.1  # on the floor
     weight = scene.model.body_subtreemass[scene.model.body(body).id] * 9.81
-    assert scene.contact_force(body)[2] == pytest.approx(weight, rel=0.1)  # the floor carries it
+    assert scene.truth.contact_force(body)[2] == pytest.approx(weight, rel=0.1)  # the floor carries it
 
 
 def test_grasp_holds_while_jaws_ease_and_lets_go_once_they_open(scene, mover):
@@ -111,7 +111,7 @@ def test_jaws_hold_a_diagonal_where_it_lies_along_them_and_miss_it_past_its_tube
 
 def test_top_grippers_carry_the_payloads_weight(scene):
     scene.advance(0.2)
-    total = sum(scene.constraint_force(f"top/{i}/payload") for i in range(4))
+    total = sum(scene.truth.constraint_force(f"top/{i}/payload") for i in range(4))
     weight = scene.model.body_subtreemass[scene.model.body("payload").id] * 9.81
     assert total == pytest.approx([0.0, 0.0, weight], abs=1e-3 * weight)
 
@@ -151,9 +151,9 @@ def test_bays_stack_as_the_lifter_raises_them(tmp_path):
     lifter = [names.lifter_joint(i) for i in range(4)]
     # Fast-forward the lead screws and pins: the real travel takes 15 s at 0.05 m/s.
     for joint in lifter:
-        scene._vmax[scene._index(joint)] = 0.5
+        scene.servos._vmax[scene.servos._index(joint)] = 0.5
     for i in range(4):
-        scene._vmax[scene._index(names.top_gripper(i))] = 0.1
+        scene.servos._vmax[scene.servos._index(names.top_gripper(i))] = 0.1
         scene.command_position(names.top_gripper(i), 0.0)
     scene.advance(0.5)
     assert scene.assembly.pins == [None] * 4
@@ -214,7 +214,7 @@ def test_a_scenario_starts_members_built_riveted_and_held(tmp_path):
         part = f"{member.dispenser}/{index}"  # parts come out of a dispenser in order
         assert scene.part_state(part) == "placed"
         if member.kind != "cross_frame":
-            ends = sorted((scene.part_end(part, e) for e in ("a", "b")), key=lambda p: p[2])
+            ends = sorted((scene.truth.part_end(part, e) for e in ("a", "b")), key=lambda p: p[2])
             place = sorted((scene.joint_position_world(j) for j, _ in member.joints), key=lambda p: p[2])
             assert max(np.linalg.norm(e - p) for e, p in zip(ends, place, strict=True)) < 2e-3, member_id
     assert scene.next_part("diagonal_dispenser_y") == "diagonal_dispenser_y/1"

@@ -97,9 +97,9 @@ def test_dispenser_apriltag_is_detected_with_its_id(scene):
 def test_renderer_is_made_only_when_a_frame_is_asked_for(tmp_path):
     with Scene(out_dir=tmp_path / "model") as scene:
         scene.advance(0.1)
-        assert not scene._renderers
+        assert not scene.cameras._renderers
         scene.render(names.d405_camera("ars_y", "b"), 64, 48, depth=False, segmentation=False)
-        assert list(scene._renderers) == [True]
+        assert list(scene.cameras._renderers) == [True]
         with pytest.raises(ValueError, match="exceeds"):
             scene.render(names.zed_camera(0), 5000, 10)
 

@@ -12,8 +12,8 @@ def test_model_compiles_with_every_named_joint_actuator_and_camera(scene):
         assert m.joint(joint).id >= 0 and m.actuator(joint).id >= 0
     for cam in names.cameras():
         assert m.camera(cam).id >= 0
-    assert sorted(scene.actuated_joints) == sorted(names.all_actuated_joints())
-    assert scene.active_constraints("top/") == [f"top/{i}/payload" for i in range(4)]
+    assert sorted(scene.servos.joints) == sorted(names.all_actuated_joints())
+    assert scene.truth.active_constraints("top/") == [f"top/{i}/payload" for i in range(4)]
 
 
 def test_compile_error_carries_mujocos_message_and_the_file(tmp_path):
@@ -69,7 +69,7 @@ def test_velocity_command_drives_until_held(scene):
     assert scene.position(joint) - start == pytest.approx(0.04, abs=3e-3)
     assert scene.velocity(joint) == pytest.approx(0.04, abs=5e-3)
     scene.hold(joint)
-    held = scene.setpoint(joint)
+    held = scene.servos.setpoint(joint)
     scene.advance(0.5)
     assert scene.position(joint) == pytest.approx(held, abs=1e-3)
     with pytest.raises(KeyError):
@@ -96,4 +96,4 @@ def test_reset_returns_to_the_start(scene):
     assert scene.time == 0.0
     assert scene.position(names.arm_joint("ars_x", 0)) == pytest.approx(scene.edu["arms"]["ars_x"]["home"][0])
     assert scene.data.ncon == 0  # nothing touches at the start
-    assert scene.active_constraints() == [f"top/{i}/payload" for i in range(4)]
+    assert scene.truth.active_constraints() == [f"top/{i}/payload" for i in range(4)]

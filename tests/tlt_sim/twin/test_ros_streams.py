@@ -82,7 +82,7 @@ def test_camera_renders_only_when_subscribed_and_segments_the_part_in_view(make_
     assert f"{part.body}/tube" in seen
     assert labels["classes"][labels["instances"].index(f"{part.body}/tube")] == "strut_tube"
     info = got["info"][0]
-    assert info.k[0] == pytest.approx(h / 2 / np.tan(np.radians(scene.camera_fovy("zed_1")) / 2))
+    assert info.k[0] == pytest.approx(h / 2 / np.tan(np.radians(scene.cameras.camera_fovy("zed_1")) / 2))
 
 
 def test_ground_truth_poses_match_the_model(make_twin, ros):
