@@ -106,7 +106,7 @@ class RemoteCall(Action):
 
     def write_answer(self, answer: Any) -> None:
         """Write ``answer`` to ``answer_key`` on the blackboard, when one was given."""
-        if self._bb is not None:
+        if self._bb is not None and self.answer_key is not None:
             self._bb.set(self.answer_key, answer)
 
 
