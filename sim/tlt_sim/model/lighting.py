@@ -1,6 +1,6 @@
 """The light the twin's cameras see by: the model's own, or the lunar surface's hard, low sun.
 
-The model (``generate.py``) lights the EDU as a laboratory does: a sun overhead and the viewer's
+The model (``tlt_sim.model.generate``) lights the EDU as a laboratory does: a sun overhead and the viewer's
 headlight, soft and even. On the Moon the sun stands a few degrees over the horizon for days at
 the poles, with next to no sky light: one face of a part glares, the other is black, and long
 shadows cross the site. :func:`apply_lighting` puts a :class:`Lighting` (``config/twin/lighting.yaml``

@@ -4,7 +4,7 @@ Reads ``config/vision/parts.yaml`` (part radii and lengths) and ``config/vision/
 (keypoints, groups and visibility rules), and a mission's geometry (bay width, strut lengths).
 :func:`build_models` returns one :class:`CadModel` per model name: ``strut_tube/vertical``,
 ``strut_tube/diagonal``, ``end_fitting``, ``cross_frame``, ``corner_joint`` and ``rivet``. The
-geometry is the twin's (sim/tlt_sim/model/generate.py): a strut of length L has its fittings
+geometry is the twin's (sim/tlt_sim/model/generate/parts.py): a strut of length L has its fittings
 between ``corner_size/2`` and ``corner_size/2 + fitting_length`` from each end and its tube (a
 capsule) between them; a cross frame's sides are capsules between corner cubes.
 """
