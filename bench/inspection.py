@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import pose_matrix
 from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.depth_noise import with_noise

@@ -48,11 +48,11 @@ from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import CertifiedPose, EndEffectorState, InspectionReport
 from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
 
-from tlt_ars.planning.kinematics import invert, pose_matrix
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.direct_executor import DirectMultiThreadedExecutor, QuickCallbackGroup
 from tlt_common.executor_stop import stop_executor
+from tlt_common.geometry.transforms import invert, pose_matrix
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 
 
 def printed_size(tag_side: float) -> float:

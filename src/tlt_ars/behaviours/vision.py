@@ -24,11 +24,11 @@ import numpy as np
 from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 
 from tlt_ars.context import ArsContext
-from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_from_matrix
 from tlt_ars.planning.targets import Target, dispenser_targets, part_in_tool
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Condition
 from tlt_common.bt.ros import ServiceCall
+from tlt_common.geometry.transforms import invert, pose_matrix, rpy_from_matrix
 
 
 def pose_to_matrix(pose: Any) -> np.ndarray:

@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from tlt_ars.planning.coarse_pose_search import NoCoarsePose, Setup
-from tlt_ars.planning.kinematics import IkFailed, invert
 from tlt_ars.planning.world import SceneConfig, build_scene
+from tlt_common.geometry.transforms import invert
+from tlt_common.geometry.ur10e import IkFailed
 
 # Tags closer than this (m, and about the same in rad) to where the poses were made for count as
 # not moved: the configured, twin-checked joints are then kept exactly.
