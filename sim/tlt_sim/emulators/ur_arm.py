@@ -23,12 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tlt_common.geometry import ur10e
 from tlt_sim.emulators import ur_kinematics as kin
 
-UR10E_MAX_VELOCITY = (math.radians(120),) * 2 + (math.radians(180),) * 4
+UR10E_MAX_VELOCITY = ur10e.VELOCITY_LIMIT
 UR10E_MAX_ACCELERATION = (15.0,) * 6  # rad/s^2; the controller's software ceiling is 40
-UR10E_POSITION_LIMIT = 2 * math.pi
-HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+UR10E_POSITION_LIMIT = ur10e.POSITION_LIMIT
+HOME = ur10e.HOME
 
 
 @dataclass

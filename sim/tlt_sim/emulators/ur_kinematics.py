@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tlt_sim.model import ur10e
+from tlt_common.geometry import ur10e
 
 
 @dataclass(frozen=True)

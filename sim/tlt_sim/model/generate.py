@@ -25,10 +25,12 @@ from typing import Any
 
 import numpy as np
 
+from tlt_common.geometry import ur10e
+from tlt_common.geometry.transforms import rot_x, rot_y, rot_z, rotation_to_mujoco_quat, rpy_matrix
 from tlt_common.mission.schema import Mission
-from tlt_sim.model import names, ur10e
+from tlt_sim.model import names
 from tlt_sim.model.apriltag import write_tag_png
-from tlt_sim.model.geometry import fmt, look_at_xyaxes, mat_to_quat, rot_x, rot_y, rot_z, rpy_matrix
+from tlt_sim.model.geometry import fmt, look_at_xyaxes
 from tlt_sim.model.scenario import NOMINAL, Defect, Scenario
 
 ARM_BIT, PART_BIT = 2, 4
@@ -409,7 +411,7 @@ class _Builder:
             type="box",
             size=(0.03, 0.09, 0.015),
             mass=0.17,
-            quat=mat_to_quat(rot_z(heading)),
+            quat=rotation_to_mujoco_quat(rot_z(heading)),
             rgba=(0.1, 0.1, 0.1, 1),
         )
         _sub(
@@ -572,7 +574,8 @@ class _Builder:
             self.info.dispenser_tags[name] = tag_id
             rot = rpy_matrix(disp.rpy)
             pos = self.base_origin + np.asarray(disp.position, dtype=float)
-            body = _sub(self.world, "body", name=f"dispenser/{name}", pos=pos, quat=mat_to_quat(rot))
+            quat = rotation_to_mujoco_quat(rot)
+            body = _sub(self.world, "body", name=f"dispenser/{name}", pos=pos, quat=quat)
             count = 0 if name in self.scenario.empty else disp.count
             extent = self._dispenser_extent(disp.part_kind)
             top = d_cfg["first_slot_height"] + max(count - 1, 0) * d_cfg["slot_pitch"]
@@ -696,7 +699,7 @@ class _Builder:
             length = self.mission.strut_lengths[kind]
             local_pos, local_rot = np.array([-length / 2, 0.0, z]), rot_y(math.pi / 2)
         wpos, wrot = dpos + drot @ local_pos, drot @ local_rot
-        wquat = mat_to_quat(wrot)
+        wquat = rotation_to_mujoco_quat(wrot)
         body = _sub(self.world, "body", name=bname, pos=wpos, quat=wquat, gravcomp=1)
         _sub(body, "freejoint", name=bname)
         half = self.edu["parts"]["corner_size"] / 2
@@ -726,7 +729,7 @@ class _Builder:
             "body",
             name=f"{arm}/base",
             pos=(base[0], base[1], base[2] + ped),
-            quat=mat_to_quat(rot_z(math.radians(cfg["yaw_deg"]))),
+            quat=rotation_to_mujoco_quat(rot_z(math.radians(cfg["yaw_deg"]))),
         )
         if ped > 0:  # in the base body, so the first link (its child) never collides with it
             _sub(
@@ -784,7 +787,7 @@ class _Builder:
                 (-ur10e.POSITION_LIMIT, ur10e.POSITION_LIMIT),
             )
             parent = link
-            pos, quat = end, mat_to_quat(rot_x(ur10e.ALPHA[i]))
+            pos, quat = end, rotation_to_mujoco_quat(rot_x(ur10e.ALPHA[i]))
         flange = _sub(parent, "body", name=names.ee_body(arm), pos=pos, quat=quat, gravcomp=1)
         _sub(flange, "site", name=f"{arm}/flange", size=(0.01,))
         self._end_effector(arm, flange)

@@ -21,12 +21,13 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from tlt_common.geometry import ur10e
+from tlt_common.geometry.transforms import frame_from_axes, rotation_to_mujoco_quat
 from tlt_common.mission.schema import Member, Mission
-from tlt_sim.model import names, ur10e
+from tlt_sim.model import names
 from tlt_sim.model.assembly import Assembly, CompressionResult, Release, RivetShot
 from tlt_sim.model.config import DEFAULT_EDU, load_edu
 from tlt_sim.model.generate import ModelInfo, PartInfo, build_model
-from tlt_sim.model.geometry import frame_from_axes, mat_to_quat
 from tlt_sim.model.placement import Placement, placement_of
 from tlt_sim.model.scenario import NOMINAL, Scenario, load_scenario
 
@@ -444,7 +445,7 @@ class Scene:
         jid = self.model.body(part.body).jntadr[0]
         adr, dof = self.model.jnt_qposadr[jid], self.model.jnt_dofadr[jid]
         self.data.qpos[adr : adr + 3] = position
-        self.data.qpos[adr + 3 : adr + 7] = mat_to_quat(rotation)
+        self.data.qpos[adr + 3 : adr + 7] = rotation_to_mujoco_quat(rotation)
         self.data.qvel[dof : dof + 6] = 0.0
         mujoco.mj_forward(self.model, self.data)
 

@@ -57,7 +57,7 @@ VELOCITY_LIMIT = tuple(math.radians(v) for v in (120, 120, 180, 180, 180, 180))
 TORQUE_LIMIT = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
 # Link capsule radii for collision, m (outer diameter of the joint housings).
 LINK_RADIUS = (0.075, 0.065, 0.055, 0.045, 0.045, 0.04)
-# UR's home posture: upper arm up, forearm forward, tool down.
+# UR's home posture: upper arm up, forearm level, tool pointing down.
 HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 
 # A candidate whose forward kinematics misses the asked pose by more than this is dropped

@@ -274,7 +274,8 @@ class TwinRenderer:
     def _place_camera(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
         """Move camera ``name`` (its optics) to a world pose, in its body's frame."""
         import mujoco
-        from tlt_sim.model.geometry import mat_to_quat
+
+        from tlt_common.geometry.transforms import rotation_to_mujoco_quat as mat_to_quat
 
         m, d = self.scene.model, self.scene.data
         cid = self._cam_ids[name]
