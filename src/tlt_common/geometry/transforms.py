@@ -20,6 +20,9 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+# Rotations within this angle (rad) of a half turn get the one canonical rotation vector.
+_HALF_TURN = 1e-6
+
 
 def rot_x(a: float) -> np.ndarray:
     """Rotation by ``a`` rad about x."""
@@ -127,8 +130,16 @@ def rotvec_to_matrix(rv: Sequence[float]) -> np.ndarray:
 
 
 def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
-    """Rotation vector of a rotation matrix, angle in [0, pi]."""
-    return Rotation.from_matrix(np.asarray(r, dtype=float)).as_rotvec()
+    """Rotation vector of a rotation matrix, angle in [0, pi].
+
+    A half turn has two rotation vectors, ``v`` and ``-v``; within 1e-6 rad of it the one whose
+    largest component (the first of equal ones) is positive is returned, so the same rotation
+    always gives the same vector.
+    """
+    rv = Rotation.from_matrix(np.asarray(r, dtype=float)).as_rotvec()
+    if math.pi - float(np.linalg.norm(rv)) < _HALF_TURN and rv[int(np.argmax(np.abs(rv)))] < 0.0:
+        rv = -rv
+    return rv
 
 
 __all__ = [

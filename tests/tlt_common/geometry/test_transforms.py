@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from tlt_common.geometry.transforms import (
     frame_from_axes,
     invert,
+    matrix_to_rotvec,
     pose_error,
     pose_matrix,
     quaternion_to_rotation,
@@ -19,6 +20,7 @@ from tlt_common.geometry.transforms import (
     rot_z,
     rotation_to_mujoco_quat,
     rotation_to_quaternion,
+    rotvec_to_matrix,
     rpy_from_matrix,
     rpy_matrix,
 )
@@ -73,3 +75,17 @@ def test_frame_from_axes_keeps_z_and_orthogonalises_x():
     r = frame_from_axes([1.0, 1.0, 0.0], [0.0, 1.0, 1.0])
     assert np.allclose(r.T @ r, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
     assert np.allclose(r[:, 2], np.array([0.0, 1.0, 1.0]) / math.sqrt(2.0))
+
+
+def test_rotation_vector_round_trip_near_pi() -> None:
+    for rv in ([0.0, 0.0, math.pi - 1e-7], [1.0, 2.0, -0.5], [0.0, 0.0, 0.0]):
+        out = matrix_to_rotvec(rotvec_to_matrix(rv))
+        assert np.allclose(rotvec_to_matrix(out), rotvec_to_matrix(rv), atol=1e-6)
+
+
+def test_a_half_turn_has_one_rotation_vector():
+    for axis in ([1.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.3, -0.9, 0.1], [-1.0, 0.0, 0.0]):
+        k = np.asarray(axis) / np.linalg.norm(axis)
+        rv = matrix_to_rotvec(rotvec_to_matrix(math.pi * k))
+        assert rv == pytest.approx(matrix_to_rotvec(rotvec_to_matrix(-math.pi * k)))
+        assert rv[int(np.argmax(np.abs(rv)))] > 0.0 and np.linalg.norm(rv) == pytest.approx(math.pi)
