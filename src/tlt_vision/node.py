@@ -52,7 +52,7 @@ from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
 from tlt_common.direct_executor import DirectMultiThreadedExecutor, QuickCallbackGroup
 from tlt_common.executor_stop import stop_executor
-from tlt_common.geometry.transforms import invert, pose_matrix
+from tlt_common.geometry.transforms import invert, pose_matrix, rotation_to_quaternion
 from tlt_common.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
@@ -66,7 +66,7 @@ from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config, pose_of
 from tlt_vision.part_inspection import STRUT_KINDS, LookCloser, PartInspector
 from tlt_vision.pipeline import Detection, detections_near
-from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
+from tlt_vision.pose.estimator import PoseEstimate
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.tag_mounts import tag_mount

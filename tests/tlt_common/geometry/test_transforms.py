@@ -89,3 +89,12 @@ def test_a_half_turn_has_one_rotation_vector():
         rv = matrix_to_rotvec(rotvec_to_matrix(math.pi * k))
         assert rv == pytest.approx(matrix_to_rotvec(rotvec_to_matrix(-math.pi * k)))
         assert rv[int(np.argmax(np.abs(rv)))] > 0.0 and np.linalg.norm(rv) == pytest.approx(math.pi)
+
+
+def test_quaternion_of_known_rotations():
+    assert rotation_to_quaternion(np.eye(3)) == pytest.approx((0, 0, 0, 1))
+    c, s = math.cos(math.pi / 3), math.sin(math.pi / 3)
+    rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    assert rotation_to_quaternion(rz) == pytest.approx((0, 0, math.sin(math.pi / 6), math.cos(math.pi / 6)))
+    rx180 = np.diag([1.0, -1.0, -1.0])
+    assert rotation_to_quaternion(rx180) == pytest.approx((1, 0, 0, 0))
