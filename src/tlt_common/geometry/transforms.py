@@ -10,6 +10,9 @@ Conventions, the same everywhere in the project:
 - A rotation vector (axis times angle, rad) is the form UR controllers use in their poses.
 
 Quaternion and rotation-vector conversions go through :class:`scipy.spatial.transform.Rotation`.
+A matrix handed to them is taken as a rotation (orthonormal to rounding, as the matrices the
+code builds are) and not projected onto the nearest one first: that projection costs several
+times the conversion, and the twin converts every body's pose on each ground-truth message.
 """
 
 from __future__ import annotations
@@ -102,9 +105,13 @@ def describe_pose(pose: np.ndarray) -> str:
     )
 
 
+def _from_matrix(rot: np.ndarray) -> Rotation:
+    return Rotation.from_matrix(np.asarray(rot, dtype=float), assume_valid=True)
+
+
 def rotation_to_quaternion(rot: np.ndarray) -> tuple[float, float, float, float]:
     """Unit quaternion ``(x, y, z, w)`` (geometry_msgs order) of a rotation matrix, ``w >= 0``."""
-    q = Rotation.from_matrix(np.asarray(rot, dtype=float)).as_quat(canonical=True)
+    q = _from_matrix(rot).as_quat(canonical=True)
     return float(q[0]), float(q[1]), float(q[2]), float(q[3])
 
 
@@ -121,7 +128,7 @@ def quaternion_to_rotation(q: Sequence[float]) -> np.ndarray:
 
 def rotation_to_mujoco_quat(rot: np.ndarray) -> np.ndarray:
     """Unit quaternion in MuJoCo's order ``(w, x, y, z)``, ``w >= 0``: the twin's boundary."""
-    return Rotation.from_matrix(np.asarray(rot, dtype=float)).as_quat(canonical=True, scalar_first=True)
+    return _from_matrix(rot).as_quat(canonical=True, scalar_first=True)
 
 
 def rotvec_to_matrix(rv: Sequence[float]) -> np.ndarray:
@@ -136,7 +143,7 @@ def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
     largest component (the first of equal ones) is positive is returned, so the same rotation
     always gives the same vector.
     """
-    rv = Rotation.from_matrix(np.asarray(r, dtype=float)).as_rotvec()
+    rv = _from_matrix(r).as_rotvec()
     if math.pi - float(np.linalg.norm(rv)) < _HALF_TURN and rv[int(np.argmax(np.abs(rv)))] < 0.0:
         rv = -rv
     return rv
