@@ -34,8 +34,8 @@ import numpy as np
 import torch
 from tlt_tools.vision_training.render_dataset import ARMS, inspection_joints
 
-from tlt_ars.planning.kinematics import pose_matrix
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import pose_matrix
 from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.depth_noise import with_noise

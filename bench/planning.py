@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import IkFailed
 from tlt_ars.planning.planner import Planner, PlanningFailed
 from tlt_ars.planning.reachability import TargetUnreachable, same_branch, usable_approaches
 from tlt_ars.planning.targets import (
@@ -43,6 +42,7 @@ from tlt_ars.planning.targets import (
 )
 from tlt_ars.planning.time_parameterisation import straight_line_duration, time_parameterise
 from tlt_ars.planning.world import build_scene, load_scene_config
+from tlt_common.geometry.ur10e import IkFailed
 from tlt_common.mission import generate
 from tlt_common.mission.schema import load_mission, parse_mission
 

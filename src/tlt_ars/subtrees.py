@@ -90,10 +90,10 @@ from tlt_ars.behaviours.vision import (
 from tlt_ars.config import PoseSpec
 from tlt_ars.context import ArsContext
 from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_common.bt.deferred import DeferredSequence
 from tlt_common.bt.nodes import Action, Condition
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 from tlt_common.mission.schema import Member
 
 Sequence = py_trees.composites.Sequence

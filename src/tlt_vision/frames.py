@@ -7,7 +7,7 @@ extrinsics of ``config/vision/node.yaml``:
   joint (``/camera_mounts/joint_states``, e.g. ``camera_mount_1``) <- optical frame (fixed);
 * an EE D405: world <- arm base (fixed) <- UR10e flange by the published DH forward kinematics of
   the six joints (``/ur_x/joint_states``, ``ur_x_shoulder_pan_joint`` ...;
-  :class:`tlt_ars.planning.kinematics.Ur10eKinematics`) <- slide along flange x by the EE width
+  :class:`tlt_common.geometry.ur10e.Ur10eKinematics`) <- slide along flange x by the EE width
   joint for a camera on gripper b (``/ee_x/state``, ``ee_x_width``) <- optical frame (fixed).
 
 Optical frames are ROS camera frames (x right, y down, z forward). :meth:`CameraRig.camera_pose`
@@ -26,8 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import JOINT_NAMES, Ur10eKinematics, pose_matrix, rot_z
 from tlt_common import ros_names
+from tlt_common.geometry.transforms import pose_matrix, rot_z
+from tlt_common.geometry.ur10e import JOINT_NAMES, Ur10eKinematics
 from tlt_vision.node_config import VisionConfig, pose_of
 
 

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 from tlt_common.mission.tag_mounts import TAG_MOUNT_SCHEMA
 from tlt_vision.depth_noise import EXACT, DepthNoise
 from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED

@@ -45,13 +45,13 @@ from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
 from tlt_ars.config import ars_config_from_dict, default_config_path
 from tlt_ars.node import ArsNode
-from tlt_ars.planning.kinematics import pose_error
 from tlt_ars.planning.targets import dispenser_targets, part_in_tool, placement_targets
 from tlt_ars.planning.world import dispenser_frame
 from tlt_common import ros_names
 from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
 from tlt_common.executor_stop import stop_executor
+from tlt_common.geometry.transforms import pose_error
 from tlt_common.node_teardown import destroy_node
 from tlt_common.spin_loop import spin
 from tlt_drivers.dynamixel.config import validate_chain

@@ -16,11 +16,11 @@ from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.mission_state import Request
 from tlt_ars.motion import ExecuteTrajectory, MotionGoal, TrajectorySlot
-from tlt_ars.planning.kinematics import pose_error
 from tlt_ars.planning.planner import PlanningFailed
 from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import tower_origin
 from tlt_ars.tree import failure_reason
+from tlt_common.geometry.transforms import pose_error
 
 pytestmark = pytest.mark.timeout(240)
 VERTICAL, DIAGONAL = AddMember.Goal.KIND_VERTICAL, AddMember.Goal.KIND_DIAGONAL

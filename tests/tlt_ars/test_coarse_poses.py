@@ -17,9 +17,9 @@ from tlt_tools.coarse_pose_search import Setup
 
 from tlt_ars.config import default_config_path
 from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, follow_tags
-from tlt_ars.planning.kinematics import pose_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import pose_matrix
 from tlt_common.mission.schema import load_mission
 from tlt_vision.apriltag import TagConfig, TagLocator, dispenser_tag_ids
 

@@ -11,9 +11,9 @@ import pytest
 from tlt_interfaces.srv import CheckAlignment
 
 from tlt_ars.behaviours.vision import corrected_target
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import load_scene_config
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 from tlt_common.mission.schema import load_mission
 
 MISSION = load_mission(Path(__file__).resolve().parents[2] / "missions" / "one_bay.yaml")

@@ -12,9 +12,9 @@ import pytest
 import yaml
 from tlt_tools import coarse_pose_search as cps
 
-from tlt_ars.planning.kinematics import pose_matrix, rot_x
 from tlt_ars.planning.world import build_scene
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import pose_matrix, rot_x
 
 SMALL = cps.ViewSpec(distances=(0.32, 0.36), rolls=12, azimuths=4)
 

@@ -32,9 +32,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from tlt_ars.planning.kinematics import rpy_matrix
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import rpy_matrix
 from tlt_common.mission.schema import load_mission
 from tlt_vision.inspection import inspect_cross_frame, inspect_strut
 from tlt_vision.node_config import VisionConfig, load_config

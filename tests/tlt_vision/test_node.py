@@ -38,12 +38,12 @@ from tlt_sim.model.scene import Scene
 from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
 from tlt_sim.twin.settings import load_settings
 
-from tlt_ars.planning.kinematics import pose_error, pose_matrix
 from tlt_ars.planning.reachability import TargetUnreachable, reach_target
 from tlt_ars.planning.targets import dispenser_targets, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
+from tlt_common.geometry.transforms import pose_error, pose_matrix
 from tlt_common.spin_loop import spin
 from tlt_vision.frames import FrameUnavailable, arm_joint_names, grasp_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main

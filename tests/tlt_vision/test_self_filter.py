@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tlt_ars.planning.kinematics import pose_matrix
+from tlt_common.geometry.transforms import pose_matrix
 from tlt_vision.node_config import load_config
 from tlt_vision.pipeline import Detection
 from tlt_vision.pointcloud import Intrinsics, back_project

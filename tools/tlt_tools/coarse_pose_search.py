@@ -39,8 +39,9 @@ from typing import Any
 import numpy as np
 
 from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, dispenser_tag_pose
-from tlt_ars.planning.kinematics import VELOCITY_LIMIT, IkFailed, invert, pose_matrix
 from tlt_ars.planning.world import SceneConfig, build_scene, load_scene_config
+from tlt_common.geometry.transforms import invert, pose_matrix
+from tlt_common.geometry.ur10e import VELOCITY_LIMIT, IkFailed
 from tlt_common.mission.schema import load_mission
 from tlt_common.mission.tag_mounts import TagMounting, printed_size
 from tlt_vision.apriltag import TagConfig

@@ -23,12 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tlt_common.geometry import ur10e
+from tlt_common.geometry.transforms import matrix_to_rotvec, rotvec_to_matrix
 from tlt_sim.emulators import ur_kinematics as kin
 
-UR10E_MAX_VELOCITY = (math.radians(120),) * 2 + (math.radians(180),) * 4
+UR10E_MAX_VELOCITY = ur10e.VELOCITY_LIMIT
 UR10E_MAX_ACCELERATION = (15.0,) * 6  # rad/s^2; the controller's software ceiling is 40
-UR10E_POSITION_LIMIT = 2 * math.pi
-HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
+UR10E_POSITION_LIMIT = ur10e.POSITION_LIMIT
+HOME = ur10e.HOME
 
 
 @dataclass
@@ -154,7 +156,7 @@ class UR10eArm:
             # Reachability of the end point is checked before moving, as the controller does.
             self.target_q = np.array(kin.inverse_nearest(pose, self.q, self.tcp, self._limits()))
             p0, p1 = start[:3, 3], goal[:3, 3]
-            rel = kin.matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])
+            rel = matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])
             length = float(np.linalg.norm(p1 - p0))
             angle = float(np.linalg.norm(rel))
             # A pure reorientation is paced by v read as rad/s, as movel does for rotations.
@@ -232,7 +234,7 @@ class UR10eArm:
         frac = s / self._profile.length
         t = np.eye(4)
         t[:3, 3] = p0 + (p1 - p0) * frac
-        t[:3, :3] = r0 @ kin.rotvec_to_matrix(rel * frac)
+        t[:3, :3] = r0 @ rotvec_to_matrix(rel * frac)
         try:
             q = np.array(kin.inverse_nearest(kin.matrix_to_pose(t), self.q, self.tcp, self._limits()))
         except kin.IKError as exc:

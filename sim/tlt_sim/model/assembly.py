@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from tlt_common.geometry.transforms import rotation_to_mujoco_quat
 from tlt_sim.model import names
 from tlt_sim.model.generate import HIDDEN_GROUP, PART_BIT, RIVET_GROUP, ModelInfo, PartInfo
-from tlt_sim.model.geometry import mat_to_quat
 
 _PARALLEL_COS = np.cos(np.radians(20.0))
 # Jaw angles (rad) short of the contact angle at which they count as closed on a part, and as
@@ -157,7 +157,7 @@ class Assembly:
         anchor2 = r2.T @ (point - x2)
         if shift2 is not None:
             anchor2 = anchor2 - shift2
-        q1, q2 = mat_to_quat(r1), mat_to_quat(r2)
+        q1, q2 = rotation_to_mujoco_quat(r1), rotation_to_mujoco_quat(r2)
         rel = np.zeros(4)
         neg = np.zeros(4)
         mujoco.mju_negQuat(neg, q1)

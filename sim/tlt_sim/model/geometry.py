@@ -1,44 +1,13 @@
-"""Small rigid-body helpers shared by the generator and the scene (rotations, quaternions, poses)."""
+"""MJCF-specific geometry for the generator: camera axes and number text.
+
+Rotations, poses and quaternions live in :mod:`tlt_common.geometry.transforms`.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
-import mujoco
 import numpy as np
-
-
-def rot_x(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
-    """Fixed-axis roll, pitch, yaw (as ROS): R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    return rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
-
-
-def mat_to_quat(mat: np.ndarray) -> np.ndarray:
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(mat, dtype=float).reshape(9))
-    return quat
-
-
-def quat_to_mat(quat: Sequence[float]) -> np.ndarray:
-    mat = np.zeros(9)
-    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=float))
-    return mat.reshape(3, 3)
 
 
 def look_at_xyaxes(forward: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
@@ -51,16 +20,6 @@ def look_at_xyaxes(forward: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.
     right /= np.linalg.norm(right)
     cam_up = np.cross(right, f)
     return np.concatenate([right, cam_up])
-
-
-def frame_from_axes(x: Sequence[float], z: Sequence[float]) -> np.ndarray:
-    """Rotation whose z axis is along ``z`` and x axis along ``x`` made orthogonal to it."""
-    zv = np.asarray(z, dtype=float)
-    zv = zv / np.linalg.norm(zv)
-    xv = np.asarray(x, dtype=float)
-    xv = xv - (xv @ zv) * zv
-    xv = xv / np.linalg.norm(xv)
-    return np.column_stack([xv, np.cross(zv, xv), zv])
 
 
 def fmt(values: Sequence[float] | float) -> str:

@@ -12,7 +12,7 @@ lifter.yaml), the servos from 1 (``active_gripper_1..4``, ``top_gripper_1..4``,
 
 from __future__ import annotations
 
-from tlt_sim.model import ur10e
+from tlt_common.geometry import ur10e
 
 CORNERS = ("x0_y0", "x1_y0", "x1_y1", "x0_y1")
 CORNER_XY = ((0, 0), (1, 0), (1, 1), (0, 1))

@@ -21,8 +21,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from tlt_common.geometry import ur10e
 from tlt_common.mission.schema import Member, Mission
-from tlt_sim.model import names, ur10e
+from tlt_sim.model import names
 from tlt_sim.model.assembly import Assembly, Release, RivetShot
 from tlt_sim.model.camera_views import CameraViews
 from tlt_sim.model.cameras import CameraRenderer, Frame

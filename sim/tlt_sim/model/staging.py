@@ -15,12 +15,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from tlt_common.geometry.transforms import frame_from_axes, rotation_to_mujoco_quat
 from tlt_common.mission.schema import Member, Mission
 from tlt_sim.model import names
 from tlt_sim.model.assembly import Assembly
 from tlt_sim.model.camera_views import CameraViews
 from tlt_sim.model.generate import ModelInfo, PartInfo
-from tlt_sim.model.geometry import frame_from_axes, mat_to_quat
 from tlt_sim.model.ground_truth import GroundTruth
 from tlt_sim.model.servos import Servos
 
@@ -58,7 +58,7 @@ class Staging:
         jid = self.model.body(part.body).jntadr[0]
         adr, dof = self.model.jnt_qposadr[jid], self.model.jnt_dofadr[jid]
         self.data.qpos[adr : adr + 3] = position
-        self.data.qpos[adr + 3 : adr + 7] = mat_to_quat(rotation)
+        self.data.qpos[adr + 3 : adr + 7] = rotation_to_mujoco_quat(rotation)
         self.data.qvel[dof : dof + 6] = 0.0
         mujoco.mj_forward(self.model, self.data)
 

@@ -39,10 +39,10 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 from tlt_interfaces.msg import TransformArray
 
+from tlt_common.geometry.transforms import rotation_to_quaternion
 from tlt_common.stamps import set_stamp
 from tlt_sim.model import names
 from tlt_sim.model.camera_sensor import CameraSensors
-from tlt_sim.model.geometry import mat_to_quat
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin import topics
 from tlt_sim.twin.settings import TwinSettings
@@ -199,9 +199,8 @@ class GroundTruth:
             msg.child_frame_id = name
             msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (
                 float(v) for v in pos)
-            w, x, y, z = (float(v) for v in mat_to_quat(rot))
             q = msg.transform.rotation
-            q.w, q.x, q.y, q.z = w, x, y, z
+            q.x, q.y, q.z, q.w = rotation_to_quaternion(rot)
             out.transforms.append(msg)
         self._pub.publish(out)
 

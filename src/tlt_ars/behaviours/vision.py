@@ -24,27 +24,17 @@ import numpy as np
 from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 
 from tlt_ars.context import ArsContext
-from tlt_ars.planning.kinematics import invert, pose_matrix, rpy_from_matrix
 from tlt_ars.planning.targets import Target, dispenser_targets, part_in_tool
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Condition
 from tlt_common.bt.ros import ServiceCall
+from tlt_common.geometry.transforms import invert, pose_matrix, quaternion_to_rotation, rpy_from_matrix
 
 
 def pose_to_matrix(pose: Any) -> np.ndarray:
-    """geometry_msgs/Pose -> 4x4."""
-    x, y, z, w = pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w
-    n = x * x + y * y + z * z + w * w
-    if n < 1e-12:
-        raise ValueError("pose has a zero quaternion")
-    s = 2.0 / n
-    rot = np.array(
-        [
-            [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
-            [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
-            [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)],
-        ]
-    )
+    """geometry_msgs/Pose -> 4x4; ``ValueError`` for a zero quaternion."""
+    o = pose.orientation
+    rot = quaternion_to_rotation((o.x, o.y, o.z, o.w))
     return pose_matrix((pose.position.x, pose.position.y, pose.position.z), rot)
 
 

@@ -22,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import IkFailed, invert
 from tlt_ars.planning.world import SceneConfig, build_scene, dispenser_frame
+from tlt_common.geometry.transforms import invert
+from tlt_common.geometry.ur10e import IkFailed
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tag_mounts import TagMounting
 

@@ -23,7 +23,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from tlt_ars.planning.kinematics import ALPHA, A, D, Ur10eKinematics, pinocchio_model, rot_x
+from tlt_common.geometry.transforms import rot_x
+from tlt_common.geometry.ur10e import ALPHA, A, D, Ur10eKinematics, pinocchio_model
 
 # Link capsule radii of the UR10e (outer radius of the joint housings and tubes), m.
 DEFAULT_LINK_RADII = (0.08, 0.065, 0.055, 0.047, 0.047, 0.045)

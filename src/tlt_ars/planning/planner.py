@@ -39,7 +39,8 @@ from itertools import pairwise
 import numpy as np
 
 from tlt_ars.planning.collision_scene import CollisionScene
-from tlt_ars.planning.kinematics import IkFailed, describe_pose, flange_batch, pose_error
+from tlt_common.geometry.transforms import describe_pose, pose_error
+from tlt_common.geometry.ur10e import IkFailed, flange_batch
 
 try:  # OMPL logs every solve at INFO on stdout; keep only its errors.
     from ompl import base as ob

@@ -25,10 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tlt_ars.planning.collision_scene import CollisionScene
-from tlt_ars.planning.kinematics import IkFailed, describe_pose
 from tlt_ars.planning.planner import Planner, PlanningFailed
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_ars.planning.world import SceneConfig, build_scene
+from tlt_common.geometry.transforms import describe_pose
+from tlt_common.geometry.ur10e import IkFailed
 
 
 @dataclass(frozen=True)

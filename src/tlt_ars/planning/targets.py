@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_ars.planning.world import (
     GUN_OFFSET,
     SceneConfig,
@@ -38,6 +37,7 @@ from tlt_ars.planning.world import (
     member_segments,
     tower_origin,
 )
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 
 _DOWN = np.array([0.0, 0.0, -1.0])
 

@@ -22,8 +22,9 @@ from typing import Any
 import numpy as np
 
 from tlt_ars.planning.collision_scene import Box, Capsule, CollisionScene, Shape, box_at
-from tlt_ars.planning.kinematics import Ur10eKinematics, pose_matrix, rot_z, rpy_matrix
 from tlt_common.config_schema import ConfigError, Field, load_validated, opt, validate
+from tlt_common.geometry.transforms import pose_matrix, rot_z, rpy_matrix
+from tlt_common.geometry.ur10e import Ur10eKinematics
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 DEFAULT_SCENE = REPO_ROOT / "config" / "planning" / "scene.yaml"

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from tlt_ars.planning.kinematics import pose_matrix, rpy_matrix
 from tlt_common.config_schema import Field, load_yaml, validate
+from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 
 REPO_ROOT = Path(__file__).resolve().parents[3]
 VISION_CONFIG = REPO_ROOT / "config" / "vision" / "node.yaml"

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from tlt_common.geometry.transforms import rotation_to_quaternion
 from tlt_vision.cad.models import CadModel
 from tlt_vision.cad.surface import SurfaceDistance
 from tlt_vision.ops.registration import transform
@@ -41,29 +42,6 @@ def tilted_turns(angle_deg: float) -> list[np.ndarray]:
             turn[i, i], turn[i, j], turn[j, i], turn[j, j] = c, -s, s, c
             turns.append(turn)
     return turns
-
-
-def rotation_to_quaternion(rot: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion ``(x, y, z, w)`` (geometry_msgs order) of a rotation matrix, ``w >= 0``."""
-    m = np.asarray(rot, dtype=float)
-    tr = np.trace(m)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
-    q = np.array([x, y, z, w])
-    q /= np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    return float(q[0]), float(q[1]), float(q[2]), float(q[3])
 
 
 def padded_batch(clouds: Sequence[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -369,6 +347,5 @@ __all__ = [
     "estimate_together",
     "padded_batch",
     "refined_together",
-    "rotation_to_quaternion",
     "tilted_turns",
 ]

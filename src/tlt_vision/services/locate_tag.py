@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from rclpy.impl.rcutils_logger import RcutilsLogger
 
-from tlt_ars.planning.kinematics import invert, pose_matrix
+from tlt_common.geometry.transforms import invert, pose_matrix
 from tlt_common.mission.schema import Mission
 from tlt_common.mission.tag_mounts import tag_mount
 from tlt_common.stamps import set_stamp

@@ -9,9 +9,10 @@ from geometry_msgs.msg import Pose
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from tlt_interfaces.msg import CertifiedPose, InspectionReport
 
+from tlt_common.geometry.transforms import rotation_to_quaternion
 from tlt_common.stamps import set_stamp
 from tlt_vision import inspection
-from tlt_vision.pose.estimator import PoseEstimate, rotation_to_quaternion
+from tlt_vision.pose.estimator import PoseEstimate
 
 
 def pose_msg(t: np.ndarray) -> Pose:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tlt_ars.planning.collision_scene import Capsule, CollisionScene, arm_link_segments, box_at
-from tlt_ars.planning.kinematics import Ur10eKinematics, pose_matrix
+from tlt_common.geometry.transforms import pose_matrix
+from tlt_common.geometry.ur10e import Ur10eKinematics
 
 HOME = np.array([0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0])
 EE = [("bar", pose_matrix([0.0, 0.0, 0.06]), (0.7, 0.06, 0.04))]

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from tlt_ars.planning.collision_scene import Capsule, CollisionScene, arm_link_segments, box_at
-from tlt_ars.planning.kinematics import Ur10eKinematics, pose_error, pose_matrix
 from tlt_ars.planning.planner import Planner, PlanningFailed
 from tlt_ars.planning.time_parameterisation import time_parameterise
+from tlt_common.geometry.transforms import pose_error, pose_matrix
+from tlt_common.geometry.ur10e import Ur10eKinematics
 
 # Upper arm leaning out, forearm about level 0.6 m from the base axis; the goal is the base turned.
 HOME = np.array([0.0, -1.0, 1.2, -1.77, -math.pi / 2, 0.0])

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from tlt_sim.model import ik, names
-from tlt_sim.model.geometry import frame_from_axes as frame
 from tlt_sim.model.scene import Scene
+
+from tlt_common.geometry.transforms import frame_from_axes as frame
 
 
 @pytest.fixture

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from tlt_sim.model import names
 from tlt_sim.model.config import REPO_ROOT
-from tlt_sim.model.geometry import frame_from_axes as frame
 from tlt_sim.model.scene import Scene
+
+from tlt_common.geometry.transforms import frame_from_axes as frame
 
 
 def test_strut_is_picked_carried_placed_riveted_and_holds_under_compression(scene, mover):

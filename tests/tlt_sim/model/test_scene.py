@@ -2,8 +2,10 @@
 
 import numpy as np
 import pytest
-from tlt_sim.model import names, ur10e
+from tlt_sim.model import names
 from tlt_sim.model.scene import ModelCompileError, compile_model
+
+from tlt_common.geometry import ur10e
 
 
 def test_model_compiles_with_every_named_joint_actuator_and_camera(scene):
@@ -32,7 +34,7 @@ def test_arm_chain_matches_the_published_dh_kinematics(scene):
         scene.set_joint_state(joint, value)
     base_pos, base_rot = scene.body_pose("ars_y/base")
     pos, rot = scene.body_pose(names.ee_body("ars_y"))
-    expected = ur10e.forward(q)
+    expected = ur10e.flange(q)
     assert np.allclose(base_rot.T @ (pos - base_pos), expected[:3, 3], atol=1e-9)
     assert np.allclose(base_rot.T @ rot, expected[:3, :3], atol=1e-9)
 

@@ -14,11 +14,11 @@ import pytest
 from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD, DynamixelServo
 from tlt_sim.emulators.gpio_chip import EmulatedGpioChip
 from tlt_sim.model import ik, names
-from tlt_sim.model.geometry import frame_from_axes
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.bindings import ServoJointBinding, URArmBinding
 
 from tlt_common import json_lines
+from tlt_common.geometry.transforms import frame_from_axes
 from tlt_drivers.gpio.config import CONFIG_DIR, load_gpio_config
 from tlt_drivers.gpio.shared_memory import SharedMemoryLines
 from tlt_drivers.lifter.protocol import FirmwareState, Mode, VelocityCommand

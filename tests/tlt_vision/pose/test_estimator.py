@@ -1,21 +1,10 @@
-import math
-
 import numpy as np
 import pytest
 import torch
 
 from tlt_vision.cad.models import build_models
 from tlt_vision.pose.detector import KeypointDetector
-from tlt_vision.pose.estimator import MIN_POINTS, PoseEstimator, rotation_to_quaternion
-
-
-def test_quaternion_of_known_rotations():
-    assert rotation_to_quaternion(np.eye(3)) == pytest.approx((0, 0, 0, 1))
-    c, s = math.cos(math.pi / 3), math.sin(math.pi / 3)
-    rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    assert rotation_to_quaternion(rz) == pytest.approx((0, 0, math.sin(math.pi / 6), math.cos(math.pi / 6)))
-    rx180 = np.diag([1.0, -1.0, -1.0])
-    assert rotation_to_quaternion(rx180) == pytest.approx((1, 0, 0, 0))
+from tlt_vision.pose.estimator import MIN_POINTS, PoseEstimator
 
 
 def test_bad_clouds_are_uncertified_with_a_reason_never_raised():

@@ -295,7 +295,8 @@ class TwinRenderer:
     def _place_camera(self, name: str, position: np.ndarray, rotation: np.ndarray) -> None:
         """Move camera ``name`` (its optics) to a world pose, in its body's frame."""
         import mujoco
-        from tlt_sim.model.geometry import mat_to_quat
+
+        from tlt_common.geometry.transforms import rotation_to_mujoco_quat
 
         m, d = self.scene.model, self.scene.data
         cid = self._cam_ids[name]
@@ -303,7 +304,7 @@ class TwinRenderer:
         b_pos, b_rot = d.xpos[body], d.xmat[body].reshape(3, 3)
         mj_rot = rotation @ np.diag([1.0, -1.0, -1.0])  # MuJoCo cameras look along -z, y up
         m.cam_pos[cid] = b_rot.T @ (position - b_pos)
-        m.cam_quat[cid] = mat_to_quat(b_rot.T @ mj_rot)
+        m.cam_quat[cid] = rotation_to_mujoco_quat(b_rot.T @ mj_rot)
         mujoco.mj_forward(m, d)
 
     def _camera_around(self, rng: np.random.Generator, target: np.ndarray, near: float, far: float):

@@ -1,4 +1,4 @@
-"""A UR10e on its pedestal: six links on the DH table of :mod:`tlt_sim.model.ur10e`, a servo per
+"""A UR10e on its pedestal: six links on the DH table of :mod:`tlt_common.geometry.ur10e`, a servo per
 joint, and the end effector on the flange."""
 
 from __future__ import annotations
@@ -8,10 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from tlt_sim.model import names, ur10e
+from tlt_common.geometry import ur10e
+from tlt_common.geometry.transforms import rot_x, rot_z, rotation_to_mujoco_quat
+from tlt_sim.model import names
 from tlt_sim.model.generate.document import Document, sub
 from tlt_sim.model.generate.end_effector import add_end_effector
-from tlt_sim.model.geometry import mat_to_quat, rot_x, rot_z
 
 
 def add_arm(doc: Document, arm: str, edu: dict[str, Any]) -> None:
@@ -27,7 +28,7 @@ def add_arm(doc: Document, arm: str, edu: dict[str, Any]) -> None:
         "body",
         name=f"{arm}/base",
         pos=(base[0], base[1], base[2] + ped),
-        quat=mat_to_quat(rot_z(math.radians(cfg["yaw_deg"]))),
+        quat=rotation_to_mujoco_quat(rot_z(math.radians(cfg["yaw_deg"]))),
     )
     if ped > 0:  # in the base body, so the first link (its child) never collides with it
         sub(
@@ -85,7 +86,7 @@ def add_arm(doc: Document, arm: str, edu: dict[str, Any]) -> None:
             (-ur10e.POSITION_LIMIT, ur10e.POSITION_LIMIT),
         )
         parent = link
-        pos, quat = end, mat_to_quat(rot_x(ur10e.ALPHA[i]))
+        pos, quat = end, rotation_to_mujoco_quat(rot_x(ur10e.ALPHA[i]))
     flange = sub(parent, "body", name=names.ee_body(arm), pos=pos, quat=quat, gravcomp=1)
     sub(flange, "site", name=f"{arm}/flange", size=(0.01,))
     add_end_effector(doc, arm, flange, edu["end_effector"], edu["parts"]["tube_radius"], edu["cameras"])

@@ -9,10 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from tlt_common.geometry.transforms import rot_z, rotation_to_mujoco_quat
 from tlt_sim.model import names
 from tlt_sim.model.generate.document import Document, sub
 from tlt_sim.model.generate.layout import TowerLayout
-from tlt_sim.model.geometry import look_at_xyaxes, mat_to_quat, rot_z
+from tlt_sim.model.geometry import look_at_xyaxes
 
 
 def add_camera_mounts(
@@ -69,7 +70,7 @@ def _camera_mount(
         type="box",
         size=(0.03, 0.09, 0.015),
         mass=0.17,
-        quat=mat_to_quat(rot_z(heading)),
+        quat=rotation_to_mujoco_quat(rot_z(heading)),
         rgba=(0.1, 0.1, 0.1, 1),
     )
     sub(

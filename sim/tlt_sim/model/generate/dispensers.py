@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
+from tlt_common.geometry.transforms import rotation_to_mujoco_quat, rpy_matrix
 from tlt_common.mission.schema import Mission
 from tlt_sim.model.apriltag import write_tag_png
 from tlt_sim.model.generate.document import Document, sub
 from tlt_sim.model.generate.end_effector import GUN_HALF
 from tlt_sim.model.generate.info import PartInfo
 from tlt_sim.model.generate.parts import add_part
-from tlt_sim.model.geometry import mat_to_quat, rpy_matrix
 from tlt_sim.model.scenario import Scenario
 
 # Rack uprights: half width of their square section, and the gap kept between a cross-frame
@@ -73,7 +73,7 @@ def add_dispensers(
         made.tags[name] = tag_id
         rot = rpy_matrix(disp.rpy)
         pos = base_origin + np.asarray(disp.position, dtype=float)
-        body = sub(doc.world, "body", name=f"dispenser/{name}", pos=pos, quat=mat_to_quat(rot))
+        body = sub(doc.world, "body", name=f"dispenser/{name}", pos=pos, quat=rotation_to_mujoco_quat(rot))
         count = 0 if name in scenario.empty else disp.count
         extent = _extent(mission, disp.part_kind)
         top = d_cfg["first_slot_height"] + max(count - 1, 0) * d_cfg["slot_pitch"]

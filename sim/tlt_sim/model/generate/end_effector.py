@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
+from tlt_common.geometry.transforms import rot_x
 from tlt_sim.model import names
 from tlt_sim.model.generate.document import Document, sub
-from tlt_sim.model.geometry import look_at_xyaxes, rot_x
+from tlt_sim.model.geometry import look_at_xyaxes
 
 # Rivet gun body of the end effector (half extents, m) and how far it sits outboard of the grasp
 # line, across the bar: a gun hangs over each end of whatever side of a part is grasped.

@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from tlt_common.geometry.transforms import rot_x, rot_y, rotation_to_mujoco_quat
 from tlt_common.mission.schema import Mission
 from tlt_sim.model import names
 from tlt_sim.model.generate.document import HIDDEN_GROUP, Document, sub
 from tlt_sim.model.generate.info import PartInfo
-from tlt_sim.model.geometry import mat_to_quat, rot_x, rot_y
 from tlt_sim.model.scenario import Defect
 
 
@@ -149,7 +149,7 @@ def add_part(
         length = mission.strut_lengths[kind]
         local_pos, local_rot = np.array([-length / 2, 0.0, z]), rot_y(math.pi / 2)
     wpos, wrot = dpos + drot @ local_pos, drot @ local_rot
-    wquat = mat_to_quat(wrot)
+    wquat = rotation_to_mujoco_quat(wrot)
     body = sub(doc.world, "body", name=bname, pos=wpos, quat=wquat, gravcomp=1)
     sub(body, "freejoint", name=bname)
     half = parts["corner_size"] / 2

@@ -8,16 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from tlt_ars.planning.kinematics import (
-    IkFailed,
-    Ur10eKinematics,
-    pinocchio_model,
-    pose_error,
-    pose_matrix,
-    rot_z,
-    rpy_from_matrix,
-    rpy_matrix,
-)
+from tlt_common.geometry.transforms import pose_error, pose_matrix, rot_z, rpy_matrix
+from tlt_common.geometry.ur10e import IkFailed, Ur10eKinematics, pinocchio_model
 
 BASE = pose_matrix([-0.35, -0.35, 0.55], rot_z(math.pi / 4))
 TOOL = pose_matrix([0.0, 0.0, 0.16])
@@ -108,8 +100,3 @@ def test_turn_variants_stay_within_limits(kin):
     variants = kin.turn_variants(q)
     assert len(variants) == 1 and variants[0][0] == pytest.approx(-4.0 + 2 * math.pi)
     assert pose_error(kin.forward(variants[0]), kin.forward(q))[0] < 1e-9
-
-
-def test_rpy_round_trip():
-    rpy = (0.3, -0.7, 2.1)
-    assert rpy_from_matrix(rpy_matrix(rpy)) == pytest.approx(rpy)

@@ -1,15 +1,24 @@
-"""UR10e kinematics from the published standard DH parameters, with the end effector as the tool.
+"""The UR10e arm as Universal Robots publish it, and its kinematics, shared by the ARS, vision and
+the twin.
 
-:class:`Ur10eKinematics` computes forward kinematics (base frame -> tool) and the analytic inverse:
-all solutions (up to 8 branches: shoulder left/right, wrist up/down, elbow up/down), each joint
-wrapped into the joint limits to the angle nearest the current configuration, sorted nearest
-first. A pose with no solution within the limits raises :class:`IkFailed` naming the pose and why.
+The figures (standard DH table, link masses and centres of mass, joint limits, rated torques)
+come from UR's published UR10e kinematic and dynamic data and data sheet (metres, radians,
+kilograms). The ARS plans with them, vision places the EE camera with them, the twin builds its
+MuJoCo arm and emulates the controller's kinematics from them.
 
-Poses are 4x4 homogeneous matrices in metres. The kinematics is in the arm's base frame; the
-planner moves poses between the world and the base with :attr:`Ur10eKinematics.base`.
+:func:`flange` is the DH product (base frame -> flange). :func:`analytic_inverse` is the
+closed-form inverse of a UR arm (three parallel shoulder/elbow/wrist-1 axes, intersecting wrist
+axes): up to 8 branches (shoulder left/right, wrist up/down, elbow up/down).
+
+:class:`Ur10eKinematics` is one arm placed in the world with a tool: forward kinematics (world
+-> tool) and the inverse as all solutions within the joint limits, each joint wrapped to the angle
+nearest the current configuration, sorted nearest first. A pose with no solution within the
+limits raises :class:`IkFailed` naming the pose and why.
+
+Poses are 4x4 homogeneous matrices in metres (see :mod:`tlt_common.geometry.transforms`).
 
 :func:`pinocchio_model` builds the same chain as a pinocchio model (programmatically, no URDF), used
-by the collision scene and to cross-check the DH product in tests.
+by the ARS's collision scene and to cross-check the DH product in tests.
 """
 
 from __future__ import annotations
@@ -20,16 +29,36 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tlt_common.geometry.transforms import describe_pose, invert, rot_x
+
 # UR10e, Universal Robots' published DH table (standard convention, m, rad).
 D = (0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655)
 A = (0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0)
 ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
 JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
+MASS = (7.369, 13.051, 3.989, 2.1, 1.98, 0.615)
+# Centres of mass in each DH link frame (UR's published dynamic parameters).
+COM = (
+    (0.021, 0.0, 0.027),
+    (0.38, 0.0, 0.158),
+    (0.24, 0.0, 0.068),
+    (0.0, 0.007, 0.018),
+    (0.0, 0.007, 0.018),
+    (0.0, 0.0, -0.026),
+)
 # UR10e data sheet: +-360 deg on every joint (the UR ROS driver limits the elbow to +-180 deg,
-# because past that the upper and fore arm meet); 120 deg/s base and shoulder, 180 deg/s others.
+# because past that the upper and fore arm meet, and so does the ARS's planner);
+# 120 deg/s base and shoulder, 180 deg/s others.
+POSITION_LIMIT = 2.0 * math.pi
 POSITION_LOWER = (-2 * math.pi, -2 * math.pi, -math.pi, -2 * math.pi, -2 * math.pi, -2 * math.pi)
 POSITION_UPPER = (2 * math.pi, 2 * math.pi, math.pi, 2 * math.pi, 2 * math.pi, 2 * math.pi)
 VELOCITY_LIMIT = tuple(math.radians(v) for v in (120, 120, 180, 180, 180, 180))
+# Rated joint torques of the size-4 and size-3 joints (data sheet), N m.
+TORQUE_LIMIT = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
+# Link capsule radii for collision, m (outer diameter of the joint housings).
+LINK_RADIUS = (0.075, 0.065, 0.055, 0.045, 0.045, 0.04)
+# UR's home posture: upper arm up, forearm level, tool pointing down.
+HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 
 # A candidate whose forward kinematics misses the asked pose by more than this is dropped
 # (the analytic branches are exact; this only removes numerically degenerate ones).
@@ -46,61 +75,6 @@ class IkFailed(ValueError):
         super().__init__(f"IK failed for pose {describe_pose(self.pose)}: {reason}")
 
 
-def describe_pose(pose: np.ndarray) -> str:
-    """Short human-readable form of a 4x4 pose: position in m and roll/pitch/yaw in degrees."""
-    p = pose[:3, 3]
-    r, pi_, y = rpy_from_matrix(pose[:3, :3])
-    return (
-        f"xyz=({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
-        f" rpy=({math.degrees(r):.1f}, {math.degrees(pi_):.1f}, {math.degrees(y):.1f}) deg"
-    )
-
-
-def rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
-    """Rotation of fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll)), as in URDF."""
-    return rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
-
-
-def rpy_from_matrix(r: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of :func:`rpy_matrix` (pitch in [-pi/2, pi/2])."""
-    pitch = math.asin(max(-1.0, min(1.0, -r[2, 0])))
-    roll = math.atan2(r[2, 1], r[2, 2])
-    yaw = math.atan2(r[1, 0], r[0, 0])
-    return roll, pitch, yaw
-
-
-def pose_matrix(position: Sequence[float], rotation: np.ndarray | None = None) -> np.ndarray:
-    """4x4 pose from a position and a 3x3 rotation (identity when omitted)."""
-    t = np.eye(4)
-    t[:3, 3] = position
-    if rotation is not None:
-        t[:3, :3] = rotation
-    return t
-
-
-def invert(t: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform."""
-    out = np.eye(4)
-    out[:3, :3] = t[:3, :3].T
-    out[:3, 3] = -t[:3, :3].T @ t[:3, 3]
-    return out
-
-
 def dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     """One standard DH link: Rz(theta) Tz(d) Tx(a) Rx(alpha)."""
     ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
@@ -114,14 +88,54 @@ def dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     )
 
 
-def pose_error(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Position (m) and rotation angle (rad) between two poses."""
-    dp = float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
-    r = a[:3, :3].T @ b[:3, :3]
-    # atan2 of sine and cosine keeps precision near zero, where acos of the trace does not.
-    s = math.hypot(r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]) / 2.0
-    c = (np.trace(r) - 1.0) / 2.0
-    return dp, math.atan2(s, c)
+def flange(q: Sequence[float]) -> np.ndarray:
+    """Flange pose (4x4) in the arm's base frame for joint angles ``q`` (six values, rad)."""
+    if len(q) != 6:
+        raise ValueError(f"expected six joint angles, got {len(q)}")
+    t = np.eye(4)
+    for i in range(6):
+        t = t @ dh(float(q[i]), D[i], A[i], ALPHA[i])
+    return t
+
+
+def analytic_inverse(t: np.ndarray, wrist_3: float = 0.0) -> list[np.ndarray]:
+    """The (up to 8) closed-form joint solutions for flange pose ``t`` in the base frame.
+
+    Angles are as the formulas give them (not wrapped, not checked against limits or against the
+    forward kinematics). At the wrist singularity joints 4 and 6 share an axis and any split
+    reaches the pose: wrist 3 is then held at ``wrist_3``.
+    """
+    d1, a2, a3, d4, d5, d6 = D[0], A[1], A[2], D[3], D[4], D[5]
+    z6 = t[:3, 2]
+    p06 = t[:3, 3]
+    wrist = p06 - d6 * z6  # origin of frame 5
+    r = math.hypot(wrist[0], wrist[1])
+    if r < d4:
+        return []
+    phi = math.atan2(wrist[1], wrist[0])
+    off = math.asin(d4 / r)
+    out: list[np.ndarray] = []
+    for t1 in (phi + off, phi + math.pi - off):
+        s1, c1 = math.sin(t1), math.cos(t1)
+        z1 = np.array([s1, -c1, 0.0])  # axis of joints 2, 3, 4
+        v6 = t[:3, :3].T @ z1
+        c5 = max(-1.0, min(1.0, float(v6[2])))
+        for t5 in (math.acos(c5), -math.acos(c5)):
+            s5 = math.sin(t5)
+            t6 = wrist_3 if abs(s5) < 1e-9 else math.atan2(-v6[1] / s5, v6[0] / s5)
+            t01 = dh(t1, d1, 0.0, ALPHA[0])
+            t46 = dh(t5, d5, 0.0, ALPHA[4]) @ dh(t6, d6, 0.0, 0.0)
+            t14 = invert(t01) @ t @ invert(t46)
+            p13 = t14[:3, 3] - np.array([0.0, 0.0, d4])
+            c3 = (p13[0] ** 2 + p13[1] ** 2 - a2 * a2 - a3 * a3) / (2 * a2 * a3)
+            if abs(c3) > 1.0 + 1e-9:
+                continue
+            c3 = max(-1.0, min(1.0, c3))
+            for t3 in (math.acos(c3), -math.acos(c3)):
+                t2 = math.atan2(p13[1], p13[0]) - math.atan2(a3 * math.sin(t3), a2 + a3 * math.cos(t3))
+                t4 = math.atan2(t14[1, 0], t14[0, 0]) - t2 - t3
+                out.append(np.array([t1, t2, t3, t4, t5, t6]))
+    return out
 
 
 @dataclass
@@ -159,10 +173,7 @@ class Ur10eKinematics:
 
     def flange(self, q: Sequence[float]) -> np.ndarray:
         """Flange pose in the arm's base frame."""
-        t = np.eye(4)
-        for i in range(6):
-            t = t @ dh(float(q[i]), D[i], A[i], ALPHA[i])
-        return t
+        return flange(q)
 
     def forward(self, q: Sequence[float]) -> np.ndarray:
         """Tool pose in the world for joint angles ``q``."""
@@ -183,7 +194,7 @@ class Ur10eKinematics:
             )
         ref = np.zeros(6) if current is None else np.asarray(current, dtype=float)
         target = self._base_inv @ pose @ self._tool_inv
-        raw = self._analytic(target, ref)
+        raw = analytic_inverse(target, float(ref[5]))
         if not raw:
             reach = float(np.linalg.norm(target[:3, 3] - np.array([0.0, 0.0, D[0]])))
             raise IkFailed(pose, f"outside the workspace (wrist {reach:.3f} m from the shoulder)")
@@ -239,42 +250,6 @@ class Ur10eKinematics:
         """The solution of :meth:`inverse` nearest ``current``."""
         return self.inverse(pose, current)[0]
 
-    @staticmethod
-    def _analytic(t: np.ndarray, ref: np.ndarray) -> list[np.ndarray]:
-        """The (up to 8) analytic branches for flange pose ``t`` in the base frame."""
-        d1, a2, a3, d4, d5, d6 = D[0], A[1], A[2], D[3], D[4], D[5]
-        z6 = t[:3, 2]
-        p06 = t[:3, 3]
-        wrist = p06 - d6 * z6  # origin of frame 5
-        r = math.hypot(wrist[0], wrist[1])
-        if r < d4:
-            return []
-        phi = math.atan2(wrist[1], wrist[0])
-        off = math.asin(d4 / r)
-        out: list[np.ndarray] = []
-        for t1 in (phi + off, phi + math.pi - off):
-            s1, c1 = math.sin(t1), math.cos(t1)
-            z1 = np.array([s1, -c1, 0.0])  # axis of joints 2, 3, 4
-            v6 = t[:3, :3].T @ z1
-            c5 = max(-1.0, min(1.0, float(v6[2])))
-            for t5 in (math.acos(c5), -math.acos(c5)):
-                s5 = math.sin(t5)
-                # At the wrist singularity joints 4 and 6 share an axis: keep wrist 3 where it is.
-                t6 = float(ref[5]) if abs(s5) < 1e-9 else math.atan2(-v6[1] / s5, v6[0] / s5)
-                t01 = dh(t1, d1, 0.0, ALPHA[0])
-                t46 = dh(t5, d5, 0.0, ALPHA[4]) @ dh(t6, d6, 0.0, 0.0)
-                t14 = invert(t01) @ t @ invert(t46)
-                p13 = t14[:3, 3] - np.array([0.0, 0.0, d4])
-                c3 = (p13[0] ** 2 + p13[1] ** 2 - a2 * a2 - a3 * a3) / (2 * a2 * a3)
-                if abs(c3) > 1.0 + 1e-9:
-                    continue
-                c3 = max(-1.0, min(1.0, c3))
-                for t3 in (math.acos(c3), -math.acos(c3)):
-                    t2 = math.atan2(p13[1], p13[0]) - math.atan2(a3 * math.sin(t3), a2 + a3 * math.cos(t3))
-                    t4 = math.atan2(t14[1, 0], t14[0, 0]) - t2 - t3
-                    out.append(np.array([t1, t2, t3, t4, t5, t6]))
-        return out
-
 
 def flange_batch(qs: np.ndarray) -> np.ndarray:
     """Flange poses (n x 4 x 4, base frame) of n configurations at once."""
@@ -311,7 +286,7 @@ def pinocchio_model(base: np.ndarray | None = None, tool: np.ndarray | None = No
             pin.JointModelRZ(),
             placement,
             JOINT_NAMES[i],
-            np.array([330.0 if i < 2 else (150.0 if i == 2 else 56.0)]),
+            np.array([TORQUE_LIMIT[i]]),
             np.array([VELOCITY_LIMIT[i]]),
             np.array([POSITION_LOWER[i]]),
             np.array([POSITION_UPPER[i]]),
@@ -320,32 +295,31 @@ def pinocchio_model(base: np.ndarray | None = None, tool: np.ndarray | None = No
         model.appendBodyToJoint(jid, pin.Inertia.FromSphere(1.0, 0.05), pin.SE3.Identity())
         placement = pin.SE3(rot_x(ALPHA[i]), np.array([A[i], 0.0, D[i]]))
         parent = jid
-    flange = model.addFrame(pin.Frame("flange", parent, 0, placement, pin.FrameType.OP_FRAME))
+    flange_id = model.addFrame(pin.Frame("flange", parent, 0, placement, pin.FrameType.OP_FRAME))
     tool_t = np.eye(4) if tool is None else np.asarray(tool, dtype=float)
-    model.addFrame(pin.Frame("tool", parent, flange, placement * pin.SE3(tool_t), pin.FrameType.OP_FRAME))
+    model.addFrame(pin.Frame("tool", parent, flange_id, placement * pin.SE3(tool_t), pin.FrameType.OP_FRAME))
     return model
 
 
 __all__ = [
     "ALPHA",
+    "COM",
+    "HOME",
     "JOINT_NAMES",
+    "LINK_RADIUS",
+    "MASS",
+    "POSITION_LIMIT",
     "POSITION_LOWER",
     "POSITION_UPPER",
+    "TORQUE_LIMIT",
     "VELOCITY_LIMIT",
     "A",
     "D",
     "IkFailed",
     "Ur10eKinematics",
-    "describe_pose",
+    "analytic_inverse",
     "dh",
+    "flange",
     "flange_batch",
-    "invert",
     "pinocchio_model",
-    "pose_error",
-    "pose_matrix",
-    "rot_x",
-    "rot_y",
-    "rot_z",
-    "rpy_from_matrix",
-    "rpy_matrix",
 ]
