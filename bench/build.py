@@ -160,7 +160,7 @@ def read_motions(recording: Path) -> list[Motion]:
     commanded: dict[str, list[float]] = {}
     for _schema, channel, message, msg in read_messages(recording, topics=topics):
         if channel.topic.endswith(COMMAND_SUFFIX):
-            component = channel.topic[1:-len(COMMAND_SUFFIX)]
+            component = channel.topic[1 : -len(COMMAND_SUFFIX)]
             speeds = group_speeds(component)
             if speeds is None or len(msg.data) != len(speeds):
                 continue
@@ -236,8 +236,10 @@ def _print_placements(placements: list[tuple[str, str, float]]) -> None:
         return
     offs = sorted(off for _, _, off in placements)
     worst = max(placements, key=lambda p: p[2])
-    print(f"\nplacement (twin ground truth, each part against its place): {len(placements)} members, "
-          f"median {1000 * offs[len(offs) // 2]:.1f} mm, worst {1000 * worst[2]:.1f} mm ({worst[0]})")
+    print(
+        f"\nplacement (twin ground truth, each part against its place): {len(placements)} members, "
+        f"median {1000 * offs[len(offs) // 2]:.1f} mm, worst {1000 * worst[2]:.1f} mm ({worst[0]})"
+    )
     for member, part, off in placements:
         if off > PLACE_WARN_M:
             print(f"  {member}: {part} {1000 * off:.1f} mm off")
@@ -316,10 +318,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--mission", default="two_bay", help="mission to build (missions/NAME.yaml)")
     parser.add_argument("--run-dir", type=Path, help="report on this finished run instead of running one")
-    parser.add_argument("--rtf", type=float, default=0.0,
-                        help="the twin's real-time factor (0, the default: as fast as it can)")
-    parser.add_argument("--arm-speed", type=float, default=1.0,
-                        help="the arms' speed as a fraction of their limits (default 1; the ARS files': 0.5)")
+    parser.add_argument(
+        "--rtf",
+        type=float,
+        default=0.0,
+        help="the twin's real-time factor (0, the default: as fast as it can)",
+    )
+    parser.add_argument(
+        "--arm-speed",
+        type=float,
+        default=1.0,
+        help="the arms' speed as a fraction of their limits (default 1; the ARS files': 0.5)",
+    )
     args = parser.parse_args(argv)
     if args.run_dir is not None:
         return report(args.run_dir, mission=args.mission)

@@ -141,15 +141,27 @@ class GivenClouds(PartPipeline):
         self.make = make
         self.seconds: list[float] = []
 
-    def cloud(self, detection: Detection, depth: np.ndarray | None, intrinsics: PinholeIntrinsics,
-              rgb: np.ndarray | None = None, depth_noise: DepthNoise | None = None) -> MaskedCloud:
+    def cloud(
+        self,
+        detection: Detection,
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        rgb: np.ndarray | None = None,
+        depth_noise: DepthNoise | None = None,
+    ) -> MaskedCloud:
         t0 = time.perf_counter()
         cloud = self.make(self, detection, depth, intrinsics, depth_noise or self.depth_noise)
         self.seconds.append(time.perf_counter() - t0)
         return cloud
 
-    def base_cloud(self, detection: Detection, depth: np.ndarray | None, intrinsics: PinholeIntrinsics,
-                   noise: DepthNoise, max_points: int | None) -> MaskedCloud:
+    def base_cloud(
+        self,
+        detection: Detection,
+        depth: np.ndarray | None,
+        intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
+        max_points: int | None,
+    ) -> MaskedCloud:
         """The pipeline's own cloud with ``noise`` filtered and ``max_points`` points at most."""
         kept, self.max_points = self.max_points, max_points
         try:
@@ -163,8 +175,12 @@ def make_variants(o3d: ModuleType | None, max_points: int) -> dict[str, Callable
 
     def replaced(cloud: MaskedCloud, points: np.ndarray, min_points: int) -> MaskedCloud:
         if len(points) < min_points:
-            return MaskedCloud(cloud.points[:0], None, cloud.mask_pixels,
-                               f"too few points: {len(points)} after filtering < {min_points}")
+            return MaskedCloud(
+                cloud.points[:0],
+                None,
+                cloud.mask_pixels,
+                f"too few points: {len(points)} after filtering < {min_points}",
+            )
         return MaskedCloud(points.astype(np.float32), None, cloud.mask_pixels)
 
     def raw(pipe, det, depth, k, noise):
@@ -182,6 +198,7 @@ def make_variants(o3d: ModuleType | None, max_points: int) -> dict[str, Callable
             if not cloud.ok:
                 return cloud
             return replaced(cloud, evenly(step(cloud.points, k), max_points), pipe.min_points)
+
         return make
 
     variants = {"exact": raw, "raw": raw, "median": median, "median9": median9}
@@ -206,8 +223,14 @@ def surface_distances(model: CadModel, points: np.ndarray, pose: np.ndarray) -> 
         return model.surface(torch.as_tensor(local, dtype=torch.float32)[None])[0].abs().numpy()
 
 
-def icp_refined(o3d: ModuleType, model: CadModel, points: np.ndarray, rotation: np.ndarray,
-                translation: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+def icp_refined(
+    o3d: ModuleType,
+    model: CadModel,
+    points: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    kind: str,
+) -> tuple[np.ndarray, np.ndarray]:
     """The pose ``rotation, translation`` refined by open3d's ICP of the observed ``points`` onto
     the model's surface sample there, the side facing the camera (at the origin): ``kind``
     ``plane`` (point-to-plane, Tukey kernel) or ``point`` (point-to-point)."""
@@ -218,8 +241,11 @@ def icp_refined(o3d: ModuleType, model: CadModel, points: np.ndarray, rotation: 
     target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(surface[facing]))
     target.normals = o3d.utility.Vector3dVector(normals[facing])
     source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points.astype(np.float64)))
-    estimation = (reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=ICP_TUKEY_M)) if kind == "plane"
-                  else reg.TransformationEstimationPointToPoint())
+    estimation = (
+        reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=ICP_TUKEY_M))
+        if kind == "plane"
+        else reg.TransformationEstimationPointToPoint()
+    )
     result = reg.registration_icp(source, target, ICP_MAX_M, np.eye(4), estimation)
     back = np.linalg.inv(result.transformation)  # observed -> model's place; the model follows back
     return back[:3, :3] @ rotation, back[:3, :3] @ translation + back[:3, 3]
@@ -273,8 +299,11 @@ def measure(
     estimators = load_estimators(config, mission)
     opts = {**config.pipeline_options, "merge": ()}
     variants = make_variants(o3d, opts["max_points"])
-    pipes = {(v, name): GivenClouds(make, estimators={estimators[name].model.object_class: e}, **opts)
-             for v, make in variants.items() for name, e in estimators.items()}
+    pipes = {
+        (v, name): GivenClouds(make, estimators={estimators[name].model.object_class: e}, **opts)
+        for v, make in variants.items()
+        for name, e in estimators.items()
+    }
     views = {name: PartPipeline({e.model.object_class: e}, **opts) for name, e in estimators.items()}
     tallies = {v: Tally() for v in variants}
     icp: dict[str, list[float]] = defaultdict(list)
@@ -303,9 +332,20 @@ def measure(
                     items.append((det, model_name, pose, shown))
             for v in variants:
                 exact = v == "exact"
-                count_instances(tallies[v], pipes, v, estimators, items, s.depth if exact else depth, k,
-                                EXACT if exact else noise, cam, args,
-                                icp if (v == "median" and o3d is not None and args.icp) else None, o3d)
+                count_instances(
+                    tallies[v],
+                    pipes,
+                    v,
+                    estimators,
+                    items,
+                    s.depth if exact else depth,
+                    k,
+                    EXACT if exact else noise,
+                    cam,
+                    args,
+                    icp if (v == "median" and o3d is not None and args.icp) else None,
+                    o3d,
+                )
             print(f"  image {i + 1}/{args.count} ({kind}, {cam}): {len(items)} parts", flush=True)
     finally:
         renderer.close()
@@ -314,8 +354,18 @@ def measure(
 
 
 def count_instances(
-    tally: Tally, pipes, variant: str, estimators, items, depth, k, noise: DepthNoise, cam: str,
-    args: argparse.Namespace, icp: dict[str, list[float]] | None, o3d: ModuleType | None,
+    tally: Tally,
+    pipes,
+    variant: str,
+    estimators,
+    items,
+    depth,
+    k,
+    noise: DepthNoise,
+    cam: str,
+    args: argparse.Namespace,
+    icp: dict[str, list[float]] | None,
+    o3d: ModuleType | None,
 ) -> None:
     """Measure ``variant``'s cloud of each of ``items`` (detection, model name, true pose, whether
     its view is counted) on ``depth`` into ``tally``, and its pose; with ``icp``, refine the pose
@@ -368,50 +418,71 @@ def _median(values: list[float]) -> float:
     return statistics.median(values) if values else float("nan")
 
 
-def report(tallies: dict[str, Tally], seconds: dict[str, list[float]], icp: dict[str, list[float]],
-           o3d: ModuleType | None, pose: bool) -> None:
+def report(
+    tallies: dict[str, Tally],
+    seconds: dict[str, list[float]],
+    icp: dict[str, list[float]],
+    o3d: ModuleType | None,
+    pose: bool,
+) -> None:
     base = tallies["median"]
-    print("\nclouds against the true surface (per camera; medians over clouds; ratio: RMS over the "
-          "median filter's)")
-    print(f"  {'way':11s} {'camera':6s} {'clouds':>6s} {'points':>6s} {'RMS mm':>7s} {'ratio':>6s} "
-          f"{'p90 mm':>7s} {'allowed':>7s} {'>5 mm':>7s} {'ms/cloud':>8s}")
+    print(
+        "\nclouds against the true surface (per camera; medians over clouds; ratio: RMS over the "
+        "median filter's)"
+    )
+    print(
+        f"  {'way':11s} {'camera':6s} {'clouds':>6s} {'points':>6s} {'RMS mm':>7s} {'ratio':>6s} "
+        f"{'p90 mm':>7s} {'allowed':>7s} {'>5 mm':>7s} {'ms/cloud':>8s}"
+    )
     for v, t in tallies.items():
         ms = _median(seconds[v]) * 1000
         for cam in sorted(t.rms):
             rms, ref = _median(t.rms[cam]), _median(base.rms[cam])
             off, total = t.off[cam]
-            print(f"  {v:11s} {cam:6s} {len(t.rms[cam]):6d} {_median(t.points[cam]):6.0f} {rms:7.2f} "
-                  f"{rms / ref:6.2f} {_median(t.p90[cam]):7.2f} {_median(t.allowance[cam]):7.2f} "
-                  f"{off / max(total, 1) * 100:6.2f}% {ms:8.2f}")
+            print(
+                f"  {v:11s} {cam:6s} {len(t.rms[cam]):6d} {_median(t.points[cam]):6.0f} {rms:7.2f} "
+                f"{rms / ref:6.2f} {_median(t.p90[cam]):7.2f} {_median(t.allowance[cam]):7.2f} "
+                f"{off / max(total, 1) * 100:6.2f}% {ms:8.2f}"
+            )
         if t.failed:
             print(f"  {v:11s} {t.failed} clouds refused (too few points)")
-    print("  (p90: the clouds' 90th percentile distance; allowed: what the certificate allows for the "
-          "noise left)")
+    print(
+        "  (p90: the clouds' 90th percentile distance; allowed: what the certificate allows for the "
+        "noise left)"
+    )
     if pose:
-        print("\nposes by the node's pipeline, of the views whose exact cloud shows enough of the part "
-              "at its true pose (a way's cloud that is refused or too small counts as wrong)")
+        print(
+            "\nposes by the node's pipeline, of the views whose exact cloud shows enough of the part "
+            "at its true pose (a way's cloud that is refused or too small counts as wrong)"
+        )
         for cam in sorted({cam for t in tallies.values() for cam in t.poses}):
             for v, t in tallies.items():
                 p = t.poses[cam]
                 n, c = p.views, p.certified
                 classes = ", ".join(f"{cls} {b}/{a}" for cls, (a, b) in sorted(p.by_class.items()))
-                print(f"  {v:11s} {cam:5s} views {n:4d}: certified {c / max(n, 1) * 100:5.1f} %, of them "
-                      f"within 2 % ADD-S {p.certified_right / max(c, 1) * 100:5.1f} %; all within 2 % "
-                      f"{p.right / max(n, 1) * 100:5.1f} %, median ADD-S {_median(p.add_s_mm):.2f} mm of "
-                      f"{len(p.add_s_mm)} posed (certified by class: {classes})")
+                print(
+                    f"  {v:11s} {cam:5s} views {n:4d}: certified {c / max(n, 1) * 100:5.1f} %, of them "
+                    f"within 2 % ADD-S {p.certified_right / max(c, 1) * 100:5.1f} %; all within 2 % "
+                    f"{p.right / max(n, 1) * 100:5.1f} %, median ADD-S {_median(p.add_s_mm):.2f} mm of "
+                    f"{len(p.add_s_mm)} posed (certified by class: {classes})"
+                )
     if icp:
         before = np.array(icp["before_mm"])
-        print(f"\nopen3d ICP after the median cloud's poses ({len(before)} views; Tukey k "
-              f"{ICP_TUKEY_M * 1000:.0f} mm, pairs within {ICP_MAX_M * 1000:.0f} mm): median ADD-S "
-              f"{_median(icp['before_mm']):.2f} mm, within 2 % {np.mean(icp['before_right']) * 100:.1f} % "
-              "before")
+        print(
+            f"\nopen3d ICP after the median cloud's poses ({len(before)} views; Tukey k "
+            f"{ICP_TUKEY_M * 1000:.0f} mm, pairs within {ICP_MAX_M * 1000:.0f} mm): median ADD-S "
+            f"{_median(icp['before_mm']):.2f} mm, within 2 % {np.mean(icp['before_right']) * 100:.1f} % "
+            "before"
+        )
         for kind, title in ICP_KINDS.items():
             after = np.array(icp[f"{kind}_mm"])
-            print(f"  {title:28s} median ADD-S {_median(icp[f'{kind}_mm']):8.2f} mm, within 2 % "
-                  f"{np.mean(icp[f'{kind}_right']) * 100:5.1f} %, better by > 0.5 mm "
-                  f"{np.mean(after < before - 0.5) * 100:5.1f} %, worse by > 0.5 mm "
-                  f"{np.mean(after > before + 0.5) * 100:5.1f} %, "
-                  f"{_median(icp[f'{kind}_seconds']) * 1000:.1f} ms")
+            print(
+                f"  {title:28s} median ADD-S {_median(icp[f'{kind}_mm']):8.2f} mm, within 2 % "
+                f"{np.mean(icp[f'{kind}_right']) * 100:5.1f} %, better by > 0.5 mm "
+                f"{np.mean(after < before - 0.5) * 100:5.1f} %, worse by > 0.5 mm "
+                f"{np.mean(after > before + 0.5) * 100:5.1f} %, "
+                f"{_median(icp[f'{kind}_seconds']) * 1000:.1f} ms"
+            )
     if o3d is None:
         print("\nopen3d is not installed: `pip install open3d` to measure its filters and ICP beside these")
 
@@ -430,8 +501,11 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--count {args.count}: at least one image")
     torch.set_num_threads(args.threads)
     o3d = open3d_or_none()
-    print(f"rendering {args.count} held-out images (seed {args.seed}) through the twin's camera models; "
-          f"open3d {o3d.__version__ if o3d else 'not installed'}", flush=True)
+    print(
+        f"rendering {args.count} held-out images (seed {args.seed}) through the twin's camera models; "
+        f"open3d {o3d.__version__ if o3d else 'not installed'}",
+        flush=True,
+    )
     tallies, seconds, icp = measure(args, o3d)
     report(tallies, seconds, icp, o3d, not args.no_pose)
     return 0

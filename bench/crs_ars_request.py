@@ -111,8 +111,9 @@ def main(argv: list[str] | None = None) -> int:
 
     env = dict(os.environ)
     isolate(env)
-    os.environ.update(ROS_DOMAIN_ID=env["ROS_DOMAIN_ID"],
-                      ROS_AUTOMATIC_DISCOVERY_RANGE=env["ROS_AUTOMATIC_DISCOVERY_RANGE"])
+    os.environ.update(
+        ROS_DOMAIN_ID=env["ROS_DOMAIN_ID"], ROS_AUTOMATIC_DISCOVERY_RANGE=env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
+    )
     import rclpy
     from rclpy.action import ActionClient
     from tlt_interfaces.action import AddMember
@@ -122,10 +123,18 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tlt_ars = Path(sys.executable).with_name("tlt-ars")
         procs = [
-            subprocess.Popen([str(tlt_ars), "--ars", "ars_x", "--config", str(ars_config(Path(tmp)))],
-                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
-            subprocess.Popen([sys.executable, __file__], env={**env, "TLT_BENCH_ROLE": "bare"},
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+            subprocess.Popen(
+                [str(tlt_ars), "--ars", "ars_x", "--config", str(ars_config(Path(tmp)))],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            ),
+            subprocess.Popen(
+                [sys.executable, __file__],
+                env={**env, "TLT_BENCH_ROLE": "bare"},
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            ),
         ]
         try:
             rclpy.init()
@@ -136,8 +145,10 @@ def main(argv: list[str] | None = None) -> int:
 
             raw = yaml.safe_load((ROOT / "config/ars/ars_x.yaml").read_text())
             home = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
-            states = {arm: node.create_publisher(JointState, ros_names.joint_states_topic(arm), 10)
-                      for arm in ("ur_x", "ur_y")}
+            states = {
+                arm: node.create_publisher(JointState, ros_names.joint_states_topic(arm), 10)
+                for arm in ("ur_x", "ur_y")
+            }
 
             def publish_states():
                 for arm, pub in states.items():
@@ -166,8 +177,10 @@ def main(argv: list[str] | None = None) -> int:
 
     def line(name: str, t: list[float]) -> str:
         q = sorted(t)
-        return (f"{name:<28} p50 {statistics.median(t) * 1e3:7.2f} ms   p90 "
-                f"{q[int(0.9 * (len(q) - 1))] * 1e3:7.2f} ms   n={len(t)}")
+        return (
+            f"{name:<28} p50 {statistics.median(t) * 1e3:7.2f} ms   p90 "
+            f"{q[int(0.9 * (len(q) - 1))] * 1e3:7.2f} ms   n={len(t)}"
+        )
 
     print(line("bare action, to its result", bare_t))
     print(line("ARS, to its tree running", ars_t))

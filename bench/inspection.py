@@ -216,8 +216,13 @@ def run(args: argparse.Namespace) -> list[Presented]:
                 camera = CAMERAS[arm]
                 own = own_pixels(frame.depth, depth)
                 report, _ = inspector.inspect(
-                    f"bench/{kind}", kind, off_own_ee(detect(frame, camera), own, ee_filter.own_share), depth,
-                    frame.intrinsics, frame.rgb, detect.closer(frame, camera),
+                    f"bench/{kind}",
+                    kind,
+                    off_own_ee(detect(frame, camera), own, ee_filter.own_share),
+                    depth,
+                    frame.intrinsics,
+                    frame.rgb,
+                    detect.closer(frame, camera),
                 )
                 defect = defect_label(scen.defects.get(name))
                 results.append(Presented(name, arm, defect, report.passed, tuple(report.reasons)))
@@ -273,16 +278,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--segmentation", choices=("twin", "mask_rcnn"), default="twin")
     parser.add_argument("--weights", help="Mask R-CNN weights (default: config/vision/node.yaml's)")
     parser.add_argument("--min-score", type=float, help="Mask R-CNN's (default: config/vision/node.yaml's)")
-    parser.add_argument("--second-look", type=float,
-                        help="second_look_score, 0 for none (default: config/vision/node.yaml's)")
-    parser.add_argument("--closer", action=argparse.BooleanOptionalAction, default=True,
-                        help="the second look's closer look at a region (Mask R-CNN), as configured")
-    parser.add_argument("--self-filter", action=argparse.BooleanOptionalAction, default=True,
-                        help="take the end effectors out of the depth first, as the vision node does")
+    parser.add_argument(
+        "--second-look", type=float, help="second_look_score, 0 for none (default: config/vision/node.yaml's)"
+    )
+    parser.add_argument(
+        "--closer",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the second look's closer look at a region (Mask R-CNN), as configured",
+    )
+    parser.add_argument(
+        "--self-filter",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="take the end effectors out of the depth first, as the vision node does",
+    )
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--depth-noise", type=float, default=0.0,
-                        help="Gaussian noise added to each pixel's depth, a fraction of it; the node is "
-                             "told so (node.yaml depth_noise)")
+    parser.add_argument(
+        "--depth-noise",
+        type=float,
+        default=0.0,
+        help="Gaussian noise added to each pixel's depth, a fraction of it; the node is "
+        "told so (node.yaml depth_noise)",
+    )
     parser.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
     if not 0.0 <= args.depth_noise <= 0.1:
@@ -290,8 +308,13 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     figures = report(run(args))
     if args.json:
-        settings = {"seed": args.seed, "rounds": args.rounds, "mission": args.mission,
-                    "segmentation": args.segmentation, "weights": args.weights}
+        settings = {
+            "seed": args.seed,
+            "rounds": args.rounds,
+            "mission": args.mission,
+            "segmentation": args.segmentation,
+            "weights": args.weights,
+        }
         args.json.write_text(json.dumps({**settings, **figures}, indent=1) + "\n")
     return 0
 

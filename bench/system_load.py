@@ -117,8 +117,14 @@ def main(argv: list[str] | None = None) -> int:
            "TLT_MISSION": args.mission, "TLT_UR_X_HOST": "127.0.84.2", "TLT_UR_Y_HOST": "127.0.84.3",
            "TLT_GROUND_CRS_PORT": "52181", "TLT_GROUND_GSW_PORT": "52182"}  # fmt: skip
     log = (run_dir / "launch.log").open("wb")
-    launcher = subprocess.Popen([str(TLT), "launch", "--isolated", str(LAUNCH_SET)], stdout=log,
-                                stderr=subprocess.STDOUT, env=env, cwd=ROOT, start_new_session=True)
+    launcher = subprocess.Popen(
+        [str(TLT), "launch", "--isolated", str(LAUNCH_SET)],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        env=env,
+        cwd=ROOT,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 180
         while not (run_dir / "twin.ready").exists():
@@ -156,10 +162,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     total = sum(c for c, _ in used)
     cores = os.cpu_count() or 1
-    print(f"idle system, --rtf {args.rtf:g}: {sim:.1f} s of sim time in {wall:.1f} s of wall time, "
-          f"{sim / wall:.2f} x real time")
-    print(f"CPU per simulated second: {total / sim:.3f} s (all processes); on {cores} cores the idle "
-          f"system can run at most {cores / (total / sim):.2f} x real time")
+    print(
+        f"idle system, --rtf {args.rtf:g}: {sim:.1f} s of sim time in {wall:.1f} s of wall time, "
+        f"{sim / wall:.2f} x real time"
+    )
+    print(
+        f"CPU per simulated second: {total / sim:.3f} s (all processes); on {cores} cores the idle "
+        f"system can run at most {cores / (total / sim):.2f} x real time"
+    )
     for seconds, name in used:
         if seconds / sim >= 0.005:
             print(f"  {seconds / sim:6.3f}  {name}")

@@ -144,8 +144,10 @@ def main() -> None:
         wall, cpu = frame_ms(scene, camera, 320, 240, depth=False, segmentation=False)
         print(f"ms per RGB frame 320x240:                   {wall:6.1f} / {cpu:6.1f}")
         wall, cpu = frame_ms(scene, camera, 320, 240, antialias=False)
-        print(f"  the same RGB-D-seg 320x240, no antialiasing: {wall:6.1f} / {cpu:6.1f}"
-              "  (run.yaml cameras.antialias: false)")
+        print(
+            f"  the same RGB-D-seg 320x240, no antialiasing: {wall:6.1f} / {cpu:6.1f}"
+            "  (run.yaml cameras.antialias: false)"
+        )
     ms = twin_period_ms(min(args.seconds, 2.0), max(1, args.repeat))
     period_ms = load_settings().sync_period_s * 1000.0
     print(

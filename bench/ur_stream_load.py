@@ -44,9 +44,19 @@ def measure(rate_hz: float, window_s: float, settle_s: float = 8.0) -> tuple[flo
         with tempfile.TemporaryDirectory() as tmp:
             tlt_ur = Path(sys.executable).with_name("tlt-ur")
             driver = subprocess.Popen(
-                [str(tlt_ur), "--config", str(ROOT / "config/hardware/ur_x.yaml"), "--host", HOST,
-                 "--rtde-frequency-hz", str(rate_hz)],
-                env=env, cwd=tmp, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                [
+                    str(tlt_ur),
+                    "--config",
+                    str(ROOT / "config/hardware/ur_x.yaml"),
+                    "--host",
+                    HOST,
+                    "--rtde-frequency-hz",
+                    str(rate_hz),
+                ],
+                env=env,
+                cwd=tmp,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
             )
             try:
                 time.sleep(settle_s)  # connected, script uploaded, streaming
@@ -74,8 +84,11 @@ def main(argv: list[str] | None = None) -> int:
     for rate in args.rates:
         emulator, driver = measure(rate, args.window)
         totals[rate] = emulator + driver
-        print(f"RTDE {rate:5g} Hz: emulator {emulator * 100:5.1f} %, driver {driver * 100:5.1f} %, "
-              f"together {totals[rate] * 100:5.1f} % of a core", flush=True)
+        print(
+            f"RTDE {rate:5g} Hz: emulator {emulator * 100:5.1f} %, driver {driver * 100:5.1f} %, "
+            f"together {totals[rate] * 100:5.1f} % of a core",
+            flush=True,
+        )
     first = args.rates[0]
     for rate in args.rates[1:]:
         print(f"{rate:g} Hz / {first:g} Hz: {totals[rate] / totals[first]:.2f}")

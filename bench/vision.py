@@ -126,8 +126,9 @@ class PoseTally:
         return sum(table.values())
 
 
-def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseTally,
-                   noise: DepthNoise = EXACT) -> None:
+def pose_instances(
+    pipelines, estimators, items, depth, intrinsics, tally: PoseTally, noise: DepthNoise = EXACT
+) -> None:
     """Pose ``items`` [(Detection, model name, true 4x4 pose, the twin's mask of the part, or None
     where the detection's mask is the twin's)] on depth of the camera's ``noise`` and count them
     into ``tally``."""
@@ -135,8 +136,7 @@ def pose_instances(pipelines, estimators, items, depth, intrinsics, tally: PoseT
     for det, name, true, truth_mask in items:
         by_model[name].append((det, true, truth_mask))
     for name, group in by_model.items():
-        observations = pipelines[name].observe([d for d, _, _ in group], depth, intrinsics,
-                                               depth_noise=noise)
+        observations = pipelines[name].observe([d for d, _, _ in group], depth, intrinsics, depth_noise=noise)
         model = estimators[name].model
         for (det, true, truth_mask), obs in zip(group, observations, strict=True):
             if obs.estimate is None:
@@ -219,23 +219,32 @@ def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
     print(f"  certified {cert}/{est} = {cert / est * 100:.1f} % (goal >= 95 %)")
     whole, whole_cert = summary["views"], summary["views_certified"]
     if whole:
-        print(f"  of the {whole} views non-degenerate at the true pose (enough keypoint groups seen), "
-              f"certified {whole_cert}/{whole} = {whole_cert / whole * 100:.1f} %")
+        print(
+            f"  of the {whole} views non-degenerate at the true pose (enough keypoint groups seen), "
+            f"certified {whole_cert}/{whole} = {whole_cert / whole * 100:.1f} %"
+        )
     shown, shown_cert = summary["views_shown"], summary["views_shown_certified"]
     if shown and (shown, shown_cert) != (whole, whole_cert):
-        print(f"  of the {shown} views in which the twin's mask of the part shows enough of it "
-              f"(segmentation's losses counted), certified {shown_cert}/{shown} = "
-              f"{shown_cert / shown * 100:.1f} %")
+        print(
+            f"  of the {shown} views in which the twin's mask of the part shows enough of it "
+            f"(segmentation's losses counted), certified {shown_cert}/{shown} = "
+            f"{shown_cert / shown * 100:.1f} %"
+        )
     reach, reach_cert = tally.total(tally.reach), tally.total(tally.reach_certified)
     if reach < whole:
-        print(f"  of the {reach} of those the depth's noise leaves certifiable (its 90th percentile "
-              f"after the filter under {noise_bound:.0%} of the part's size), certified "
-              f"{reach_cert}/{reach} = {reach_cert / max(reach, 1) * 100:.1f} %")
+        print(
+            f"  of the {reach} of those the depth's noise leaves certifiable (its 90th percentile "
+            f"after the filter under {noise_bound:.0%} of the part's size), certified "
+            f"{reach_cert}/{reach} = {reach_cert / max(reach, 1) * 100:.1f} %"
+        )
     if cert:
-        print(f"  of the certified, ADD-S < 2 % of size: {ok}/{cert} = {ok / cert * 100:.1f} % "
-              "(goal >= 95 %)")
-        print(f"  median rotation error {summary['median_rotation_deg']:.2f} deg (goal <= 2), "
-              f"translation {summary['median_translation_mm']:.1f} mm (goal <= 3)")
+        print(
+            f"  of the certified, ADD-S < 2 % of size: {ok}/{cert} = {ok / cert * 100:.1f} % (goal >= 95 %)"
+        )
+        print(
+            f"  median rotation error {summary['median_rotation_deg']:.2f} deg (goal <= 2), "
+            f"translation {summary['median_translation_mm']:.1f} mm (goal <= 3)"
+        )
     for cls in POSED:
         n = tally.estimated.get(cls, 0)
         if not n:
@@ -251,18 +260,23 @@ def report_poses(title: str, tally: PoseTally, noise_bound: float) -> None:
                 line += f", {share:5.1f} % of {r} in the noise's reach"
             line += ")"
         if c:
-            line += (f", ADD-S ok {tally.add_s_ok.get(cls, 0) / c * 100:5.1f} %, rotation "
-                     f"{statistics.median(tally.rotation[cls]):5.2f} deg, translation "
-                     f"{statistics.median(tally.translation[cls]):5.1f} mm")
+            line += (
+                f", ADD-S ok {tally.add_s_ok.get(cls, 0) / c * 100:5.1f} %, rotation "
+                f"{statistics.median(tally.rotation[cls]):5.2f} deg, translation "
+                f"{statistics.median(tally.translation[cls]):5.1f} mm"
+            )
         print(line)
     refused = [(cls, kinds) for cls, kinds in tally.refused.items() if kinds]
     if refused:
-        print("  not certified though non-degenerate at the true pose (and in the noise's reach), by the"
-              " certificate's reason, [of them with a pose within the ADD-S goal]:")
+        print(
+            "  not certified though non-degenerate at the true pose (and in the noise's reach), by the"
+            " certificate's reason, [of them with a pose within the ADD-S goal]:"
+        )
     for cls, kinds in sorted(refused):
         names = sorted({kind for kind, _ in kinds})
-        text = ", ".join(f"{kind} {kinds[kind, True] + kinds[kind, False]} [{kinds[kind, True]}]"
-                         for kind in names)
+        text = ", ".join(
+            f"{kind} {kinds[kind, True] + kinds[kind, False]} [{kinds[kind, True]}]" for kind in names
+        )
         print(f"    {cls:13s} {text}")
 
 
@@ -301,18 +315,37 @@ def main() -> int:
     p.add_argument("--mission", type=Path, default=ROOT / "missions/one_bay.yaml")
     p.add_argument("--config", type=Path, default=ROOT / "config/vision/node.yaml")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
-    p.add_argument("--camera-model", choices=("realistic", "exact"), default="realistic",
-                   help="the images through the twin's camera models (config/twin/cameras.yaml), the "
-                        "node told each camera's noise (node.yaml depth_noise.cameras); or exact")
-    p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
-                   help="the camera models the realistic images are taken through (cameras.yaml)")
-    p.add_argument("--lighting", default="",
-                   help="light the images by this preset of config/twin/lighting.yaml (lunar: a low, "
-                        "hard sun) instead of the renderer's random lights")
-    p.add_argument("--depth-noise", type=float, default=0.0,
-                   help="Gaussian noise added to each pixel's depth, a fraction of it (default none)")
-    p.add_argument("--image-noise", type=float, default=0.0,
-                   help="Gaussian noise added to each pixel's colours, in grey levels of 255 (default none)")
+    p.add_argument(
+        "--camera-model",
+        choices=("realistic", "exact"),
+        default="realistic",
+        help="the images through the twin's camera models (config/twin/cameras.yaml), the "
+        "node told each camera's noise (node.yaml depth_noise.cameras); or exact",
+    )
+    p.add_argument(
+        "--cameras",
+        type=Path,
+        default=DEFAULT_CAMERAS,
+        help="the camera models the realistic images are taken through (cameras.yaml)",
+    )
+    p.add_argument(
+        "--lighting",
+        default="",
+        help="light the images by this preset of config/twin/lighting.yaml (lunar: a low, "
+        "hard sun) instead of the renderer's random lights",
+    )
+    p.add_argument(
+        "--depth-noise",
+        type=float,
+        default=0.0,
+        help="Gaussian noise added to each pixel's depth, a fraction of it (default none)",
+    )
+    p.add_argument(
+        "--image-noise",
+        type=float,
+        default=0.0,
+        help="Gaussian noise added to each pixel's colours, in grey levels of 255 (default none)",
+    )
     p.add_argument("--picture", type=Path, help="draw the first frames' masks and posed models into this PNG")
     p.add_argument("--picture-frames", type=int, default=4, help="frames drawn (default 4)")
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
@@ -336,8 +369,9 @@ def main() -> int:
     classes = list(model.cfg.classes)
     estimators = load_estimators(config, mission)
     opts = {**config.pipeline_options, "merge": ()}
-    pipelines = {name: PartPipeline({estimators[name].model.object_class: e}, **opts)
-                 for name, e in estimators.items()}
+    pipelines = {
+        name: PartPipeline({estimators[name].model.object_class: e}, **opts) for name, e in estimators.items()
+    }
     # A frame's parts of every kind posed in one call, as the node does (tubes as verticals).
     frame_pipeline = PartPipeline({cls: estimators[instance_model(cls, "")] for cls in POSED}, **opts)
     min_score = config.raw["segmentation"]["min_score"]
@@ -348,8 +382,9 @@ def main() -> int:
             root = Path(tmp)
             print(f"rendering {args.count} held-out images (seed {args.seed}) ...", flush=True)
             cameras = str(args.cameras) if args.camera_model == "realistic" else ""
-            settings = RenderSettings(seed=args.seed, mission=str(args.mission), cameras=cameras,
-                                      lighting=args.lighting)
+            settings = RenderSettings(
+                seed=args.seed, mission=str(args.mission), cameras=cameras, lighting=args.lighting
+            )
             render_set(root, args.count, settings, progress_every=10)
         images = ImageSet(root)
         if images.classes != classes:
@@ -377,8 +412,9 @@ def main() -> int:
             observations = frame_pipeline.observe(frame_items, s.depth, intrinsics, depth_noise=noise)
             frame_s.append(time.perf_counter() - t0)
             if args.picture and len(pictured) < args.picture_frames:
-                pictured.append(PosedFrame(f"{images.path(i).name}", s.rgb, s.intrinsics, frame_items,
-                                           observations))
+                pictured.append(
+                    PosedFrame(f"{images.path(i).name}", s.rgb, s.intrinsics, frame_items, observations)
+                )
             seg_s.append(t1 - t0)
             parts.append(len(frame_items))
             gt_masks = torch.as_tensor(s.masks, dtype=torch.bool)
@@ -405,17 +441,25 @@ def main() -> int:
                     matched.append((detection_of(pred, classes, best), item_name, pose, s.masks[j]))
             pose_instances(pipelines, estimators, matched, s.depth, intrinsics, from_model, noise)
             pose_instances(pipelines, estimators, truth, s.depth, intrinsics, from_twin, noise)
-            print(f"  image {i + 1}/{len(images)}: {len(dets)} detections, {len(matched)} matched, "
-                  f"frame {frame_s[-1]:.2f} s", flush=True)
+            print(
+                f"  image {i + 1}/{len(images)}: {len(dets)} detections, {len(matched)} matched, "
+                f"frame {frame_s[-1]:.2f} s",
+                flush=True,
+            )
 
-    print(f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
-          f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
-          + f", {args.camera_model} cameras"
-          + (f", {args.lighting} light" if args.lighting else "")
-          + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else "")
-          + (f", image noise {args.image_noise:g} grey levels" if args.image_noise else ""))
-    cut = ("cut where the depth jumps" if segmenter.depth_split
-           else "not cut by depth (no segmentation.depth_split)")
+    print(
+        f"\n{args.weights.relative_to(ROOT) if args.weights.is_relative_to(ROOT) else args.weights} "
+        f"on {len(images)} held-out images, max size {max_size or 'full'}, {args.threads} threads"
+        + f", {args.camera_model} cameras"
+        + (f", {args.lighting} light" if args.lighting else "")
+        + (f", depth noise {args.depth_noise:g} of the depth" if args.depth_noise else "")
+        + (f", image noise {args.image_noise:g} grey levels" if args.image_noise else "")
+    )
+    cut = (
+        "cut where the depth jumps"
+        if segmenter.depth_split
+        else "not cut by depth (no segmentation.depth_split)"
+    )
     if segmenter.trim is not None:
         cut += f", {', '.join(segmenter.trim.classes)} trimmed of thin parts' pixels"
     if segmenter.overlaps is not None:
@@ -426,26 +470,40 @@ def main() -> int:
         result = results[key] = acc.result()
         per_class = {classes[k - 1]: v for k, v in result["per_class"].items()}
         ap_line = ", ".join(f"{c} {per_class[c]:.3f}" if c in per_class else f"{c} -" for c in classes)
-        print(f"mask AP50 {title}: {result['map']:.3f} (goal >= 0.90; ratio {result['map'] / 0.90:.2f}): "
-              f"{ap_line}")
+        print(
+            f"mask AP50 {title}: {result['map']:.3f} (goal >= 0.90; ratio {result['map'] / 0.90:.2f}): "
+            f"{ap_line}"
+        )
     bound = config.depth_noise.max_allowance
     report_poses("C-3PO on Mask R-CNN masks matched to the twin's parts", from_model, bound)
     report_poses("C-3PO on the twin's own masks (segmentation taken out)", from_twin, bound)
     med, p95 = statistics.median(frame_s), float(np.percentile(frame_s, 95))
-    print(f"segmentation + pose of every part in a frame ({statistics.mean(parts):.1f} parts on "
-          f"average): median {med * 1000:.0f} ms, p95 {p95 * 1000:.0f} ms (goal <= 500 ms; ratio "
-          f"{med / 0.5:.2f}); segmentation alone median {statistics.median(seg_s) * 1000:.0f} ms")
+    print(
+        f"segmentation + pose of every part in a frame ({statistics.mean(parts):.1f} parts on "
+        f"average): median {med * 1000:.0f} ms, p95 {p95 * 1000:.0f} ms (goal <= 500 ms; ratio "
+        f"{med / 0.5:.2f}); segmentation alone median {statistics.median(seg_s) * 1000:.0f} ms"
+    )
     if args.json:
         figures = {
-            "weights": str(args.weights), "images": len(images), "source": str(root) if args.images else None,
-            "seed": None if args.images else args.seed, "camera_model": args.camera_model,
+            "weights": str(args.weights),
+            "images": len(images),
+            "source": str(root) if args.images else None,
+            "seed": None if args.images else args.seed,
+            "camera_model": args.camera_model,
             "depth_noise": args.depth_noise,
-            "image_noise": args.image_noise, "threads": args.threads,
-            **{f"mask_ap50_{key}": {"mean": r["map"],
-                                    "per_class": {classes[k - 1]: v for k, v in r["per_class"].items()}}
-               for key, r in results.items()},
-            "poses": pose_summary(from_model), "poses_twin_masks": pose_summary(from_twin),
-            "frame_median_ms": med * 1000, "frame_p95_ms": p95 * 1000,
+            "image_noise": args.image_noise,
+            "threads": args.threads,
+            **{
+                f"mask_ap50_{key}": {
+                    "mean": r["map"],
+                    "per_class": {classes[k - 1]: v for k, v in r["per_class"].items()},
+                }
+                for key, r in results.items()
+            },
+            "poses": pose_summary(from_model),
+            "poses_twin_masks": pose_summary(from_twin),
+            "frame_median_ms": med * 1000,
+            "frame_p95_ms": p95 * 1000,
             "segmentation_median_ms": statistics.median(seg_s) * 1000,
             "parts_per_frame": statistics.mean(parts),
         }
@@ -454,8 +512,10 @@ def main() -> int:
         models = {cls: e.model for cls, e in frame_pipeline.estimators.items()}
         written = write_pose_picture(args.picture, pictured, models, classes)
         print(f"picture of {len(pictured)} frames: {written}")
-    print("not measured here: inspection catch and false-reject rates (tests/tlt_vision/"
-          "test_twin_parts.py checks each defect kind), AprilTag at 1 m (tests/tlt_vision/test_apriltag.py)")
+    print(
+        "not measured here: inspection catch and false-reject rates (tests/tlt_vision/"
+        "test_twin_parts.py checks each defect kind), AprilTag at 1 m (tests/tlt_vision/test_apriltag.py)"
+    )
     return 0
 
 

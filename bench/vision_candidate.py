@@ -87,8 +87,14 @@ def compare(candidate: dict[str, float | None], against: dict[str, float | None]
     return out
 
 
-LABELS = {"ap50": "mask AP50", "certified": "certified", "shown": "certified*", "add_s_ok": "ADD-S ok",
-          "caught": "caught", "rejected": "good rejected"}
+LABELS = {
+    "ap50": "mask AP50",
+    "certified": "certified",
+    "shown": "certified*",
+    "add_s_ok": "ADD-S ok",
+    "caught": "caught",
+    "rejected": "good rejected",
+}
 
 
 def _fmt(value: float | None, key: str) -> str:
@@ -104,7 +110,7 @@ def table(rows: dict[str, dict[str, dict[str, float | None]]], names: list[str],
     the first compares with the second."""
     width = 13
     head = f"{'':20s}" + "".join(f"{LABELS[k]:>{width * len(names)}s}" for k in keys)
-    sub = f"{'':20s}" + "".join(f"{n[:width - 1]:>{width}s}" for _ in keys for n in names)
+    sub = f"{'':20s}" + "".join(f"{n[: width - 1]:>{width}s}" for _ in keys for n in names)
     lines = [head, sub]
     for name_of_set, by_weights in rows.items():
         cells = "".join(f"{_fmt(by_weights.get(n, {}).get(k), k):>{width}s}" for k in keys for n in names)
@@ -113,8 +119,11 @@ def table(rows: dict[str, dict[str, dict[str, float | None]]], names: list[str],
         lines.append(f"{names[0]} against {names[1]} (positive: better)")
         for name_of_set, by_weights in rows.items():
             diff = compare(by_weights.get(names[0], {}), by_weights.get(names[1], {}))
-            text = ", ".join(f"{LABELS[k]} {v:+.3f}" if k == "ap50" else f"{LABELS[k]} {v * 100:+.1f} points"
-                             for k, v in diff.items() if k in keys)
+            text = ", ".join(
+                f"{LABELS[k]} {v:+.3f}" if k == "ap50" else f"{LABELS[k]} {v * 100:+.1f} points"
+                for k, v in diff.items()
+                if k in keys
+            )
             lines.append(f"  {name_of_set:20s}{text}")
     return "\n".join(lines)
 
@@ -128,8 +137,9 @@ def pooled(rows: dict[str, dict[str, float | None]], names: list[str]) -> dict[s
         out[n] = {"ap50": sum(r["ap50"] for r in sets) / len(sets) if sets else None}
         for key, views_key in (("certified", "views"), ("shown", "views_shown")):
             views = sum(r.get(views_key, 0) for r in sets if r.get(key) is not None)
-            out[n][key] = (sum(r[key] * r[views_key] for r in sets if r.get(key) is not None) / views
-                           if views else None)
+            out[n][key] = (
+                sum(r[key] * r[views_key] for r in sets if r.get(key) is not None) / views if views else None
+            )
     return out
 
 
@@ -177,10 +187,24 @@ def main(argv: list[str] | None = None) -> int:
     for seed in args.seeds:
         images = args.work / f"held_out_{seed}_{args.count}"
         if not (images / "index.json").exists():
-            renders.append(Job(f"render held-out seed {seed}", [
-                python, "-m", "tlt_tools.vision_training.render_dataset", "--out", str(images),
-                "--count", str(args.count), "--seed", str(seed)], images / "index.json",
-                args.work / f"render_{seed}.log"))
+            renders.append(
+                Job(
+                    f"render held-out seed {seed}",
+                    [
+                        python,
+                        "-m",
+                        "tlt_tools.vision_training.render_dataset",
+                        "--out",
+                        str(images),
+                        "--count",
+                        str(args.count),
+                        "--seed",
+                        str(seed),
+                    ],
+                    images / "index.json",
+                    args.work / f"render_{seed}.log",
+                )
+            )
     print(f"rendering {len(renders)} held-out sets into {args.work} ...", flush=True)
     if run_all(renders, args.jobs):
         return 1
@@ -189,16 +213,50 @@ def main(argv: list[str] | None = None) -> int:
     for name, path in weights.items():
         for seed in args.seeds:
             out = args.work / f"{name}_{seed}.json"
-            jobs.append(Job(f"bench/vision.py {name} seed {seed}", [
-                python, "bench/vision.py", "--weights", str(path), "--threads", "1", "--json", str(out),
-                "--images", str(args.work / f"held_out_{seed}_{args.count}")], out,
-                args.work / f"{name}_{seed}.log"))
+            jobs.append(
+                Job(
+                    f"bench/vision.py {name} seed {seed}",
+                    [
+                        python,
+                        "bench/vision.py",
+                        "--weights",
+                        str(path),
+                        "--threads",
+                        "1",
+                        "--json",
+                        str(out),
+                        "--images",
+                        str(args.work / f"held_out_{seed}_{args.count}"),
+                    ],
+                    out,
+                    args.work / f"{name}_{seed}.log",
+                )
+            )
         for seed in args.inspection_seeds:
             out = args.work / f"{name}_inspection_{seed}.json"
-            jobs.append(Job(f"bench/inspection.py {name} seed {seed}", [
-                python, "bench/inspection.py", "--segmentation", "mask_rcnn", "--weights", str(path),
-                "--rounds", str(args.rounds), "--seed", str(seed), "--threads", "1", "--json", str(out)],
-                out, args.work / f"{name}_inspection_{seed}.log"))
+            jobs.append(
+                Job(
+                    f"bench/inspection.py {name} seed {seed}",
+                    [
+                        python,
+                        "bench/inspection.py",
+                        "--segmentation",
+                        "mask_rcnn",
+                        "--weights",
+                        str(path),
+                        "--rounds",
+                        str(args.rounds),
+                        "--seed",
+                        str(seed),
+                        "--threads",
+                        "1",
+                        "--json",
+                        str(out),
+                    ],
+                    out,
+                    args.work / f"{name}_inspection_{seed}.log",
+                )
+            )
     print(f"running {len(jobs)} benchmarks, {args.jobs} at a time ...", flush=True)
     failed = run_all(jobs, args.jobs)
 
@@ -215,20 +273,30 @@ def main(argv: list[str] | None = None) -> int:
             if path.exists():
                 figures = json.loads(path.read_text())
                 inspection.setdefault(f"seed {seed}", {})[name] = {
-                    "caught": figures["caught"], "rejected": figures["rejected"]}
+                    "caught": figures["caught"],
+                    "rejected": figures["rejected"],
+                }
     if vision:
         vision["all (mean, pooled)"] = pooled(vision, names)
     print(f"\ncandidate {args.weights}, current {args.against} ('ok': the goal met)")
-    print(f"\nheld-out sets ({args.count} images each; certified: of the views whose cloud shows enough of "
-          "a part; certified*: of those the twin's mask of the part does, segmentation's losses counted)")
+    print(
+        f"\nheld-out sets ({args.count} images each; certified: of the views whose cloud shows enough of "
+        "a part; certified*: of those the twin's mask of the part does, segmentation's losses counted)"
+    )
     print(table(vision, names, ["ap50", "certified", "shown", "add_s_ok"]))
     if inspection:
-        print(f"\ninspection (the two-bay mission's struts presented {args.rounds} times, on Mask R-CNN's "
-              "masks)")
+        print(
+            f"\ninspection (the two-bay mission's struts presented {args.rounds} times, on Mask R-CNN's "
+            "masks)"
+        )
         print(table(inspection, names, ["caught", "rejected"]))
     rows = {"vision": vision, "inspection": inspection}
-    (args.work / "summary.json").write_text(json.dumps(
-        {"weights": {n: str(p) for n, p in weights.items()}, "goals": GOALS, "rows": rows}, indent=1) + "\n")
+    (args.work / "summary.json").write_text(
+        json.dumps(
+            {"weights": {n: str(p) for n, p in weights.items()}, "goals": GOALS, "rows": rows}, indent=1
+        )
+        + "\n"
+    )
     print(f"\nfigures of every run in {args.work}; frame times are bench/vision.py's, run alone")
     return 1 if failed else 0
 

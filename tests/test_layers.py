@@ -164,8 +164,11 @@ def test_no_modules_import_each_other():
         ("tlt_vision/train.py", "import tlt_tools.vision_training\n", "imports an offline tool"),
         ("tlt_common/geo.py", "from tlt_ars.planning import kinematics\n", "shared layer imports tlt_ars"),
         ("tlt_drivers/ee.py", "from tlt_crs import context\n", "drivers import the agent tlt_crs"),
-        ("tlt_ars/tags.py", "try:\n    import tlt_vision.apriltag\nexcept ImportError:\n    pass\n",
-         "agent tlt_ars imports the agent tlt_vision"),
+        (
+            "tlt_ars/tags.py",
+            "try:\n    import tlt_vision.apriltag\nexcept ImportError:\n    pass\n",
+            "agent tlt_ars imports the agent tlt_vision",
+        ),
     ],
 )
 def test_a_wrong_import_is_named_with_its_file_and_line(tmp_path, module, source, caught):

@@ -169,13 +169,17 @@ class ArsNode(LeanNode):
             require_reachable(scene, mission, [self.ars], config.ee["width"])
         state = config.state_path
         self.ctx = ArsContext(
-            self, config, mission, scene,
+            self,
+            config,
+            mission,
+            scene,
             request_file=RequestFile(state, mission, self.ars) if state is not None else None,
         )
         if self.ctx.unfinished is not None:
             left = self.ctx.unfinished
             how = (
-                f"set its member ({left.recorded})" if left.recorded
+                f"set its member ({left.recorded})"
+                if left.recorded
                 else f"began the step that sets its member ({left.setting}) and never saw it end"
             )
             self.get_logger().warning(
@@ -233,7 +237,10 @@ class ArsNode(LeanNode):
         self._progress_changed = threading.Condition()
         self._progress_count = 0
         self.create_subscription(
-            MissionProgress, ros_names.CRS_MISSION_PROGRESS, self._on_progress, 10,
+            MissionProgress,
+            ros_names.CRS_MISSION_PROGRESS,
+            self._on_progress,
+            10,
             callback_group=MutuallyExclusiveCallbackGroup(),
         )
         ticks = MutuallyExclusiveCallbackGroup()
@@ -267,8 +274,12 @@ class ArsNode(LeanNode):
         with self._lock:
             goal = ActiveGoal(kind, handle, request, threading.Event())
             running = self.active
-            if (running is not None and running.request == request and not running.cancel_requested
-                    and not self.stop_requested):
+            if (
+                running is not None
+                and running.request == request
+                and not running.cancel_requested
+                and not self.stop_requested
+            ):
                 self._take_over(running, goal)
             elif (reason := self._refusal(request)) is not None:
                 goal.outcome = ("aborted", f"rejected: {reason}")
@@ -462,12 +473,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, help="ARS file (default config/ars/<ars>.yaml)")
     p.add_argument("--mission", type=Path, help="mission file (overrides the ARS file; the same as the CRS)")
     p.add_argument(
-        "--state-file", type=Path,
+        "--state-file",
+        type=Path,
         help="where a held part, a rivet and a request that set its member are kept for a restart"
         " (overrides the ARS file)",
     )
     p.add_argument(
-        "--velocity-scale", type=_optional_float, metavar="FRACTION",
+        "--velocity-scale",
+        type=_optional_float,
+        metavar="FRACTION",
         help="the arm's speed as a fraction of its limits (overrides arm.velocity_scale; empty: the"
         " ARS file's)",
     )

@@ -58,10 +58,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ars", choices=ros_names.ARS_AGENTS, required=True)
     parser.add_argument("--mission", type=Path, required=True, help="the mission file the ARS runs")
     settled = parser.add_mutually_exclusive_group()
-    settled.add_argument("--set", dest="is_set", action="store_true", default=None,
-                         help="resolve: the member is set (riveted, the frame in place)")
-    settled.add_argument("--not-set", dest="is_set", action="store_false",
-                         help="resolve: the member is not set")
+    settled.add_argument(
+        "--set",
+        dest="is_set",
+        action="store_true",
+        default=None,
+        help="resolve: the member is set (riveted, the frame in place)",
+    )
+    settled.add_argument(
+        "--not-set", dest="is_set", action="store_false", help="resolve: the member is not set"
+    )
     args = parser.parse_args(argv)
     try:
         file = RequestFile(args.file, load_mission(args.mission), args.ars)

@@ -278,8 +278,10 @@ class SubtreeBuilder:
         """Get and inspect a part; after a discard, a replacement from the same dispenser."""
 
         def attempt() -> Sequence:
-            return _seq(f"{name} Attempt", [self.get_part(get_name, dispenser, kind),
-                                            self.inspect_part(inspect_name, kind)])
+            return _seq(
+                f"{name} Attempt",
+                [self.get_part(get_name, dispenser, kind), self.inspect_part(inspect_name, kind)],
+            )
 
         return ReplaceDiscarded(name, _phase(defer)(f"{name} Attempt", attempt), self.ctx)
 
@@ -489,7 +491,11 @@ class SubtreeBuilder:
                 *ahead,
                 self.load_rivet(rivet.dispenser),
                 self.get_inspected_part(
-                    "Get Inspected Member", "Grab Member", "Inspect Member", member.dispenser, member.kind,
+                    "Get Inspected Member",
+                    "Grab Member",
+                    "Inspect Member",
+                    member.dispenser,
+                    member.kind,
                     defer=defer,
                 ),
                 later("Place Member", lambda: self.place_member(member)),

@@ -32,8 +32,11 @@ def launch_main(argv: list[str]) -> int:
 
     parser = argparse.ArgumentParser(prog="tlt launch", description="Start the processes of a launch set.")
     parser.add_argument("launch_set", help="launch set YAML, e.g. config/launch/hardware_emulated.yaml")
-    parser.add_argument("--isolated", action="store_true",
-                        help="claim a ROS domain no other run here holds; localhost discovery only")
+    parser.add_argument(
+        "--isolated",
+        action="store_true",
+        help="claim a ROS domain no other run here holds; localhost discovery only",
+    )
     args = parser.parse_args(argv)
     if args.isolated:
         import os

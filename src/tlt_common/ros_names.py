@@ -73,6 +73,7 @@ def ee_rivet_gun_service(ee_component: str) -> str:
     """SetActuatorState: drive one of the EE's rivet-gun GPIO outputs."""
     return f"/{ee_component}/set_rivet_gun"
 
+
 # --- agents (paper §IV, §V.C.1) --------------------------------------------------------------------
 ARS_ACTIONS = ("add_cross_frame", "add_member", "affix_member", "foundation_rivet")
 

@@ -42,15 +42,23 @@ class SimClockWatch(WatchThread):
             wall = time.monotonic()
             if now != last:
                 if stalled:
-                    _log.warning("%s: sim time moves again (%.3f s) after %.0f s of wall time without "
-                                 "/clock", self.name, now * 1e-9, wall - since)
+                    _log.warning(
+                        "%s: sim time moves again (%.3f s) after %.0f s of wall time without /clock",
+                        self.name,
+                        now * 1e-9,
+                        wall - since,
+                    )
                 last, since, stalled = now, wall, False
             elif now and not stalled and wall - since >= self.stall_s:
                 stalled = True
                 self.stalls += 1
-                _log.warning("%s: no /clock for %.0f s of wall time (sim time stands at %.3f s): the twin "
-                             "has stopped, or this process no longer hears it; its threads follow",
-                             self.name, wall - since, now * 1e-9)
+                _log.warning(
+                    "%s: no /clock for %.0f s of wall time (sim time stands at %.3f s): the twin "
+                    "has stopped, or this process no longer hears it; its threads follow",
+                    self.name,
+                    wall - since,
+                    now * 1e-9,
+                )
                 faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
 
 

@@ -64,9 +64,16 @@ class TopicSilenceWatch(WatchThread):
                 self.silences.append((topic, known, matched))
                 _log.warning(
                     "%s: nothing on '%s' for %.0f s of wall time; publishers: %d in this process's graph, "
-                    "%d matched to its subscription%s", self.name, topic, now - since, known, matched,
+                    "%d matched to its subscription%s",
+                    self.name,
+                    topic,
+                    now - since,
+                    known,
+                    matched,
                     " (DDS sees the publisher but has not matched it: a rediscovery after a network cut "
-                    "that did not rematch the endpoints)" if known > matched else "",
+                    "that did not rematch the endpoints)"
+                    if known > matched
+                    else "",
                 )
 
 

@@ -182,8 +182,9 @@ class CrsContext:
 
         from tlt_common.bt.ros import shared_action_client, shared_service_client
 
-        actions = dict(zip(ros_names.ARS_ACTIONS, (AddCrossFrame, AddMember, AffixMember, FoundationRivet),
-                           strict=True))
+        actions = dict(
+            zip(ros_names.ARS_ACTIONS, (AddCrossFrame, AddMember, AffixMember, FoundationRivet), strict=True)
+        )
         node = self.node
         checks: list[tuple[str, Callable[[], bool]]] = []
         for ars in ros_names.ARS_AGENTS:
@@ -194,8 +195,10 @@ class CrsContext:
                 name = ros_names.ars_action(ars, request)
                 action = shared_action_client(node, action_type, name)
                 checks.append((f"{ars}: {name}", action.server_is_ready))
-        for srv_type, name in ((InspectPart, ros_names.VISION_INSPECT_PART),
-                               (InspectBay, ros_names.VISION_INSPECT_BAY)):
+        for srv_type, name in (
+            (InspectPart, ros_names.VISION_INSPECT_PART),
+            (InspectBay, ros_names.VISION_INSPECT_BAY),
+        ):
             checks.append((f"vision: {name}", shared_service_client(node, srv_type, name).service_is_ready))
         return checks
 
@@ -204,8 +207,9 @@ class CrsContext:
         older than ``timeouts.sensor_max_age_s``, a lifter whose link is down, an ARS's end
         effector or arm not ready (:meth:`ars_hardware_not_ready`), or an ARS or vision server not
         up yet. Start is refused while this says anything."""
-        return "; ".join(filter(None, (self.hardware_not_ready(), self.ars_hardware_not_ready(),
-                                       self._servers_not_up())))
+        return "; ".join(
+            filter(None, (self.hardware_not_ready(), self.ars_hardware_not_ready(), self._servers_not_up()))
+        )
 
     def ars_hardware_not_ready(self) -> str:
         """Why an ARS's end effector or arm cannot be trusted to build now ('' when they can): a
@@ -214,8 +218,10 @@ class CrsContext:
         or faulted, an arm whose driver says it is not active."""
         troubles = []
         for ars in ros_names.ARS_AGENTS:
-            for name, trouble in ((ros_names.ee(ars), self._end_effector_trouble),
-                                  (ros_names.ur(ars), self._arm_trouble)):
+            for name, trouble in (
+                (ros_names.ee(ars), self._end_effector_trouble),
+                (ros_names.ur(ars), self._arm_trouble),
+            ):
                 if why := trouble(name):
                     troubles.append(f"{name}: {why}")
         return "; ".join(troubles)

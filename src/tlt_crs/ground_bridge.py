@@ -123,8 +123,14 @@ class GroundBridge:
 
     def send_housekeeping(self) -> None:
         """Every housekeeping packet now (the last word of a stopping CRS)."""
-        for send in (self.send_progress, self.send_lifter, self.send_grippers, self.send_end_effectors,
-                     self.send_arm_joints, self.send_tower):
+        for send in (
+            self.send_progress,
+            self.send_lifter,
+            self.send_grippers,
+            self.send_end_effectors,
+            self.send_arm_joints,
+            self.send_tower,
+        ):
             try:
                 send()
             except Exception as exc:  # one packet that cannot be built must not cost the others

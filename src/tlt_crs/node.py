@@ -224,6 +224,7 @@ def build_node(config: CrsConfig, **node_kwargs: Any) -> CrsNode:
 # How long a stopped CRS keeps listening to its devices before it sends their last states home, s.
 FINAL_STATES_S = 0.5
 
+
 def _autostart_when_ready(node: CrsNode) -> None:
     """Submit Start as soon as the CRS would accept it: its drivers may still be coming up."""
     waiting: list[str] = []
@@ -237,9 +238,7 @@ def _autostart_when_ready(node: CrsNode) -> None:
             return
         timer.cancel()
         node.destroy_timer(timer)
-        node.commands.submit(
-            "start", {}, lambda stage, why: _log.info("autostart: %s %s", stage.label, why)
-        )
+        node.commands.submit("start", {}, lambda stage, why: _log.info("autostart: %s %s", stage.label, why))
 
     # Wall time: under sim time nothing ticks before the twin's /clock does.
     timer = node.create_timer(0.5, attempt, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -263,7 +262,11 @@ def main(argv: list[str] | None = None) -> int:
         "--autostart", action="store_true", help="submit Start at start-up (unattended runs, tests)"
     )
     parser.add_argument(
-        "--ground-link", type=Path, nargs="?", const=LINK_CONFIG, metavar="LINK_YAML",
+        "--ground-link",
+        type=Path,
+        nargs="?",
+        const=LINK_CONFIG,
+        metavar="LINK_YAML",
         help="serve the CCSDS ground link (settings: %(const)s; key file from it or $TLT_GROUND_KEY_FILE)",
     )
     args = parser.parse_args(argv)

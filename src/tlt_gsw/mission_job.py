@@ -232,8 +232,9 @@ def _start(link: GswLink, out: IO[str], timeout: float, seen: list[Packet]) -> t
                     if NOT_READY in (final.detail or ""):  # refused, or failed when its turn came
                         # The CRS is up but its drivers are not yet: ask again until start_timeout.
                         if final.detail != not_ready:
-                            print(f"start refused for now ({final.detail}); asking again",
-                                  file=out, flush=True)
+                            print(
+                                f"start refused for now ({final.detail}); asking again", file=out, flush=True
+                            )
                         not_ready = final.detail
                         sent.remove(command)
                         continue

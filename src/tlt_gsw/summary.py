@@ -306,9 +306,7 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
             continue
         if record.kind == "hk_tower":
             states = unpack_member_states(f["member_states"], int(f["member_count"]))
-            summary.member_states = {
-                name: sum(s == i for s in states) for i, name in enumerate(STATE_NAMES)
-            }
+            summary.member_states = {name: sum(s == i for s in states) for i, name in enumerate(STATE_NAMES)}
             continue
         # events
         code, text = f["code"], f["text"]
@@ -320,9 +318,7 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
         elif code in ("BAY_INSPECTION_PASSED", "BAY_INSPECTION_FAILED"):
             target = text.split(" passed")[0].split(" failed")[0]
             summary.inspections.append(
-                Inspection(
-                    target, code == "BAY_INSPECTION_PASSED", text, record.recorded_at, sim_now(), True
-                )
+                Inspection(target, code == "BAY_INSPECTION_PASSED", text, record.recorded_at, sim_now(), True)
             )
         elif code == "CRS_FAULT":
             if open_fault is not None and open_fault.reason == text:

@@ -28,8 +28,11 @@ from tlt_gsw.summary import MissionSummary, StepSpan
 CATEGORIES = (
     ("inspection", "#9467bd", ("Inspect", "Inspection", "Part", "Forward Result")),
     ("send request", "#1f77b4", ("Send ",)),
-    ("wait for ARS", "#17becf", ("Wait For AddMember", "Wait For AffixMember", "Wait For AddCrossFrame",
-                                 "Wait For FoundationRivet")),
+    (
+        "wait for ARS",
+        "#17becf",
+        ("Wait For AddMember", "Wait For AffixMember", "Wait For AddCrossFrame", "Wait For FoundationRivet"),
+    ),
     ("lifter", "#2ca02c", ("Lifter", "Raise", "Lower", "Compression", "CRS Control")),
     ("grippers / cameras", "#ff7f0e", ("Gripper", "Camera")),
     ("fault: waiting for help", "#d62728", ("Wait For Help",)),

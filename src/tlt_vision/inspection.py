@@ -168,14 +168,20 @@ def inspect_strut(
     elif len(fittings) > 2:
         reasons.append(f"expected two end fittings, found {len(fittings)}")
     if len(tubes) == 1:
-        seen = [o for o in observations if o.object_class == "end_fitting" and o.estimate is not None
-                and not o.estimate.certified]
+        seen = [
+            o
+            for o in observations
+            if o.object_class == "end_fitting" and o.estimate is not None and not o.estimate.certified
+        ]
         placed, unplaced, accounted = _fittings_on_tube(tubes[0], fittings, seen, length, parts, tol)
         reasons.extend(placed)
         unsure.extend(unplaced)
         taken = {id(o) for o in accounted}
-        fitting_bad = [r for o, r in zip(_uncertified(observations, "end_fitting"), fitting_bad, strict=True)
-                       if id(o) not in taken]
+        fitting_bad = [
+            r
+            for o, r in zip(_uncertified(observations, "end_fitting"), fitting_bad, strict=True)
+            if id(o) not in taken
+        ]
     elif len(fittings) < 2:
         reasons.append(f"missing end fitting: {len(fittings)} of 2 found")
     reasons.extend(fitting_bad)
@@ -186,8 +192,9 @@ def inspect_strut(
 
 def _uncertified(observations: Sequence[Observation], cls: str) -> list[Observation]:
     """The observations of ``cls`` :func:`_split` gives a reason for, in its order."""
-    return [o for o in observations
-            if o.object_class == cls and (o.estimate is None or not o.estimate.certified)]
+    return [
+        o for o in observations if o.object_class == cls and (o.estimate is None or not o.estimate.certified)
+    ]
 
 
 def _fittings_on_tube(
@@ -209,13 +216,18 @@ def _fittings_on_tube(
         # A tube is the same end for end: "a" and "b" follow the estimated axis, so the reason
         # also says where the fitting should be.
         xyz = ", ".join(f"{v:.3f}" for v in where)
-        near = [o for o in seen
-                if np.linalg.norm(np.asarray(o.estimate.translation) - where) <= FITTING_SEEN_WITHIN]
+        near = [
+            o
+            for o in seen
+            if np.linalg.norm(np.asarray(o.estimate.translation) - where) <= FITTING_SEEN_WITHIN
+        ]
         if near:
             accounted.extend(near)
             why = near[0].estimate.certificate.reason or "not certified"
-            unsure.append(f"cannot judge the end fitting at ({xyz}) m in the camera frame: seen there, "
-                          f"its pose not certified ({why})")
+            unsure.append(
+                f"cannot judge the end fitting at ({xyz}) m in the camera frame: seen there, "
+                f"its pose not certified ({why})"
+            )
             continue
         reasons.append(
             f"missing end fitting: {2 - len(missing)} of 2 found, none at ({xyz}) m in the camera frame"
@@ -331,13 +343,17 @@ def inspect_cross_frame(
             # The joint is there; the view could not place it well enough to check it.
             taken.update(id(o) for o in near)
             why = near[0].estimate.certificate.reason or "not certified"
-            unsure.append(f"cannot judge the corner joint at corner {i}: seen there, its pose not "
-                          f"certified ({why})")
+            unsure.append(
+                f"cannot judge the corner joint at corner {i}: seen there, its pose not certified ({why})"
+            )
         else:
             reasons.append(f"missing corner joint at corner {i}")
     if any(r.startswith("missing corner joint") for r in reasons):
-        reasons.extend(r for o, r in zip(_uncertified(observations, "corner_joint"), joint_bad, strict=True)
-                       if id(o) not in taken)
+        reasons.extend(
+            r
+            for o, r in zip(_uncertified(observations, "corner_joint"), joint_bad, strict=True)
+            if id(o) not in taken
+        )
     elif len(found) > 1:
         corners = list(found)
         residuals = _rigid_residuals(

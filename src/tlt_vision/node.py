@@ -218,9 +218,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="tlt-vision", description="The TLT vision node (paper §V.E).")
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="vision node configuration")
     parser.add_argument("--mission", type=Path, help="mission file (overrides the configuration's)")
-    parser.add_argument("--camera-model", choices=CAMERA_MODELS, default="realistic",
-                        help="exact: the depth is the twin's exact render (tlt twin run --camera-model "
-                             "exact), for diagnosis; realistic: each camera's noise as node.yaml gives it")
+    parser.add_argument(
+        "--camera-model",
+        choices=CAMERA_MODELS,
+        default="realistic",
+        help="exact: the depth is the twin's exact render (tlt twin run --camera-model "
+        "exact), for diagnosis; realistic: each camera's noise as node.yaml gives it",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:

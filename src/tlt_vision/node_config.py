@@ -65,6 +65,7 @@ _POSITIVE = {"minimum": 1e-6}
 
 def _camera_noise(value: object) -> str | None:
     """A camera's depth noise: a fraction of the depth, or {fraction, per_m2}."""
+
     def bad(v: object, top: float) -> bool:
         return isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= top
 
@@ -79,6 +80,7 @@ def _camera_noise(value: object) -> str | None:
         return f"expected a fraction of the depth from 0 to 0.1 or {{fraction, per_m2}}, got {value!r}"
     return None
 
+
 SCHEMA = {
     "format": Field("int", choices=(1,)),
     "mission": Field("str"),
@@ -91,10 +93,12 @@ SCHEMA = {
             "min_score": opt("float", 0.5, minimum=0.0, maximum=1.0),
             "second_look_score": opt("float", None, minimum=0.0, maximum=1.0),
             "semantic_background_weight": opt("float", None, minimum=0.01, maximum=1.0),
-            "semantic_vote": opt("bool", False,
-                                 doc="a thin region or piece of the class with the most probability over it"),
-            "proposals": opt("int", None, minimum=1, maximum=5000,
-                             doc="region proposals per image the box branch scores"),
+            "semantic_vote": opt(
+                "bool", False, doc="a thin region or piece of the class with the most probability over it"
+            ),
+            "proposals": opt(
+                "int", None, minimum=1, maximum=5000, doc="region proposals per image the box branch scores"
+            ),
             "second_look_closer": opt(
                 "dict",
                 None,
@@ -115,13 +119,17 @@ SCHEMA = {
                     "join_offset": opt("float", 0.015, minimum=0.0),
                     "join_gap": opt("float", 0.3, minimum=0.0),
                     "width_band": opt(
-                        "list", None, item=Field("float", minimum=0.0),
+                        "list",
+                        None,
+                        item=Field("float", minimum=0.0),
                         check=_band,
                         doc="a piece's mean image width over its part's, outside which it is scored down",
                     ),
                     "width_penalty": opt("float", 0.3, minimum=0.0, maximum=1.0),
                     "bend_tolerance": opt(
-                        "float", None, minimum=0.5,
+                        "float",
+                        None,
+                        minimum=0.5,
                         doc="a bent piece is cut into straight ones, points within this many radii of each",
                     ),
                 },
@@ -132,8 +140,12 @@ SCHEMA = {
                 schema={
                     "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks trimmed"),
                     "above": Field("float", minimum=0.0, maximum=1.0, doc="a thin part's probability"),
-                    "cores": opt("list", [], item=Field("str", choices=CLASSES),
-                                 doc="masks kept whole, their trimmed masks fitted where theirs is refused"),
+                    "cores": opt(
+                        "list",
+                        [],
+                        item=Field("str", choices=CLASSES),
+                        doc="masks kept whole, their trimmed masks fitted where theirs is refused",
+                    ),
                 },
             ),
             "exclusive_overlaps": opt(
@@ -141,8 +153,12 @@ SCHEMA = {
                 None,
                 schema={
                     "classes": Field("list", item=Field("str", choices=CLASSES), doc="masks made exclusive"),
-                    "duplicate": Field("float", minimum=0.0, maximum=1.0,
-                                       doc="share of the smaller mask above which two are one part's"),
+                    "duplicate": Field(
+                        "float",
+                        minimum=0.0,
+                        maximum=1.0,
+                        doc="share of the smaller mask above which two are one part's",
+                    ),
                 },
             ),
         },
@@ -183,20 +199,40 @@ SCHEMA = {
     ),
     "depth_noise": opt(
         "dict",
-        {"fraction": EXACT.fraction, "window": EXACT.window, "max_allowance": EXACT.max_allowance,
-         "cameras": {}},
+        {
+            "fraction": EXACT.fraction,
+            "window": EXACT.window,
+            "max_allowance": EXACT.max_allowance,
+            "cameras": {},
+        },
         schema={
-            "fraction": opt("float", EXACT.fraction, minimum=0.0, maximum=0.1,
-                            doc="the depth cameras' noise, 1 sigma, a fraction of the depth"),
-            "window": opt("int", EXACT.window, minimum=1, maximum=15,
-                          check=lambda v: None if v % 2 else "must be odd",
-                          doc="pixels of the square whose median depth a point takes"),
-            "max_allowance": opt("float", EXACT.max_allowance, minimum=0.0, maximum=0.5,
-                                 doc="the most allowed for noise, a fraction of the part's size"),
+            "fraction": opt(
+                "float",
+                EXACT.fraction,
+                minimum=0.0,
+                maximum=0.1,
+                doc="the depth cameras' noise, 1 sigma, a fraction of the depth",
+            ),
+            "window": opt(
+                "int",
+                EXACT.window,
+                minimum=1,
+                maximum=15,
+                check=lambda v: None if v % 2 else "must be odd",
+                doc="pixels of the square whose median depth a point takes",
+            ),
+            "max_allowance": opt(
+                "float",
+                EXACT.max_allowance,
+                minimum=0.0,
+                maximum=0.5,
+                doc="the most allowed for noise, a fraction of the part's size",
+            ),
             # A ZED's noise is not a D405's: a camera named here has its own, a fraction of the
             # depth or {fraction, per_m2} (a stereo camera's, growing with the depth's square).
-            "cameras": opt("map", {}, item=Field("any", check=_camera_noise),
-                           doc="a configured camera's own noise"),
+            "cameras": opt(
+                "map", {}, item=Field("any", check=_camera_noise), doc="a configured camera's own noise"
+            ),
         },
     ),
     "free_space": opt(
@@ -205,18 +241,26 @@ SCHEMA = {
         schema={
             "margin": opt("float", FREE_SPACE.margin, minimum=0.0, maximum=0.1),
             "max_fraction": opt("float", FREE_SPACE.max_fraction, minimum=0.0, maximum=1.0),
-            "window": opt("int", FREE_SPACE.window, minimum=1, maximum=31,
-                          check=lambda v: None if v % 2 else "must be odd"),
+            "window": opt(
+                "int",
+                FREE_SPACE.window,
+                minimum=1,
+                maximum=31,
+                check=lambda v: None if v % 2 else "must be odd",
+            ),
         },
     ),
     "axial_slide": opt(
         "dict",
-        {"classes": [], "step": AXIAL_SLIDE.step,
-         "hidden_margin": AXIAL_SLIDE.hidden_margin, "min_gain": AXIAL_SLIDE.min_gain},
+        {
+            "classes": [],
+            "step": AXIAL_SLIDE.step,
+            "hidden_margin": AXIAL_SLIDE.hidden_margin,
+            "min_gain": AXIAL_SLIDE.min_gain,
+        },
         schema={
             # Parts round about their model's z axis.
-            "classes": opt("list", [],
-                           item=Field("str", choices=("end_fitting", "strut_tube", "rivet"))),
+            "classes": opt("list", [], item=Field("str", choices=("end_fitting", "strut_tube", "rivet"))),
             "step": opt("float", AXIAL_SLIDE.step, minimum=0.0001, maximum=0.01),
             "hidden_margin": opt("float", AXIAL_SLIDE.hidden_margin, minimum=0.0, maximum=0.05),
             "min_gain": opt("float", AXIAL_SLIDE.min_gain, minimum=0.0, maximum=1.0),
@@ -224,22 +268,52 @@ SCHEMA = {
     ),
     "parting": opt(
         "dict",
-        {"classes": [], "min_share": PARTING.min_share, "min_separation": PARTING.min_separation,
-         "in_mask": PARTING.in_mask, "mask_margin": PARTING.mask_margin,
-         "hidden_margin": PARTING.hidden_margin},
+        {
+            "classes": [],
+            "min_share": PARTING.min_share,
+            "min_separation": PARTING.min_separation,
+            "in_mask": PARTING.in_mask,
+            "mask_margin": PARTING.mask_margin,
+            "hidden_margin": PARTING.hidden_margin,
+        },
         schema={
             # Compact parts only: a tube or a frame side is long, and its two halves are one part.
             "classes": opt("list", [], item=Field("str", choices=COMPACT)),
-            "min_share": opt("float", PARTING.min_share, minimum=0.0, maximum=0.5,
-                             doc="the smaller piece's least share of the cloud's points"),
-            "min_separation": opt("float", PARTING.min_separation, minimum=0.0, maximum=2.0,
-                                  doc="the pieces' centres' least distance, a fraction of the part's size"),
-            "in_mask": opt("float", PARTING.in_mask, minimum=0.0, maximum=1.0,
-                           doc="the least share of the posed model's visible surface in the mask"),
-            "mask_margin": opt("int", PARTING.mask_margin, minimum=0, maximum=10,
-                               doc="pixels the mask is grown by for that share"),
-            "hidden_margin": opt("float", PARTING.hidden_margin, minimum=0.0, maximum=0.1,
-                                 doc="m behind the depth seen at which a model point is hidden"),
+            "min_share": opt(
+                "float",
+                PARTING.min_share,
+                minimum=0.0,
+                maximum=0.5,
+                doc="the smaller piece's least share of the cloud's points",
+            ),
+            "min_separation": opt(
+                "float",
+                PARTING.min_separation,
+                minimum=0.0,
+                maximum=2.0,
+                doc="the pieces' centres' least distance, a fraction of the part's size",
+            ),
+            "in_mask": opt(
+                "float",
+                PARTING.in_mask,
+                minimum=0.0,
+                maximum=1.0,
+                doc="the least share of the posed model's visible surface in the mask",
+            ),
+            "mask_margin": opt(
+                "int",
+                PARTING.mask_margin,
+                minimum=0,
+                maximum=10,
+                doc="pixels the mask is grown by for that share",
+            ),
+            "hidden_margin": opt(
+                "float",
+                PARTING.hidden_margin,
+                minimum=0.0,
+                maximum=0.1,
+                doc="m behind the depth seen at which a model point is hidden",
+            ),
         },
     ),
     "detached": opt(
@@ -252,9 +326,16 @@ SCHEMA = {
             "largest_only": opt("list", [], item=Field("str", choices=COMPACT)),
             # A compact part's own link: its points lie closer together than a tube's, and so do
             # its neighbours.
-            "links": opt("map", {}, item=Field("float", minimum=0.001, maximum=0.5),
-                         check=lambda v: None if set(v) <= set(COMPACT)
-                         else f"keys are compact part classes ({', '.join(COMPACT)})"),
+            "links": opt(
+                "map",
+                {},
+                item=Field("float", minimum=0.001, maximum=0.5),
+                check=lambda v: (
+                    None
+                    if set(v) <= set(COMPACT)
+                    else f"keys are compact part classes ({', '.join(COMPACT)})"
+                ),
+            ),
         },
     ),
     "ee_self_filter": opt(
@@ -415,8 +496,11 @@ class VisionConfig:
         """The Mask R-CNN's inference settings node.yaml sets (MaskRCNN.set_inference); the
         weights' own for those left out."""
         seg = self.raw["segmentation"]
-        named = {"semantic_background_weight": seg["semantic_background_weight"],
-                 "rpn_post_nms_top_n_test": seg["proposals"], "semantic_vote": seg["semantic_vote"]}
+        named = {
+            "semantic_background_weight": seg["semantic_background_weight"],
+            "rpn_post_nms_top_n_test": seg["proposals"],
+            "semantic_vote": seg["semantic_vote"],
+        }
         return {key: value for key, value in named.items() if value is not None}
 
     @property
@@ -436,8 +520,13 @@ class VisionConfig:
     def detached(self) -> Detached:
         """Which pieces of a part's cloud are dropped before its pose."""
         raw = self.raw["detached"]
-        return Detached(**{**raw, "largest_only": tuple(raw["largest_only"]),
-                           "links": tuple(sorted(raw["links"].items()))})
+        return Detached(
+            **{
+                **raw,
+                "largest_only": tuple(raw["largest_only"]),
+                "links": tuple(sorted(raw["links"].items())),
+            }
+        )
 
     @property
     def depth_split(self) -> DepthSplit | None:
@@ -446,9 +535,14 @@ class VisionConfig:
         if not raw:
             return None
         band = raw["width_band"]
-        return DepthSplit(**{**raw, "width_band": tuple(band) if band else None,
-                             "depth_noise": self.depth_noise,
-                             "vote": self.raw["segmentation"]["semantic_vote"]})
+        return DepthSplit(
+            **{
+                **raw,
+                "width_band": tuple(band) if band else None,
+                "depth_noise": self.depth_noise,
+                "vote": self.raw["segmentation"]["semantic_vote"],
+            }
+        )
 
     @property
     def semantic_trim(self) -> SemanticTrim | None:

@@ -86,7 +86,10 @@ def load_estimators(config: VisionConfig, mission: Mission) -> dict[str, PoseEst
             raise WeightsError(path, "manifest settings lack the detector width")
         model = models[name]
         out[name] = PoseEstimator(
-            model, load_detector(path, model, width), thresholds[model.object_class], corrector,
+            model,
+            load_detector(path, model, width),
+            thresholds[model.object_class],
+            corrector,
             turned_starts=model.object_class in turned,
             tilted_deg=tilted["angle_deg"] if model.object_class in tilted["classes"] else 0.0,
             trim=trim["fraction"] if model.object_class in trim["classes"] else 0.0,

@@ -113,8 +113,11 @@ def detections_from_mask_rcnn(
     result: Mapping[str, torch.Tensor], classes: Sequence[str], min_score: float = 0.5
 ) -> list[Detection]:
     """Detections of one image's Mask R-CNN output scoring at least ``min_score``."""
-    return [detection_of(result, classes, k) for k, score in enumerate(result["scores"].tolist())
-            if score >= min_score]
+    return [
+        detection_of(result, classes, k)
+        for k, score in enumerate(result["scores"].tolist())
+        if score >= min_score
+    ]
 
 
 def merge_instances(detections: Sequence[Detection], classes: Sequence[str]) -> list[Detection]:
@@ -223,7 +226,9 @@ class PartPipeline:
             return cloud
         if keep.sum() < self.min_points:
             return MaskedCloud(
-                cloud.points[:0], None, cloud.mask_pixels,
+                cloud.points[:0],
+                None,
+                cloud.mask_pixels,
                 f"too few points: {int(keep.sum())} joined to the part < {self.min_points}",
             )
         colours = cloud.colours[keep] if cloud.colours is not None else None
@@ -276,12 +281,16 @@ class PartPipeline:
                     refused.setdefault(cls, []).append((i, points))
         if again:
             estimates = [o.estimate for o in out]
-            cored = [i for i, e in enumerate(estimates)
-                     if dets[i].core is not None and e is not None and not e.certified]
+            cored = [
+                i
+                for i, e in enumerate(estimates)
+                if dets[i].core is not None and e is not None and not e.certified
+            ]
             for i, e in self._cored(cored, estimates, dets, depth, intrinsics, rgb, noise, near):
                 out[i] = replace(out[i], estimate=e)
-        refused = {cls: [(i, p) for i, p in items if not out[i].estimate.certified]
-                   for cls, items in refused.items()}
+        refused = {
+            cls: [(i, p) for i, p in items if not out[i].estimate.certified] for cls, items in refused.items()
+        }
         if any(refused.values()):
             for i, e in self._parted(refused, dets, depth, intrinsics, noise, near):
                 out[i] = replace(out[i], estimate=e)
@@ -333,8 +342,15 @@ class PartPipeline:
             return []
         jobs = [(self.estimators[cls], [p for _, p in items], None) for cls, items in pieces.items()]
         posed = estimate_together(jobs)
-        return self._taken([x for items in pieces.values() for x in items], [e for es in posed for e in es],
-                           dets, depth, intrinsics, noise, near)
+        return self._taken(
+            [x for items in pieces.values() for x in items],
+            [e for es in posed for e in es],
+            dets,
+            depth,
+            intrinsics,
+            noise,
+            near,
+        )
 
     def _cored(
         self,
@@ -383,8 +399,9 @@ class PartPipeline:
             if not e.certified:
                 continue
             surface = self._surface(e.object_class) @ e.rotation.T + e.translation
-            share = visible_share_in_mask(surface, dets[i].mask, depth, intrinsics, parting.mask_margin,
-                                          parting.hidden_margin)
+            share = visible_share_in_mask(
+                surface, dets[i].mask, depth, intrinsics, parting.mask_margin, parting.hidden_margin
+            )
             if share >= parting.in_mask:
                 taken.append((i, e))
         return taken
@@ -416,7 +433,11 @@ class PartPipeline:
         return replace(moved, certificate=certificate) if certificate.certified else estimate
 
     def _certificate(
-        self, object_class: str, points: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+        self,
+        object_class: str,
+        points: np.ndarray,
+        rotation: np.ndarray,
+        translation: np.ndarray,
         noise: DepthNoise,
     ) -> Certificate:
         """The certificate of a pose of ``object_class`` for ``points``, allowing for the depth's
@@ -436,8 +457,9 @@ class PartPipeline:
             f"({allowance * 1000:.1f} mm) is over {noise.max_allowance:.0%} of the part's "
             f"size ({noise.max_allowance * size * 1000:.1f} mm)"
         )
-        return replace(certificate, certified=False,
-                       reason="; ".join(r for r in (reason, certificate.reason) if r))
+        return replace(
+            certificate, certified=False, reason="; ".join(r for r in (reason, certificate.reason) if r)
+        )
 
     def _surface(self, object_class: str) -> np.ndarray:
         """A fixed surface sample of the class's model, of the free-space check's size."""

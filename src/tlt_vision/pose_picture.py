@@ -37,19 +37,27 @@ class PosedFrame:
     observations: Sequence[Observation]
 
 
-def projected(model: CadModel, rotation: np.ndarray, translation: np.ndarray, k: np.ndarray,
-              count: int = SURFACE_POINTS) -> np.ndarray:
+def projected(
+    model: CadModel, rotation: np.ndarray, translation: np.ndarray, k: np.ndarray, count: int = SURFACE_POINTS
+) -> np.ndarray:
     """Pixel coordinates (N, 2) of ``count`` surface points of ``model`` at the pose, those in
     front of the camera only."""
     surface = model.sample(count, np.random.default_rng(0))[0]
     points = surface @ np.asarray(rotation).T + np.asarray(translation)
     points = points[points[:, 2] > 1e-3]
-    return np.stack([k[0, 0] * points[:, 0] / points[:, 2] + k[0, 2],
-                     k[1, 1] * points[:, 1] / points[:, 2] + k[1, 2]], axis=1)
+    return np.stack(
+        [k[0, 0] * points[:, 0] / points[:, 2] + k[0, 2], k[1, 1] * points[:, 1] / points[:, 2] + k[1, 2]],
+        axis=1,
+    )
 
 
-def write_pose_picture(path: str | Path, frames: Sequence[PosedFrame], models: Mapping[str, CadModel],
-                       classes: Sequence[str], columns: int = 2) -> Path:
+def write_pose_picture(
+    path: str | Path,
+    frames: Sequence[PosedFrame],
+    models: Mapping[str, CadModel],
+    classes: Sequence[str],
+    columns: int = 2,
+) -> Path:
     """``frames`` drawn side by side into the PNG ``path``; ``models`` (class: the model it was
     posed with) and ``classes`` (the colours' order) as the frames' poses were made."""
     import matplotlib
@@ -86,8 +94,10 @@ def write_pose_picture(path: str | Path, frames: Sequence[PosedFrame], models: M
         ax.set_ylim(h, 0)
         ax.set_title(f"{frame.title}: {posed} parts posed, {certified} certified", fontsize=9)
     handles = [Line2D([], [], marker="s", linestyle="", color=tints[name], label=name) for name in classes]
-    handles += [Line2D([], [], marker="o", linestyle="", color=CERTIFIED, label="posed model, certified"),
-                Line2D([], [], marker="o", linestyle="", color=REFUSED, label="posed model, not certified")]
+    handles += [
+        Line2D([], [], marker="o", linestyle="", color=CERTIFIED, label="posed model, certified"),
+        Line2D([], [], marker="o", linestyle="", color=REFUSED, label="posed model, not certified"),
+    ]
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(path, dpi=100)

@@ -86,11 +86,18 @@ class TwinLabels:
 class MaskRcnnSegmenter:
     streams = ("rgb",)
 
-    def __init__(self, model: MaskRCNN, max_size: int | None, min_score: float,
-                 depth_split: DepthSplit | None = None, radii: Mapping[str, float] | None = None,
-                 trim: SemanticTrim | None = None, overlaps: ExclusiveOverlaps | None = None,
-                 camera_noise: Mapping[str, DepthNoise] | None = None,
-                 inference: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        model: MaskRCNN,
+        max_size: int | None,
+        min_score: float,
+        depth_split: DepthSplit | None = None,
+        radii: Mapping[str, float] | None = None,
+        trim: SemanticTrim | None = None,
+        overlaps: ExclusiveOverlaps | None = None,
+        camera_noise: Mapping[str, DepthNoise] | None = None,
+        inference: Mapping[str, Any] | None = None,
+    ) -> None:
         """Segment with ``model`` at ``max_size`` (the image size it was trained at); ValueError
         for a trim or overlap rule naming a class its semantic head segments."""
         # ``inference`` (MaskRCNN.set_inference) is the node's choice, not the weights'.
@@ -106,13 +113,17 @@ class MaskRcnnSegmenter:
         self.camera_noise = dict(camera_noise or {})
         self.radii = radii_by_label(self.cfg.classes, radii or {})  # for depth_split's width check
         self.trim, self.overlaps = trim, overlaps
-        named = [("semantic_trim.classes", trim and trim.classes),
-                 ("semantic_trim.cores", trim and trim.cores),
-                 ("exclusive_overlaps.classes", overlaps and overlaps.classes)]
+        named = [
+            ("semantic_trim.classes", trim and trim.classes),
+            ("semantic_trim.cores", trim and trim.cores),
+            ("exclusive_overlaps.classes", overlaps and overlaps.classes),
+        ]
         for key, names in named:
             if names and (thin := sorted(set(names) & set(self.cfg.semantic_classes))):
-                raise ValueError(f"its semantic head segments {', '.join(thin)}, which "
-                                 f"segmentation.{key} may not name (it acts on box masks)")
+                raise ValueError(
+                    f"its semantic head segments {', '.join(thin)}, which "
+                    f"segmentation.{key} may not name (it acts on box masks)"
+                )
 
     @classmethod
     def load(cls, weights: str | Path, min_score: float, **options: Any) -> MaskRcnnSegmenter:
@@ -127,21 +138,32 @@ class MaskRcnnSegmenter:
             raise WeightsError(weights, str(exc)) from exc
 
     @classmethod
-    def from_config(cls, config: VisionConfig, weights: str | Path | None = None, *,
-                    model: MaskRCNN | None = None, max_size: int | None = None) -> MaskRcnnSegmenter:
+    def from_config(
+        cls,
+        config: VisionConfig,
+        weights: str | Path | None = None,
+        *,
+        model: MaskRCNN | None = None,
+        max_size: int | None = None,
+    ) -> MaskRcnnSegmenter:
         """The segmenter of a vision node run with ``config``, with other ``weights`` if given, or
         around a ``model`` in memory (one being trained) that sees images of ``max_size``."""
         from tlt_vision.cad.models import thin_part_radii
         from tlt_vision.node_config import repo_path
 
-        options = {"depth_split": config.depth_split, "radii": thin_part_radii(),
-                   "trim": config.semantic_trim, "overlaps": config.exclusive_overlaps,
-                   "camera_noise": {camera: config.depth_noise_of(camera) for camera in config.cameras},
-                   "inference": config.mask_rcnn_inference}
+        options = {
+            "depth_split": config.depth_split,
+            "radii": thin_part_radii(),
+            "trim": config.semantic_trim,
+            "overlaps": config.exclusive_overlaps,
+            "camera_noise": {camera: config.depth_noise_of(camera) for camera in config.cameras},
+            "inference": config.mask_rcnn_inference,
+        }
         if model is not None:
             return cls(model, max_size, config.score_floor, **options)
-        return cls.load(weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor,
-                        **options)
+        return cls.load(
+            weights or repo_path(config.raw["segmentation"]["weights"]), config.score_floor, **options
+        )
 
     def detect(self, frame: CameraFrame) -> list[Detection]:
         from tlt_vision.segmentation.inference import detect_rgb
@@ -149,12 +171,18 @@ class MaskRcnnSegmenter:
         rgb = frame.get("rgb")
         if rgb is None:
             raise ValueError("no RGB image")
-        result = self.refine(detect_rgb(self.model, rgb, self.max_size), frame.get("depth"),
-                             frame.camera_matrix, frame.camera)
+        result = self.refine(
+            detect_rgb(self.model, rgb, self.max_size), frame.get("depth"), frame.camera_matrix, frame.camera
+        )
         return detections_from_mask_rcnn(result, self.cfg.classes, self.min_score)
 
-    def refine(self, result: dict[str, Any], depth: np.ndarray | None,
-               camera_matrix: np.ndarray | None, camera: str = "") -> dict[str, Any]:
+    def refine(
+        self,
+        result: dict[str, Any],
+        depth: np.ndarray | None,
+        camera_matrix: np.ndarray | None,
+        camera: str = "",
+    ) -> dict[str, Any]:
         """The model's ``result`` for one frame of ``camera`` with its box-branch masks made
         exclusive, its thin parts cut by depth (allowing for that camera's noise) and its
         box-branch masks trimmed, as configured."""
@@ -207,9 +235,12 @@ class MaskRcnnSegmenter:
             mask[y0:y1, x0:x1] = small >= 0.5
             return mask
 
-        return [replace(d, mask=in_frame(d.mask), core=None if d.core is None else in_frame(d.core))
-                for d in detections_from_mask_rcnn(self._trimmed(self._exclusive(result)), self.cfg.classes,
-                                                   self.min_score)]
+        return [
+            replace(d, mask=in_frame(d.mask), core=None if d.core is None else in_frame(d.core))
+            for d in detections_from_mask_rcnn(
+                self._trimmed(self._exclusive(result)), self.cfg.classes, self.min_score
+            )
+        ]
 
 
 __all__ = ["MASK_RCNN_KIND", "MaskRcnnSegmenter", "TwinLabels"]

@@ -110,8 +110,13 @@ class EeSelfFilter:
             for name, e in raw["boxes"].items()
         )
         jaws = tuple(
-            EeJaw(side, np.asarray(e["hinge"], float), np.asarray(e["tip"], float), float(e["radius"]),
-                  bool(e["on_width_slide"]))
+            EeJaw(
+                side,
+                np.asarray(e["hinge"], float),
+                np.asarray(e["tip"], float),
+                float(e["radius"]),
+                bool(e["on_width_slide"]),
+            )
             for side, e in raw.get("jaws", {}).items()
         )
         return cls(boxes, jaws, float(raw["margin"]), float(raw["own_share"]))
@@ -216,5 +221,13 @@ def off_own_ee(detections: Sequence[Detection], own: np.ndarray | None, share: f
     return kept
 
 
-__all__ = ["EeBox", "EeJaw", "EeSelfFilter", "PlacedBox", "PlacedCapsule", "drop_inside", "off_own_ee",
-           "own_pixels"]
+__all__ = [
+    "EeBox",
+    "EeJaw",
+    "EeSelfFilter",
+    "PlacedBox",
+    "PlacedCapsule",
+    "drop_inside",
+    "off_own_ee",
+    "own_pixels",
+]

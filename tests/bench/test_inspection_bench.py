@@ -83,7 +83,12 @@ def test_the_shipped_mask_rcnn_passes_good_held_struts_and_catches_a_missing_fit
             kind = name.split("_")[0]
             camera = bench.CAMERAS["ars_x"]
             decided[name], _ = inspector.inspect(
-                f"bench/{kind}", kind, detect(frame, camera), depth, frame.intrinsics, frame.rgb,
+                f"bench/{kind}",
+                kind,
+                detect(frame, camera),
+                depth,
+                frame.intrinsics,
+                frame.rgb,
                 detect.closer(frame, camera),
             )
     assert decided[good_vertical].passed, decided[good_vertical].reasons
@@ -124,8 +129,14 @@ def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_d
     detect = bench.detector("mask_rcnn")
     name = next(n for n, kind in bench.struts(mission) if kind == "diagonal")
     with scene_mod.Scene(mission=mission, scenario=bench.scenario(mission, [8.0])) as scene:
-        frame = bench.present(scene, scene.part(name), "ars_x", bench.inspection_joints()["ars_x"],
-                              np.random.default_rng(1200), bench.Jitter())
+        frame = bench.present(
+            scene,
+            scene.part(name),
+            "ars_x",
+            bench.inspection_joints()["ars_x"],
+            np.random.default_rng(1200),
+            bench.Jitter(),
+        )
     camera = bench.CAMERAS["ars_x"]
 
     def node_masks(**images):
@@ -139,4 +150,3 @@ def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_d
     bench_masks = masks(detect(frame, camera))
     assert bench_masks == node_masks(rgb=frame.rgb, depth=frame.depth)
     assert bench_masks != node_masks(rgb=frame.rgb)
-

@@ -17,9 +17,16 @@ def bench(load_bench):
 
 def _sample(depth: np.ndarray) -> Sample:
     h, w = depth.shape
-    return Sample(rgb=np.zeros((h, w, 3), np.uint8), depth=depth, masks=np.zeros((0, h, w), bool),
-                  labels=np.zeros(0, np.int64), names=np.array([], dtype=str), poses=np.zeros((0, 4, 4)),
-                  defects=np.array([], dtype=str), intrinsics=np.eye(3))
+    return Sample(
+        rgb=np.zeros((h, w, 3), np.uint8),
+        depth=depth,
+        masks=np.zeros((0, h, w), bool),
+        labels=np.zeros(0, np.int64),
+        names=np.array([], dtype=str),
+        poses=np.zeros((0, 4, 4)),
+        defects=np.array([], dtype=str),
+        intrinsics=np.eye(3),
+    )
 
 
 def test_depth_noise_is_a_fraction_of_each_pixels_depth_and_the_same_every_run(bench):
@@ -72,9 +79,15 @@ def test_views_left_uncertified_are_reported_by_the_certificates_reason(bench, c
     assert "of the 4 views in which the twin's mask of the part shows enough of it" in out
     assert "    end_fitting   Chamfer over threshold 2 [1], seen past 1 [0]\n" in out
     assert bench.pose_summary(tally) == {
-        "posed": 3, "certified": 0, "views": 3, "views_certified": 0, "views_shown": 4,
-        "views_shown_certified": 0, "add_s_ok": 0,
-        "median_rotation_deg": None, "median_translation_mm": None,
+        "posed": 3,
+        "certified": 0,
+        "views": 3,
+        "views_certified": 0,
+        "views_shown": 4,
+        "views_shown_certified": 0,
+        "add_s_ok": 0,
+        "median_rotation_deg": None,
+        "median_translation_mm": None,
     }
 
 

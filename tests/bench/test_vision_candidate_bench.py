@@ -17,19 +17,40 @@ def bench(load_bench):
     return load_bench("vision_candidate")
 
 
-def _vision_json(views: int, views_certified: int, certified: int, add_s_ok: int, ap: float,
-                 shown: tuple[int, int] = (0, 0)) -> dict:
-    poses = {"posed": certified + 5, "certified": certified, "views": views,
-             "views_certified": views_certified, "views_shown": shown[0], "views_shown_certified": shown[1],
-             "add_s_ok": add_s_ok, "median_rotation_deg": 0.1, "median_translation_mm": 0.4}
+def _vision_json(
+    views: int,
+    views_certified: int,
+    certified: int,
+    add_s_ok: int,
+    ap: float,
+    shown: tuple[int, int] = (0, 0),
+) -> dict:
+    poses = {
+        "posed": certified + 5,
+        "certified": certified,
+        "views": views,
+        "views_certified": views_certified,
+        "views_shown": shown[0],
+        "views_shown_certified": shown[1],
+        "add_s_ok": add_s_ok,
+        "median_rotation_deg": 0.1,
+        "median_translation_mm": 0.4,
+    }
     return {"mask_ap50_node": {"mean": ap, "per_class": {}}, "poses": poses}
 
 
 def test_the_table_reads_the_vision_benchs_figures_and_marks_the_goals(bench):
-    row = bench.vision_figures(_vision_json(200, views_certified=192, certified=195, add_s_ok=190, ap=0.91,
-                                            shown=(220, 198)))
-    assert row == {"ap50": 0.91, "certified": 0.96, "shown": 0.9, "add_s_ok": pytest.approx(190 / 195),
-                   "views": 200, "views_shown": 220}
+    row = bench.vision_figures(
+        _vision_json(200, views_certified=192, certified=195, add_s_ok=190, ap=0.91, shown=(220, 198))
+    )
+    assert row == {
+        "ap50": 0.91,
+        "certified": 0.96,
+        "shown": 0.9,
+        "add_s_ok": pytest.approx(190 / 195),
+        "views": 200,
+        "views_shown": 220,
+    }
     # Segmentation's losses counted, the same poses fall short.
     assert bench.goals_met(row) == {"ap50": True, "certified": True, "shown": False, "add_s_ok": True}
     short = bench.vision_figures(_vision_json(100, views_certified=94, certified=94, add_s_ok=80, ap=0.84))
@@ -44,14 +65,18 @@ def test_the_table_reads_the_vision_benchs_figures_and_marks_the_goals(bench):
 
 
 def test_a_positive_difference_is_always_a_gain(bench):
-    diff = bench.compare({"ap50": 0.90, "certified": 0.95, "rejected": 0.0},
-                         {"ap50": 0.85, "certified": 0.96, "rejected": 0.05})
+    diff = bench.compare(
+        {"ap50": 0.90, "certified": 0.95, "rejected": 0.0},
+        {"ap50": 0.85, "certified": 0.96, "rejected": 0.05},
+    )
     assert diff == pytest.approx({"ap50": 0.05, "certified": -0.01, "rejected": 0.05})
 
 
 def test_the_sets_are_pooled_by_their_views_and_their_ap_averaged(bench):
-    rows = {"seed 1": {"a": {"ap50": 0.8, "certified": 1.0, "views": 100, "shown": 0.5, "views_shown": 100}},
-            "seed 2": {"a": {"ap50": 0.9, "certified": 0.5, "views": 300, "shown": 1.0, "views_shown": 100}}}
+    rows = {
+        "seed 1": {"a": {"ap50": 0.8, "certified": 1.0, "views": 100, "shown": 0.5, "views_shown": 100}},
+        "seed 2": {"a": {"ap50": 0.9, "certified": 0.5, "views": 300, "shown": 1.0, "views_shown": 100}},
+    }
     assert bench.pooled(rows, ["a"])["a"] == pytest.approx({"ap50": 0.85, "certified": 0.625, "shown": 0.75})
     # A set measured before the second count: pooled over the sets that have it.
     rows["seed 3"] = {"a": {"ap50": 0.7, "certified": 1.0, "views": 400, "shown": None, "views_shown": 0}}
@@ -64,8 +89,21 @@ def test_a_run_compares_two_weights_on_a_small_held_out_set(bench, tmp_path, cap
     """Every benchmark for real, on two rendered images of one seed and no inspection: the shipped
     weights against themselves come out equal, figure for figure."""
     pytest.importorskip("tlt_sim.model.scene")
-    rc = bench.main(["--weights", str(WEIGHTS), "--seeds", "900", "--count", "2", "--inspection-seeds",
-                     "--jobs", "2", "--work", str(tmp_path)])
+    rc = bench.main(
+        [
+            "--weights",
+            str(WEIGHTS),
+            "--seeds",
+            "900",
+            "--count",
+            "2",
+            "--inspection-seeds",
+            "--jobs",
+            "2",
+            "--work",
+            str(tmp_path),
+        ]
+    )
     out = capsys.readouterr().out
     assert rc == 0, out
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -11,8 +11,9 @@ SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "device_train.sh"
 
 
 def _run(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(["bash", str(SCRIPT), *args], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, **env})
+    return subprocess.run(
+        ["bash", str(SCRIPT), *args], capture_output=True, text=True, timeout=60, env={**os.environ, **env}
+    )
 
 
 def test_an_unknown_step_is_refused_with_the_usage():

@@ -30,6 +30,8 @@ def test_a_failed_stage_is_named_and_not_trusted(tmp_path):
     env = {**os.environ, "TLT_VENV": str(venv), "TLT_PYTHON": "python3.10"}
     result = subprocess.run(["bash", str(SETUP)], capture_output=True, text=True, timeout=120, env=env)
     assert result.returncode != 0
-    assert "[setup] FAILED: python3.10 is not Python 3.11" in result.stderr or \
-        "[setup] FAILED: python3.10 not found" in result.stderr
+    assert (
+        "[setup] FAILED: python3.10 is not Python 3.11" in result.stderr
+        or "[setup] FAILED: python3.10 not found" in result.stderr
+    )
     assert not (venv / ".tlt-stamps").exists()

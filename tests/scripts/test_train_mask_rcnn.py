@@ -24,8 +24,9 @@ TOY = {
 
 def _run(tmp_path: Path, **settings: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"), **settings}
-    return subprocess.run(["bash", str(SCRIPT), str(tmp_path / "out")], capture_output=True, text=True,
-                          timeout=300, env=env)
+    return subprocess.run(
+        ["bash", str(SCRIPT), str(tmp_path / "out")], capture_output=True, text=True, timeout=300, env=env
+    )
 
 
 def test_renders_shards_and_trains_within_the_budget(tmp_path):
@@ -45,10 +46,23 @@ def test_renders_shards_and_trains_within_the_budget(tmp_path):
     assert figures["val_as"] == "as the node segments (config/vision/node.yaml)"  # NODE_CONFIG's default
     # A second run on the same images renders nothing and starts from the first run's weights; its
     # two processes (RANKS) take two images each of the step, and its smoke test trains with two.
-    again = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "again")], capture_output=True, text=True,
-                           timeout=300, env={**os.environ, **TOY, "DATA_DIR": str(tmp_path / "data"),
-                                             "RENDER": "0", "INIT": str(out / "mask_rcnn.pt"), "RANKS": "2",
-                                             "NOISE": "4", "BLUR": "1.5", "NODE_CONFIG": ""})
+    again = subprocess.run(
+        ["bash", str(SCRIPT), str(tmp_path / "again")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={
+            **os.environ,
+            **TOY,
+            "DATA_DIR": str(tmp_path / "data"),
+            "RENDER": "0",
+            "INIT": str(out / "mask_rcnn.pt"),
+            "RANKS": "2",
+            "NOISE": "4",
+            "BLUR": "1.5",
+            "NODE_CONFIG": "",
+        },
+    )
     assert again.returncode == 0, again.stdout + again.stderr
     assert "rendering 4 images" not in again.stdout
     assert "rendered 4 training images in 2 shards" in again.stdout

@@ -22,8 +22,13 @@ def main() -> int:
     command = sys.argv[2]
     params = {"key": sys.argv[3], "value": yaml.safe_load(sys.argv[4])} if len(sys.argv) > 4 else None
     gsw_conf = link["gsw"]
-    with GswLink(load_definitions(), KeyRing.load(link["key_file"]), link["key_id"],
-                 (gsw_conf["crs_host"], gsw_conf["crs_port"]), bind=(gsw_conf["bind_host"], 0)) as gsw:
+    with GswLink(
+        load_definitions(),
+        KeyRing.load(link["key_file"]),
+        link["key_id"],
+        (gsw_conf["crs_host"], gsw_conf["crs_port"]),
+        bind=(gsw_conf["bind_host"], 0),
+    ) as gsw:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:
             ack = gsw.wait_ack(gsw.send_command(command, params), final=True, timeout=2.0)

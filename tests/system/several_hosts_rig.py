@@ -66,8 +66,14 @@ def main() -> None:
         def add(self, request):
             # Read by the stand-in right after this call: only the first request is held.
             ars.hold_s = args.hold_first_s if not self.requests else 0.0
-            write({"kind": "request", "ars": request.ars, "request": request.request,
-                   "member": request.member_id})
+            write(
+                {
+                    "kind": "request",
+                    "ars": request.ars,
+                    "request": request.request,
+                    "member": request.member_id,
+                }
+            )
             return original_add(self, request)
 
         rig_module.Recorder.add = add

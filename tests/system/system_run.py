@@ -190,18 +190,30 @@ class SystemRun:
         try:
             self.proc = subprocess.Popen(
                 [str(TLT), "launch", "--isolated", str(self.launch_set)],
-                stdout=log, stderr=subprocess.STDOUT, env=self.env, cwd=ROOT,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=self.env,
+                cwd=ROOT,
                 preexec_fn=_launcher_dies_with_test,
             )
         finally:
             log.close()
         key_file = self.run_dir / "ground.key"
-        self._wait(lambda: key_file.exists() and key_file.stat().st_size > 0, 60.0,
-                   "the run's ground key was not written")
+        self._wait(
+            lambda: key_file.exists() and key_file.stat().st_size > 0,
+            60.0,
+            "the run's ground key was not written",
+        )
 
         def link() -> GswLink:
-            return GswLink(self.defs, KeyRing.load(key_file), 1, (self.crs_host, self.crs_port),
-                           bind=(self.gsw_host, self.gsw_port), on_packet=self._keep)
+            return GswLink(
+                self.defs,
+                KeyRing.load(key_file),
+                1,
+                (self.crs_host, self.crs_port),
+                bind=(self.gsw_host, self.gsw_port),
+                on_packet=self._keep,
+            )
 
         if self.hosts_run is None:
             self.gsw = link()
@@ -214,8 +226,15 @@ class SystemRun:
         """Wait until both ARSs tick (their tree status reaches the ground through the CRS) and
         the CRS reports the lifter, both arms and both end effectors (calibrated, no fault): a
         Start sent sooner reaches ARSs still starting up."""
-        needed = {("tree_status", "ars_x"), ("tree_status", "ars_y"), ("hk_arm_joints", "ars_x"),
-                  ("hk_arm_joints", "ars_y"), ("hk_ee", "ars_x"), ("hk_ee", "ars_y"), ("hk_lifter", None)}
+        needed = {
+            ("tree_status", "ars_x"),
+            ("tree_status", "ars_y"),
+            ("hk_arm_joints", "ars_x"),
+            ("hk_arm_joints", "ars_y"),
+            ("hk_ee", "ars_x"),
+            ("hk_ee", "ars_y"),
+            ("hk_lifter", None),
+        }
         deadline = time.monotonic() + timeout
         seen = 0
         while needed:
@@ -228,8 +247,9 @@ class SystemRun:
             if not needed:
                 break
             if time.monotonic() > deadline:
-                raise AssertionError(f"the system was not ready within {timeout:g} s: "
-                                     f"no {sorted(needed, key=str)}")
+                raise AssertionError(
+                    f"the system was not ready within {timeout:g} s: no {sorted(needed, key=str)}"
+                )
             self.check_running()
             self.link.poll(0.2)
 
@@ -354,8 +374,10 @@ class SystemRun:
         sent = self.send(name, params)
         ack = self.link.wait_ack(sent, final=True, timeout=timeout)
         if ack is None:
-            raise AssertionError(f"no final acknowledgement of {name} within {timeout:g} s "
-                                 f"(acks so far: {[a.stage.name for a in sent.acks]})")
+            raise AssertionError(
+                f"no final acknowledgement of {name} within {timeout:g} s "
+                f"(acks so far: {[a.stage.name for a in sent.acks]})"
+            )
         return ack
 
     def wait_ack(self, sent: SentCommand, stage: AckStage, timeout: float = 20.0) -> Ack:
@@ -365,8 +387,10 @@ class SystemRun:
             if found is not None:
                 return found
             if time.monotonic() > deadline:
-                raise AssertionError(f"no {stage.name} ack of {sent.name} within {timeout:g} s "
-                                     f"(got {[a.stage.name for a in sent.acks]})")
+                raise AssertionError(
+                    f"no {stage.name} ack of {sent.name} within {timeout:g} s "
+                    f"(got {[a.stage.name for a in sent.acks]})"
+                )
             self.link.poll(0.2)
 
     def poll(self, seconds: float) -> None:
@@ -388,18 +412,25 @@ class SystemRun:
                     return packet
             seen = max(seen, len(self.packets))
             if time.monotonic() > deadline:
-                raise AssertionError(f"{what}: not seen within {timeout:g} s; last telemetry: "
-                                     f"{self.last_of_each()}")
+                raise AssertionError(
+                    f"{what}: not seen within {timeout:g} s; last telemetry: {self.last_of_each()}"
+                )
             self.check_running()
             self.link.poll(0.2)
 
     def wait_kind(
-        self, kind: str, predicate: Callable[[Mapping[str, Any]], bool], timeout: float, what: str,
-        *, since: int = 0,
+        self,
+        kind: str,
+        predicate: Callable[[Mapping[str, Any]], bool],
+        timeout: float,
+        what: str,
+        *,
+        since: int = 0,
     ) -> Mapping[str, Any]:
         """Wait for a ``kind`` packet whose fields satisfy ``predicate``; return its fields."""
-        return self.wait_packet(lambda p: p.kind == kind and predicate(p.fields), timeout, what,
-                                since=since).fields
+        return self.wait_packet(
+            lambda p: p.kind == kind and predicate(p.fields), timeout, what, since=since
+        ).fields
 
     def of_kind(self, kind: str, *, since: int = 0) -> list[Mapping[str, Any]]:
         return [p.fields for p in self.packets[since:] if p.kind == kind]
@@ -420,11 +451,21 @@ class SystemRun:
     # -- arms -------------------------------------------------------------------------------
     def arm_q(self, ars: str, *, since: int = 0) -> list[tuple[float, ...]]:
         """The joint positions of one arm in every ``hk_arm_joints`` packet since ``since``."""
-        return [tuple(f[f"q{i}"] for i in range(6)) for f in self.of_kind("hk_arm_joints", since=since)
-                if f["ars"] == ars]
+        return [
+            tuple(f[f"q{i}"] for i in range(6))
+            for f in self.of_kind("hk_arm_joints", since=since)
+            if f["ars"] == ars
+        ]
 
-    def wait_arm_moving(self, ars: str, timeout: float, *, tolerance: float = 0.01,
-                        start: tuple[float, ...] | None = None, since: int = 0) -> tuple[float, ...]:
+    def wait_arm_moving(
+        self,
+        ars: str,
+        timeout: float,
+        *,
+        tolerance: float = 0.01,
+        start: tuple[float, ...] | None = None,
+        since: int = 0,
+    ) -> tuple[float, ...]:
         """Wait until ``ars``'s arm stands more than ``tolerance`` rad (in some joint) from
         ``start`` (by default where it stood first); return where it stands then."""
         if start is None:
@@ -435,11 +476,19 @@ class SystemRun:
         fields = self.wait_kind(
             "hk_arm_joints",
             lambda f: f["ars"] == ars and max(abs(f[f"q{i}"] - ref[i]) for i in range(6)) > tolerance,
-            timeout, f"{ars}'s arm moving away from {ref}", since=since)
+            timeout,
+            f"{ars}'s arm moving away from {ref}",
+            since=since,
+        )
         return tuple(fields[f"q{i}"] for i in range(6))
 
     def wait_through_faults(
-        self, predicate: Callable[[Packet], bool], timeout: float, what: str, *, clear_faults: int = 2,
+        self,
+        predicate: Callable[[Packet], bool],
+        timeout: float,
+        what: str,
+        *,
+        clear_faults: int = 2,
         since: int | None = None,
     ) -> tuple[Packet, list[str]]:
         """Wait for a packet that satisfies ``predicate``. A fault raised meanwhile (on this loaded
@@ -453,24 +502,32 @@ class SystemRun:
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise AssertionError(f"{what}: not seen within {timeout:g} s (faults cleared: {cleared}); "
-                                     f"last: {self.last_of_each()}")
+                raise AssertionError(
+                    f"{what}: not seen within {timeout:g} s (faults cleared: {cleared}); "
+                    f"last: {self.last_of_each()}"
+                )
             packet = self.wait_packet(
                 lambda p: predicate(p) or (p.kind == "hk_mission" and p.fields["run_state"] == "fault"),
-                left, what, since=since)
+                left,
+                what,
+                since=since,
+            )
             since = len(self.packets)
             if predicate(packet):
                 return packet, cleared
             if packet.fields["fault"].startswith("lifter link down"):
                 continue  # it clears itself when the link is back; the ground cannot clear it
             if len(cleared) >= clear_faults:
-                raise AssertionError(f"the build faulted before {what}: {packet.fields['fault']} "
-                                     f"(faults cleared before: {cleared})")
+                raise AssertionError(
+                    f"the build faulted before {what}: {packet.fields['fault']} "
+                    f"(faults cleared before: {cleared})"
+                )
             cleared.append(packet.fields["fault"])
             ack = self.command("set_blackboard_value", {"key": "clear_fault", "value": True})
             assert ack.stage is AckStage.COMPLETED, ack
-            self.wait_kind("hk_mission", lambda f: f["run_state"] != "fault", 30, "the fault cleared",
-                           since=since)
+            self.wait_kind(
+                "hk_mission", lambda f: f["run_state"] != "fault", 30, "the fault cleared", since=since
+            )
             since = len(self.packets)
 
     def wait_build_moves_arm(self, ars: str, timeout: float, *, clear_faults: int = 2) -> list[str]:
@@ -478,21 +535,30 @@ class SystemRun:
         (:meth:`wait_through_faults`); return the faults cleared."""
         start = self.arm_q(ars)[0] if self.arm_q(ars) else None
         _, cleared = self.wait_through_faults(
-            lambda p: p.kind == "hk_arm_joints" and p.fields["ars"] == ars and start is not None
-            and max(abs(p.fields[f"q{i}"] - start[i]) for i in range(6)) > 0.01,
-            timeout, f"{ars}'s arm moving", clear_faults=clear_faults)
+            lambda p: (
+                p.kind == "hk_arm_joints"
+                and p.fields["ars"] == ars
+                and start is not None
+                and max(abs(p.fields[f"q{i}"] - start[i]) for i in range(6)) > 0.01
+            ),
+            timeout,
+            f"{ars}'s arm moving",
+            clear_faults=clear_faults,
+        )
         return cleared
 
-    def wait_arm_still(self, ars: str, timeout: float, *, samples: int = 5, tolerance: float = 1e-3
-                       ) -> tuple[float, ...]:
+    def wait_arm_still(
+        self, ars: str, timeout: float, *, samples: int = 5, tolerance: float = 1e-3
+    ) -> tuple[float, ...]:
         """Wait until ``samples`` consecutive ``hk_arm_joints`` packets of ``ars`` agree within
         ``tolerance`` rad; return where the arm stands."""
         deadline = time.monotonic() + timeout
         since = len(self.packets)
         while True:
             qs = self.arm_q(ars, since=since)[-samples:]
-            if len(qs) == samples and all(max(abs(a - b) for a, b in zip(q, qs[0], strict=True))
-                                          <= tolerance for q in qs):
+            if len(qs) == samples and all(
+                max(abs(a - b) for a, b in zip(q, qs[0], strict=True)) <= tolerance for q in qs
+            ):
                 return qs[-1]
             if time.monotonic() > deadline:
                 raise AssertionError(f"{ars}'s arm did not stand still within {timeout:g} s: {qs}")
@@ -542,10 +608,15 @@ class SystemRun:
                 return [(m.log_time * 1e-9, decoded) for _s, _c, m, decoded in messages]
             return [decoded for _s, _c, _m, decoded in messages]
         except McapError as exc:
-            said = [line for line in self.log_path.read_text(errors="replace").splitlines()
-                    if line.startswith("[recorder]") or (line.startswith("[launch]") and "recorder" in line)]
-            raise AssertionError(f"{path} is not a complete recording ({exc}); what the launch log "
-                                 "says of the recorder:\n" + "\n".join(said[-40:])) from exc
+            said = [
+                line
+                for line in self.log_path.read_text(errors="replace").splitlines()
+                if line.startswith("[recorder]") or (line.startswith("[launch]") and "recorder" in line)
+            ]
+            raise AssertionError(
+                f"{path} is not a complete recording ({exc}); what the launch log "
+                "says of the recorder:\n" + "\n".join(said[-40:])
+            ) from exc
 
     # -- helpers ----------------------------------------------------------------------------
     def _wait(self, condition: Callable[[], bool], timeout: float, what: str) -> None:

@@ -39,16 +39,21 @@ def test_set_blackboard_value_changes_the_ars_the_tree_sends_the_cross_frame_to(
         mark = len(run.packets)
         ack = run.command("set_blackboard_value", {"key": "cross_frame_ars", "value": "ars_y"})
         assert (ack.stage, ack.reason.name) == (AckStage.COMPLETED, "NONE"), ack
-        event = run.wait_kind("event", lambda f: f["code"] == "BLACKBOARD_SET", 20,
-                              "the BLACKBOARD_SET event", since=mark)
+        event = run.wait_kind(
+            "event", lambda f: f["code"] == "BLACKBOARD_SET", 20, "the BLACKBOARD_SET event", since=mark
+        )
         assert event["text"] == "cross_frame_ars = 'ars_y'", event
         assert len(run.events(code="BLACKBOARD_SET")) == 1, "the refused write was reported as set"
 
         assert run.start_build().stage is AckStage.COMPLETED
         # The request is sent and accepted: the CRS waits for the part, or ARS Y already failed it
         # (a fault names the ARS the request went to).
-        run.wait_kind("mission_step", lambda f: f["step"].startswith("Wait For Part bay1/cross_frame")
-                      or f["run_state"] == "fault", 90, "AddCrossFrame accepted by an ARS")
+        run.wait_kind(
+            "mission_step",
+            lambda f: f["step"].startswith("Wait For Part bay1/cross_frame") or f["run_state"] == "fault",
+            90,
+            "AddCrossFrame accepted by an ARS",
+        )
         faults = [f["text"] for f in run.events() if f["code"] == "CRS_FAULT"]
         assert all("on ars_y" in text for text in faults if "AddCrossFrame" in text), faults
         run.poll(3.0)  # the recorder subscribes and writes asynchronously: give it the goal's status
@@ -56,9 +61,11 @@ def test_set_blackboard_value_changes_the_ars_the_tree_sends_the_cross_frame_to(
 
     # Each ARS's action server as the recording saw it: the goal went to ARS Y, none to ARS X.
     def goals(ars: str) -> set[bytes]:
-        return {bytes(entry.goal_info.goal_id.uuid)
-                for status in run.recorded(f"/{ars}/add_cross_frame/_action/status")
-                for entry in status.status_list}
+        return {
+            bytes(entry.goal_info.goal_id.uuid)
+            for status in run.recorded(f"/{ars}/add_cross_frame/_action/status")
+            for entry in status.status_list
+        }
 
     assert len(goals("ars_y")) == 1, "ARS Y did not receive the AddCrossFrame goal"
     assert goals("ars_x") == set(), "ARS X received an AddCrossFrame goal"

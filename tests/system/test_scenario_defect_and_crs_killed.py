@@ -57,9 +57,11 @@ SCENARIO = {
     "name": "defective_vertical",
     "description": "the first vertical of ARS X's dispenser lacks end fitting b",
     "built": ["bay1/cross_frame"],
-    "faults": {"defective_parts": [
-        {"dispenser": DISPENSER, "index": 0, "defect": "missing_end_fitting", "end": "b"},
-    ]},
+    "faults": {
+        "defective_parts": [
+            {"dispenser": DISPENSER, "index": 0, "defect": "missing_end_fitting", "end": "b"},
+        ]
+    },
 }
 
 
@@ -72,8 +74,9 @@ def test_a_defective_vertical_is_replaced_through_a_crs_restart_and_placed_once(
         run.start()
         run.wait_ready()
         assert run.start_build().stage is AckStage.COMPLETED
-        failed, cleared = run.wait_through_faults(_inspection("INSPECTION_FAILED"), 400,
-                                                  f"{MEMBER}'s first part failing inspection", clear_faults=3)
+        failed, cleared = run.wait_through_faults(
+            _inspection("INSPECTION_FAILED"), 400, f"{MEMBER}'s first part failing inspection", clear_faults=3
+        )
         assert "end fitting" in failed.fields["text"], failed.fields
         assert not any(MEMBER in fault for fault in cleared), cleared
 
@@ -85,18 +88,23 @@ def test_a_defective_vertical_is_replaced_through_a_crs_restart_and_placed_once(
         os.kill(run.pid("crs"), signal.SIGKILL)
         run.wait_output("restarting crs", 30)
         mark = len(run.packets)
-        back = run.wait_kind("hk_mission", lambda f: not f["started"], 120, "the restarted CRS's telemetry",
-                             since=mark)
+        back = run.wait_kind(
+            "hk_mission", lambda f: not f["started"], 120, "the restarted CRS's telemetry", since=mark
+        )
         # What it persisted: the cross frame stands. (The discarded part is the ARS's to report,
         # with the result of the request it is in.)
         assert back["members_placed"] == 1, back
         assert run.start_build().stage is AckStage.COMPLETED  # the operator starts it again
 
-        _, more = run.wait_through_faults(_inspection("INSPECTION_PASSED"), 300,
-                                          f"{MEMBER}'s replacement passing", since=mark)
+        _, more = run.wait_through_faults(
+            _inspection("INSPECTION_PASSED"), 300, f"{MEMBER}'s replacement passing", since=mark
+        )
         done, later = run.wait_through_faults(
-            lambda p: p.kind == "mission_step" and p.fields["members_placed"] >= 2, 150,
-            f"{MEMBER} placed", since=mark)
+            lambda p: p.kind == "mission_step" and p.fields["members_placed"] >= 2,
+            150,
+            f"{MEMBER} placed",
+            since=mark,
+        )
         assert done.fields["parts_discarded"] == 1, done.fields
         codes = [f["code"] for f in run.events() if f["text"].startswith(MEMBER) and "INSPECT" in f["code"]]
         assert codes == ["INSPECTION_FAILED", "INSPECTION_PASSED"], codes

@@ -53,8 +53,13 @@ STILL_RAD_S = 1e-3
 
 
 def _rejection_ack(run: SystemRun, security_seq: int, since: int):
-    return run.wait_kind("ack", lambda f: f["security_seq"] == security_seq and f["stage"] == "rejected",
-                         20, f"the rejection ack of security sequence {security_seq}", since=since)
+    return run.wait_kind(
+        "ack",
+        lambda f: f["security_seq"] == security_seq and f["stage"] == "rejected",
+        20,
+        f"the rejection ack of security sequence {security_seq}",
+        since=since,
+    )
 
 
 def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
@@ -96,8 +101,13 @@ def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
         finally:
             intruder.close()
         assert intruder_heard == [], "the CRS answered an unauthenticated sender"
-        event = run.wait_kind("event", lambda f: f["code"] == "COMMAND_REJECTED" and where in f["text"],
-                              20, "the event reporting the forged command", since=mark)
+        event = run.wait_kind(
+            "event",
+            lambda f: f["code"] == "COMMAND_REJECTED" and where in f["text"],
+            20,
+            "the event reporting the forged command",
+            since=mark,
+        )
         assert (event["severity"], event["reason"]) == ("warning", "bad_auth"), event
 
         # 2. Out of range: rejected with the registry's reason, never written.
@@ -105,9 +115,13 @@ def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
         ack = run.command("set_blackboard_value", {"key": "inspection_attempts", "value": 9})
         assert ack.stage is AckStage.REJECTED and "inspection_attempts" in ack.detail, ack
         assert ack.reason in (Reason.REFUSED, Reason.BAD_PARAMETER_RANGE), ack
-        event = run.wait_kind("event", lambda f: f["code"] == "COMMAND_REJECTED"
-                              and "inspection_attempts" in f["text"], 20,
-                              "the event reporting the out-of-range value", since=mark)
+        event = run.wait_kind(
+            "event",
+            lambda f: f["code"] == "COMMAND_REJECTED" and "inspection_attempts" in f["text"],
+            20,
+            "the event reporting the out-of-range value",
+            since=mark,
+        )
         assert event["reason"] == ack.reason.name.lower(), event
 
         # 3. Replay: scenario 2's Pause, carried out and answered by a Resume, sent again.
@@ -115,8 +129,13 @@ def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
         run.link.send_raw(pause.raw)
         ack = _rejection_ack(run, pause.security_seq, mark)
         assert ack["reason"] == "replay", ack
-        event = run.wait_kind("event", lambda f: f["code"] == "COMMAND_REJECTED" and f["reason"] == "replay",
-                              20, "the event reporting the replay", since=mark)
+        event = run.wait_kind(
+            "event",
+            lambda f: f["code"] == "COMMAND_REJECTED" and f["reason"] == "replay",
+            20,
+            "the event reporting the replay",
+            since=mark,
+        )
         assert event["severity"] == "warning"
 
         # The build is unaffected: a few more seconds of telemetry show no pause, no stop, no
@@ -138,12 +157,18 @@ def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
         ack = run.command("stop", timeout=60)
         assert (ack.stage, ack.reason.name) == (AckStage.COMPLETED, "NONE"), ack
         assert run.events(since=mark, code="STOPPING"), run.events(since=mark)
-        run.wait_kind("hk_mission", lambda f: f["run_state"] == "stopped" and not f["started"], 10,
-                      "run state stopped", since=mark)
+        run.wait_kind(
+            "hk_mission",
+            lambda f: f["run_state"] == "stopped" and not f["started"],
+            10,
+            "run state stopped",
+            since=mark,
+        )
         # The stopping CRS sends its devices' last states home before it exits: the operator
         # sees the lifter in Safe.
-        run.wait_kind("hk_lifter", lambda f: f["state"] in ("safe", 3), 30, "the lifter in Safe (ground)",
-                      since=mark)
+        run.wait_kind(
+            "hk_lifter", lambda f: f["state"] in ("safe", 3), 30, "the lifter in Safe (ground)", since=mark
+        )
         lifter_after = [f["state"] for f in run.of_kind("hk_lifter", since=mark)]
         for name in ("crs", "ars_x", "ars_y"):
             run.wait_output(f"[launch] {name} exited with exit code 0", 60)

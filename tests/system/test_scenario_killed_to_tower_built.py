@@ -81,36 +81,46 @@ def test_an_ars_and_then_the_crs_killed_late_in_the_bay_and_the_tower_is_built_o
         assert "ARS 'ars_y' gone while running AddMember" in fault["text"], fault
         run.wait_output("restarting ars_y", 30)
         back = len(run.packets)
-        run.wait_kind("tree_status", lambda f: f["agent"] == "ars_y", 120, "the restarted ARS Y ticking",
-                      since=back)
+        run.wait_kind(
+            "tree_status", lambda f: f["agent"] == "ars_y", 120, "the restarted ARS Y ticking", since=back
+        )
         run.poll(2.0)
         # Waiting for help: the ARS is back, but nothing clears the fault but the operator.
         assert run.last("hk_mission")["run_state"] == "fault", run.last("hk_mission")
         ack = run.command("set_blackboard_value", {"key": "clear_fault", "value": True})
         assert ack.stage is AckStage.COMPLETED, ack
         placed, more = run.wait_through_faults(
-            lambda p: p.kind == "mission_step" and p.fields["members_placed"] > len(built), 400,
-            f"{LAST} placed", since=len(run.packets))
+            lambda p: p.kind == "mission_step" and p.fields["members_placed"] > len(built),
+            400,
+            f"{LAST} placed",
+            since=len(run.packets),
+        )
         assert placed.fields["members_placed"] == len(built) + 1, placed.fields
 
         # Scenario 6, once ARS X works on the first foundation rivet.
         step, later = run.wait_through_faults(
-            lambda p: p.kind == "mission_step" and p.fields["member"].startswith("foundation/"), 400,
-            "the foundation rivets begun")
+            lambda p: p.kind == "mission_step" and p.fields["member"].startswith("foundation/"),
+            400,
+            "the foundation rivets begun",
+        )
         rivet = step.fields["member"]
         assert mission.member(rivet).add_ars == "ars_x", rivet
         run.wait_arm_moving("ars_x", 120, start=run.arm_q("ars_x")[-1], since=len(run.packets))
         os.kill(run.pid("crs"), signal.SIGKILL)
         run.wait_output("restarting crs", 30)
         mark = len(run.packets)
-        again = run.wait_kind("hk_mission", lambda f: not f["started"], 120, "the restarted CRS's telemetry",
-                              since=mark)
+        again = run.wait_kind(
+            "hk_mission", lambda f: not f["started"], 120, "the restarted CRS's telemetry", since=mark
+        )
         assert again["members_placed"] == len(built) + 1 and again["bays_built"] == 1, again
         assert run.start_build().stage is AckStage.COMPLETED  # the operator starts it again
 
         done, rest = run.wait_through_faults(
-            lambda p: p.kind == "hk_mission" and p.fields["run_state"] == "done", 900,
-            "the mission done", since=mark)
+            lambda p: p.kind == "hk_mission" and p.fields["run_state"] == "done",
+            900,
+            "the mission done",
+            since=mark,
+        )
         hk = done.fields
         members = len(mission.members)
         assert hk["members_placed"] == hk["members_riveted"] == hk["members_total"] == members, hk

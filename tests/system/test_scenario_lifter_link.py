@@ -64,17 +64,18 @@ def test_a_dropped_lifter_link_holds_the_build_which_goes_on_when_it_returns(tmp
         held_at = len(run.packets)
         in_flight = run.last("mission_step")
         assert in_flight["members_placed"] == 0, f"the cross frame was placed before the drop: {in_flight}"
-        hk = run.wait_kind("hk_mission", lambda f: f["run_state"] == "fault", 20, "run state fault",
-                           since=held_at - 1)
+        hk = run.wait_kind(
+            "hk_mission", lambda f: f["run_state"] == "fault", 20, "run state fault", since=held_at - 1
+        )
         assert hk["fault"].startswith("lifter link down"), hk
         held = run.wait_arm_still("ars_x", 30)  # ARS X paused: its arm holds
 
-        back = run.wait_packet(_event("FAULT_CLEARED", "lifter link back"), 120, "the link back",
-                               since=held_at)
+        back = run.wait_packet(
+            _event("FAULT_CLEARED", "lifter link back"), 120, "the link back", since=held_at
+        )
         assert back.fields["severity"] == "info"
         resumed_at = len(run.packets)
-        run.wait_kind("hk_mission", lambda f: f["run_state"] == "running", 20, "running again",
-                      since=held_at)
+        run.wait_kind("hk_mission", lambda f: f["run_state"] == "running", 20, "running again", since=held_at)
         # The request it was paused in goes on: the arm moves on from where it held.
         run.wait_arm_moving("ars_x", 90, start=held, tolerance=2e-3, since=resumed_at)
         moved_on_at = run.last("mission_step")["sim_time"]

@@ -55,8 +55,12 @@ MISSION = Path(__file__).resolve().parents[2] / "missions" / "one_bay.yaml"
 BUILD_TIMEOUT_S = 2400.0  # 13-25 min on 2 cores; CI machines vary
 PLACE_TOLERANCE = 0.01  # m, a part's body from its member's place on the tower
 # The action each member kind is asked for, and the ARS action that rivets an affix joint.
-ACTIONS = {"cross_frame": "add_cross_frame", "vertical": "add_member", "diagonal": "add_member",
-           "foundation_rivet": "foundation_rivet"}
+ACTIONS = {
+    "cross_frame": "add_cross_frame",
+    "vertical": "add_member",
+    "diagonal": "add_member",
+    "foundation_rivet": "foundation_rivet",
+}
 
 
 def test_a_one_bay_tower_is_built_from_ground_start_to_tower_built(tmp_path):

@@ -114,9 +114,13 @@ def members(state_file: Path) -> dict[str, str]:
 
 def ground(link_yaml: Path, *command: str) -> str:
     """Run the ground station's command inside the ground host; its acknowledgement line."""
-    result = subprocess.run([sys.executable, str(HERE / "several_hosts_ground.py"), str(link_yaml), *command],
-                            capture_output=True, text=True, timeout=60,
-                            preexec_fn=lambda: enter_namespace(namespace_name(RUN, "ground")))
+    result = subprocess.run(
+        [sys.executable, str(HERE / "several_hosts_ground.py"), str(link_yaml), *command],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=lambda: enter_namespace(namespace_name(RUN, "ground")),
+    )
     return (result.stdout + result.stderr).strip()
 
 
@@ -127,26 +131,53 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
     record = tmp_path / "requests.jsonl"
     key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
     link_yaml = tmp_path / "link.yaml"
-    link_yaml.write_text(yaml.safe_dump({
-        "key_file": str(key_file), "key_id": 1,
-        "crs": {"bind_host": crs_ip, "bind_port": 52001, "gsw_host": "", "gsw_port": 0,
-                "replay_state": str(tmp_path / "replay.json")},
-        "gsw": {"crs_host": crs_ip, "crs_port": 52001, "bind_host": ground_ip, "bind_port": 0,
-                "archive": str(tmp_path / "archive.sqlite"), "command_state": str(tmp_path / "seq.json")},
-    }))
+    link_yaml.write_text(
+        yaml.safe_dump(
+            {
+                "key_file": str(key_file),
+                "key_id": 1,
+                "crs": {
+                    "bind_host": crs_ip,
+                    "bind_port": 52001,
+                    "gsw_host": "",
+                    "gsw_port": 0,
+                    "replay_state": str(tmp_path / "replay.json"),
+                },
+                "gsw": {
+                    "crs_host": crs_ip,
+                    "crs_port": 52001,
+                    "bind_host": ground_ip,
+                    "bind_port": 0,
+                    "archive": str(tmp_path / "archive.sqlite"),
+                    "command_state": str(tmp_path / "seq.json"),
+                },
+            }
+        )
+    )
     crs_yaml = tmp_path / "crs.yaml"
-    crs_yaml.write_text(yaml.safe_dump({
-        "mission": str(ROOT / "missions/one_bay.yaml"),
-        "state_file": str(state),
-        "writable_blackboard": str(ROOT / "config/crs/writable_blackboard.yaml"),
-        "tick_rate_hz": 50.0,
-        "timeouts": {"ars_server_s": 4.0, "service_s": 10.0, "forward_s": 1.0, "sensor_max_age_s": 1.0},
-    }))
+    crs_yaml.write_text(
+        yaml.safe_dump(
+            {
+                "mission": str(ROOT / "missions/one_bay.yaml"),
+                "state_file": str(state),
+                "writable_blackboard": str(ROOT / "config/crs/writable_blackboard.yaml"),
+                "tick_rate_hz": 50.0,
+                "timeouts": {
+                    "ars_server_s": 4.0,
+                    "service_s": 10.0,
+                    "forward_s": 1.0,
+                    "sensor_max_age_s": 1.0,
+                },
+            }
+        )
+    )
     rig = HERE / "several_hosts_rig.py"
     host_lines = "\n".join(f"  - {{name: {name}, address: {address}}}" for name, address in hosts.items())
     launch_set = tmp_path / "several_hosts.yaml"
     header = f"name: several_hosts\ngrace_period_s: 5\nhosts:\n{host_lines}\n"
-    launch_set.write_text(header + textwrap.dedent(f"""
+    launch_set.write_text(
+        header
+        + textwrap.dedent(f"""
         processes:
           - {{name: crs_drivers, executable: python, args: ["{rig}", drivers, "{record}"], host: crs}}
           - {{name: ars_x, executable: python, host: ars_x,
@@ -157,15 +188,25 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
             args: [-m, tlt_crs.node, --config, "{crs_yaml}", --ground-link, "{link_yaml}", --autostart]
             host: crs
             required: true
-        """))
+        """)
+    )
     env = {**os.environ, "TLT_HOSTS_RUN": RUN}
-    proc = subprocess.Popen([str(TLT), "launch", str(launch_set)], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=env)
+    proc = subprocess.Popen(
+        [str(TLT), "launch", str(launch_set)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     out = Output(proc)
     try:
         # ARS X gets its first request from the CRS, across the network, and holds it.
-        wait(lambda: any(r["ars"] == "ars_x" for r in json_lines.read(record, "request")), 90,
-             "a first request reaches ARS X", out)
+        wait(
+            lambda: any(r["ars"] == "ars_x" for r in json_lines.read(record, "request")),
+            90,
+            "a first request reaches ARS X",
+            out,
+        )
         held = next(r for r in json_lines.read(record, "request") if r["ars"] == "ars_x")
         cut_link(RUN, "ars_x")
         # The CRS loses ARS X from its graph (lease 3 s) and, ars_server_s (4 s) later, faults.
@@ -179,8 +220,15 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
         for _attempt in range(3):
             ack = ground(link_yaml, "set_blackboard_value", "clear_fault", "true")
             assert ack.startswith("ack COMPLETED"), ack
-            wait(lambda m=mark: (members(state) and "NOT_PLACED" not in members(state).values())
-                 or out.matching("CRS_FAULT", after=m), 90, "the tower built or another fault", out)
+            wait(
+                lambda m=mark: (
+                    (members(state) and "NOT_PLACED" not in members(state).values())
+                    or out.matching("CRS_FAULT", after=m)
+                ),
+                90,
+                "the tower built or another fault",
+                out,
+            )
             if "NOT_PLACED" not in members(state).values():
                 break
             mark = len(out.lines)
@@ -216,11 +264,19 @@ def test_the_whole_system_builds_across_hosts_through_a_cut_ars_link(tmp_path):
     with system_run.SystemRun(tmp_path / "run", scenario=scenario, rtf=0, hosts=True) as run:
         run.start()
         run.wait_ready()
-        placed = {name: host for name, host in re.findall(r"started (\w+) \(pid \d+\) on host (\w+)",
-                                                           run.launch_output())}
+        placed = {
+            name: host
+            for name, host in re.findall(r"started (\w+) \(pid \d+\) on host (\w+)", run.launch_output())
+        }
         assert {k: placed.get(k) for k in ("twin", "crs", "vision", "ars_x", "ur_x", "ars_y", "ur_y")} == {
-            "twin": "twin", "crs": "crs", "vision": "crs", "ars_x": "ars_x", "ur_x": "ars_x",
-            "ars_y": "ars_y", "ur_y": "ars_y"}, placed
+            "twin": "twin",
+            "crs": "crs",
+            "vision": "crs",
+            "ars_x": "ars_x",
+            "ur_x": "ars_x",
+            "ars_y": "ars_y",
+            "ur_y": "ars_y",
+        }, placed
         assert run.start_build().stage is AckStage.COMPLETED  # from the ground host
         cleared = run.wait_build_moves_arm("ars_y", 150)
 
@@ -240,8 +296,11 @@ def test_the_whole_system_builds_across_hosts_through_a_cut_ars_link(tmp_path):
         # The bay built: the diagonal placed and riveted, Test Bay passed (the foundation rivets,
         # ARS requests like the diagonal's, are left out for CI's time).
         _, more = run.wait_through_faults(
-            lambda p: p.kind == "event" and p.fields["code"] == "BAY_INSPECTION_PASSED", 600,
-            "the bay inspection passed", since=len(run.packets))
+            lambda p: p.kind == "event" and p.fields["code"] == "BAY_INSPECTION_PASSED",
+            600,
+            "the bay inspection passed",
+            since=len(run.packets),
+        )
         run.poll(2.0)
         bay = [m for m in mission.members if m.kind != "foundation_rivet"]
         hk = run.last("hk_mission")

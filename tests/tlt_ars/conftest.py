@@ -144,9 +144,9 @@ def ee_test_config(port: str) -> dict:
     )
 
 
-
 # A verdict of ``inspection_verdicts``: vision could not judge the part (InspectionReport.cannot_judge).
 CANNOT_JUDGE = "cannot judge"
+
 
 class Gpio:
     """The EE's GPIO: the limit switch closes when the width servo is at or below its zero."""
@@ -458,8 +458,10 @@ class Stack:
             self.wait(lambda: publisher.get_subscription_count() > 0, "the ARS subscribed to progress")
             publisher.publish(progress)
             self.wait(
-                lambda: set(placed) <= state.placed()
-                and all(state.remaining[d.name] == d.remaining for d in progress.dispensers),
+                lambda: (
+                    set(placed) <= state.placed()
+                    and all(state.remaining[d.name] == d.remaining for d in progress.dispensers)
+                ),
                 "the ARS told what stands",
             )
         finally:

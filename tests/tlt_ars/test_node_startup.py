@@ -209,8 +209,9 @@ def test_a_request_is_judged_on_mission_progress_newer_than_it(idle_ars):
     handle = _wait(action.send_goal_async(goal))
     time.sleep(0.3)
     placed = MissionProgress(mission=ars.ctx.state.mission.name, current_bay=1, started=True)
-    placed.members = [MemberState(member_id=member, kind=MemberState.KIND_VERTICAL, bay=1,
-                                  state=MemberState.STATE_PLACED)]
+    placed.members = [
+        MemberState(member_id=member, kind=MemberState.KIND_VERTICAL, bay=1, state=MemberState.STATE_PLACED)
+    ]
     progress.publish(placed)
     result = _wait(handle.get_result_async(), timeout=60.0)
     assert "not placed" not in result.result.reason  # taken: it went on to the tree (no arm here)
@@ -287,7 +288,10 @@ def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_start
         ars.tree.tick()
         branch = ars.tree.branch
         assert [c.name for c in branch.children] == [
-            "Load Rivet", "Get Inspected Member", "Place Member", "Rivet Member"
+            "Load Rivet",
+            "Get Inspected Member",
+            "Place Member",
+            "Rivet Member",
         ]
         assert branch.children[0].status == Status.RUNNING
         assert not branch.children[2].children and not branch.children[3].children

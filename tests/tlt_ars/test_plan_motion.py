@@ -225,8 +225,12 @@ def _execute(driver: Driver, arm: Arm) -> ExecuteTrajectory:
     arm.config.timeouts.update(server_s=30.0, trajectory_margin_s=5.0)
     arm.config.arm.update(path_tolerance=0.1, goal_tolerance=0.01, goal_time_tolerance_s=1.0)
     slot = TrajectorySlot()
-    slot.motion = SimpleNamespace(duration=1.0, trajectory=JointTrajectory(
-        joint_names=[f"j{i}" for i in range(6)], points=[JointTrajectoryPoint(positions=[0.0] * 6)]))
+    slot.motion = SimpleNamespace(
+        duration=1.0,
+        trajectory=JointTrajectory(
+            joint_names=[f"j{i}" for i in range(6)], points=[JointTrajectoryPoint(positions=[0.0] * 6)]
+        ),
+    )
     return ExecuteTrajectory("Execute", arm, slot)
 
 

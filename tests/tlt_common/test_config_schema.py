@@ -10,36 +10,56 @@ SCHEMA = {
     "port": Field("str"),
     "rate_hz": opt("float", 50.0, minimum=1.0, maximum=1000.0),
     "mode": opt("str", "position", choices=("position", "velocity")),
-    "servos": opt("list", [], item=Field("dict", schema={"id": Field("int", minimum=0, maximum=252),
-                                                           "name": Field("str")})),
+    "servos": opt(
+        "list",
+        [],
+        item=Field("dict", schema={"id": Field("int", minimum=0, maximum=252), "name": Field("str")}),
+    ),
     "limits": opt("map", {}, item=Field("float")),
-    "ids": opt("list", [], item=Field("int"),
-               check=lambda v: "ids repeat" if len(set(v)) != len(v) else None),
+    "ids": opt(
+        "list", [], item=Field("int"), check=lambda v: "ids repeat" if len(set(v)) != len(v) else None
+    ),
 }
 
 
 def test_defaults_are_filled_and_ints_become_floats_where_numbers_are_expected():
     out = validate({"port": "/dev/ttyUSB0", "rate_hz": 100}, SCHEMA, source="f.yaml")
-    assert out == {"port": "/dev/ttyUSB0", "rate_hz": 100.0, "mode": "position", "servos": [], "limits": {},
-                   "ids": []}
+    assert out == {
+        "port": "/dev/ttyUSB0",
+        "rate_hz": 100.0,
+        "mode": "position",
+        "servos": [],
+        "limits": {},
+        "ids": [],
+    }
     assert isinstance(out["rate_hz"], float)
 
 
-@pytest.mark.parametrize(("data", "message"), [
-    ({}, "f.yaml: port: missing required key (a string)"),
-    ({"port": 3}, "f.yaml: port: expected a string, got int 3"),
-    ({"port": "p", "rate": 1},
-     "f.yaml: rate: unknown key (known keys: ids, limits, mode, port, rate_hz, servos)"),
-    ({"port": "p", "rate_hz": 0.5}, "f.yaml: rate_hz: expected at least 1.0, got 0.5"),
-    ({"port": "p", "rate_hz": True}, "f.yaml: rate_hz: expected a number, got bool True"),
-    ({"port": "p", "mode": "torque"}, "f.yaml: mode: expected one of 'position', 'velocity', got 'torque'"),
-    ({"port": "p", "servos": [{"id": 1, "name": "a"}, {"id": 300, "name": "b"}]},
-     "f.yaml: servos[1].id: expected at most 252, got 300"),
-    ({"port": "p", "servos": [{"id": 1}]}, "f.yaml: servos[0].name: missing required key (a string)"),
-    ({"port": "p", "limits": {"lift": "high"}}, "f.yaml: limits.lift: expected a number, got str 'high'"),
-    ({"port": "p", "ids": [1, 1]}, "f.yaml: ids: ids repeat"),
-    ([1, 2], "f.yaml: expected a mapping, got list [1, 2]"),
-])
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({}, "f.yaml: port: missing required key (a string)"),
+        ({"port": 3}, "f.yaml: port: expected a string, got int 3"),
+        (
+            {"port": "p", "rate": 1},
+            "f.yaml: rate: unknown key (known keys: ids, limits, mode, port, rate_hz, servos)",
+        ),
+        ({"port": "p", "rate_hz": 0.5}, "f.yaml: rate_hz: expected at least 1.0, got 0.5"),
+        ({"port": "p", "rate_hz": True}, "f.yaml: rate_hz: expected a number, got bool True"),
+        (
+            {"port": "p", "mode": "torque"},
+            "f.yaml: mode: expected one of 'position', 'velocity', got 'torque'",
+        ),
+        (
+            {"port": "p", "servos": [{"id": 1, "name": "a"}, {"id": 300, "name": "b"}]},
+            "f.yaml: servos[1].id: expected at most 252, got 300",
+        ),
+        ({"port": "p", "servos": [{"id": 1}]}, "f.yaml: servos[0].name: missing required key (a string)"),
+        ({"port": "p", "limits": {"lift": "high"}}, "f.yaml: limits.lift: expected a number, got str 'high'"),
+        ({"port": "p", "ids": [1, 1]}, "f.yaml: ids: ids repeat"),
+        ([1, 2], "f.yaml: expected a mapping, got list [1, 2]"),
+    ],
+)
 def test_errors_name_the_file_the_key_and_the_reason(data, message):
     with pytest.raises(ConfigError) as info:
         validate(data, SCHEMA, source="f.yaml")

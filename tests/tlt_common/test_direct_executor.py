@@ -198,8 +198,11 @@ def test_the_multi_threaded_one_calls_clock_and_quick_subscriptions_on_its_spinn
     spinner.start()
     try:
         deadline = time.monotonic() + TIMEOUT_S
-        while not (sim.count_publishers("plain") and feeder.count_subscribers("quick")
-                   and feeder.count_subscribers("/clock")):
+        while not (
+            sim.count_publishers("plain")
+            and feeder.count_subscribers("quick")
+            and feeder.count_subscribers("/clock")
+        ):
             assert time.monotonic() < deadline, "no match"
             time.sleep(0.05)
         plain_pub.publish(String(data="x"))

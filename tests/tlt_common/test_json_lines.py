@@ -37,4 +37,3 @@ def test_entries_without_a_kind_are_not_taken_for_one(tmp_path):
 
     assert json_lines.read(path, "request") == []
     assert json_lines.read(path) == [{"member": "S1"}]
-

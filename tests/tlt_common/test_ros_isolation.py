@@ -15,8 +15,10 @@ from std_msgs.msg import String
 
 from tlt_common.ros_isolation import claim_domain
 
-CLAIM = "from tlt_common.ros_isolation import claim_domain; import sys, time; " \
-        "print(claim_domain(sys.argv[1]), flush=True); time.sleep(30)"
+CLAIM = (
+    "from tlt_common.ros_isolation import claim_domain; import sys, time; "
+    "print(claim_domain(sys.argv[1]), flush=True); time.sleep(30)"
+)
 
 TALKER = textwrap.dedent("""
     import rclpy, sys, time
@@ -52,8 +54,9 @@ def test_the_session_domain_is_local_and_private():
     assert str(other_domain) != os.environ["ROS_DOMAIN_ID"]
     talkers = [
         subprocess.Popen([sys.executable, "-c", TALKER, "same"]),
-        subprocess.Popen([sys.executable, "-c", TALKER, "other"],
-                         env={**os.environ, "ROS_DOMAIN_ID": str(other_domain)}),
+        subprocess.Popen(
+            [sys.executable, "-c", TALKER, "other"], env={**os.environ, "ROS_DOMAIN_ID": str(other_domain)}
+        ),
     ]
     heard: set[str] = set()
     same_heard = threading.Event()

@@ -133,10 +133,16 @@ class ArsStandIn:
     def _publish_hardware(self) -> None:
         """The states of the ARS's end effector and arm drivers, which the CRS's Start checks."""
         ee, ur = ros_names.ee(self.ars), ros_names.ur(self.ars)
-        self._ee_pub.publish(self._ee_pub.msg_type(
-            ars=self.ars, joint_names=[f"{ee}_grasp_left", f"{ee}_grasp_right", f"{ee}_width"],
-            position=[0.0, 0.0, 0.1], velocity=[0.0] * 3, effort=[0.0] * 3, calibrated=self.ee_calibrated,
-        ))
+        self._ee_pub.publish(
+            self._ee_pub.msg_type(
+                ars=self.ars,
+                joint_names=[f"{ee}_grasp_left", f"{ee}_grasp_right", f"{ee}_width"],
+                position=[0.0, 0.0, 0.1],
+                velocity=[0.0] * 3,
+                effort=[0.0] * 3,
+                calibrated=self.ee_calibrated,
+            )
+        )
         joints = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
         names = [f"{ur}_{j}_joint" for j in joints]
         self._arm_pub.publish(self._arm_pub.msg_type(name=names, position=[0.0] * 6))
@@ -242,8 +248,10 @@ class VisionStandIn:
 
         self._services = [
             self._node.create_service(srv_type, name, handler, callback_group=self._group)
-            for srv_type, name, handler in ((InspectPart, ros_names.VISION_INSPECT_PART, self._part),
-                                            (InspectBay, ros_names.VISION_INSPECT_BAY, self._bay))
+            for srv_type, name, handler in (
+                (InspectPart, ros_names.VISION_INSPECT_PART, self._part),
+                (InspectBay, ros_names.VISION_INSPECT_BAY, self._bay),
+            )
         ]
 
     def withdraw(self) -> None:
@@ -263,8 +271,11 @@ class VisionStandIn:
         response.report.passed = passed
         response.report.cannot_judge = verdict == self.CANNOT_JUDGE
         response.report.reasons = (
-            [] if passed else ["cannot judge the end fitting: depth too noisy to certify"]
-            if verdict == self.CANNOT_JUDGE else ["strut_tube chamfer 0.02 m above threshold"]
+            []
+            if passed
+            else ["cannot judge the end fitting: depth too noisy to certify"]
+            if verdict == self.CANNOT_JUDGE
+            else ["strut_tube chamfer 0.02 m above threshold"]
         )
         return response
 

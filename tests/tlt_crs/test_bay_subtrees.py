@@ -212,8 +212,14 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
     lingering = rclpy.create_node("ars_x_lingering")
     rig.add(lingering)
     lingering.create_publisher(GoalStatusArray, "/ars_x/add_member/_action/status", 1)
-    crs.wait_for(lambda: "ars_x_lingering" in {
-        i.node_name for i in ctx.node.get_publishers_info_by_topic("/ars_x/add_member/_action/status")})
+    crs.wait_for(
+        lambda: (
+            "ars_x_lingering"
+            in {
+                i.node_name for i in ctx.node.get_publishers_info_by_topic("/ars_x/add_member/_action/status")
+            }
+        )
+    )
     subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
     if phase == "waiting for the part":
         # The CRS learns the goal was accepted only after the ARS that took it died: its request
@@ -278,7 +284,7 @@ def test_test_bay_compresses_inspects_and_marks_the_bay_inspected(rig, crs, tmp_
     assert [g for g in rig.cameras.trajectories.goals] == [[1.15, 1.15], [0.0, 0.0]]
     # The ZEDs looked once the mounts stood still inward, not when their trajectory ended (the
     # stand-in's servos trail it by 0.3 s).
-    (at, speed), = rig.vision.mounts_at_bay_calls
+    ((at, speed),) = rig.vision.mounts_at_bay_calls
     assert at == pytest.approx([1.15, 1.15], abs=0.005) and speed == [0.0, 0.0], (at, speed)
     # 50 N / 50000 N/m = 1 mm above the lowered position.
     assert all(abs(p - 0.101) < 1e-9 for p in rig.lifter.positions)

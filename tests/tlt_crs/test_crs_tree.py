@@ -38,8 +38,9 @@ def crs_node(rig, crs, tmp_path):
     crs.wait_for(lambda: not node.ctx.not_ready(), what="driver states")
     # The tree's first tick initialises the blackboard: a test that reads it before (a clean-clone
     # run on a loaded machine did) reads every key unset.
-    crs.wait_for(lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0,
-                 what="the blackboard initialised")
+    crs.wait_for(
+        lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0, what="the blackboard initialised"
+    )
     yield node
     node.interrupt()
     node.destroy_node()
@@ -118,13 +119,16 @@ def test_start_is_refused_until_each_ars_has_a_calibrated_end_effector_and_an_ac
     def arm(lifecycle: int, fault: str) -> None:
         status.publish(HardwareStatus(component="ur_x", lifecycle_state=lifecycle, fault=fault))
 
-    crs.wait_for(lambda: arm(HardwareStatus.LIFECYCLE_ERROR, "protective stop")
-                 or "ur_x" in crs_node.ctx.not_ready(), what="ur_x reported in error")
+    crs.wait_for(
+        lambda: arm(HardwareStatus.LIFECYCLE_ERROR, "protective stop") or "ur_x" in crs_node.ctx.not_ready(),
+        what="ur_x reported in error",
+    )
     refused = _submit(crs_node, crs, "start")
     assert refused.rejected and "ur_x: arm not active (protective stop)" in refused.stages[0][1]
     assert not crs_node.ctx.started and rig.recorder.requests == []
-    crs.wait_for(lambda: arm(HardwareStatus.LIFECYCLE_ACTIVE, "")
-                 or not crs_node.ctx.not_ready(), what="ur_x active")
+    crs.wait_for(
+        lambda: arm(HardwareStatus.LIFECYCLE_ACTIVE, "") or not crs_node.ctx.not_ready(), what="ur_x active"
+    )
     assert _start(crs_node, crs).final[0] == AckStage.COMPLETED
 
 
@@ -324,8 +328,10 @@ def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
     crs.wait_for(lambda: all(s in crs_node.ctx.not_ready() for s in gone), what="vision gone from the graph")
     refused = _submit(crs_node, crs, "start")
     assert refused.rejected
-    assert refused.stages[0][1] == f"not ready: vision: {ros_names.VISION_INSPECT_PART}, " \
-                                   f"vision: {ros_names.VISION_INSPECT_BAY} not up"
+    assert (
+        refused.stages[0][1] == f"not ready: vision: {ros_names.VISION_INSPECT_PART}, "
+        f"vision: {ros_names.VISION_INSPECT_BAY} not up"
+    )
     rig.vision.serve()
     crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="vision back")
     final = _start(crs_node, crs).final

@@ -34,21 +34,43 @@ def ground(rig, crs, tmp_path):
     node = build_node(crs.fast_config(tmp_path))
     rig.add(node)
     crs.wait_for(lambda: not node.ctx.not_ready(), what="driver states")
-    crs.wait_for(lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0,
-                 what="the blackboard initialised")
+    crs.wait_for(
+        lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0, what="the blackboard initialised"
+    )
     key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
     link_yaml = tmp_path / "link.yaml"
-    link_yaml.write_text(yaml.safe_dump({
-        "key_file": str(key_file), "key_id": 1,
-        "crs": {"bind_host": "127.0.0.1", "bind_port": 0, "gsw_host": "", "gsw_port": 0,
-                "replay_state": str(tmp_path / "replay.json")},
-        "gsw": {"crs_host": "127.0.0.1", "crs_port": 0, "bind_host": "127.0.0.1", "bind_port": 0,
-                "archive": str(tmp_path / "archive.sqlite"), "command_state": str(tmp_path / "seq.json")},
-    }))
+    link_yaml.write_text(
+        yaml.safe_dump(
+            {
+                "key_file": str(key_file),
+                "key_id": 1,
+                "crs": {
+                    "bind_host": "127.0.0.1",
+                    "bind_port": 0,
+                    "gsw_host": "",
+                    "gsw_port": 0,
+                    "replay_state": str(tmp_path / "replay.json"),
+                },
+                "gsw": {
+                    "crs_host": "127.0.0.1",
+                    "crs_port": 0,
+                    "bind_host": "127.0.0.1",
+                    "bind_port": 0,
+                    "archive": str(tmp_path / "archive.sqlite"),
+                    "command_state": str(tmp_path / "seq.json"),
+                },
+            }
+        )
+    )
     bridge = GroundBridge(node, load_link_config(link_yaml)).start()
     packets: list[Packet] = []
-    gsw = GswLink(load_definitions(), KeyRing.load(key_file), 1, bridge.link.address,
-                  on_packet=lambda result: packets.append(result) if isinstance(result, Packet) else None)
+    gsw = GswLink(
+        load_definitions(),
+        KeyRing.load(key_file),
+        1,
+        bridge.link.address,
+        on_packet=lambda result: packets.append(result) if isinstance(result, Packet) else None,
+    )
     yield node, gsw, packets
     gsw.close()
     bridge.close()

@@ -254,8 +254,16 @@ def _ars_tree_status_reaches_the_ground(gsw, packets) -> None:
     rclpy.init(context=context, domain_id=int(PROCESS_ENV["ROS_DOMAIN_ID"]))
     node = Node("ars_x_stand_in", context=context)
     pub = node.create_publisher(TreeStatus, ros_names.tree_status_topic("ars_x"), 10)
-    sent = TreeStatus(agent="ars_x", shape_hash=0xC0FFEE, tick_count=7, node_count=5, part_index=0,
-                      part_count=1, first_node=0, status=[0b01101100, 0b11000000])
+    sent = TreeStatus(
+        agent="ars_x",
+        shape_hash=0xC0FFEE,
+        tick_count=7,
+        node_count=5,
+        part_index=0,
+        part_count=1,
+        first_node=0,
+        status=[0b01101100, 0b11000000],
+    )
     try:
         deadline = time.monotonic() + 15
         while not any(p.kind == "tree_status" and p.fields["agent"] == "ars_x" for p in packets):
@@ -283,17 +291,38 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
     key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
     port = free_udp_port()
     link_yaml = tmp_path / "link.yaml"
-    link_yaml.write_text(yaml.safe_dump({
-        "key_file": str(key_file), "key_id": 1,
-        "crs": {"bind_host": "127.0.0.1", "bind_port": port, "gsw_host": "", "gsw_port": 0,
-                "replay_state": str(tmp_path / "replay.json")},
-        "gsw": {"crs_host": "127.0.0.1", "crs_port": port, "bind_host": "127.0.0.1", "bind_port": 0,
-                "archive": str(tmp_path / "archive.sqlite"), "command_state": str(tmp_path / "seq.json")},
-    }))
+    link_yaml.write_text(
+        yaml.safe_dump(
+            {
+                "key_file": str(key_file),
+                "key_id": 1,
+                "crs": {
+                    "bind_host": "127.0.0.1",
+                    "bind_port": port,
+                    "gsw_host": "",
+                    "gsw_port": 0,
+                    "replay_state": str(tmp_path / "replay.json"),
+                },
+                "gsw": {
+                    "crs_host": "127.0.0.1",
+                    "crs_port": port,
+                    "bind_host": "127.0.0.1",
+                    "bind_port": 0,
+                    "archive": str(tmp_path / "archive.sqlite"),
+                    "command_state": str(tmp_path / "seq.json"),
+                },
+            }
+        )
+    )
     proc = _start(_config(tmp_path, crs), "--ground-link", str(link_yaml))
     packets: list[Packet] = []
-    gsw = GswLink(load_definitions(), KeyRing.load(key_file), 1, ("127.0.0.1", port),
-                  on_packet=lambda result: packets.append(result) if isinstance(result, Packet) else None)
+    gsw = GswLink(
+        load_definitions(),
+        KeyRing.load(key_file),
+        1,
+        ("127.0.0.1", port),
+        on_packet=lambda result: packets.append(result) if isinstance(result, Packet) else None,
+    )
 
     def command(name, params=None, timeout=15.0):
         sent = gsw.send_command(name, params)
@@ -334,8 +363,10 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
         assert (refused.stage, refused.reason) == (AckStage.REJECTED, Reason.REFUSED)
         assert "already paused" in refused.detail
 
-        assert command("set_blackboard_value", {"key": "inspection_attempts", "value": 4}).stage \
+        assert (
+            command("set_blackboard_value", {"key": "inspection_attempts", "value": 4}).stage
             is AckStage.COMPLETED
+        )
         out_of_range = command("set_blackboard_value", {"key": "inspection_attempts", "value": 9})
         assert out_of_range.stage is AckStage.REJECTED and "inspection_attempts" in out_of_range.detail
         read_only = command("set_blackboard_value", {"key": "tower_built", "value": True})

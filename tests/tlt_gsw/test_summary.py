@@ -211,13 +211,21 @@ def test_a_fault_that_clears_itself_is_not_credited_to_the_operator(tmp_path):
     a.step(3000.0, 10.0, "running", 1, "bay1/cross_frame", "Wait For AddCrossFrame bay1/cross_frame", 0, 0, 0)
     link = "lifter link down (no answer): its watchdog stops the motors; the build is held"
     a.event(3001.0, "error", "CRS_FAULT", link)
-    a.command(3002.0, "set_blackboard_value", {"key": "clear_fault", "value": True}, 201,
-              ("rejected", "refused", "the lifter link fault clears itself when the link is back"))
+    a.command(
+        3002.0,
+        "set_blackboard_value",
+        {"key": "clear_fault", "value": True},
+        201,
+        ("rejected", "refused", "the lifter link fault clears itself when the link is back"),
+    )
     a.event(3009.0, "info", "FAULT_CLEARED", f"lifter link back, the build goes on (was: {link})")
     a.close()
     (fault,) = summarize_file(path).faults
     assert (fault.reason, fault.cleared_by, fault.cleared_wall) == (
-        link, "lifter link back, the build goes on", 3009.0)
+        link,
+        "lifter link back, the build goes on",
+        3009.0,
+    )
 
 
 def test_summary_command_prints_and_plots(two_bay_archive, tmp_path):

@@ -30,11 +30,14 @@ def main() -> None:
             pub = node.create_publisher(cls, f"rt/msg/{name}/pong", QOS)
             keep.append(node.create_subscription(cls, f"rt/msg/{name}/ping", pub.publish, QOS))
         elif kind == "srv":
+
             def serve(request, response, cls=cls):
                 expected = sample_message(cls.Request, 1)
                 return sample_message(cls.Response, 2) if request == expected else response
+
             keep.append(node.create_service(cls, f"rt/srv/{name}", serve))
         else:
+
             def execute(handle, cls=cls):
                 if handle.request != sample_message(cls.Goal, 1):
                     handle.abort()
@@ -45,6 +48,7 @@ def main() -> None:
                     time.sleep(0.05)
                 handle.succeed()
                 return sample_message(cls.Result, 2)
+
             keep.append(ActionServer(node, cls, f"rt/action/{name}", execute))
     print("peer ready", flush=True)
     executor = MultiThreadedExecutor()

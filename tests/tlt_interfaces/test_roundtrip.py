@@ -34,10 +34,25 @@ def test_the_package_holds_what_the_system_needs():
     assert {"AddCrossFrame", "AddMember", "AffixMember", "FoundationRivet", "FollowJointTrajectory"} <= set(
         _ids("action")
     )
-    assert {"LifterState", "GripperState", "EndEffectorState", "TreeStatus", "MissionProgress",
-            "InspectionReport", "CertifiedPose"} <= set(_ids("msg"))
-    assert {"InspectPart", "InspectBay", "CheckAlignment", "LocateTag", "SetLifterMode",
-            "SetBlackboardValue", "SetActuatorState", "GroundCommand"} <= set(_ids("srv"))
+    assert {
+        "LifterState",
+        "GripperState",
+        "EndEffectorState",
+        "TreeStatus",
+        "MissionProgress",
+        "InspectionReport",
+        "CertifiedPose",
+    } <= set(_ids("msg"))
+    assert {
+        "InspectPart",
+        "InspectBay",
+        "CheckAlignment",
+        "LocateTag",
+        "SetLifterMode",
+        "SetBlackboardValue",
+        "SetActuatorState",
+        "GroundCommand",
+    } <= set(_ids("srv"))
     assert len(names) == len(INTERFACES)
 
 
@@ -53,8 +68,9 @@ def test_samples_set_every_field_away_from_its_default():
 @pytest.fixture(scope="module")
 def peer():
     script = Path(__file__).with_name("roundtrip_peer.py")
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+    proc = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     assert proc.stdout is not None
     line = proc.stdout.readline()
     assert "peer ready" in line, line + proc.stdout.read()
@@ -142,8 +158,9 @@ def test_action_round_trip(node, name):
     feedback = []
     try:
         assert client.wait_for_server(timeout_sec=TIMEOUT_S), f"action rt/action/{name} not found"
-        goal_future = client.send_goal_async(sample_message(cls.Goal, 1),
-                                             feedback_callback=lambda fb: feedback.append(fb.feedback))
+        goal_future = client.send_goal_async(
+            sample_message(cls.Goal, 1), feedback_callback=lambda fb: feedback.append(fb.feedback)
+        )
         accepted = threading.Event()
         goal_future.add_done_callback(lambda _: accepted.set())
         _wait(accepted, f"{name} goal acceptance")

@@ -92,8 +92,12 @@ def test_a_mask_rcnn_detection_carries_its_core_only_where_it_is_smaller_than_it
     cores = masks.clone()
     cores[0, 1, 1] = False  # trimmed
     cores[2] = False  # trimmed away: nothing to pose
-    result = {"labels": torch.tensor([4, 4, 2]), "scores": torch.tensor([0.9, 0.8, 0.7]),
-              "masks": masks, "core_masks": cores}
+    result = {
+        "labels": torch.tensor([4, 4, 2]),
+        "scores": torch.tensor([0.9, 0.8, 0.7]),
+        "masks": masks,
+        "core_masks": cores,
+    }
     classes = ("strut_tube", "end_fitting", "cross_frame", "corner_joint", "rivet")
     first, same, emptied = (detection_of(result, classes, k) for k in range(3))
     assert first.object_class == "corner_joint" and first.score == pytest.approx(0.9)

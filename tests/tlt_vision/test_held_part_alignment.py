@@ -65,8 +65,9 @@ def inspector():
     return PartInspector(cfg, load_mission(cfg.mission_path))
 
 
-def _corners_seen(placement, inspector, tmp_path, shift: float, dq=(0.0,) * 6, prior: bool = True
-                  ) -> list[np.ndarray]:
+def _corners_seen(
+    placement, inspector, tmp_path, shift: float, dq=(0.0,) * 6, prior: bool = True
+) -> list[np.ndarray]:
     """Certified corner joints (world) in both D405 frames, the frame ``shift`` m along its side,
     the arm ``dq`` (rad) off the placement configuration (a controller's tracking error)."""
     q = np.asarray(placement[0]) + np.asarray(dq)
@@ -85,8 +86,9 @@ def _corners_seen(placement, inspector, tmp_path, shift: float, dq=(0.0,) * 6, p
         return _pieces_seen(scene, inspector, "corner_joint", "bay", placement[2], prior)
 
 
-def _pieces_seen(scene, inspector, piece: str, pipeline: str, places: np.ndarray, prior: bool = False
-                 ) -> list[np.ndarray]:
+def _pieces_seen(
+    scene, inspector, piece: str, pipeline: str, places: np.ndarray, prior: bool = False
+) -> list[np.ndarray]:
     """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them: only
     the pieces within the gate's reach of ``places`` get a pose, a corner joint's fit also
     started from its place (``prior``)."""

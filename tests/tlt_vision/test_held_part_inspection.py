@@ -351,7 +351,7 @@ def test_a_fitting_the_frame_missed_is_found_by_a_closer_look_at_its_place(held_
     assert fitting in {o.object_id for o in obs}
     assert f"bay1/{kind} passed on a second look: 1 end fitting(s) in a closer look" in caplog.text
     # One region, about the fitting, of the frame's shape and the configured width at its depth.
-    (x0, y0, x1, y1), = asked
+    ((x0, y0, x1, y1),) = asked
     rows, cols = np.nonzero(missed.mask)
     assert x0 <= np.median(cols) < x1 and y0 <= np.median(rows) < y1
     assert abs((x1 - x0) / (y1 - y0) - frame.depth.shape[1] / frame.depth.shape[0]) < 0.05

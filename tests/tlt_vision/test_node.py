@@ -160,8 +160,9 @@ class Rig:
         for n in (self.vision, self.client):
             self.executor.add_node(n)
         self.stop = threading.Event()
-        self.spin = threading.Thread(target=spin, args=(self.executor, self.context, self.stop.is_set),
-                                     daemon=True)
+        self.spin = threading.Thread(
+            target=spin, args=(self.executor, self.context, self.stop.is_set), daemon=True
+        )
         self.spin.start()
 
     def call(self, srv_type, name: str, request):
@@ -266,12 +267,18 @@ def test_inspect_part_allows_for_the_noise_of_the_camera_asked_for(rig):
     _show(rig, "vertical_dispenser_x/2")
     with _exact_cameras(rig):
         noise["cameras"] = {"zed_2": 0.01}
-        other = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
-                         request(member_id=member, part_kind="vertical", camera="zed_left")).report
+        other = rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            request(member_id=member, part_kind="vertical", camera="zed_left"),
+        ).report
         assert other.passed, list(other.reasons)
         noise["cameras"] = {"zed_1": 0.01}
-        noisy = rig.call(InspectPart, ros_names.VISION_INSPECT_PART,
-                         request(member_id=member, part_kind="vertical", camera="zed_left")).report
+        noisy = rig.call(
+            InspectPart,
+            ros_names.VISION_INSPECT_PART,
+            request(member_id=member, part_kind="vertical", camera="zed_left"),
+        ).report
     assert not noisy.passed
     assert any("depth too noisy to certify" in r for r in noisy.reasons), list(noisy.reasons)
     fittings = [p for p in noisy.poses if p.object_class == "end_fitting"]
@@ -594,8 +601,12 @@ def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path,
     err = capsys.readouterr().err
     assert "segmentation.second_look_score" in err and "above min_score 0.3" in err
     wrong = vision_config()
-    wrong["segmentation"]["depth_split"] = {"jump": -0.02, "jump_per_m": 0.01, "min_area": 30,
-                                            "full_score_area": 200}
+    wrong["segmentation"]["depth_split"] = {
+        "jump": -0.02,
+        "jump_per_m": 0.01,
+        "min_area": 30,
+        "full_score_area": 200,
+    }
     path.write_text(__import__("yaml").safe_dump(wrong))
     assert main(["--config", str(path)]) == 2
     err = capsys.readouterr().err
@@ -714,9 +725,19 @@ def test_process_exits_cleanly_on_a_signal(sig, wait_for_service):
     # Its own service name: in this session other vision nodes came and went, and the graph may
     # still list theirs (a clean-clone run once signalled the process before it had started).
     service = f"/signal_test_{sig}_{time.monotonic_ns()}/inspect_part"
-    proc = subprocess.Popen([sys.executable, "-m", "tlt_vision.node", "--ros-args", "-r",
-                             f"{ros_names.VISION_INSPECT_PART}:={service}"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "tlt_vision.node",
+            "--ros-args",
+            "-r",
+            f"{ros_names.VISION_INSPECT_PART}:={service}",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         wait_for_service(proc, InspectPart, service)
         proc.send_signal(sig)

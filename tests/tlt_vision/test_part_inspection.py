@@ -97,12 +97,15 @@ def test_a_held_strut_not_the_struts_of_a_lifted_bay_joined_behind_it():
     args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.5, (0.15, 2.0), 20)
     assert _ids(select_part(*args, gap=0.03)) == ["bay1/diagonal/tube", "bay1/vertical/tube"], "the old rule"
     assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
-        "held/fitting_a", "held/fitting_b", "held/tube"
+        "held/fitting_a",
+        "held/fitting_b",
+        "held/tube",
     ]
     # A structure alone in view is still what there is to inspect (and fails for what it is).
     alone = [d for d in dets if not d.object_id.startswith("held/")]
     assert _ids(select_part(alone, depth, K, *args[3:], gap=0.03, anchors_per_part=1)) == [
-        "bay1/diagonal/tube", "bay1/vertical/tube"
+        "bay1/diagonal/tube",
+        "bay1/vertical/tube",
     ]
 
 
@@ -120,7 +123,10 @@ def test_a_held_tube_in_two_pieces_is_one_tube_and_its_far_fitting_within_reach(
     )
     args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.35, (0.15, 2.0), 20)
     assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
-        "held/fitting_a", "held/fitting_b", "held/tube_0", "held/tube_1"
+        "held/fitting_a",
+        "held/fitting_b",
+        "held/tube_0",
+        "held/tube_1",
     ]
 
 
@@ -147,5 +153,7 @@ def test_a_bent_tube_split_at_its_bend_is_one_tube():
     dets, depth = _frame(*held, racked)
     args = (dets, depth, K, ("strut_tube", "end_fitting"), "strut_tube", 0.55, (0.15, 2.0), 20)
     assert _ids(select_part(*args, gap=0.03, anchors_per_part=1)) == [
-        "held/fitting_a", "held/tube_0", "held/tube_1"
+        "held/fitting_a",
+        "held/tube_0",
+        "held/tube_1",
     ]

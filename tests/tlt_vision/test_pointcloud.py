@@ -32,14 +32,16 @@ def test_hand_computed_back_projection():
 
 
 def test_only_points_ahead_landing_in_the_image_have_pixels():
-    points = np.array([
-        [0.03, -0.01, 2.0],  # (u=3, v=0): in a 3x4 image
-        [-0.03, 0.01, 2.0],  # (0, 2)
-        [0.03, -0.01, -2.0],  # behind the camera, though it projects onto (0, 2)
-        [0.05, 0.0, 2.0],  # (4, 1): one column past the right edge
-        [0.0, -0.02, 2.0],  # (1.5, -1): above the top row
-        [0.0, 0.0, 0.0],  # at the optical centre
-    ])
+    points = np.array(
+        [
+            [0.03, -0.01, 2.0],  # (u=3, v=0): in a 3x4 image
+            [-0.03, 0.01, 2.0],  # (0, 2)
+            [0.03, -0.01, -2.0],  # behind the camera, though it projects onto (0, 2)
+            [0.05, 0.0, 2.0],  # (4, 1): one column past the right edge
+            [0.0, -0.02, 2.0],  # (1.5, -1): above the top row
+            [0.0, 0.0, 0.0],  # at the optical centre
+        ]
+    )
     uv, index = pixels_in_image(points, K, (3, 4))
     assert uv.tolist() == [[3, 0], [0, 2]]
     assert index.tolist() == [0, 1]
@@ -206,7 +208,8 @@ def test_a_rivet_whose_mask_took_in_its_neighbour_in_the_feeder_is_posed_from_it
     one_link = replace(options["detached"], links=())
     common = PartPipeline({"rivet": estimator}, **{**options, "detached": one_link})
     renderer = render_dataset.TwinRenderer(
-        render_dataset.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0))
+        render_dataset.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0)
+    )
     rivet = render_dataset.CLASSES.index("rivet") + 1
     results: dict[str, list[tuple[bool, float]]] = {"node": [], "common": []}
     try:

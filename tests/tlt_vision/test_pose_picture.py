@@ -37,9 +37,11 @@ def test_the_picture_shows_masks_and_certified_and_refused_poses(tmp_path):
     mask = np.zeros((480, 640), dtype=bool)
     mask[230:250, 360:380] = True
     detections = [Detection("rivet", mask), Detection("rivet", np.zeros_like(mask))]
-    observations = [Observation("rivet", _estimate("rivet", [0.1, 0.0, 1.0], True)),
-                    Observation("rivet", _estimate("rivet", [-0.2, 0.1, 1.0], False)),
-                    Observation("rivet", None, "empty mask: part not in view")]
+    observations = [
+        Observation("rivet", _estimate("rivet", [0.1, 0.0, 1.0], True)),
+        Observation("rivet", _estimate("rivet", [-0.2, 0.1, 1.0], False)),
+        Observation("rivet", None, "empty mask: part not in view"),
+    ]
     frame = PosedFrame("frame 0", rgb, K, detections, observations)
     classes = ["strut_tube", "end_fitting", "cross_frame", "corner_joint", "rivet"]
     path = write_pose_picture(tmp_path / "poses.png", [frame], MODELS, classes)

@@ -125,7 +125,7 @@ def test_a_capsule_takes_the_points_within_its_radius_of_its_segment():
 def test_a_jaw_turns_about_flange_x_by_its_grasp_joint_and_rides_the_slide():
     jaw = EeJaw("b", np.array([0.25, -0.045, 0.115]), np.array([0.25, 0.0, 0.17]), 0.007, True)
     flt = EeSelfFilter((), (jaw,), 0.0)
-    (start, end, radius), = flt.place(np.eye(4), np.eye(4), 0.1, {"a": 1.0, "b": np.pi / 2})
+    ((start, end, radius),) = flt.place(np.eye(4), np.eye(4), 0.1, {"a": 1.0, "b": np.pi / 2})
     np.testing.assert_allclose(start, [0.35, -0.045, 0.115], atol=1e-12)
     # (0, 0.045, 0.055) from the hinge turned a quarter about x: (0, -0.055, 0.045).
     np.testing.assert_allclose(end, [0.35, -0.1, 0.16], atol=1e-12)

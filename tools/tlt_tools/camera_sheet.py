@@ -65,12 +65,23 @@ def sheet(out: Path, cameras: Path = DEFAULT_CAMERAS, seed_frame: int = 0) -> Pa
     sigma = float(sensors.zed.depth.sigma(0.8))
     rows = [
         np.hstack([exact.rgb, rgb, lunar.rgb]),
-        np.hstack([_depth_colours(exact.depth, near, far), _depth_colours(depth, near, far),
-                   _difference_colours(depth - exact.depth, both, 3 * sigma)]),
+        np.hstack(
+            [
+                _depth_colours(exact.depth, near, far),
+                _depth_colours(depth, near, far),
+                _difference_colours(depth - exact.depth, both, 3 * sigma),
+            ]
+        ),
     ]
     image = np.vstack(rows)
-    labels = ("render", "ZED 2i model", "lunar sun", "depth", "through the model (holes black)",
-              f"difference, +-{3 * sigma * 1000:.0f} mm")
+    labels = (
+        "render",
+        "ZED 2i model",
+        "lunar sun",
+        "depth",
+        "through the model (holes black)",
+        f"difference, +-{3 * sigma * 1000:.0f} mm",
+    )
     for k, text in enumerate(labels):
         x, y = (k % 3) * WIDTH + 10, (k // 3) * HEIGHT + 28
         cv2.putText(image, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 0), 4, cv2.LINE_AA)

@@ -85,14 +85,22 @@ def ee_limit_switch(hardware: dict[str, Any], chain: DynamixelChain, source: str
     # Relative GPIO maps live beside the hardware configs, as the EE node reads them.
     gpio = load_gpio_config(CONFIG_DIR / ee["gpio_config"])
     if gpio.backend != "emulator":
-        raise ConfigError(source, "ee.gpio_config", f"{gpio.component} uses the {gpio.backend} backend, "
-                          "not the emulator: nothing to drive the limit switch")
+        raise ConfigError(
+            source,
+            "ee.gpio_config",
+            f"{gpio.component} uses the {gpio.backend} backend, "
+            "not the emulator: nothing to drive the limit switch",
+        )
     switch = next(spec for spec in gpio.lines if spec.name == ee["limit_switch_input"])
     width = next(j for j in cfg["joints"] if j["name"] == ee["width_joint"])
     direction = ee["calibration"]["direction"] * width["direction"]
     return WidthLimitSwitch(
-        chain.servo(width["id"]), EmulatedGpioChip(gpio.emulator_state), switch.line,
-        active_low=switch.active_low, lead_m_per_rev=width["lead_m_per_rev"], direction=direction,
+        chain.servo(width["id"]),
+        EmulatedGpioChip(gpio.emulator_state),
+        switch.line,
+        active_low=switch.active_low,
+        lead_m_per_rev=width["lead_m_per_rev"],
+        direction=direction,
     )
 
 

@@ -204,12 +204,7 @@ class Assembly:
     def update(self) -> None:
         """Apply grasp, gripper and slip rules to the present state (called after each step)."""
         q = self.d.qpos[self._watch_adr]
-        if (
-            self._pending
-            or self._slip_at
-            or (q >= self._watch_upper).any()
-            or (q < self._watch_lower).any()
-        ):
+        if self._pending or self._slip_at or (q >= self._watch_upper).any() or (q < self._watch_lower).any():
             self._set_watch_state(np.where(self._watch_state, q >= self._watch_low, q >= self._watch_thr))
             self._pending = False
             self._apply_rules()

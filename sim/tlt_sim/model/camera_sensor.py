@@ -86,8 +86,9 @@ class StereoDepth:
         """1 sigma of the depth error (m) at depth ``z`` (m), to first order."""
         return np.square(z) * self.disparity_sigma_px / (self.baseline_m * self.focal_px)
 
-    def apply(self, depth: np.ndarray, rgb: np.ndarray | None, fx: float,
-              rng: np.random.Generator) -> np.ndarray:
+    def apply(
+        self, depth: np.ndarray, rgb: np.ndarray | None, fx: float, rng: np.random.Generator
+    ) -> np.ndarray:
         """``depth`` (metres, 0 = none) rendered with focal length ``fx`` (pixels) as this camera
         measures it; ``rgb`` (the same view's exact colours) locates specular spots."""
         z = np.asarray(depth, dtype=np.float64)
@@ -167,8 +168,9 @@ class CameraSensor:
     image: Imager
     mount: MountError
 
-    def apply(self, rgb: np.ndarray | None, depth: np.ndarray | None, fx: float,
-              rng: np.random.Generator) -> tuple[np.ndarray | None, np.ndarray | None]:
+    def apply(
+        self, rgb: np.ndarray | None, depth: np.ndarray | None, fx: float, rng: np.random.Generator
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The exact ``rgb`` and ``depth`` of one frame (either may be None) as the camera gives
         them. The specular test reads the exact colours, before exposure and noise."""
         noisy_depth = None if depth is None else self.depth.apply(depth, rgb, fx, rng)
@@ -273,57 +275,79 @@ def _sensor(doc: dict[str, Any]) -> CameraSensor:
     d, i, m = doc["depth"], doc["image"], doc["mount"]
     return CameraSensor(
         depth=StereoDepth(
-            baseline_m=d["baseline_m"], focal_px=d["focal_px"],
-            disparity_sigma_px=d["disparity_sigma_px"], correlation_px=d["correlation_px"],
-            min_range_m=d["min_range_m"], max_range_m=d["max_range_m"], edge_px=d["edge_px"],
-            edge_jump=d["edge_jump"], occlusion=d["occlusion"], thin_px=d["thin_px"],
-            thin_dropout=d["thin_dropout"], specular_luminance=d["specular_luminance"],
-            specular_contrast=d["specular_contrast"], dropout=d["dropout"],
+            baseline_m=d["baseline_m"],
+            focal_px=d["focal_px"],
+            disparity_sigma_px=d["disparity_sigma_px"],
+            correlation_px=d["correlation_px"],
+            min_range_m=d["min_range_m"],
+            max_range_m=d["max_range_m"],
+            edge_px=d["edge_px"],
+            edge_jump=d["edge_jump"],
+            occlusion=d["occlusion"],
+            thin_px=d["thin_px"],
+            thin_dropout=d["thin_dropout"],
+            specular_luminance=d["specular_luminance"],
+            specular_contrast=d["specular_contrast"],
+            dropout=d["dropout"],
         ),
         image=Imager(
             exposure=(float(i["exposure"][0]), float(i["exposure"][1])),
-            white_balance_sigma=i["white_balance_sigma"], vignetting=i["vignetting"],
-            shot_noise=i["shot_noise"], read_noise=i["read_noise"],
+            white_balance_sigma=i["white_balance_sigma"],
+            vignetting=i["vignetting"],
+            shot_noise=i["shot_noise"],
+            read_noise=i["read_noise"],
         ),
         mount=MountError(m["translation_sigma_m"], m["rotation_sigma_deg"]),
     )
 
 
 def _exposure(value: Any) -> str | None:
-    if (len(value) != 2 or not all(isinstance(v, int | float) for v in value)
-            or not 0 < value[0] <= value[1] <= 8):
+    if (
+        len(value) != 2
+        or not all(isinstance(v, int | float) for v in value)
+        or not 0 < value[0] <= value[1] <= 8
+    ):
         return f"expected [low, high] gains with 0 < low <= high <= 8, got {value!r}"
     return None
 
 
 _CAMERA = {
-    "depth": Field("dict", schema={
-        "baseline_m": Field("float", minimum=0.001, maximum=1.0, doc="stereo baseline"),
-        "focal_px": Field("float", minimum=10.0, maximum=10000.0, doc="focal length, native pixels"),
-        "disparity_sigma_px": Field("float", minimum=0.0, maximum=5.0, doc="sub-pixel disparity error"),
-        "correlation_px": opt("float", 0.0, minimum=0.0, maximum=20.0),
-        "min_range_m": opt("float", 0.0, minimum=0.0, maximum=10.0),
-        "max_range_m": opt("float", 100.0, minimum=0.01, maximum=1000.0),
-        "edge_px": opt("float", 0.0, minimum=0.0, maximum=20.0),
-        "edge_jump": opt("float", 0.05, minimum=0.001, maximum=1.0),
-        "occlusion": opt("bool", True),
-        "thin_px": opt("float", 0.0, minimum=0.0, maximum=50.0),
-        "thin_dropout": opt("float", 0.0, minimum=0.0, maximum=1.0),
-        "specular_luminance": opt("float", 256.0, minimum=0.0, maximum=256.0),
-        "specular_contrast": opt("float", 30.0, minimum=0.0, maximum=255.0),
-        "dropout": opt("float", 0.0, minimum=0.0, maximum=0.5),
-    }),
-    "image": Field("dict", schema={
-        "exposure": opt("list", [1.0, 1.0], check=_exposure),
-        "white_balance_sigma": opt("float", 0.0, minimum=0.0, maximum=0.5),
-        "vignetting": opt("float", 0.0, minimum=0.0, maximum=0.9),
-        "shot_noise": opt("float", 0.0, minimum=0.0, maximum=5.0),
-        "read_noise": opt("float", 0.0, minimum=0.0, maximum=30.0),
-    }),
-    "mount": Field("dict", schema={
-        "translation_sigma_m": opt("float", 0.0, minimum=0.0, maximum=0.05),
-        "rotation_sigma_deg": opt("float", 0.0, minimum=0.0, maximum=5.0),
-    }),
+    "depth": Field(
+        "dict",
+        schema={
+            "baseline_m": Field("float", minimum=0.001, maximum=1.0, doc="stereo baseline"),
+            "focal_px": Field("float", minimum=10.0, maximum=10000.0, doc="focal length, native pixels"),
+            "disparity_sigma_px": Field("float", minimum=0.0, maximum=5.0, doc="sub-pixel disparity error"),
+            "correlation_px": opt("float", 0.0, minimum=0.0, maximum=20.0),
+            "min_range_m": opt("float", 0.0, minimum=0.0, maximum=10.0),
+            "max_range_m": opt("float", 100.0, minimum=0.01, maximum=1000.0),
+            "edge_px": opt("float", 0.0, minimum=0.0, maximum=20.0),
+            "edge_jump": opt("float", 0.05, minimum=0.001, maximum=1.0),
+            "occlusion": opt("bool", True),
+            "thin_px": opt("float", 0.0, minimum=0.0, maximum=50.0),
+            "thin_dropout": opt("float", 0.0, minimum=0.0, maximum=1.0),
+            "specular_luminance": opt("float", 256.0, minimum=0.0, maximum=256.0),
+            "specular_contrast": opt("float", 30.0, minimum=0.0, maximum=255.0),
+            "dropout": opt("float", 0.0, minimum=0.0, maximum=0.5),
+        },
+    ),
+    "image": Field(
+        "dict",
+        schema={
+            "exposure": opt("list", [1.0, 1.0], check=_exposure),
+            "white_balance_sigma": opt("float", 0.0, minimum=0.0, maximum=0.5),
+            "vignetting": opt("float", 0.0, minimum=0.0, maximum=0.9),
+            "shot_noise": opt("float", 0.0, minimum=0.0, maximum=5.0),
+            "read_noise": opt("float", 0.0, minimum=0.0, maximum=30.0),
+        },
+    ),
+    "mount": Field(
+        "dict",
+        schema={
+            "translation_sigma_m": opt("float", 0.0, minimum=0.0, maximum=0.05),
+            "rotation_sigma_deg": opt("float", 0.0, minimum=0.0, maximum=5.0),
+        },
+    ),
 }
 SCHEMA = {
     "format": Field("int", choices=(1,)),

@@ -86,13 +86,17 @@ def overview_camera(
 
 
 def write_png(
-    scene: Scene, camera: mujoco.MjvCamera | str, path: Path, width: int | None = None,
+    scene: Scene,
+    camera: mujoco.MjvCamera | str,
+    path: Path,
+    width: int | None = None,
     height: int | None = None,
 ) -> bool:
     """Render ``scene`` as it stands from ``camera`` to ``path``; False when it cannot be written."""
     view = scene.edu["render"]
-    frame = scene.render(camera, width or view["width"], height or view["height"], depth=False,
-                         segmentation=False)
+    frame = scene.render(
+        camera, width or view["width"], height or view["height"], depth=False, segmentation=False
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     return bool(cv2.imwrite(str(path), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)))
 

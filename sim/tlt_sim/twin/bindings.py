@@ -182,8 +182,14 @@ class URArmBinding:
         if abs(off[worst]) > self.pushed_rad:
             arm = self.joints[0].split("/", 1)[0]
             touching = ", ".join(f"{a} on {b}" for a, b in scene.truth.contacts_of(f"{arm}/")) or "none"
-            log.warning("%s held off its commanded joints (%s %.1f mrad) at %.3f s: contacts %s",
-                        arm, self.joints[worst], 1000 * off[worst], scene.time, touching)
+            log.warning(
+                "%s held off its commanded joints (%s %.1f mrad) at %.3f s: contacts %s",
+                arm,
+                self.joints[worst],
+                1000 * off[worst],
+                scene.time,
+                touching,
+            )
         self._reported = True  # one look per commanded pose
 
 
@@ -209,8 +215,11 @@ class EEGpioBinding:
             rising = (edges + 1) // 2 if on else edges // 2
             for _ in range(rising):
                 shot = scene.fire_rivet(self.arm, side)
-                outcome = ("joined " + ", ".join(shot.joined)) if shot.joined else (
-                    "loaded, nothing in reach" if shot.loaded else "dry shot")
+                outcome = (
+                    ("joined " + ", ".join(shot.joined))
+                    if shot.joined
+                    else ("loaded, nothing in reach" if shot.loaded else "dry shot")
+                )
                 self.shots.append((scene.time, side, outcome))
                 log.info("%s rivet gun %s fired at %.3f s: %s", self.arm, side, scene.time, outcome)
 

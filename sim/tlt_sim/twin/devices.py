@@ -128,11 +128,20 @@ class TwinDevices:
                 # wherever the shaft happens to stand.
                 self.scene.set_joint_state(joint, WIDTH_START_M)
                 scale = dataclasses.replace(scale, zero_ticks=scale.zero_ticks + 4096 * 3.25)
-            servo = DynamixelServo(j["id"], position_ticks=scale.zero_ticks + scale.direction
-                                   * self.scene.position(joint) * scale.ticks_per_unit)
+            servo = DynamixelServo(
+                j["id"],
+                position_ticks=scale.zero_ticks
+                + scale.direction * self.scene.position(joint) * scale.ticks_per_unit,
+            )
             servos.append(servo)
-            self._bind_servo(joint, servo, scale.to_ticks, scale.from_ticks,
-                             lambda s=servo: float(s.get("goal_position")), BLOCK_TOLERANCE[j["unit"]])
+            self._bind_servo(
+                joint,
+                servo,
+                scale.to_ticks,
+                scale.from_ticks,
+                lambda s=servo: float(s.get("goal_position")),
+                BLOCK_TOLERANCE[j["unit"]],
+            )
         self.chains[component] = DynamixelChain(servos, clock=None)
         self.driver_periods[component] = 1.0 / cfg["rate_hz"]
 
@@ -145,8 +154,14 @@ class TwinDevices:
             joint = a["name"]
             act = MightyZapActuator(a["id"], position=self.scene.position(joint) * per_m)
             actuators.append(act)
-            self._bind_servo(joint, act, lambda m: m * per_m, lambda t: t / per_m,
-                             lambda s=act: float(s.get(ADDR_GOAL_POSITION)), BLOCK_TOLERANCE["m"])
+            self._bind_servo(
+                joint,
+                act,
+                lambda m: m * per_m,
+                lambda t: t / per_m,
+                lambda s=act: float(s.get(ADDR_GOAL_POSITION)),
+                BLOCK_TOLERANCE["m"],
+            )
         self.chains[component] = MightyZapChain(actuators, clock=None)
         self.driver_periods[component] = 1.0 / cfg["rate_hz"]
 
@@ -175,8 +190,10 @@ class TwinDevices:
         gpio = load_gpio_config(self.hardware_dir / ee["gpio_config"])
         lines = {spec.name: spec for spec in gpio.lines}
         switch = lines[ee["limit_switch_input"]]
-        guns = {lines[name].line: ("ab"[i], lines[name].active_low)
-                for i, name in enumerate(ee["rivet_gun_outputs"])}
+        guns = {
+            lines[name].line: ("ab"[i], lines[name].active_low)
+            for i, name in enumerate(ee["rivet_gun_outputs"])
+        }
         # The state file lives in the run folder, as the EE driver resolves it.
         state = self.run_dir / Path(gpio.emulator_state).name
         binding = EEGpioBinding(EmulatedGpioChip(state), ee["ars"], switch.line, switch.active_low, guns)

@@ -45,20 +45,28 @@ class FaultSchedule:
             chain = devices.chains[fault["link"]]
             ids = chain.servos if isinstance(chain, DynamixelChain) else chain.actuators
             if fault["servo_id"] not in ids:
-                raise ValueError(f"servo_failure: {fault['link']} has no servo {fault['servo_id']} "
-                                 f"(ids {sorted(ids)})")
-            self._add(fault["at_s"], f"{fault['link']} servo {fault['servo_id']} fails",
-                      lambda f=fault: self._fail_servo(f["link"], f["servo_id"]))
+                raise ValueError(
+                    f"servo_failure: {fault['link']} has no servo {fault['servo_id']} (ids {sorted(ids)})"
+                )
+            self._add(
+                fault["at_s"],
+                f"{fault['link']} servo {fault['servo_id']} fails",
+                lambda f=fault: self._fail_servo(f["link"], f["servo_id"]),
+            )
         for fault in device_faults.get("limit_switch_stuck", []):
             state = "pressed" if fault["pressed"] else "released"
-            self._add(fault["at_s"], f"lifter limit switch {fault['switch']} stuck {state}",
-                      lambda f=fault: devices.firmware.force_switch(f["switch"], f["pressed"]))
+            self._add(
+                fault["at_s"],
+                f"lifter limit switch {fault['switch']} stuck {state}",
+                lambda f=fault: devices.firmware.force_switch(f["switch"], f["pressed"]),
+            )
         for fault in device_faults.get("link_drop", []):
             link, duration = fault["link"], fault.get("duration_s", math.inf)
             self._add(fault["at_s"], f"{link} link drops", lambda link=link, d=duration: self._drop(link, d))
             if math.isfinite(duration) and link != "lifter":  # the firmware restores itself on sim time
-                self._add(fault["at_s"] + duration, f"{link} link back",
-                          lambda link=link: self._restore(link))
+                self._add(
+                    fault["at_s"] + duration, f"{link} link back", lambda link=link: self._restore(link)
+                )
 
     def _add(self, at_s: float, what: str, action: Callable[[], None]) -> None:
         heapq.heappush(self._events, _Event(at_s, len(self._events), what, action))

@@ -61,23 +61,38 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mission", type=Path, help="mission YAML (default: the one edu.yaml names)")
     p.add_argument("--scenario", help="scenario YAML (config/twin/scenarios/); empty for none")
     p.add_argument("--settings", type=Path, default=DEFAULT_SETTINGS, help="run settings (run.yaml)")
-    p.add_argument("--cameras", type=Path, default=DEFAULT_CAMERAS,
-                   help="what the cameras make of the render (cameras.yaml)")
-    p.add_argument("--lighting", help="a preset of config/twin/lighting.yaml (lunar: a low, hard sun), or "
-                   "`model` for the model's own lights; default: the file's `lighting`")
-    p.add_argument("--camera-model", choices=("realistic", "exact"),
-                   help="exact: the render's colours and depth, cameras exactly on their mounts (for "
-                        "diagnosis); default: cameras.yaml's `realistic`")
+    p.add_argument(
+        "--cameras",
+        type=Path,
+        default=DEFAULT_CAMERAS,
+        help="what the cameras make of the render (cameras.yaml)",
+    )
+    p.add_argument(
+        "--lighting",
+        help="a preset of config/twin/lighting.yaml (lunar: a low, hard sun), or "
+        "`model` for the model's own lights; default: the file's `lighting`",
+    )
+    p.add_argument(
+        "--camera-model",
+        choices=("realistic", "exact"),
+        help="exact: the render's colours and depth, cameras exactly on their mounts (for "
+        "diagnosis); default: cameras.yaml's `realistic`",
+    )
     p.add_argument("--rtf", type=float, help="real-time factor (0: as fast as possible)")
-    p.add_argument("--run-dir", type=Path,
-                   help="where device links go (default $TLT_RUN_DIR or /tmp/tlt-run)")
+    p.add_argument(
+        "--run-dir", type=Path, help="where device links go (default $TLT_RUN_DIR or /tmp/tlt-run)"
+    )
     p.add_argument("--ur-x-host", help="loopback address of ARS X's UR controller")
     p.add_argument("--ur-y-host", help="loopback address of ARS Y's UR controller")
     p.add_argument("--camera-rate", type=float, help="camera frames per simulated second")
     p.add_argument("--final-png", type=Path, help="on the way out, a PNG of the scene as it stands")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this much sim time (0: never)")
-    p.add_argument("--viewer", action="store_true", default=None,
-                   help="open MuJoCo's viewer window on the running twin (needs a display)")
+    p.add_argument(
+        "--viewer",
+        action="store_true",
+        default=None,
+        help="open MuJoCo's viewer window on the running twin (needs a display)",
+    )
     return p
 
 
@@ -166,8 +181,13 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         clock.publish(scene.time)
         ready.write_text(f"{os.getpid()}\n")
-        log.info("links up in %s (rtf %s, scenario %s, %s cameras)", run_dir, settings.rtf or "max",
-                 scene.scenario.name, "realistic" if sensors.realistic else "exact")
+        log.info(
+            "links up in %s (rtf %s, scenario %s, %s cameras)",
+            run_dir,
+            settings.rtf or "max",
+            scene.scenario.name,
+            "realistic" if sensors.realistic else "exact",
+        )
         # Hand the interpreter lock to a device thread quickly when one has bytes to answer.
         share_the_interpreter_quickly()
         pacer = Pacer(settings.rtf, min_sleep_s=YIELD_S)
@@ -186,8 +206,13 @@ def main(argv: list[str] | None = None) -> int:
             if args.duration and t >= args.duration - 1e-9:
                 break
         wall = time.monotonic() - wall0
-        log.info("stopped at %.2f s of sim time after %.2f s of wall time (%.2fx), %d waits for drivers",
-                 scene.time, wall, scene.time / wall if wall > 0 else 0.0, twin.holds)
+        log.info(
+            "stopped at %.2f s of sim time after %.2f s of wall time (%.2fx), %d waits for drivers",
+            scene.time,
+            wall,
+            scene.time / wall if wall > 0 else 0.0,
+            twin.holds,
+        )
         if args.final_png:
             _write_final_png(scene, args.final_png)
     finally:

@@ -88,8 +88,9 @@ class CameraStreams:
                 for stream in topics.CAMERA_STREAMS
             }
             self._next[camera] = 0.0
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
         self._labels = node.create_publisher(String, topics.SEGMENTATION_LABELS, latched)
         self._labels_sent = False
         # The renderers every camera's frames need, made now, before the device links are served:
@@ -103,8 +104,9 @@ class CameraStreams:
 
     def _publish_labels(self) -> None:
         labels = self.scene.renderer(antialias=self.settings.camera_antialias).labels
-        self._labels.publish(String(data=json.dumps(
-            {"instances": labels.instance_names, "classes": labels.classes})))
+        self._labels.publish(
+            String(data=json.dumps({"instances": labels.instance_names, "classes": labels.classes}))
+        )
         self._labels_sent = True
 
     def publish_due(self, t: float) -> None:
@@ -121,13 +123,20 @@ class CameraStreams:
             # The depth's specular holes are found on the colours: rendered with the depth (one
             # cheap pass without multisampling) when nobody asks for the colours.
             colour = "rgb" in wanted or (realistic and "depth" in wanted)
-            frame = self.scene.render(camera, width, height, depth="depth" in wanted,
-                                      segmentation="segmentation" in wanted, rgb=colour,
-                                      antialias=self.settings.camera_antialias and "rgb" in wanted)
+            frame = self.scene.render(
+                camera,
+                width,
+                height,
+                depth="depth" in wanted,
+                segmentation="segmentation" in wanted,
+                rgb=colour,
+                antialias=self.settings.camera_antialias and "rgb" in wanted,
+            )
             if realistic:
                 rng = self.sensors.frame_rng(camera, self.renders[camera])
                 rgb, depth = self.sensors.for_camera(camera).apply(
-                    frame.rgb, frame.depth, frame.intrinsics.fx, rng)
+                    frame.rgb, frame.depth, frame.intrinsics.fx, rng
+                )
                 frame = dataclasses.replace(frame, rgb=rgb, depth=depth)
             self.renders[camera] += 1
             frame_id = topics.camera_frame(camera)
@@ -137,7 +146,8 @@ class CameraStreams:
                 pubs["depth"].publish(_image(frame.depth.astype(np.float32), "32FC1", 4 * width, t, frame_id))
             if "segmentation" in wanted:
                 pubs["segmentation"].publish(
-                    _image(frame.segmentation.astype(np.int32), "32SC1", 4 * width, t, frame_id))
+                    _image(frame.segmentation.astype(np.int32), "32SC1", 4 * width, t, frame_id)
+                )
             pubs["camera_info"].publish(_camera_info(frame.intrinsics, t, frame_id))
 
 
@@ -198,7 +208,8 @@ class GroundTruth:
             msg.header.frame_id = topics.WORLD_FRAME
             msg.child_frame_id = name
             msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (
-                float(v) for v in pos)
+                float(v) for v in pos
+            )
             q = msg.transform.rotation
             q.x, q.y, q.z, q.w = rotation_to_quaternion(rot)
             out.transforms.append(msg)

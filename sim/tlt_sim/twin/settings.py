@@ -32,8 +32,13 @@ SCHEMA = {
     "sync_period_s": Field("float", minimum=0.001, maximum=0.05, doc="sim seconds per emulator exchange"),
     "rtf": opt("float", 1.0, minimum=0.0, maximum=1000.0, doc="real-time factor; 0 = as fast as possible"),
     "driver_wait_s": opt("float", 0.5, minimum=0.0, maximum=5.0, doc="wall s to wait for a late driver"),
-    "driver_lead_s": opt("float", 0.05, minimum=0.0, maximum=1.0,
-                         doc="sim s a serial driver may lag before the twin waits for it"),
+    "driver_lead_s": opt(
+        "float",
+        0.05,
+        minimum=0.0,
+        maximum=1.0,
+        doc="sim s a serial driver may lag before the twin waits for it",
+    ),
     "ur_hosts": Field(
         "dict",
         schema={"ur_x": Field("str", check=_loopback), "ur_y": Field("str", check=_loopback)},

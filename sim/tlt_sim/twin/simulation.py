@@ -140,9 +140,9 @@ class Twin:
         self._note_traffic()
         t_next = self.scene.time + self.settings.sync_period_s
         late = [
-            link for link in self._links.values()
-            if link.count > 0 and link.given_up_on != link.count
-            and t_next > link.since + link.lead_s + 1e-9
+            link
+            for link in self._links.values()
+            if link.count > 0 and link.given_up_on != link.count and t_next > link.since + link.lead_s + 1e-9
         ]
         if not late:
             return False
@@ -155,8 +155,9 @@ class Twin:
             if clock() >= deadline:
                 for link in waiting:
                     link.given_up_on = link.count
-                    log.warning("%s driver silent for %.2f s of wall time: not waiting for it",
-                                link.name, wait_s)
+                    log.warning(
+                        "%s driver silent for %.2f s of wall time: not waiting for it", link.name, wait_s
+                    )
                 break
             sleep(0.0005)
         self.holds += 1

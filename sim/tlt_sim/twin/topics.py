@@ -21,5 +21,12 @@ def camera_frame(camera: str) -> str:
     return f"{camera}_optical"
 
 
-__all__ = ["CAMERA_STREAMS", "CLOCK", "GROUND_TRUTH", "SEGMENTATION_LABELS", "WORLD_FRAME", "camera_frame",
-           "camera_topic"]
+__all__ = [
+    "CAMERA_STREAMS",
+    "CLOCK",
+    "GROUND_TRUTH",
+    "SEGMENTATION_LABELS",
+    "WORLD_FRAME",
+    "camera_frame",
+    "camera_topic",
+]

@@ -81,8 +81,10 @@ class URControllerHost:
         self._positions = ctx.Array("d", list(config.q0), lock=False)
         pipe, child = ctx.Pipe()
         process = ctx.Process(
-            target=_serve, args=(asdict(config), child, self._time, self._positions, log_level),
-            daemon=True, name=f"ur-controller-{config.host}",
+            target=_serve,
+            args=(asdict(config), child, self._time, self._positions, log_level),
+            daemon=True,
+            name=f"ur-controller-{config.host}",
         )
         self._calls = PipedCalls(process, pipe, f"the UR controller at {config.host}")
         self._started = False

@@ -402,6 +402,7 @@ class Planner:
         self, start: np.ndarray, goal: np.ndarray, vias: list[np.ndarray]
     ) -> list[tuple[str, list[np.ndarray]]]:
         """start -> via -> goal through each collision-free via configuration, shortest first."""
+
         def length(v: np.ndarray) -> float:
             return float(np.max(np.abs(v - start)) + np.max(np.abs(goal - v)))
 
@@ -543,9 +544,11 @@ class Planner:
                     f" {self.dense_check_resolution} rad, and re-planning it failed: {exc.reason}",
                 ) from exc
             failed = next(
-                (f"re-planned segment {_fmt(x)} -> {_fmt(y)} fails the dense re-check"
-                 for x, y in pairwise(repair)
-                 if self.scene.segment_collision(x, y, self.dense_check_resolution) is not None),
+                (
+                    f"re-planned segment {_fmt(x)} -> {_fmt(y)} fails the dense re-check"
+                    for x, y in pairwise(repair)
+                    if self.scene.segment_collision(x, y, self.dense_check_resolution) is not None
+                ),
                 "",
             )
             if not failed:

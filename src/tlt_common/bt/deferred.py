@@ -40,8 +40,10 @@ class DeferredSequence(py_trees.composites.Sequence):
             made = make()
             sequence = isinstance(made, py_trees.composites.Sequence) and made.memory
             if not sequence or made.name != self.name:
-                raise TypeError(f"expected a Sequence with memory named '{self.name}', got "
-                                f"{type(made).__name__} '{made.name}'")
+                raise TypeError(
+                    f"expected a Sequence with memory named '{self.name}', got "
+                    f"{type(made).__name__} '{made.name}'"
+                )
         except Exception as exc:  # reported when ticked, as any failing step is
             self.error = f"cannot build '{self.name}': {exc}"
             return True

@@ -72,8 +72,10 @@ def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
     sends to), when set."""
     chosen = Path(path or os.environ.get(ENV_PATH) or DEFAULT_PATH)
     conf = load_validated(chosen, SCHEMA)
-    for var, keys in ((ENV_CRS_PORT, (("crs", "bind_port"), ("gsw", "crs_port"))),
-                      (ENV_GSW_PORT, (("crs", "gsw_port"), ("gsw", "bind_port")))):
+    for var, keys in (
+        (ENV_CRS_PORT, (("crs", "bind_port"), ("gsw", "crs_port"))),
+        (ENV_GSW_PORT, (("crs", "gsw_port"), ("gsw", "bind_port"))),
+    ):
         text = os.environ.get(var, "")
         if not text:
             continue
@@ -81,8 +83,10 @@ def load_link_config(path: str | Path | None = None) -> dict[str, Any]:
             raise ConfigError(f"${var}", "", f"{text!r} is not a UDP port")
         for section, key in keys:
             conf[section][key] = int(text)
-    for var, keys in ((ENV_CRS_HOST, (("crs", "bind_host"), ("gsw", "crs_host"))),
-                      (ENV_GSW_HOST, (("crs", "gsw_host"), ("gsw", "bind_host")))):
+    for var, keys in (
+        (ENV_CRS_HOST, (("crs", "bind_host"), ("gsw", "crs_host"))),
+        (ENV_GSW_HOST, (("crs", "gsw_host"), ("gsw", "bind_host"))),
+    ):
         text = os.environ.get(var, "").strip()
         if not text:
             continue

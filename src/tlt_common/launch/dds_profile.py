@@ -39,13 +39,16 @@ def render_profile(template: str | Path, peers: Iterable[str], out: str | Path) 
         raise ConfigError(str(template), "", f"cannot read the Fast DDS profile: {exc}") from None
     root = tree.getroot()
     if root.tag != _q("profiles"):
-        raise ConfigError(str(template), "profiles", f"expected a <profiles xmlns=\"{NS}\"> root")
+        raise ConfigError(str(template), "profiles", f'expected a <profiles xmlns="{NS}"> root')
     participants = root.findall(_q("participant"))
     default = [p for p in participants if p.get("is_default_profile") == "true"] or participants[:1]
     builtin = default[0].find(f"{_q('rtps')}/{_q('builtin')}") if default else None
     if builtin is None:
-        raise ConfigError(str(template), "participant.rtps.builtin",
-                          "a default participant profile with <rtps><builtin> is needed for the peers")
+        raise ConfigError(
+            str(template),
+            "participant.rtps.builtin",
+            "a default participant profile with <rtps><builtin> is needed for the peers",
+        )
     for old in builtin.findall(_q("initialPeersList")):
         builtin.remove(old)
     peers_list = ET.SubElement(builtin, _q("initialPeersList"))

@@ -271,8 +271,10 @@ class HostNetwork:
         except HostsError as exc:
             self.teardown()
             if _looks_unprivileged(str(exc)):
-                raise HostsUnavailable(f"cannot create network namespaces: {exc} "
-                                       "(needs root, or CAP_NET_ADMIN and CAP_SYS_ADMIN)") from exc
+                raise HostsUnavailable(
+                    f"cannot create network namespaces: {exc} "
+                    "(needs root, or CAP_NET_ADMIN and CAP_SYS_ADMIN)"
+                ) from exc
             raise
 
     def teardown(self) -> None:
@@ -315,8 +317,10 @@ class HostNetwork:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 handle.close()
-                raise HostsError(f"hosts run {self.run!r} is in use by another process (lock {path}); "
-                                 "set TLT_HOSTS_RUN to use another name") from None
+                raise HostsError(
+                    f"hosts run {self.run!r} is in use by another process (lock {path}); "
+                    "set TLT_HOSTS_RUN to use another name"
+                ) from None
             # The previous holder removes the file at teardown: a lock on a file that is no longer
             # the one at the path guards nothing, so take the new one.
             try:
@@ -334,8 +338,21 @@ class HostNetwork:
         _ip("netns", "add", switch)
         # Without snooping every multicast frame is "unknown", and mcast_flood decides it per port.
         snooping = "1" if self.multicast else "0"
-        _ip("-n", switch, "link", "add", "br0", "type", "bridge", "forward_delay", "0", "stp_state", "0",
-            "mcast_snooping", snooping)
+        _ip(
+            "-n",
+            switch,
+            "link",
+            "add",
+            "br0",
+            "type",
+            "bridge",
+            "forward_delay",
+            "0",
+            "stp_state",
+            "0",
+            "mcast_snooping",
+            snooping,
+        )
         _ip("-n", switch, "link", "set", "br0", "up")
         for host in self.hosts:
             ns = namespace_name(self.run, host.name)
@@ -394,8 +411,9 @@ def check_addresses(hosts: Sequence[HostSpec]) -> None:
             if iface.network != network:
                 raise HostsError(f"host {host.name!r}: {address} is not on {network}, the hosts' network")
             if str(iface.ip) in seen:
-                raise HostsError(f"host {host.name!r}: {iface.ip} is already the address of "
-                                 f"{seen[str(iface.ip)]!r}")
+                raise HostsError(
+                    f"host {host.name!r}: {iface.ip} is already the address of {seen[str(iface.ip)]!r}"
+                )
             seen[str(iface.ip)] = host.name
 
 
@@ -410,4 +428,3 @@ def unavailable_reason(run: str | None = None) -> str | None:
     finally:
         probe.teardown()
     return None
-

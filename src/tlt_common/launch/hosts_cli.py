@@ -27,8 +27,9 @@ def main(argv: list[str] | None = None) -> int:
     success, 1 with the reason on stderr otherwise.
     """
     parser = argparse.ArgumentParser(prog="tlt hosts", description="Emulated hosts of a launch set.")
-    parser.add_argument("--run", default=None,
-                        help="run name (default: $TLT_HOSTS_RUN, else d<ROS_DOMAIN_ID>)")
+    parser.add_argument(
+        "--run", default=None, help="run name (default: $TLT_HOSTS_RUN, else d<ROS_DOMAIN_ID>)"
+    )
     sub = parser.add_subparsers(dest="action", required=True)
     sub.add_parser("check", help="can this machine create network namespaces?")
     sub.add_parser("list", help="the run's namespaces")
@@ -49,8 +50,9 @@ def main(argv: list[str] | None = None) -> int:
         elif args.action in ("cut", "heal"):
             present = run_namespaces(run)
             if namespace_name(run, args.host) not in present:
-                raise HostsError(f"no host {args.host!r} in run {run!r} "
-                                 f"(namespaces: {', '.join(present) or 'none'})")
+                raise HostsError(
+                    f"no host {args.host!r} in run {run!r} (namespaces: {', '.join(present) or 'none'})"
+                )
             set_link(run, args.host, args.action == "heal")
             print(f"{args.host}: link {'up' if args.action == 'heal' else 'down'}")
         else:

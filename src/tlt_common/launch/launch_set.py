@@ -67,17 +67,43 @@ def _name_check(value: str) -> str | None:
     return None
 
 
-_SCALAR = Field("any", check=lambda v: None if isinstance(v, str | int | float | bool) else
-                f"expected a string, number or boolean, got {type(v).__name__}")
+_SCALAR = Field(
+    "any",
+    check=lambda v: (
+        None
+        if isinstance(v, str | int | float | bool)
+        else f"expected a string, number or boolean, got {type(v).__name__}"
+    ),
+)
 
 PROCESS_SCHEMA: dict[str, Field] = {
     "name": Field("str", check=_name_check, doc="the process name, unique in the set"),
     "executable": Field("str", doc="program to run"),
-    "args": opt("list", [], item=Field("any", check=lambda v: None if isinstance(v, str | int | float)
-                                       else f"expected a string or number, got {type(v).__name__}")),
+    "args": opt(
+        "list",
+        [],
+        item=Field(
+            "any",
+            check=lambda v: (
+                None
+                if isinstance(v, str | int | float)
+                else f"expected a string or number, got {type(v).__name__}"
+            ),
+        ),
+    ),
     "node_name": opt("str", None, check=_name_check),
-    "parameters": opt("map", {}, item=Field("any", check=lambda v: None if isinstance(
-        v, str | int | float | bool | list) else f"expected a scalar or list, got {type(v).__name__}")),
+    "parameters": opt(
+        "map",
+        {},
+        item=Field(
+            "any",
+            check=lambda v: (
+                None
+                if isinstance(v, str | int | float | bool | list)
+                else f"expected a scalar or list, got {type(v).__name__}"
+            ),
+        ),
+    ),
     "env": opt("map", {}, item=_SCALAR),
     "cwd": opt("str", None),
     "restart": opt("str", "never", choices=RESTART_POLICIES),
@@ -87,11 +113,20 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "on_exit": opt("str", "continue", choices=ON_EXIT),
     "wait_for_path": opt("str", None, doc="start once this path exists (e.g. a device link)"),
     "wait_timeout_s": opt("float", 30.0, minimum=0.0),
-    "startup_s": opt("float", 3.0, minimum=0.0,
-                     doc="an exit within this long after start is reported as a failure to start"),
+    "startup_s": opt(
+        "float",
+        3.0,
+        minimum=0.0,
+        doc="an exit within this long after start is reported as a failure to start",
+    ),
     "host": opt("str", None, doc="the emulated host (a name under hosts:) the process runs in"),
-    "nice": opt("int", 0, minimum=0, maximum=19,
-                doc="niceness the process starts with: it yields the CPU to processes of lower niceness"),
+    "nice": opt(
+        "int",
+        0,
+        minimum=0,
+        maximum=19,
+        doc="niceness the process starts with: it yields the CPU to processes of lower niceness",
+    ),
 }
 
 HOST_SCHEMA: dict[str, Field] = {
@@ -107,8 +142,12 @@ LAUNCH_SET_SCHEMA: dict[str, Field] = {
     "env": opt("map", {}, item=_SCALAR),
     "include": opt("list", [], item=Field("str"), doc="launch sets whose processes join this one"),
     "processes": opt("list", [], item=Field("dict", schema=PROCESS_SCHEMA)),
-    "hosts": opt("list", [], item=Field("dict", schema=HOST_SCHEMA),
-                 doc="emulated hosts (network namespaces) the processes can be placed in"),
+    "hosts": opt(
+        "list",
+        [],
+        item=Field("dict", schema=HOST_SCHEMA),
+        doc="emulated hosts (network namespaces) the processes can be placed in",
+    ),
     "placement": opt("map", {}, item=Field("str"), doc="process name -> host, for included processes"),
     "dds_profile": opt("str", None, doc="Fast DDS profile template for processes in hosts"),
     "host_multicast": opt("bool", False, doc="whether the hosts' emulated switch forwards multicast"),
@@ -183,8 +222,9 @@ def _ros_value(value: Any) -> str:
     return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
-def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
-                    _including: tuple[Path, ...] = ()) -> LaunchSet:
+def load_launch_set(
+    path: str | Path, base_env: dict[str, str] | None = None, _including: tuple[Path, ...] = ()
+) -> LaunchSet:
     """Load and fully resolve a launch set; raise :class:`ConfigError` on any problem."""
     path = Path(path)
     source = str(path)
@@ -194,12 +234,18 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
     if _including:
         for key in ("hosts", "placement", "dds_profile", "host_multicast"):
             if data[key]:
-                raise ConfigError(source, key, f"only the top-level launch set may declare {key} "
-                                  f"(this set is included by {_including[-1]})")
+                raise ConfigError(
+                    source,
+                    key,
+                    f"only the top-level launch set may declare {key} "
+                    f"(this set is included by {_including[-1]})",
+                )
     base = dict(os.environ if base_env is None else base_env)
     base.pop("LAUNCH_DIR", None)
-    set_env = {k: _expand(str(v), {**base, "LAUNCH_DIR": str(path.resolve().parent)}, source, f"env.{k}")
-               for k, v in data["env"].items()}
+    set_env = {
+        k: _expand(str(v), {**base, "LAUNCH_DIR": str(path.resolve().parent)}, source, f"env.{k}")
+        for k, v in data["env"].items()
+    }
 
     specs: list[ProcessSpec] = []
     for i, name in enumerate(data["include"]):
@@ -236,26 +282,32 @@ def load_launch_set(path: str | Path, base_env: dict[str, str] | None = None,
         cwd = proc["cwd"] and _expand(proc["cwd"], variables, source, f"{key}.cwd")
         if cwd and not Path(cwd).is_dir():
             raise ConfigError(source, f"{key}.cwd", f"{cwd} is not a directory")
-        specs.append(ProcessSpec(
-            name=proc["name"],
-            argv=tuple(argv),
-            env={**set_env, **proc_env},
-            cwd=cwd,
-            restart=proc["restart"],
-            max_restarts=proc["max_restarts"],
-            restart_delay_s=proc["restart_delay_s"],
-            required=proc["required"],
-            on_exit=proc["on_exit"],
-            wait_for_path=proc["wait_for_path"] and _expand(
-                proc["wait_for_path"], variables, source, f"{key}.wait_for_path"),
-            wait_timeout_s=proc["wait_timeout_s"],
-            startup_s=proc["startup_s"],
-            host=proc["host"],
-            nice=proc["nice"],
-        ))
+        specs.append(
+            ProcessSpec(
+                name=proc["name"],
+                argv=tuple(argv),
+                env={**set_env, **proc_env},
+                cwd=cwd,
+                restart=proc["restart"],
+                max_restarts=proc["max_restarts"],
+                restart_delay_s=proc["restart_delay_s"],
+                required=proc["required"],
+                on_exit=proc["on_exit"],
+                wait_for_path=proc["wait_for_path"]
+                and _expand(proc["wait_for_path"], variables, source, f"{key}.wait_for_path"),
+                wait_timeout_s=proc["wait_timeout_s"],
+                startup_s=proc["startup_s"],
+                host=proc["host"],
+                nice=proc["nice"],
+            )
+        )
     if _including:
-        return LaunchSet(name=data["name"] or path.stem, source=source,
-                         grace_period_s=data["grace_period_s"], processes=tuple(specs))
+        return LaunchSet(
+            name=data["name"] or path.stem,
+            source=source,
+            grace_period_s=data["grace_period_s"],
+            processes=tuple(specs),
+        )
     hosts = _hosts(data, source)
     specs = _place(specs, data["placement"], hosts, source)
     dds_profile = None
@@ -290,8 +342,9 @@ def _hosts(data: dict[str, Any], source: str) -> tuple[HostSpec, ...]:
     return hosts
 
 
-def _place(specs: list[ProcessSpec], placement: dict[str, str], hosts: tuple[HostSpec, ...],
-           source: str) -> list[ProcessSpec]:
+def _place(
+    specs: list[ProcessSpec], placement: dict[str, str], hosts: tuple[HostSpec, ...], source: str
+) -> list[ProcessSpec]:
     """Apply ``placement`` and check that every host a process names is declared."""
     names = {spec.name for spec in specs}
     declared = [h.name for h in hosts]
@@ -300,16 +353,15 @@ def _place(specs: list[ProcessSpec], placement: dict[str, str], hosts: tuple[Hos
         if process not in names:
             raise ConfigError(source, f"placement.{process}", f"no process {process!r} in this set")
         if host not in declared:
-            raise ConfigError(source, f"placement.{process}",
-                              f"no host {host!r} {undeclared}")
+            raise ConfigError(source, f"placement.{process}", f"no host {host!r} {undeclared}")
     placed = []
     for i, spec in enumerate(specs):
         placed_host = placement.get(spec.name, spec.host)
         if spec.host and placed_host != spec.host:
-            raise ConfigError(source, f"placement.{spec.name}",
-                              f"{spec.name} already runs on host {spec.host!r}")
+            raise ConfigError(
+                source, f"placement.{spec.name}", f"{spec.name} already runs on host {spec.host!r}"
+            )
         if placed_host and placed_host not in declared:
-            raise ConfigError(source, f"processes[{i}].host",
-                              f"no host {placed_host!r} {undeclared}")
+            raise ConfigError(source, f"processes[{i}].host", f"no host {placed_host!r} {undeclared}")
         placed.append(dataclasses.replace(spec, host=placed_host))
     return placed

@@ -71,6 +71,7 @@ def _preexec(namespace: str | None, nice: int) -> Callable[[], None]:
             enter_namespace(namespace)
         if nice:
             _lower_priority(nice)
+
     return preexec
 
 
@@ -122,8 +123,10 @@ class Supervisor:
         """Run until done; return the exit code (non-zero when a required process died)."""
         installed = self._install_signal_handlers()
         try:
-            self._say(f"launch set '{self.launch_set.name}' ({self.launch_set.source}): "
-                      f"{len(self._procs)} process(es)")
+            self._say(
+                f"launch set '{self.launch_set.name}' ({self.launch_set.source}): "
+                f"{len(self._procs)} process(es)"
+            )
             if self.launch_set.hosts and not self._create_hosts():
                 return 1
             for proc in self._procs:
@@ -134,8 +137,9 @@ class Supervisor:
                     self._start(proc)
             while not self._shutdown.is_set() and not self._signals:
                 self._watch()
-                if not any(p.running or p.restart_at is not None or p.waiting_since is not None
-                           for p in self._procs):
+                if not any(
+                    p.running or p.restart_at is not None or p.waiting_since is not None for p in self._procs
+                ):
                     failed = [p for p in self._procs if p.returncode not in (0, None)]
                     self._say("every process has ended")
                     return 1 if failed else self._exit_code
@@ -165,8 +169,13 @@ class Supervisor:
         try:
             network.create()
             assert self.launch_set.dds_profile is not None
-            self._profile = str(render_profile(self.launch_set.dds_profile, [h.ip for h in network.hosts],
-                                               network.lock_dir / f"{self.run_name}-fastdds.xml"))
+            self._profile = str(
+                render_profile(
+                    self.launch_set.dds_profile,
+                    [h.ip for h in network.hosts],
+                    network.lock_dir / f"{self.run_name}-fastdds.xml",
+                )
+            )
         except (HostsError, OSError) as exc:
             network.teardown()
             self._say(f"cannot create the hosts: {exc}")
@@ -236,8 +245,9 @@ class Supervisor:
         where = f" on host {spec.host}" if spec.host else ""
         # Said before its output is relayed, so that no line of the process comes before it.
         self._say(f"started {spec.name} (pid {proc.popen.pid}){where}")
-        proc.reader = threading.Thread(target=self._pump, args=(proc, proc.popen), daemon=True,
-                                       name=f"launch-{spec.name}")
+        proc.reader = threading.Thread(
+            target=self._pump, args=(proc, proc.popen), daemon=True, name=f"launch-{spec.name}"
+        )
         proc.reader.start()
 
     def _pump(self, proc: _Proc, popen: subprocess.Popen[bytes]) -> None:
@@ -276,8 +286,10 @@ class Supervisor:
         elif now - proc.waiting_since > spec.wait_timeout_s:
             proc.waiting_since = None
             proc.returncode = 1
-            self._say(f"{spec.name} cannot start: {spec.wait_for_path} did not appear "
-                      f"within {spec.wait_timeout_s:g} s")
+            self._say(
+                f"{spec.name} cannot start: {spec.wait_for_path} did not appear "
+                f"within {spec.wait_timeout_s:g} s"
+            )
             if spec.required or spec.on_exit == "shutdown":
                 self._exit_code = 1
                 self._shutdown.set()

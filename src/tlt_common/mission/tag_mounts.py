@@ -34,9 +34,7 @@ TAG_MOUNT_SCHEMA = {
     "slot_pitch": Field("float", minimum=0.0),
     "rivet_top": Field("float"),
     "rivet_extent": Field("float", minimum=0.0),
-    "rpy": Field(
-        "list", item=Field("float"), check=lambda v: None if len(v) == 3 else "expected 3 numbers"
-    ),
+    "rpy": Field("list", item=Field("float"), check=lambda v: None if len(v) == 3 else "expected 3 numbers"),
 }
 # The part of apriltag.yaml that sizes the tag.
 _TAG_SIZE_SCHEMA = {

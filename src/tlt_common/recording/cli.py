@@ -62,28 +62,61 @@ def build_parser() -> argparse.ArgumentParser:
         prog="tlt-record",
         description="Record every ROS topic (found continuously) to an MCAP file.",
     )
-    parser.add_argument("--out", type=Path, default=None,
-                        help="MCAP file to write (default: $TLT_RUN_DIR/recording.mcap, "
-                             "TLT_RUN_DIR defaulting to /tmp/tlt-run)")
-    parser.add_argument("--exclude", action="append", default=[], metavar="REGEX",
-                        help="leave out topics whose whole name matches (repeatable)")
-    parser.add_argument("--include-images", action="store_true",
-                        help="also record image topics (by default topics of type "
-                             f"sensor_msgs/Image or CompressedImage and topics matching "
-                             f"{IMAGE_PATTERN!r} are excluded)")
-    parser.add_argument("--topics", nargs="+", metavar="TOPIC",
-                        help="record only these topics (exact names)")
-    parser.add_argument("--compression", choices=compressions, default=compressions[0],
-                        help=f"chunk compression (default {compressions[0]})")
-    parser.add_argument("--chunk-size", type=int, default=1024 * 1024,
-                        help="bytes of messages per chunk before it is written (default 1 MiB)")
-    parser.add_argument("--flush-period", type=_positive, default=1.0, metavar="S",
-                        help="close the chunk in progress every S seconds: what a crash can lose "
-                             "(default 1)")
-    parser.add_argument("--discovery-period", type=_positive, default=0.5, metavar="S",
-                        help="look for new topics every S seconds (default 0.5)")
-    parser.add_argument("--progress-period", type=_positive, default=10.0, metavar="S",
-                        help="log topics and messages written every S seconds (default 10)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="MCAP file to write (default: $TLT_RUN_DIR/recording.mcap, "
+        "TLT_RUN_DIR defaulting to /tmp/tlt-run)",
+    )
+    parser.add_argument(
+        "--exclude",
+        action="append",
+        default=[],
+        metavar="REGEX",
+        help="leave out topics whose whole name matches (repeatable)",
+    )
+    parser.add_argument(
+        "--include-images",
+        action="store_true",
+        help="also record image topics (by default topics of type "
+        f"sensor_msgs/Image or CompressedImage and topics matching "
+        f"{IMAGE_PATTERN!r} are excluded)",
+    )
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="record only these topics (exact names)")
+    parser.add_argument(
+        "--compression",
+        choices=compressions,
+        default=compressions[0],
+        help=f"chunk compression (default {compressions[0]})",
+    )
+    parser.add_argument(
+        "--chunk-size",
+        type=int,
+        default=1024 * 1024,
+        help="bytes of messages per chunk before it is written (default 1 MiB)",
+    )
+    parser.add_argument(
+        "--flush-period",
+        type=_positive,
+        default=1.0,
+        metavar="S",
+        help="close the chunk in progress every S seconds: what a crash can lose (default 1)",
+    )
+    parser.add_argument(
+        "--discovery-period",
+        type=_positive,
+        default=0.5,
+        metavar="S",
+        help="look for new topics every S seconds (default 0.5)",
+    )
+    parser.add_argument(
+        "--progress-period",
+        type=_positive,
+        default=10.0,
+        metavar="S",
+        help="log topics and messages written every S seconds (default 10)",
+    )
     return parser
 
 
@@ -105,7 +138,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         moved = keep_existing(out)
         writer = McapRecordingWriter(
-            out, compression=args.compression, chunk_size=args.chunk_size,
+            out,
+            compression=args.compression,
+            chunk_size=args.chunk_size,
             metadata={"argv": " ".join(argv)},
         )
     except OSError as exc:
@@ -148,12 +183,16 @@ def _finish(node: TopicRecorder | None, writer: McapRecordingWriter, out: Path) 
             node.stop()
         writer.close()
     except OSError as exc:
-        print(f"tlt-record: could not finish {out}: {exc}; tlt-mcap-recover gets the messages "
-              "that reached it", file=sys.stderr)
+        print(
+            f"tlt-record: could not finish {out}: {exc}; tlt-mcap-recover gets the messages that reached it",
+            file=sys.stderr,
+        )
         return 1
     if node is not None:
         stats = node.stats
         left_out = f" ({len(stats.skipped)} topics left out: no definition)" if stats.skipped else ""
-        print(f"tlt-record: wrote {stats.messages} messages on {stats.topics} topics to {out}{left_out}",
-              file=sys.stderr)
+        print(
+            f"tlt-record: wrote {stats.messages} messages on {stats.topics} topics to {out}{left_out}",
+            file=sys.stderr,
+        )
     return 0

@@ -68,9 +68,7 @@ class McapRecordingWriter:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._stream = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        self._writer = Writer(
-            self._stream, chunk_size=chunk_size, compression=_COMPRESSIONS[compression]
-        )
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
         self._schemas: dict[str, int] = {}
         self._sequence: Counter[int] = Counter()

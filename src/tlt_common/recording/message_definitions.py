@@ -27,8 +27,21 @@ from pathlib import Path
 SEPARATOR = "=" * 80
 PRIMITIVE_TYPES = frozenset(
     {
-        "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-        "int32", "uint32", "int64", "uint64", "string", "wstring",
+        "bool",
+        "byte",
+        "char",
+        "float32",
+        "float64",
+        "int8",
+        "uint8",
+        "int16",
+        "uint16",
+        "int32",
+        "uint32",
+        "int64",
+        "uint64",
+        "string",
+        "wstring",
     }
 )
 _CONSTANT = re.compile(r"^\w+\s*=")  # "NAME = value" after the type; a field is "name [default]"
@@ -122,8 +135,7 @@ class MessageDefinitionSource:
     """Looks up and caches message definitions in a list of ``share`` directories."""
 
     def __init__(self, share_dirs: Iterable[str | Path] | None = None) -> None:
-        self._share_dirs = [Path(d) for d in (share_dirs if share_dirs is not None
-                                              else default_share_dirs())]
+        self._share_dirs = [Path(d) for d in (share_dirs if share_dirs is not None else default_share_dirs())]
         self._own_text: dict[str, str] = {}
         self._full_text: dict[str, str] = {}
 

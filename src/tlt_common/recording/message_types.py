@@ -40,9 +40,7 @@ def import_message_type(type_name: str) -> type:
         if parent is not None:
             if kind == "action" and part in _ACTION_IMPL_PARTS:
                 cls = getattr(getattr(parent, "Impl", None), part, None)
-            elif (kind == "action" and part in _ACTION_PARTS) or (
-                kind == "srv" and part in _SERVICE_PARTS
-            ):
+            elif (kind == "action" and part in _ACTION_PARTS) or (kind == "srv" and part in _SERVICE_PARTS):
                 cls = getattr(parent, part, None)
     if cls is None:
         raise UnknownMessageType(f"{type_name}: {package}.{kind} has no such message class")

@@ -46,16 +46,13 @@ def qos_to_dict(profile: QoSProfile) -> dict[str, Any]:
 
 def offered_qos_yaml(profiles: Iterable[QoSProfile]) -> str:
     """The ``offered_qos_profiles`` channel metadata: a YAML list, one entry per publisher."""
-    return yaml.safe_dump([qos_to_dict(p) for p in profiles], sort_keys=False,
-                          default_flow_style=False)
+    return yaml.safe_dump([qos_to_dict(p) for p in profiles], sort_keys=False, default_flow_style=False)
 
 
 def subscription_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
     """The QoS that receives from every publisher offering ``offered`` (see the module text)."""
     reliable = bool(offered) and all(p.reliability == ReliabilityPolicy.RELIABLE for p in offered)
-    latched = bool(offered) and all(
-        p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered
-    )
+    latched = bool(offered) and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered)
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=SUBSCRIPTION_DEPTH,

@@ -10,6 +10,7 @@ a service-introspection topic (``pkg/srv/X_Event``) make it raise as soon as it 
 schema under a name it accepts (the definition text, and so the decoding, are unchanged), so whole
 recordings decode.
 """
+
 from __future__ import annotations
 
 import re

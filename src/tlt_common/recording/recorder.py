@@ -100,8 +100,11 @@ class TopicRecorder(LeanNode):
         # Its own arguments only: a remapped node name (``-r __node:=...``) would otherwise name
         # both nodes alike, and a sim-time parameter give it a /clock reader nobody reads.
         self._topics_node = LeanNode(
-            f"{self.get_name()}_topics", context=self.context, use_global_arguments=False,
-            enable_rosout=False, start_parameter_services=False,
+            f"{self.get_name()}_topics",
+            context=self.context,
+            use_global_arguments=False,
+            enable_rosout=False,
+            start_parameter_services=False,
         )
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(self._timing.take_period_s, self.take_queued, clock=wall)
@@ -187,8 +190,7 @@ class TopicRecorder(LeanNode):
         subscription = self._subscribe(msg_class, topic, qos)
         self._recorded[topic] = _Recorded(type_name, channel_id, has_header, qos, subscription)
         self.get_logger().info(
-            f"recording {topic} ({type_name}, {qos.reliability.short_key}, "
-            f"{qos.durability.short_key})"
+            f"recording {topic} ({type_name}, {qos.reliability.short_key}, {qos.durability.short_key})"
         )
 
     def _resubscribe(self, topic: str, recorded: _Recorded, offered: list[QoSProfile]) -> None:
@@ -207,9 +209,7 @@ class TopicRecorder(LeanNode):
 
     def _subscribe(self, msg_class: type, topic: str, qos: QoSProfile) -> Subscription:
         # Never called back: no executor spins the topics node; take_queued takes the messages.
-        return self._topics_node.create_subscription(
-            msg_class, topic, _never_called, qos, raw=True
-        )
+        return self._topics_node.create_subscription(msg_class, topic, _never_called, qos, raw=True)
 
     def _take(self, recorded: _Recorded, log_time: int) -> int:
         """Write what ``recorded``'s subscription holds now, logged at ``log_time``."""
@@ -246,10 +246,14 @@ def _never_called(_data: bytes) -> None:
 def _compatible(requested: QoSProfile, offered: list[QoSProfile]) -> bool:
     """Whether a subscription with ``requested`` matches every publisher offering ``offered``."""
     for profile in offered:
-        if (requested.reliability == ReliabilityPolicy.RELIABLE
-                and profile.reliability != ReliabilityPolicy.RELIABLE):
+        if (
+            requested.reliability == ReliabilityPolicy.RELIABLE
+            and profile.reliability != ReliabilityPolicy.RELIABLE
+        ):
             return False
-        if (requested.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                and profile.durability != DurabilityPolicy.TRANSIENT_LOCAL):
+        if (
+            requested.durability == DurabilityPolicy.TRANSIENT_LOCAL
+            and profile.durability != DurabilityPolicy.TRANSIENT_LOCAL
+        ):
             return False
     return True

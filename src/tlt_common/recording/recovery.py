@@ -111,19 +111,24 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
             writer.start(profile=PROFILE, library=LIBRARY)
             for record in _chain(first, records):
                 if isinstance(record, Schema):
-                    schema_ids[record.id] = writer.register_schema(
-                        record.name, record.encoding, record.data
-                    )
+                    schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
                 elif isinstance(record, Channel):
                     channel_ids[record.id] = writer.register_channel(
-                        record.topic, record.message_encoding,
-                        schema_ids.get(record.schema_id, 0), dict(record.metadata),
+                        record.topic,
+                        record.message_encoding,
+                        schema_ids.get(record.schema_id, 0),
+                        dict(record.metadata),
                     )
                 elif isinstance(record, Metadata):
                     writer.add_metadata(record.name, dict(record.metadata))
                 elif isinstance(record, Message) and record.channel_id in channel_ids:
-                    writer.add_message(channel_ids[record.channel_id], record.log_time,
-                                       record.data, record.publish_time, record.sequence)
+                    writer.add_message(
+                        channel_ids[record.channel_id],
+                        record.log_time,
+                        record.data,
+                        record.publish_time,
+                        record.sequence,
+                    )
                     messages += 1
             writer.finish()
         tmp.replace(dst)
@@ -156,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tlt-mcap-recover: {exc}", file=sys.stderr)
         return 2
     state = "complete" if report.complete else f"cut ({report.stopped_at or 'no footer'})"
-    print(f"tlt-mcap-recover: {report.messages} messages on {report.channels} channels "
-          f"from {args.src} ({state}) -> {args.dst}")
+    print(
+        f"tlt-mcap-recover: {report.messages} messages on {report.channels} channels "
+        f"from {args.src} ({state}) -> {args.dst}"
+    )
     return 0

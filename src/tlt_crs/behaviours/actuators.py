@@ -393,10 +393,13 @@ class Actuators:
         def still(msg: Any) -> bool:
             at = dict(zip(msg.name, msg.position, strict=False))
             speeds = [abs(v) for v in msg.velocity]
-            return all(
-                abs(at.get(j, math.inf) - p) <= CAMERA_MOUNT_SETTLED_RAD
-                for j, p in zip(setup.joints, positions, strict=True)
-            ) and max(speeds, default=0.0) <= CAMERA_MOUNT_STILL_RAD_S
+            return (
+                all(
+                    abs(at.get(j, math.inf) - p) <= CAMERA_MOUNT_SETTLED_RAD
+                    for j, p in zip(setup.joints, positions, strict=True)
+                )
+                and max(speeds, default=0.0) <= CAMERA_MOUNT_STILL_RAD_S
+            )
 
         return py_trees.composites.Sequence(
             f"Rotate Cameras {way}",

@@ -140,8 +140,11 @@ class JointTrajectoryController:
         unknown = [n for n in names if n not in self.joints]
         if unknown:
             return INVALID_JOINTS, f"unknown joint(s) {unknown}; this controller has {self.joints}"
-        for kind, tolerances in (("path", goal.path_tolerance), ("goal", goal.goal_tolerance),
-                                 ("goal velocity", goal.goal_velocity_tolerance)):
+        for kind, tolerances in (
+            ("path", goal.path_tolerance),
+            ("goal", goal.goal_tolerance),
+            ("goal velocity", goal.goal_velocity_tolerance),
+        ):
             stray = [n for n in tolerances if n not in self.joints]
             if stray:
                 return INVALID_JOINTS, f"{kind} tolerance for unknown joint(s) {stray}"
@@ -300,6 +303,7 @@ class JointTrajectoryController:
                          actual: Mapping[str, float]) -> dict[str, float]:  # fmt: skip
         """The joints off the path at ``t`` (name -> desired position); none when the arm is on the
         path as it was up to ``path_lag_window`` earlier, i.e. merely late along it."""
+
         def off(want: Mapping[str, float]) -> dict[str, float]:
             tol = goal.path_tolerance
             return {n: w for n, w in want.items() if tol[n] > 0 and abs(actual[n] - w) > tol[n]}

@@ -40,8 +40,9 @@ GPIO_SCHEMA = {
     ),
     "chip": opt("str", "/dev/gpiochip0", doc="GPIO character device (chardev backend)"),
     "consumer": opt("str", "tlt", doc="consumer label shown by gpioinfo"),
-    "emulator_state": opt("str", "gpio.state",
-                          doc="shared state file (emulator backend); relative to $TLT_RUN_DIR"),
+    "emulator_state": opt(
+        "str", "gpio.state", doc="shared state file (emulator backend); relative to $TLT_RUN_DIR"
+    ),
     "lines": Field("map", item=Field("dict", schema=LINE_SCHEMA), check=_check_lines),
 }
 

@@ -298,12 +298,14 @@ def driver(args: list[str]) -> Driver:
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="lifter hardware YAML")
     parser.add_argument("--port", help="serial device, overriding the configured port")
     parser.add_argument(
-        "--answer-timeout-s", type=float,
+        "--answer-timeout-s",
+        type=float,
         help="how long the firmware has to answer a state or mode request, overriding the YAML's (the "
         "twin answers from a busy process)",
     )
     parser.add_argument(
-        "--link-timeout-s", type=float,
+        "--link-timeout-s",
+        type=float,
         help="how long without telemetry is a link fault, overriding the YAML's (an emulated firmware "
         "on a busy machine pauses longer than a Teensy)",
     )

@@ -78,12 +78,14 @@ def chain_driver(
     )
     parser.add_argument("--port", help="serial port to use instead of the YAML's")
     parser.add_argument(
-        "--latency-timer-ms", type=float,
+        "--latency-timer-ms",
+        type=float,
         help="Dynamixel chains: the latency the packet timeout allows for, instead of the YAML's (comm."
         "latency_timer_ms); on the twin the far end is a process sharing the CPU, not a USB adapter",
     )
     parser.add_argument(
-        "--response-timeout-s", type=float,
+        "--response-timeout-s",
+        type=float,
         help="MightyZAP chains: how long a request waits for feedback, instead of the YAML's (comm."
         "response_timeout_s); on the twin the far end is a process sharing the CPU, not an actuator",
     )
@@ -165,8 +167,11 @@ def _spin_each(nodes: list[tuple[str, Node]]) -> list[str]:
         except Exception:
             if rclpy.ok():
                 failed.append(name)
-                print(f"driver {name} stopped on an error:\n{traceback.format_exc()}", file=sys.stderr,
-                      flush=True)
+                print(
+                    f"driver {name} stopped on an error:\n{traceback.format_exc()}",
+                    file=sys.stderr,
+                    flush=True,
+                )
             # else: SIGINT/SIGTERM shut the context down while a callback was publishing: a normal stop.
         finally:
             done.set()
@@ -213,8 +218,12 @@ def _shut_down(prog: str, nodes: list[tuple[str, Node]], code: int) -> None:
     for thread in threads:
         thread.join(max(0.0, deadline - time.monotonic()))
     if pending:
-        print(f"{prog}: {', '.join(sorted(pending))} still shutting down after {SHUTDOWN_TIMEOUT_S:g} s; "
-              "exiting without them", file=sys.stderr, flush=True)
+        print(
+            f"{prog}: {', '.join(sorted(pending))} still shutting down after {SHUTDOWN_TIMEOUT_S:g} s; "
+            "exiting without them",
+            file=sys.stderr,
+            flush=True,
+        )
         os._exit(code)
     for _, node in nodes:
         node.destroy_node()

@@ -28,7 +28,11 @@ class TopGrippersNode(LeanNode):
         self.hw = MightyZapChainInterface(config)
         acts = config["actuators"]
         self.loop = DriverLoop.for_chain(
-            self, self.hw, config, acts, group_joints=[a["name"] for a in acts],
+            self,
+            self.hw,
+            config,
+            acts,
+            group_joints=[a["name"] for a in acts],
             publish_state=self.publish_state,
         )
         self.state_pub = self.create_publisher(GripperState, ros_names.state_topic(config["component"]), 10)

@@ -135,8 +135,12 @@ def load_ur_config(path: str | Path = DEFAULT_CONFIG) -> URConfig:
     if doc["link_timeout_s"] <= 1.0 / doc["rtde_frequency_hz"]:
         raise ConfigError(path, "link_timeout_s", "must be longer than one RTDE period")
     if doc["joint_state_rate_hz"] > doc["control_rate_hz"]:
-        raise ConfigError(path, "joint_state_rate_hz", "joint states go out from the control cycle: "
-                          f"at most control_rate_hz ({doc['control_rate_hz']:g})")
+        raise ConfigError(
+            path,
+            "joint_state_rate_hz",
+            "joint states go out from the control cycle: "
+            f"at most control_rate_hz ({doc['control_rate_hz']:g})",
+        )
     joints = tuple(URJoint(**j) for j in doc.pop("joints"))
     return URConfig(joints=joints, **doc)
 
@@ -164,6 +168,12 @@ def with_link_timeout(config: URConfig, seconds: float, path: str | Path) -> URC
 
 
 __all__ = [
-    "CONFIG_DIR", "DEFAULT_CONFIG", "UR_SCHEMA", "URConfig", "URJoint",
-    "load_ur_config", "with_link_timeout", "with_rtde_frequency",
+    "CONFIG_DIR",
+    "DEFAULT_CONFIG",
+    "UR_SCHEMA",
+    "URConfig",
+    "URJoint",
+    "load_ur_config",
+    "with_link_timeout",
+    "with_rtde_frequency",
 ]

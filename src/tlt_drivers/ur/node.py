@@ -198,13 +198,15 @@ def driver(args: list[str]) -> Driver:
     )
     parser.add_argument("--host", help="controller address, overriding the configured host")
     parser.add_argument(
-        "--rtde-frequency-hz", type=float,
+        "--rtde-frequency-hz",
+        type=float,
         help="RTDE output rate asked of the controller, overriding rtde_frequency_hz (1-500)",
     )
     parser.add_argument(
-        "--link-timeout-s", type=float,
+        "--link-timeout-s",
+        type=float,
         help="seconds of the loop's clock without new controller data before the link counts as down, "
-             "overriding link_timeout_s",
+        "overriding link_timeout_s",
     )
     own = parser.parse_args(args)
     try:

@@ -46,12 +46,14 @@ class PacketTableModel(QtCore.QAbstractTableModel):
         self.endResetModel()
 
     def rowCount(
-        self, parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex()  # noqa: B008
+        self,
+        parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex(),  # noqa: B008
     ) -> int:
         return 0 if parent.isValid() else len(self.rows)
 
     def columnCount(
-        self, parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex()  # noqa: B008
+        self,
+        parent: QtCore.QModelIndex | QtCore.QPersistentModelIndex = QtCore.QModelIndex(),  # noqa: B008
     ) -> int:
         return len(COLUMNS)
 

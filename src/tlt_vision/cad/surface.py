@@ -80,8 +80,11 @@ class SurfaceDistance:
 
     def signed(self, points: torch.Tensor) -> torch.Tensor:
         """Signed distance (..., N): negative inside the part."""
-        parts = [value for value, _ in (self._segments(points, False), self._boxes(points, False))
-                 if value is not None]
+        parts = [
+            value
+            for value, _ in (self._segments(points, False), self._boxes(points, False))
+            if value is not None
+        ]
         return torch.cat(parts, dim=-1).min(dim=-1).values
 
     def signed_with_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -6,8 +6,9 @@ import numpy as np
 import torch
 
 
-def nms(boxes: torch.Tensor, scores: torch.Tensor, iou_threshold: float, max_keep: int | None = None
-        ) -> torch.Tensor:
+def nms(
+    boxes: torch.Tensor, scores: torch.Tensor, iou_threshold: float, max_keep: int | None = None
+) -> torch.Tensor:
     """Indices of the boxes kept, highest score first (at most ``max_keep``).
 
     Walks the boxes from the highest score down; a box is dropped when its IoU with a box already
@@ -31,17 +32,20 @@ def nms(boxes: torch.Tensor, scores: torch.Tensor, iou_threshold: float, max_kee
         keep.append(i)
         if max_keep is not None and len(keep) >= max_keep:
             break
-        w = np.clip(np.minimum(x2[i], x2[i + 1:]) - np.maximum(x1[i], x1[i + 1:]), 0, None)
-        h = np.clip(np.minimum(y2[i], y2[i + 1:]) - np.maximum(y1[i], y1[i + 1:]), 0, None)
+        w = np.clip(np.minimum(x2[i], x2[i + 1 :]) - np.maximum(x1[i], x1[i + 1 :]), 0, None)
+        h = np.clip(np.minimum(y2[i], y2[i + 1 :]) - np.maximum(y1[i], y1[i + 1 :]), 0, None)
         inter = w * h
-        union = area[i] + area[i + 1:] - inter
+        union = area[i] + area[i + 1 :] - inter
         iou = np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)  # as ops.boxes.box_iou
-        suppressed[i + 1:] |= iou > iou_threshold
+        suppressed[i + 1 :] |= iou > iou_threshold
     return order[torch.tensor(keep, dtype=torch.long, device=order.device)]
 
 
 def batched_nms(
-    boxes: torch.Tensor, scores: torch.Tensor, labels: torch.Tensor, iou_threshold: float,
+    boxes: torch.Tensor,
+    scores: torch.Tensor,
+    labels: torch.Tensor,
+    iou_threshold: float,
     max_keep: int | None = None,
 ) -> torch.Tensor:
     """NMS run independently per label: boxes of different labels never suppress each other."""

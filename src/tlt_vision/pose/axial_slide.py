@@ -98,8 +98,9 @@ def slid_along_axis(
     slides = np.union1d(steps * slide.step, [0.0])
     posed, turned = points @ rot.T + t, normals @ rot.T
     mask = np.asarray(mask, dtype=bool)
-    counts = overhangs(mask, depth, intrinsics, posed[None] + slides[:, None, None] * axis, turned,
-                       slide.hidden_margin)
+    counts = overhangs(
+        mask, depth, intrinsics, posed[None] + slides[:, None, None] * axis, turned, slide.hidden_margin
+    )
     here = counts[slides == 0.0][0]
     best = slides[counts == counts.min()]
     chosen = float(best[np.argmin(np.abs(best))])

@@ -168,8 +168,9 @@ def correct(
             break
     with torch.no_grad():
         final_kp = keypoints + best_delta
-        final, rot, t = chamfer_objective(observed, mask, final_kp, surface, model_keypoints,
-                                          keypoint_weights)
+        final, rot, t = chamfer_objective(
+            observed, mask, final_kp, surface, model_keypoints, keypoint_weights
+        )
     return Correction(final_kp, rot, t, start, final, iterations)
 
 
@@ -270,8 +271,9 @@ def refine_pose(
     start_rot = rot[element] if turns is None else rot[element] @ turns[element, k].to(rot.dtype)
     view = cloud.centre / torch.linalg.vector_norm(cloud.centre, dim=-1, keepdim=True).clamp(min=1e-9)
     start_t = t[element] + offsets[element, k, None] * view[element]
-    r, tt, value = _levenberg_marquardt(cloud.rows(element), surface.select(element), start_rot, start_t,
-                                        iterations)
+    r, tt, value = _levenberg_marquardt(
+        cloud.rows(element), surface.select(element), start_rot, start_t, iterations
+    )
     # Per element the lowest total of its starts, the input pose unless a refined one is lower.
     lowest = torch.full_like(best, float("inf")).scatter_reduce(0, element, value, "amin")
     taken = (value == lowest[element]) & (value < best[element])
@@ -348,6 +350,7 @@ def _levenberg_marquardt(
 
     def fit(r: torch.Tensor, tt: torch.Tensor, moved: torch.Tensor, rows: torch.Tensor | None = None) -> _Fit:
         """The state at ``r, tt`` of every element, or of the elements ``rows`` (r, tt, moved theirs)."""
+
         def own(x: torch.Tensor) -> torch.Tensor:
             return x if rows is None else x[rows]
 

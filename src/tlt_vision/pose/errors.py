@@ -61,8 +61,11 @@ def non_degenerate_at(model: CadModel, points: np.ndarray, pose: np.ndarray) -> 
     """Whether ``points`` (N, 3, camera frame) show enough of ``model``'s keypoint groups with the
     part at ``pose`` (4x4, camera frame): the certificate's own rule, at the truth."""
     kp = np.asarray(model.keypoints) @ pose[:3, :3].T + pose[:3, 3]
-    groups = visible_groups(torch.as_tensor(points, dtype=torch.float32),
-                            torch.as_tensor(kp, dtype=torch.float32), model.visibility)
+    groups = visible_groups(
+        torch.as_tensor(points, dtype=torch.float32),
+        torch.as_tensor(kp, dtype=torch.float32),
+        model.visibility,
+    )
     return len(groups) >= model.visibility.groups_required
 
 

@@ -149,8 +149,13 @@ class PoseEstimator:
             float("inf"),
         )
 
-    def certify_at(self, points: np.ndarray | torch.Tensor, rotation: np.ndarray | torch.Tensor,
-                   translation: np.ndarray | torch.Tensor, allowance: float = 0.0) -> Certificate:
+    def certify_at(
+        self,
+        points: np.ndarray | torch.Tensor,
+        rotation: np.ndarray | torch.Tensor,
+        translation: np.ndarray | torch.Tensor,
+        allowance: float = 0.0,
+    ) -> Certificate:
         """The certificate of the pose ``rotation, translation`` (camera frame) for the observed
         ``points`` (N, 3), the threshold grown by ``allowance`` (m) for the depth's noise."""
         seen = torch.as_tensor(points, dtype=torch.float32)
@@ -317,8 +322,12 @@ def refined_together(
 
 
 def _certified(
-    estimators: Sequence[PoseEstimator], counts: Sequence[int], obs: torch.Tensor, rot: torch.Tensor,
-    t: torch.Tensor, obj: torch.Tensor,
+    estimators: Sequence[PoseEstimator],
+    counts: Sequence[int],
+    obs: torch.Tensor,
+    rot: torch.Tensor,
+    t: torch.Tensor,
+    obj: torch.Tensor,
 ) -> list[PoseEstimate]:
     """The estimates of a batch's poses, each certified on its own ``counts[b]`` points."""
     out = []

@@ -66,12 +66,14 @@ def _principal(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.linalg.svd(points - centre, full_matrices=False)[2][0]
 
 
-def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.random.Generator
-               ) -> np.ndarray:
+def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.random.Generator) -> np.ndarray:
     """The points (a boolean over ``points``) within their ``tol`` of the line most of them lie
     near."""
-    scored = np.arange(len(points)) if len(points) <= split.sample else rng.choice(
-        len(points), split.sample, replace=False)
+    scored = (
+        np.arange(len(points))
+        if len(points) <= split.sample
+        else rng.choice(len(points), split.sample, replace=False)
+    )
     a = rng.choice(scored, split.hypotheses)
     b = rng.choice(scored, split.hypotheses)
     direction = points[b] - points[a]
@@ -96,8 +98,9 @@ def _best_line(points: np.ndarray, tol: np.ndarray, split: BendSplit, rng: np.ra
     return near
 
 
-def straight_pieces(mask: np.ndarray, seen: RegionPoints, radius: float, split: BendSplit
-                    ) -> list[np.ndarray]:
+def straight_pieces(
+    mask: np.ndarray, seen: RegionPoints, radius: float, split: BendSplit
+) -> list[np.ndarray]:
     """``mask`` (H, W) cut into the pieces that each lie along one line in space (boolean masks of
     its shape; ``[mask]`` when it is straight already). ``seen`` holds the points its pixels see,
     over the same pixels (a region ``mask`` is part of, or ``mask`` itself). ``radius`` is the

@@ -187,9 +187,14 @@ def _on_one_line(a: _Axis | None, b: _Axis | None, split: DepthSplit) -> bool:
     return abs(along) - a.half_length - b.half_length <= split.join_gap
 
 
-def join_collinear(masks: list[np.ndarray], scores: list[float], depth: np.ndarray, k: np.ndarray,
-                   split: DepthSplit, points: list[np.ndarray] | None = None
-                   ) -> tuple[list[np.ndarray], list[float], list[np.ndarray]]:
+def join_collinear(
+    masks: list[np.ndarray],
+    scores: list[float],
+    depth: np.ndarray,
+    k: np.ndarray,
+    split: DepthSplit,
+    points: list[np.ndarray] | None = None,
+) -> tuple[list[np.ndarray], list[float], list[np.ndarray]]:
     """Pieces of one class (masks and scores) with those on one line in space joined, pass after
     pass until no two are; a joined piece's score is its pieces' mean weighted by area. ``points``,
     each piece's back-projected pixels, if the caller has them already; returned joined too."""
@@ -241,9 +246,14 @@ def radii_by_label(classes: Sequence[str], radii: Mapping[str, float]) -> dict[i
     return {classes.index(c) + 1: r for c, r in radii.items() if c in classes}
 
 
-def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, labels: Sequence[int],
-                   split: DepthSplit, camera_matrix: np.ndarray | None = None,
-                   radii: Mapping[int, float] | None = None) -> dict[str, torch.Tensor]:
+def split_by_depth(
+    result: dict[str, torch.Tensor],
+    depth: np.ndarray | None,
+    labels: Sequence[int],
+    split: DepthSplit,
+    camera_matrix: np.ndarray | None = None,
+    radii: Mapping[int, float] | None = None,
+) -> dict[str, torch.Tensor]:
     """Detections (``boxes``, ``labels``, ``scores``, ``masks`` (D, H, W) at the depth image's
     size, and ``semantic_probs`` (C, H, W) if the model gave them) with those of ``labels`` cut
     into their depth pieces and scored by their pixels and area, and with ``camera_matrix`` (3x3)
@@ -261,14 +271,19 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
     kept = torch.nonzero(~thin).flatten()
     probs = result.get("semantic_probs")
     pieces: dict[int, tuple[list[np.ndarray], list[float], list[np.ndarray]]] = {
-        label: ([], [], []) for label in labels}
+        label: ([], [], []) for label in labels
+    }
     regions = torch.nonzero(thin).flatten()
-    bend = (BendSplit(tolerance=split.bend_tolerance, depth_noise=split.depth_noise, min_area=split.min_area)
-            if split.bend_tolerance is not None else None)
+    bend = (
+        BendSplit(tolerance=split.bend_tolerance, depth_noise=split.depth_noise, min_area=split.min_area)
+        if split.bend_tolerance is not None
+        else None
+    )
     # Within each mask's own box: a thin part is a sliver of the frame, and whole-frame arrays for
     # each region cost nearly twice the time a frame.
-    for i, (x0, y0, x1, y1) in zip(regions.tolist(), boxes_from_masks(masks[regions]).int().tolist(),
-                                   strict=True):
+    for i, (x0, y0, x1, y1) in zip(
+        regions.tolist(), boxes_from_masks(masks[regions]).int().tolist(), strict=True
+    ):
         box = np.s_[y0:y1, x0:x1]
         label = int(result["labels"][i])
         own = probs[label][box].cpu().numpy() if probs is not None else None
@@ -279,12 +294,17 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
         # A piece without a pixel the head is sure of scores nothing (piece_score): not kept, and
         # not searched for bends, the cut's costliest step.
         smalls = [s for s in depth_pieces(region, depth[box], split) if _scores(own, s)]
-        seen = (RegionPoints.of(region, depth[box], camera_matrix, y0, x0)
-                if camera_matrix is not None else None)
+        seen = (
+            RegionPoints.of(region, depth[box], camera_matrix, y0, x0) if camera_matrix is not None else None
+        )
         radius = (radii or {}).get(label)
         if bend is not None and seen is not None and radius is not None:
-            smalls = [straight for small in smalls for straight in straight_pieces(small, seen, radius, bend)
-                      if straight.sum() >= split.min_area and _scores(own, straight)]
+            smalls = [
+                straight
+                for small in smalls
+                for straight in straight_pieces(small, seen, radius, bend)
+                if straight.sum() >= split.min_area and _scores(own, straight)
+            ]
         for small in smalls:
             piece = np.zeros(masks.shape[-2:], dtype=bool)
             piece[box] = small
@@ -302,7 +322,8 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
     for label, (class_masks, class_scores, class_points) in pieces.items():
         if camera_matrix is not None:
             class_masks, class_scores, class_points = join_collinear(
-                class_masks, class_scores, depth, camera_matrix, split, class_points)
+                class_masks, class_scores, depth, camera_matrix, split, class_points
+            )
             radius = (radii or {}).get(label)
             if split.width_band is not None and radius is not None:
                 low, high = split.width_band
@@ -319,12 +340,24 @@ def split_by_depth(result: dict[str, torch.Tensor], depth: np.ndarray | None, la
     if not new_masks:
         return out
     m = torch.from_numpy(np.stack(new_masks)).to(masks.device)
-    added = {"boxes": boxes_from_masks(m), "labels": torch.tensor(new_labels),
-             "scores": torch.tensor(new_scores), "masks": m}
+    added = {
+        "boxes": boxes_from_masks(m),
+        "labels": torch.tensor(new_labels),
+        "scores": torch.tensor(new_scores),
+        "masks": m,
+    }
     for key, value in added.items():
         out[key] = torch.cat([out[key], value.to(out[key].dtype)])
     return out
 
 
-__all__ = ["DepthSplit", "depth_pieces", "join_collinear", "piece_score", "radii_by_label",
-           "split_by_depth", "voted", "width_ratio"]
+__all__ = [
+    "DepthSplit",
+    "depth_pieces",
+    "join_collinear",
+    "piece_score",
+    "radii_by_label",
+    "split_by_depth",
+    "voted",
+    "width_ratio",
+]

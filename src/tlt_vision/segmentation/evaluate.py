@@ -90,9 +90,7 @@ class MaskAP:
 
     def result(self) -> dict[str, float | dict[int, float]]:
         """``{"map": mean AP, "per_class": {label: AP}}`` over the classes with ground truth."""
-        per_class = {
-            c: average_precision(self.tp[c], self.scores[c], n) for c, n in self.num_gt.items() if n
-        }
+        per_class = {c: average_precision(self.tp[c], self.scores[c], n) for c, n in self.num_gt.items() if n}
         mean = sum(per_class.values()) / len(per_class) if per_class else 0.0
         return {"map": mean, "per_class": per_class}
 

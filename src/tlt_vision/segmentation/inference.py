@@ -48,8 +48,9 @@ def resize_masks(masks: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
         return masks
     if masks.shape[0] == 0:
         return masks.new_zeros((0, *size))
-    small = F.interpolate(masks[:, None].to(torch.float32), size=size, mode="area" if
-                          size[0] <= masks.shape[-2] else "bilinear")
+    small = F.interpolate(
+        masks[:, None].to(torch.float32), size=size, mode="area" if size[0] <= masks.shape[-2] else "bilinear"
+    )
     return small[:, 0] >= 0.5
 
 
@@ -78,17 +79,20 @@ def detect_rgb(model: MaskRCNN, rgb: np.ndarray, max_size: int | None) -> dict[s
         out["boxes"] = out["boxes"] * torch.tensor([sx, sy, sx, sy])
         if len(out["masks"]):
             # Bilinear on the small mask then threshold: smoother edges than repeating pixels.
-            big = F.interpolate(out["masks"][:, None].to(torch.float32), size=(h, w), mode="bilinear",
-                                align_corners=False)
+            big = F.interpolate(
+                out["masks"][:, None].to(torch.float32), size=(h, w), mode="bilinear", align_corners=False
+            )
             out["masks"] = big[:, 0] >= 0.5
         else:
             out["masks"] = torch.zeros((0, h, w), dtype=torch.bool)
         if len(out.get("mask_probs", ())):
-            out["mask_probs"] = F.interpolate(out["mask_probs"][:, None], size=(h, w), mode="bilinear",
-                                              align_corners=False)[:, 0]
+            out["mask_probs"] = F.interpolate(
+                out["mask_probs"][:, None], size=(h, w), mode="bilinear", align_corners=False
+            )[:, 0]
         if "semantic_probs" in out:
-            out["semantic_probs"] = F.interpolate(out["semantic_probs"][None], size=(h, w), mode="bilinear",
-                                                  align_corners=False)[0]
+            out["semantic_probs"] = F.interpolate(
+                out["semantic_probs"][None], size=(h, w), mode="bilinear", align_corners=False
+            )[0]
     return out
 
 
@@ -119,5 +123,13 @@ def load_mask_rcnn(path: str | Path, classes: Sequence[str] = CLASSES) -> tuple[
     return model, manifest
 
 
-__all__ = ["KIND", "detect_rgb", "load_mask_rcnn", "resize_image", "resize_masks", "rgb_to_tensor",
-           "scaled_size", "weights_settings"]
+__all__ = [
+    "KIND",
+    "detect_rgb",
+    "load_mask_rcnn",
+    "resize_image",
+    "resize_masks",
+    "rgb_to_tensor",
+    "scaled_size",
+    "weights_settings",
+]

@@ -35,8 +35,14 @@ from tlt_vision.segmentation.semantic import (
 )
 
 # MaskRCNNConfig fields a user of trained weights may change (MaskRCNN.set_inference).
-INFERENCE_SETTINGS = ("rpn_post_nms_top_n_test", "score_threshold", "detection_nms", "detections_per_image",
-                      "semantic_background_weight", "semantic_vote")
+INFERENCE_SETTINGS = (
+    "rpn_post_nms_top_n_test",
+    "score_threshold",
+    "detection_nms",
+    "detections_per_image",
+    "semantic_background_weight",
+    "semantic_vote",
+)
 
 
 class MaskRCNN(nn.Module):
@@ -57,8 +63,9 @@ class MaskRCNN(nn.Module):
         ValueError naming any other."""
         other = sorted(set(settings) - set(INFERENCE_SETTINGS))
         if other:
-            raise ValueError(f"not inference settings: {', '.join(other)} (these are: "
-                             f"{', '.join(INFERENCE_SETTINGS)})")
+            raise ValueError(
+                f"not inference settings: {', '.join(other)} (these are: {', '.join(INFERENCE_SETTINGS)})"
+            )
         cfg = replace(self.cfg, **settings)
         for module in (self, self.rpn, self.roi_heads):
             module.cfg = cfg
@@ -86,8 +93,9 @@ class MaskRCNN(nn.Module):
             proposals, losses = self.rpn(feats, size, [t["boxes"] for t in targets])
             losses.update(self.roi_heads.losses(feats, proposals, targets))
             if logits is not None:
-                losses["semantic"] = semantic_loss(logits, targets, self.cfg.semantic_fg_weight,
-                                                   self.cfg.semantic_gap)
+                losses["semantic"] = semantic_loss(
+                    logits, targets, self.cfg.semantic_fg_weight, self.cfg.semantic_gap
+                )
             return losses
         proposals, _ = self.rpn(feats, size)
         results = self.roi_heads.detect(feats, proposals, size, skip_labels=self.cfg.semantic_labels)
@@ -95,8 +103,13 @@ class MaskRCNN(nn.Module):
             return results
         probs = torch.softmax(upsample_logits(logits, size), dim=1)
         for r, p in zip(results, probs, strict=True):
-            found = instances_from_semantic(p, self.cfg.semantic_labels, self.cfg.semantic_min_area,
-                                            self.cfg.semantic_background_weight, self.cfg.semantic_vote)
+            found = instances_from_semantic(
+                p,
+                self.cfg.semantic_labels,
+                self.cfg.semantic_min_area,
+                self.cfg.semantic_background_weight,
+                self.cfg.semantic_vote,
+            )
             # ``mask_probs`` stay the box branch's alone, whose detections come first: a region's
             # probability is its mask, and a frame's regions as full-size floats would cost time.
             for key in r:

@@ -21,8 +21,9 @@ from tlt_vision.pointcloud import Intrinsics, back_project
 _NEIGHBOURS = ((0, 1), (1, 0), (1, 1), (1, -1))
 
 
-def neighbour_pairs(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]
-                    ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+def neighbour_pairs(
+    ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """For each of the four directions: the indices into ``ys``, ``xs`` of the pixels whose
     neighbour that way lies inside an image of ``shape``, and that neighbour's rows and columns.
     Whether the neighbour is one of the pixels too is the caller's to look up."""
@@ -42,8 +43,9 @@ class RegionPoints:
     index: np.ndarray
 
     @classmethod
-    def of(cls, mask: np.ndarray, depth: np.ndarray, camera_matrix: np.ndarray, top: int = 0,
-           left: int = 0) -> RegionPoints:
+    def of(
+        cls, mask: np.ndarray, depth: np.ndarray, camera_matrix: np.ndarray, top: int = 0, left: int = 0
+    ) -> RegionPoints:
         """``mask``'s pixels with a depth, back-projected; ``mask`` and ``depth`` may be a crop
         whose first pixel is (``top``, ``left``) of the image ``camera_matrix`` (3x3) is for."""
         ys, xs = np.nonzero(mask)

@@ -97,8 +97,9 @@ def paste_masks(probs: torch.Tensor, boxes: torch.Tensor, image_size: tuple[int,
         gx = (xs - x0) / bw * 2 - 1
         gy = (ys - y0) / bh * 2 - 1
         grid = torch.stack([gx[None, :].expand(r1 - r0, -1), gy[:, None].expand(-1, c1 - c0)], dim=-1)
-        out[i, r0:r1, c0:c1] = F.grid_sample(probs[i, None, None], grid[None], align_corners=False,
-                                             padding_mode="zeros")[0, 0]
+        out[i, r0:r1, c0:c1] = F.grid_sample(
+            probs[i, None, None], grid[None], align_corners=False, padding_mode="zeros"
+        )[0, 0]
     return out
 
 
@@ -154,8 +155,13 @@ class RoIHeads(nn.Module):
             mask_labels.append(b_lab[pos])
             if len(pos):
                 gt_masks = tgt["masks"][b_gt[pos]].to(torch.float32)[:, None]  # (P, 1, H, W)
-                rois = torch.cat([torch.arange(len(pos), dtype=b_boxes.dtype, device=b_boxes.device)[:, None],
-                                  b_boxes[pos]], dim=1)
+                rois = torch.cat(
+                    [
+                        torch.arange(len(pos), dtype=b_boxes.dtype, device=b_boxes.device)[:, None],
+                        b_boxes[pos],
+                    ],
+                    dim=1,
+                )
                 m = cfg.mask_pool * 2
                 mask_targets.append(roi_align(gt_masks, rois, (m, m), 1.0, 2, aligned=True)[:, 0] >= 0.5)
         mlab = torch.cat(mask_labels)
@@ -169,7 +175,10 @@ class RoIHeads(nn.Module):
 
     @torch.no_grad()
     def detect(
-        self, feats: list[torch.Tensor], proposals: list[torch.Tensor], image_size: tuple[int, int],
+        self,
+        feats: list[torch.Tensor],
+        proposals: list[torch.Tensor],
+        image_size: tuple[int, int],
         skip_labels: tuple[int, ...] = (),
     ) -> list[dict[str, torch.Tensor]]:
         """Detections per image; none of the classes ``skip_labels`` (found another way)."""

@@ -60,8 +60,9 @@ class RPN(nn.Module):
         logits = torch.cat([o[0] for o in outs], dim=1)
         deltas = torch.cat([o[1] for o in outs], dim=1)
         all_anchors = torch.cat(anchors)
-        levels = torch.cat([torch.full((len(a),), i, dtype=torch.long, device=a.device)
-                            for i, a in enumerate(anchors)])
+        levels = torch.cat(
+            [torch.full((len(a),), i, dtype=torch.long, device=a.device) for i, a in enumerate(anchors)]
+        )
         post = cfg.rpn_post_nms_top_n_train if self.training else cfg.rpn_post_nms_top_n_test
         proposals = []
         with torch.no_grad():

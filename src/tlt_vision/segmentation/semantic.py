@@ -37,8 +37,13 @@ class SemanticHead(nn.Module):
     def __init__(self, cfg: MaskRCNNConfig) -> None:
         super().__init__()
         c, fine = cfg.semantic_channels, max(cfg.semantic_channels // 2, 1)
-        self.context = nn.Sequential(nn.Conv2d(cfg.fpn_channels, c, 3, padding=1), nn.ReLU(),
-                                     nn.Conv2d(c, c, 3, padding=1), nn.ReLU(), nn.Conv2d(c, fine, 1))
+        self.context = nn.Sequential(
+            nn.Conv2d(cfg.fpn_channels, c, 3, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(c, fine, 1),
+        )
         self.from_stem = nn.Conv2d(cfg.backbone_channels[0], fine, 1)
         self.refine = nn.Sequential(nn.Conv2d(fine, fine, 3, padding=1), nn.ReLU())
         self.logits = nn.Conv2d(fine, cfg.num_classes, 1)
@@ -82,8 +87,9 @@ def label_map(target: dict[str, torch.Tensor], size: tuple[int, int], gap: int =
     return labels
 
 
-def semantic_loss(logits: torch.Tensor, targets: Sequence[dict[str, torch.Tensor]], fg_weight: float,
-                  gap: int = 0) -> torch.Tensor:
+def semantic_loss(
+    logits: torch.Tensor, targets: Sequence[dict[str, torch.Tensor]], fg_weight: float, gap: int = 0
+) -> torch.Tensor:
     """Cross-entropy of stride-2 ``logits`` (B, classes, h, w) against every image's label map at
     the input's size, object pixels weighted ``fg_weight`` against background (a strut is a
     sliver of a frame; unweighted, a map of background alone is already a low loss), instances
@@ -112,8 +118,13 @@ def pixel_classes(probs: torch.Tensor, background_weight: float = 1.0) -> torch.
     return torch.where(best.values > background_weight * probs[0], best.indices + 1, 0)
 
 
-def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area: int,
-                            background_weight: float = 1.0, vote: bool = False) -> dict[str, torch.Tensor]:
+def instances_from_semantic(
+    probs: torch.Tensor,
+    labels: Sequence[int],
+    min_area: int,
+    background_weight: float = 1.0,
+    vote: bool = False,
+) -> dict[str, torch.Tensor]:
     """Detections of the classes ``labels`` in one image's class probabilities ``probs`` (C, H, W):
     each 8-connected region of pixels of the label (:func:`pixel_classes`, the background's
     probability weighted ``background_weight``), of at least ``min_area`` pixels and holding a
@@ -133,7 +144,7 @@ def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area
     out_labels: list[int] = []
     scores: list[float] = []
     boxes: list[tuple[int, int, int, int]] = []
-    for group in ([list(labels)] if vote else [[label] for label in labels]):
+    for group in [list(labels)] if vote else [[label] for label in labels]:
         count, regions, stats, _ = cv2.connectedComponentsWithStats(
             np.isin(best, group).astype(np.uint8), connectivity=8
         )
@@ -158,11 +169,20 @@ def instances_from_semantic(probs: torch.Tensor, labels: Sequence[int], min_area
     masks = np.zeros((len(found), h, w), dtype=bool)
     for i, ((regions, k), (x0, y0, x1, y1)) in enumerate(zip(found, boxes, strict=True)):
         masks[i, y0:y1, x0:x1] = regions[y0:y1, x0:x1] == k  # a region lies within its box
-    return {"boxes": torch.tensor(boxes, dtype=torch.float32, device=device).reshape(-1, 4),
-            "labels": torch.tensor(out_labels, dtype=torch.long, device=device),
-            "scores": torch.tensor(scores, dtype=torch.float32, device=device),
-            "masks": torch.from_numpy(masks).to(device)}
+    return {
+        "boxes": torch.tensor(boxes, dtype=torch.float32, device=device).reshape(-1, 4),
+        "labels": torch.tensor(out_labels, dtype=torch.long, device=device),
+        "scores": torch.tensor(scores, dtype=torch.float32, device=device),
+        "masks": torch.from_numpy(masks).to(device),
+    }
 
 
-__all__ = ["SURE", "SemanticHead", "instances_from_semantic", "label_map", "pixel_classes", "semantic_loss",
-           "upsample_logits"]
+__all__ = [
+    "SURE",
+    "SemanticHead",
+    "instances_from_semantic",
+    "label_map",
+    "pixel_classes",
+    "semantic_loss",
+    "upsample_logits",
+]

@@ -45,8 +45,9 @@ def _labels(names: Sequence[str], classes: Sequence[str]) -> tuple[int, ...]:
     return tuple(classes.index(name) + 1 for name in names if name in classes)
 
 
-def _thin(result: dict[str, torch.Tensor], chosen: torch.Tensor, semantic_labels: Sequence[int],
-          above: float) -> torch.Tensor | None:
+def _thin(
+    result: dict[str, torch.Tensor], chosen: torch.Tensor, semantic_labels: Sequence[int], above: float
+) -> torch.Tensor | None:
     """Where the semantic head holds a pixel to be a thin part (H, W), or None when nothing of
     ``chosen`` (a row per detection) is to be looked at."""
     probs = result.get("semantic_probs")

@@ -171,8 +171,10 @@ class CheckAlignmentHandler:
                 e = in_world(e, held_pose)
                 if all(np.linalg.norm(m.translation - e.translation) >= SAME_PIECE_M for m in seen):
                     seen.append(e)
-            counts.append(f"{frame.camera}: {len(detections)} segmented, {len(near)} near a place,"
-                          f" {certified} certified")
+            counts.append(
+                f"{frame.camera}: {len(detections)} segmented, {len(near)} near a place,"
+                f" {certified} certified"
+            )
         p = response.pose
         set_stamp(p.header.stamp, stamp)
         p.header.frame_id = self.config.raw["world_frame"]
@@ -194,9 +196,11 @@ class CheckAlignmentHandler:
         seen_how = []
         if not result.aligned:
             off = [np.linalg.norm(np.asarray(places) - e.translation, axis=1).min() * 1000 for e in seen]
-            seen_how = [f"{piece}s: {', '.join(counts)}",
-                        f"certified ones {', '.join(f'{d:.0f}' for d in off) or '-'} mm from a place",
-                        *uncertified]
+            seen_how = [
+                f"{piece}s: {', '.join(counts)}",
+                f"certified ones {', '.join(f'{d:.0f}' for d in off) or '-'} mm from a place",
+                *uncertified,
+            ]
         response.reason = "; ".join([r for r in (result.reason, *problems, *seen_how) if r])
         p.keypoint_groups_visible, p.keypoint_groups_required = result.matched, 2
         p.certified = result.held is not None

@@ -430,10 +430,12 @@ def test_topic_data_waits_then_fails(ros):
 def test_goals_on_one_server_share_a_client_and_keep_their_results(ros, action_server):
     _, node = ros
     # Discovery of the fixture's server took over the default 5 s in a loaded CI run.
-    first = ActionGoal("first", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x0_y0"),
-                       server_timeout=30.0)
-    second = ActionGoal("second", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x1_y1"),
-                        server_timeout=30.0)
+    first = ActionGoal(
+        "first", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x0_y0"), server_timeout=30.0
+    )
+    second = ActionGoal(
+        "second", node, AddMember, "ars_x/add_member", goal("bay4/vertical/x1_y1"), server_timeout=30.0
+    )
     assert first.client is second.client
     both = py_trees.composites.Parallel(
         "both",
@@ -452,8 +454,9 @@ def test_result_recording_error_fails_cleanly(ros, action_server):
     def record(result, ok, reason):
         raise OSError("disk full")
 
-    behaviour = ActionGoal("add", node, AddMember, "ars_x/add_member", goal(), on_result=record,
-                           server_timeout=30.0)
+    behaviour = ActionGoal(
+        "add", node, AddMember, "ars_x/add_member", goal(), on_result=record, server_timeout=30.0
+    )
     run_to_end(behaviour, timeout=40.0)
     assert behaviour.status is Status.FAILURE
     assert "could not be recorded: disk full" in behaviour.feedback_message

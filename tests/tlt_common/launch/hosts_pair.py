@@ -96,8 +96,9 @@ class Client:
 
     def send(self, member: str, hold_s: float) -> None:
         self.sent.add(member)
-        goal = AddMember.Goal(kind=AddMember.Goal.KIND_VERTICAL, bay=1, member_id=member,
-                              position=f"hold:{hold_s}")
+        goal = AddMember.Goal(
+            kind=AddMember.Goal.KIND_VERTICAL, bay=1, member_id=member, position=f"hold:{hold_s}"
+        )
         self.action.send_goal_async(goal).add_done_callback(lambda f: self.on_accepted(member, f))
 
     def on_accepted(self, member: str, future) -> None:

@@ -51,19 +51,26 @@ class Receiver:
     def __init__(self, net: HostNetwork, host: str, bind: str, port: int, group: str | None = None) -> None:
         join = ""
         if group:
-            join = (f"s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, "
-                    f"socket.inet_aton('{group}') + socket.inet_aton('{bind}'))\n")
-        code = textwrap.dedent(f"""
+            join = (
+                f"s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, "
+                f"socket.inet_aton('{group}') + socket.inet_aton('{bind}'))\n"
+            )
+        code = (
+            textwrap.dedent(f"""
             import socket
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(('{'0.0.0.0' if group else bind}', {port}))
-            """) + join + textwrap.dedent("""
+            s.bind(('{"0.0.0.0" if group else bind}', {port}))
+            """)
+            + join
+            + textwrap.dedent("""
             print('ready', flush=True)
             while True:
                 print(s.recv(100).decode(), flush=True)
             """)
-        self.proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
-                                     preexec_fn=net.preexec(host))
+        )
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, preexec_fn=net.preexec(host)
+        )
         assert self.proc.stdout is not None
         assert self.proc.stdout.readline().strip() == "ready"
         self.got: list[str] = []
@@ -110,8 +117,12 @@ def test_hosts_reach_each_other_and_a_cut_link_drops_their_packets(network):
         assert receiver.received("before", timeout=10)
 
         network.cut("b")
-        link = subprocess.run(["ip", "-n", network.namespace("b"), "addr", "show", "eth0"],
-                              capture_output=True, text=True, check=True).stdout
+        link = subprocess.run(
+            ["ip", "-n", network.namespace("b"), "addr", "show", "eth0"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
         assert "NO-CARRIER" in link and "10.77.0.12/24" in link  # a pulled cable: the address stays
         send(network, "a", "10.77.0.11", "10.77.0.21", 47001, "while-cut")
         assert not receiver.received("while-cut", timeout=1.0)
@@ -142,8 +153,14 @@ def test_a_cut_host_fails_its_sends_to_other_hosts_at_once_and_still_reaches_its
         print(r.recv(10).decode())
         """)
     network.cut("b")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=30,
-                         preexec_fn=network.preexec("b")).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=30,
+        preexec_fn=network.preexec("b"),
+    ).stdout.split()
     assert out == ["ENETUNREACH", "self"], out
 
 
@@ -172,8 +189,9 @@ def test_teardown_ends_what_runs_inside_and_leaves_nothing():
     net.create()
     assert run_namespaces(RUN) == [f"tlt-{RUN}-a", f"tlt-{RUN}-b", f"tlt-{RUN}-switch"]
     assert _root_links() == links_before  # nothing of the emulated network in the machine's own
-    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"],
-                               preexec_fn=net.preexec("a"))
+    sleeper = subprocess.Popen(
+        [sys.executable, "-c", "import time; time.sleep(60)"], preexec_fn=net.preexec("a")
+    )
     net.teardown()
     assert sleeper.wait(timeout=10) == -9
     assert run_namespaces(RUN) == []
@@ -214,14 +232,17 @@ def test_without_privileges_creation_fails_naming_what_failed():
             print(exc)
         """)
     # Root without any capability: what an unprivileged CI container looks like.
-    result = subprocess.run(["setpriv", "--bounding-set=-all", "--inh-caps=-all", sys.executable, "-c",
-                             attempt], capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        ["setpriv", "--bounding-set=-all", "--inh-caps=-all", sys.executable, "-c", attempt],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     assert f"cannot create network namespaces: `ip netns add tlt-{RUN}-switch` failed:" in result.stdout
     assert "Operation not permitted" in result.stdout
     assert "needs root, or CAP_NET_ADMIN and CAP_SYS_ADMIN" in result.stdout
     assert run_namespaces(RUN) == []
-
 
 
 def test_the_hosts_command_cuts_heals_and_lists(network, capsys):

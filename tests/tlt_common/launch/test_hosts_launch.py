@@ -69,7 +69,8 @@ class Lines:
 
 def pair_set(tmp_path: Path, hold_s: float) -> Path:
     path = tmp_path / "pair_on_hosts.yaml"
-    path.write_text(textwrap.dedent(f"""
+    path.write_text(
+        textwrap.dedent(f"""
         name: pair_on_hosts
         grace_period_s: 3
         hosts:
@@ -86,7 +87,8 @@ def pair_set(tmp_path: Path, hold_s: float) -> Path:
             args: ["{PAIR}", client, "{hold_s}"]
             host: crs
             on_exit: shutdown
-    """))
+    """)
+    )
     return path
 
 
@@ -153,7 +155,8 @@ def _launch(path: Path, env: dict[str, str], setpriv: bool = False) -> subproces
 
 def _sleepers(tmp_path: Path) -> Path:
     path = tmp_path / "sleepers.yaml"
-    path.write_text(textwrap.dedent("""
+    path.write_text(
+        textwrap.dedent("""
         grace_period_s: 1
         hosts:
           - {name: a, address: 10.77.0.11/24}
@@ -161,8 +164,11 @@ def _sleepers(tmp_path: Path) -> Path:
         processes:
           - {name: one, executable: python, args: ["-c", "{SLEEP}"], host: a}
           - {name: two, executable: python, args: ["-c", "{SLEEP}"], host: b}
-    """).replace("{SLEEP}", "import time; print('up', flush=True); time.sleep(60)"))
+    """).replace("{SLEEP}", "import time; print('up', flush=True); time.sleep(60)")
+    )
     return path
+
+
 def _read_until(proc: subprocess.Popen[str], pattern: str, timeout: float) -> list[str]:
     """Lines of ``proc`` up to the first matching ``pattern`` (a timer kills it if none comes)."""
     assert proc.stdout is not None
@@ -219,8 +225,10 @@ def test_without_privileges_the_set_does_not_start_and_says_why(tmp_path):
     proc = _launch(_sleepers(tmp_path), {**os.environ, "TLT_HOSTS_RUN": run}, setpriv=True)
     output, _ = proc.communicate(timeout=60)
     assert proc.returncode == 1, output
-    assert (f"[launch] cannot create the hosts: cannot create network namespaces: "
-            f"`ip netns add tlt-{run}-switch` failed: ") in output
+    assert (
+        f"[launch] cannot create the hosts: cannot create network namespaces: "
+        f"`ip netns add tlt-{run}-switch` failed: "
+    ) in output
     assert "Operation not permitted" in output
     assert "[launch] started" not in output
     assert run_namespaces(run) == []

@@ -30,7 +30,9 @@ def refused(tmp_path: Path, body: str) -> str:
 
 
 def test_a_full_set_resolves_arguments_parameters_and_environment(tmp_path):
-    path = write(tmp_path, """
+    path = write(
+        tmp_path,
+        """
         name: demo
         grace_period_s: 2
         env: {SHARED: one}
@@ -44,14 +46,27 @@ def test_a_full_set_resolves_arguments_parameters_and_environment(tmp_path):
             restart: always
             max_restarts: 2
             required: true
-    """)
+    """,
+    )
     launch_set = load_launch_set(path, base_env={"PATH": "/usr/bin:/bin"})
     (proc,) = launch_set.processes
     assert launch_set.name == "demo" and launch_set.grace_period_s == 2.0
     assert proc.argv == (
-        sys.executable, f"{tmp_path}/x.py", "3", "one-two",
-        "--ros-args", "-r", "__node:=lifter",
-        "-p", "rate_hz:=50", "-p", "port:=/dev/ttyACM0", "-p", "joints:=[a, b]", "-p", "safe:=true",
+        sys.executable,
+        f"{tmp_path}/x.py",
+        "3",
+        "one-two",
+        "--ros-args",
+        "-r",
+        "__node:=lifter",
+        "-p",
+        "rate_hz:=50",
+        "-p",
+        "port:=/dev/ttyACM0",
+        "-p",
+        "joints:=[a, b]",
+        "-p",
+        "safe:=true",
     )
     assert proc.env == {"SHARED": "one", "OWN": "two"}
 
@@ -59,74 +74,116 @@ def test_a_full_set_resolves_arguments_parameters_and_environment(tmp_path):
 
 
 def test_variables_may_have_defaults(tmp_path):
-    path = write(tmp_path, """
+    path = write(
+        tmp_path,
+        """
         processes:
           - {name: a, executable: python, args: ["${RUN_DIR:-/tmp/run}/x", "${HOME_ISH:-h}"],
              wait_for_path: "${RUN_DIR:-/tmp/run}/dev"}
-    """)
+    """,
+    )
     (proc,) = load_launch_set(path, base_env={"HOME_ISH": "set"}).processes
     assert proc.argv[1:] == ("/tmp/run/x", "set")
     assert proc.wait_for_path == "/tmp/run/dev"
 
+
 def test_defaults(tmp_path):
-    launch_set = load_launch_set(write(tmp_path, """
+    launch_set = load_launch_set(
+        write(
+            tmp_path,
+            """
         processes:
           - {name: a, executable: python}
-    """))
+    """,
+        )
+    )
     (proc,) = launch_set.processes
     assert launch_set.name == "set"
     assert (proc.restart, proc.required, proc.argv, proc.nice) == ("never", False, (sys.executable,), 0)
 
 
-@pytest.mark.parametrize(("body", "message"), [
-    ("processes: []", "processes: no processes and nothing included"),
-    ("name: x", "processes: no processes and nothing included"),
-    ("include: [no_such_set.yaml]", "include[0]: no launch set at /"),
-    ("processes:\n  - {name: a, executable: python, restrat: always}",
-     "processes[0].restrat: unknown key (known keys: "),
-    ("processes:\n  - {name: a, executable: python, max_restarts: many}",
-     "processes[0].max_restarts: expected an integer, got str 'many'"),
-    ("processes:\n  - {name: a, executable: python, required: yes please}",
-     "processes[0].required: expected true or false, got str 'yes please'"),
-    ("processes:\n  - {name: a}", "processes[0].executable: missing required key (program to run)"),
-    ("processes:\n  - {name: a, executable: python}\n  - {name: a, executable: python}",
-     "processes[1].name: duplicate process name 'a'"),
-    ("processes:\n  - {name: a, executable: tlt-no-such-program}",
-     "processes[0].executable: executable 'tlt-no-such-program' not found in"),
-    ("processes:\n  - {name: a, executable: python, args: ['${NOT_SET}']}",
-     "processes[0].args[0]: ${NOT_SET} is not set in the environment or the launch set"),
-    ("processes:\n  - {name: 2fast, executable: python}",
-     "processes[0].name: expected a name of letters, digits and '_' starting with a letter, got '2fast'"),
-    ("grace_period_s: 0\nprocesses:\n  - {name: a, executable: python}",
-     "grace_period_s: expected at least 0.1, got 0.0"),
-    ("processes:\n  - {name: a, executable: python, on_exit: shutdown}\n"
-     "  - {name: b, executable: python, on_exit: shutdown}",
-     "processes: at most one process may have on_exit: shutdown"),
-    ("processes:\n  - {name: a, executable: python, cwd: /no/such/dir}",
-     "processes[0].cwd: /no/such/dir is not a directory"),
-    ("processes:\n  - {name: a, executable: python, nice: 20}",
-     "processes[0].nice: expected at most 19, got 20"),
-    ("processes:\n  - {name: a, executable: python, nice: -5}",
-     "processes[0].nice: expected at least 0, got -5"),
-    ("processes: [a", "invalid YAML: line 1, column 14: "),
-])
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("processes: []", "processes: no processes and nothing included"),
+        ("name: x", "processes: no processes and nothing included"),
+        ("include: [no_such_set.yaml]", "include[0]: no launch set at /"),
+        (
+            "processes:\n  - {name: a, executable: python, restrat: always}",
+            "processes[0].restrat: unknown key (known keys: ",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, max_restarts: many}",
+            "processes[0].max_restarts: expected an integer, got str 'many'",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, required: yes please}",
+            "processes[0].required: expected true or false, got str 'yes please'",
+        ),
+        ("processes:\n  - {name: a}", "processes[0].executable: missing required key (program to run)"),
+        (
+            "processes:\n  - {name: a, executable: python}\n  - {name: a, executable: python}",
+            "processes[1].name: duplicate process name 'a'",
+        ),
+        (
+            "processes:\n  - {name: a, executable: tlt-no-such-program}",
+            "processes[0].executable: executable 'tlt-no-such-program' not found in",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, args: ['${NOT_SET}']}",
+            "processes[0].args[0]: ${NOT_SET} is not set in the environment or the launch set",
+        ),
+        (
+            "processes:\n  - {name: 2fast, executable: python}",
+            "processes[0].name: expected a name of letters, digits and '_' starting with a letter, "
+            "got '2fast'",
+        ),
+        (
+            "grace_period_s: 0\nprocesses:\n  - {name: a, executable: python}",
+            "grace_period_s: expected at least 0.1, got 0.0",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, on_exit: shutdown}\n"
+            "  - {name: b, executable: python, on_exit: shutdown}",
+            "processes: at most one process may have on_exit: shutdown",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, cwd: /no/such/dir}",
+            "processes[0].cwd: /no/such/dir is not a directory",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, nice: 20}",
+            "processes[0].nice: expected at most 19, got 20",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, nice: -5}",
+            "processes[0].nice: expected at least 0, got -5",
+        ),
+        ("processes: [a", "invalid YAML: line 1, column 14: "),
+    ],
+)
 def test_bad_sets_are_refused_naming_file_key_and_expectation(tmp_path, body, message):
     assert refused(tmp_path, body).startswith(message)
 
 
 def test_included_sets_join_with_the_including_environment(tmp_path):
     (tmp_path / "sub").mkdir()
-    (tmp_path / "sub" / "devices.yaml").write_text(textwrap.dedent("""
+    (tmp_path / "sub" / "devices.yaml").write_text(
+        textwrap.dedent("""
         env: {LINKS: "${RUN:-/default}/links"}
         processes:
           - {name: emulator, executable: python, args: ["${LINKS}", "${LAUNCH_DIR}"]}
-    """))
-    path = write(tmp_path, """
+    """)
+    )
+    path = write(
+        tmp_path,
+        """
         env: {RUN: /run/here}
         include: [sub/devices.yaml]
         processes:
           - {name: job, executable: python, args: ["${LAUNCH_DIR}"], on_exit: shutdown}
-    """)
+    """,
+    )
     emulator, job = load_launch_set(path, base_env={}).processes
     assert emulator.argv[1:] == ("/run/here/links", str(tmp_path / "sub"))
     assert emulator.env == {"RUN": "/run/here", "LINKS": "/run/here/links"}

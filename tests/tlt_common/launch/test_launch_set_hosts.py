@@ -41,67 +41,112 @@ HOSTS = textwrap.dedent("""
 
 
 def test_processes_are_placed_on_declared_hosts(tmp_path):
-    path = write(tmp_path, HOSTS + textwrap.dedent("""
+    path = write(
+        tmp_path,
+        HOSTS
+        + textwrap.dedent("""
     processes:
       - {name: server, executable: python, host: ars_x}
       - {name: client, executable: python, host: crs}
       - {name: local, executable: python}
-    """))
+    """),
+    )
     launch_set = load_launch_set(path)
     assert [(p.name, p.host) for p in launch_set.processes] == [
-        ("server", "ars_x"), ("client", "crs"), ("local", None)]
+        ("server", "ars_x"),
+        ("client", "crs"),
+        ("local", None),
+    ]
     assert [(h.name, h.ip, h.extra_addresses) for h in launch_set.hosts] == [
-        ("crs", "10.77.0.11", ()), ("ars_x", "10.77.0.12", ("10.77.0.21/24",))]
+        ("crs", "10.77.0.11", ()),
+        ("ars_x", "10.77.0.12", ("10.77.0.21/24",)),
+    ]
     assert launch_set.dds_profile == str(DEFAULT_PROFILE)
     assert launch_set.host_multicast is False
 
 
 def test_placement_puts_included_processes_on_hosts(tmp_path):
-    write(tmp_path, textwrap.dedent("""
+    write(
+        tmp_path,
+        textwrap.dedent("""
     processes:
       - {name: driver, executable: python}
       - {name: agent, executable: python}
-    """), name="inner.yaml")
-    path = write(tmp_path, HOSTS + textwrap.dedent("""
+    """),
+        name="inner.yaml",
+    )
+    path = write(
+        tmp_path,
+        HOSTS
+        + textwrap.dedent("""
     include: [inner.yaml]
     placement: {driver: crs, agent: ars_x}
     dds_profile: profile.xml
-    """))
+    """),
+    )
     (tmp_path / "profile.xml").write_text(DEFAULT_PROFILE.read_text())
     launch_set = load_launch_set(path)
     assert {p.name: p.host for p in launch_set.processes} == {"driver": "crs", "agent": "ars_x"}
     assert launch_set.dds_profile == str(tmp_path / "profile.xml")
 
 
-@pytest.mark.parametrize(("body", "message"), [
-    (HOSTS + "processes: [{name: a, executable: python, host: ars_y}]",
-     "processes[0].host: no host 'ars_y' declared under hosts (hosts: crs, ars_x)"),
-    ("processes: [{name: a, executable: python, host: crs}]",
-     "processes[0].host: no host 'crs' declared under hosts (hosts: none)"),
-    (HOSTS + "placement: {b: crs}\nprocesses: [{name: a, executable: python}]",
-     "placement.b: no process 'b' in this set"),
-    (HOSTS + "placement: {a: ars_x}\nprocesses: [{name: a, executable: python, host: crs}]",
-     "placement.a: a already runs on host 'crs'"),
-    ("hosts: [{name: a, address: 10.77.0.1/24}, {name: b, address: 10.77.0.1/24}]\n"
-     "processes: [{name: p, executable: python}]",
-     "hosts: host 'b': 10.77.0.1 is already the address of 'a'"),
-    ("hosts: [{name: a, address: 10.77.0.1/24}, {name: b, address: 10.78.0.2/24}]\n"
-     "processes: [{name: p, executable: python}]",
-     "hosts: host 'b': 10.78.0.2/24 is not on 10.77.0.0/24, the hosts' network"),
-    ("hosts: [{name: a, address: 10.77.0.300/24}]\nprocesses: [{name: p, executable: python}]",
-     "hosts: host 'a': '10.77.0.300/24' is not an IPv4 address"),
-    ("hosts: [{name: a, address: 10.77.0.1}]\nprocesses: [{name: p, executable: python}]",
-     "hosts: host 'a': '10.77.0.1' needs a prefix length, e.g. 10.77.0.1/24"),
-    ("hosts: [{name: a, address: 10.77.0.1/24}, {name: a, address: 10.77.0.2/24}]\n"
-     "processes: [{name: p, executable: python}]",
-     "hosts[1].name: duplicate host name 'a'"),
-    ("hosts: [{name: a_very_long_name, address: 10.77.0.1/24}]\nprocesses: [{name: p, executable: python}]",
-     "a host name has at most 13 characters"),
-    ("hosts: [{name: switch, address: 10.77.0.1/24}]\nprocesses: [{name: p, executable: python}]",
-     "'switch' is the name of the emulated network's switch"),
-    (HOSTS + "dds_profile: nowhere.xml\nprocesses: [{name: p, executable: python}]",
-     "dds_profile: no Fast DDS profile at"),
-])
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            HOSTS + "processes: [{name: a, executable: python, host: ars_y}]",
+            "processes[0].host: no host 'ars_y' declared under hosts (hosts: crs, ars_x)",
+        ),
+        (
+            "processes: [{name: a, executable: python, host: crs}]",
+            "processes[0].host: no host 'crs' declared under hosts (hosts: none)",
+        ),
+        (
+            HOSTS + "placement: {b: crs}\nprocesses: [{name: a, executable: python}]",
+            "placement.b: no process 'b' in this set",
+        ),
+        (
+            HOSTS + "placement: {a: ars_x}\nprocesses: [{name: a, executable: python, host: crs}]",
+            "placement.a: a already runs on host 'crs'",
+        ),
+        (
+            "hosts: [{name: a, address: 10.77.0.1/24}, {name: b, address: 10.77.0.1/24}]\n"
+            "processes: [{name: p, executable: python}]",
+            "hosts: host 'b': 10.77.0.1 is already the address of 'a'",
+        ),
+        (
+            "hosts: [{name: a, address: 10.77.0.1/24}, {name: b, address: 10.78.0.2/24}]\n"
+            "processes: [{name: p, executable: python}]",
+            "hosts: host 'b': 10.78.0.2/24 is not on 10.77.0.0/24, the hosts' network",
+        ),
+        (
+            "hosts: [{name: a, address: 10.77.0.300/24}]\nprocesses: [{name: p, executable: python}]",
+            "hosts: host 'a': '10.77.0.300/24' is not an IPv4 address",
+        ),
+        (
+            "hosts: [{name: a, address: 10.77.0.1}]\nprocesses: [{name: p, executable: python}]",
+            "hosts: host 'a': '10.77.0.1' needs a prefix length, e.g. 10.77.0.1/24",
+        ),
+        (
+            "hosts: [{name: a, address: 10.77.0.1/24}, {name: a, address: 10.77.0.2/24}]\n"
+            "processes: [{name: p, executable: python}]",
+            "hosts[1].name: duplicate host name 'a'",
+        ),
+        (
+            "hosts: [{name: a_very_long_name, address: 10.77.0.1/24}]\n"
+            "processes: [{name: p, executable: python}]",
+            "a host name has at most 13 characters",
+        ),
+        (
+            "hosts: [{name: switch, address: 10.77.0.1/24}]\nprocesses: [{name: p, executable: python}]",
+            "'switch' is the name of the emulated network's switch",
+        ),
+        (
+            HOSTS + "dds_profile: nowhere.xml\nprocesses: [{name: p, executable: python}]",
+            "dds_profile: no Fast DDS profile at",
+        ),
+    ],
+)
 def test_a_bad_host_declaration_refuses_the_set(tmp_path, body, message):
     path = write(tmp_path, body)
     with pytest.raises(ConfigError) as caught:
@@ -146,17 +191,31 @@ def test_a_template_without_a_participant_is_refused(tmp_path):
 
 
 def test_a_process_in_a_host_is_not_confined_to_loopback():
-    env = host_environment("/x/p.xml", {"ROS_LOCALHOST_ONLY": "1", "ROS_STATIC_PEERS": "127.0.0.1",
-                                        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_DOMAIN_ID": "7"})
-    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_DOMAIN_ID": "7",
-                   "FASTRTPS_DEFAULT_PROFILES_FILE": "/x/p.xml", "FASTDDS_DEFAULT_PROFILES_FILE": "/x/p.xml",
-                   "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp"}
+    env = host_environment(
+        "/x/p.xml",
+        {
+            "ROS_LOCALHOST_ONLY": "1",
+            "ROS_STATIC_PEERS": "127.0.0.1",
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_DOMAIN_ID": "7",
+        },
+    )
+    assert env == {
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+        "ROS_DOMAIN_ID": "7",
+        "FASTRTPS_DEFAULT_PROFILES_FILE": "/x/p.xml",
+        "FASTDDS_DEFAULT_PROFILES_FILE": "/x/p.xml",
+        "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp",
+    }
 
 
 def _fast_dds_complaints(profile: Path) -> str:
     """What Fast DDS prints while a node starts with ``profile`` as its default profiles file."""
-    env = {**os.environ, "FASTRTPS_DEFAULT_PROFILES_FILE": str(profile),
-           "FASTDDS_DEFAULT_PROFILES_FILE": str(profile)}
+    env = {
+        **os.environ,
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(profile),
+        "FASTDDS_DEFAULT_PROFILES_FILE": str(profile),
+    }
     code = "import rclpy; rclpy.init(); rclpy.create_node('profile_check'); print('node up')"
     result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert "node up" in result.stdout, result.stderr

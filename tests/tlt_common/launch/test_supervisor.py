@@ -23,8 +23,12 @@ class Launcher:
     """``tlt launch`` as a subprocess, with its output collected line by line."""
 
     def __init__(self, launch_file: Path) -> None:
-        self.proc = subprocess.Popen([str(TLT), "launch", str(launch_file)], stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(
+            [str(TLT), "launch", str(launch_file)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         self.lines: list[str] = []
         self._changed = threading.Condition()
         threading.Thread(target=self._read, daemon=True).start()
@@ -95,7 +99,9 @@ def launcher():
 
 
 def pair_set(tmp_path: Path, client_restart: str = "on-failure", server_required: bool = True) -> Path:
-    return write_set(tmp_path, f"""
+    return write_set(
+        tmp_path,
+        f"""
         name: pair
         grace_period_s: 3
         processes:
@@ -108,7 +114,8 @@ def pair_set(tmp_path: Path, client_restart: str = "on-failure", server_required
             args: ["{PAIR}", client]
             restart: {client_restart}
             restart_delay_s: 0.2
-    """)
+    """,
+    )
 
 
 def test_two_nodes_exchange_an_action_and_ctrl_c_stops_everything(tmp_path, launcher):
@@ -153,7 +160,9 @@ def test_a_required_process_that_dies_stops_the_set_with_an_error(tmp_path, laun
 
 
 def test_a_process_that_cannot_start_is_named_with_its_last_output(tmp_path, launcher):
-    path = write_set(tmp_path, """
+    path = write_set(
+        tmp_path,
+        """
         processes:
           - name: broken
             executable: python
@@ -162,7 +171,8 @@ def test_a_process_that_cannot_start_is_named_with_its_last_output(tmp_path, lau
           - name: bystander
             executable: python
             args: ["-c", "import time; time.sleep(60)"]
-    """)
+    """,
+    )
     run = launcher(path)
     bystander = run.pid_of("bystander")
     assert run.finish() != 0
@@ -176,7 +186,8 @@ def test_a_process_that_cannot_start_is_named_with_its_last_output(tmp_path, lau
 
 def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_path, launcher):
     stubborn = tmp_path / "stubborn.py"
-    stubborn.write_text(textwrap.dedent("""
+    stubborn.write_text(
+        textwrap.dedent("""
         import signal, subprocess, sys, time
         ignored = [signal.SIGINT] + ([signal.SIGTERM] if sys.argv[1] == "both" else [])
         for sig in ignored:
@@ -184,8 +195,11 @@ def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_
         child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
         print(f"grandchild {child.pid}", flush=True)
         time.sleep(120)
-    """))
-    path = write_set(tmp_path, f"""
+    """)
+    )
+    path = write_set(
+        tmp_path,
+        f"""
         grace_period_s: 0.5
         processes:
           - name: ignores_int
@@ -194,7 +208,8 @@ def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_
           - name: ignores_both
             executable: python
             args: ["{stubborn}", "both"]
-    """)
+    """,
+    )
     run = launcher(path)
     pids = [run.pid_of("ignores_int"), run.pid_of("ignores_both")]
     for name in ("ignores_int", "ignores_both"):
@@ -218,22 +233,29 @@ def test_children_die_with_a_killed_launcher(tmp_path, launcher):
 
 
 def test_a_bad_launch_set_starts_nothing(tmp_path):
-    path = write_set(tmp_path, """
+    path = write_set(
+        tmp_path,
+        """
         processes:
           - name: a
             executable: python
             restart: sometimes
-    """)
+    """,
+    )
     result = subprocess.run([str(TLT), "launch", str(path)], capture_output=True, text=True, timeout=30)
     assert result.returncode == 2
-    assert f"{path}: processes[0].restart: expected one of 'never', 'on-failure', 'always', got 'sometimes'" \
+    assert (
+        f"{path}: processes[0].restart: expected one of 'never', 'on-failure', 'always', got 'sometimes'"
         in result.stderr
+    )
     assert "[launch] started" not in result.stdout
 
 
 @pytest.mark.parametrize("code", [0, 3])
 def test_a_job_with_on_exit_shutdown_ends_the_set_with_its_exit_code(tmp_path, launcher, code):
-    path = write_set(tmp_path, f"""
+    path = write_set(
+        tmp_path,
+        f"""
         processes:
           - name: service
             executable: python
@@ -242,7 +264,8 @@ def test_a_job_with_on_exit_shutdown_ends_the_set_with_its_exit_code(tmp_path, l
             executable: python
             args: ["-c", "import time, sys; time.sleep(0.5); print('job done'); sys.exit({code})"]
             on_exit: shutdown
-    """)
+    """,
+    )
     run = launcher(path)
     service = run.pid_of("service")
     assert run.finish() == code
@@ -252,7 +275,9 @@ def test_a_job_with_on_exit_shutdown_ends_the_set_with_its_exit_code(tmp_path, l
 
 def test_a_process_waits_for_its_device_path(tmp_path, launcher):
     link = tmp_path / "device"
-    path = write_set(tmp_path, f"""
+    path = write_set(
+        tmp_path,
+        f"""
         processes:
           - name: driver
             executable: python
@@ -261,7 +286,8 @@ def test_a_process_waits_for_its_device_path(tmp_path, launcher):
           - name: emulator
             executable: python
             args: ["-c", "import time, pathlib; time.sleep(1); pathlib.Path('{link}').touch(); time.sleep(9)"]
-    """)
+    """,
+    )
     run = launcher(path)
     run.wait_for(rf"\[launch\] driver waits for {link}")
     run.pid_of("emulator")
@@ -273,19 +299,24 @@ def test_a_process_waits_for_its_device_path(tmp_path, launcher):
 
 def test_a_process_runs_every_thread_and_its_autogroup_at_its_niceness(tmp_path, launcher):
     # A thread's niceness is in field 19 of its /proc stat line: the process's own and one it starts.
-    report = ("import os, threading, pathlib; "
-              "nice = lambda tid: int(pathlib.Path(f'/proc/self/task/{tid}/stat').read_text()"
-              ".rsplit(')', 1)[1].split()[16]); "
-              "t = threading.Thread(target=lambda: print('thread', nice(threading.get_native_id()), "
-              "flush=True)); t.start(); t.join(); "
-              "print('main', nice(threading.get_native_id()), flush=True); "
-              "group = pathlib.Path('/proc/self/autogroup'); "
-              "print('group', group.read_text().split()[-1] if group.exists() else 'none', flush=True)")
-    path = write_set(tmp_path, f"""
+    report = (
+        "import os, threading, pathlib; "
+        "nice = lambda tid: int(pathlib.Path(f'/proc/self/task/{tid}/stat').read_text()"
+        ".rsplit(')', 1)[1].split()[16]); "
+        "t = threading.Thread(target=lambda: print('thread', nice(threading.get_native_id()), "
+        "flush=True)); t.start(); t.join(); "
+        "print('main', nice(threading.get_native_id()), flush=True); "
+        "group = pathlib.Path('/proc/self/autogroup'); "
+        "print('group', group.read_text().split()[-1] if group.exists() else 'none', flush=True)"
+    )
+    path = write_set(
+        tmp_path,
+        f"""
         processes:
           - {{name: yielding, executable: python, args: ["-c", "{report}"], nice: 7}}
           - {{name: plain, executable: python, args: ["-c", "{report}"]}}
-    """)
+    """,
+    )
     own = os.nice(0)
     run = launcher(path)
     assert run.finish() == 0
@@ -300,7 +331,9 @@ def test_a_process_runs_every_thread_and_its_autogroup_at_its_niceness(tmp_path,
 
 
 def test_a_device_path_that_never_appears_fails_a_required_process(tmp_path, launcher):
-    path = write_set(tmp_path, f"""
+    path = write_set(
+        tmp_path,
+        f"""
         processes:
           - name: driver
             executable: python
@@ -308,7 +341,8 @@ def test_a_device_path_that_never_appears_fails_a_required_process(tmp_path, lau
             wait_for_path: {tmp_path / "never"}
             wait_timeout_s: 0.5
             required: true
-    """)
+    """,
+    )
     run = launcher(path)
     assert run.finish() == 1
     run.wait_for(r"driver cannot start: .*never did not appear within 0.5 s")
@@ -322,11 +356,14 @@ def test_the_signal_handler_takes_no_lock_the_main_thread_may_hold(tmp_path):
     from tlt_common.launch.launch_set import load_launch_set
     from tlt_common.launch.supervisor import Supervisor
 
-    path = write_set(tmp_path, """
+    path = write_set(
+        tmp_path,
+        """
         processes:
           - name: a
             executable: python
-    """)
+    """,
+    )
     supervisor = Supervisor(load_launch_set(path), out=sys.stdout)
     previous = supervisor._install_signal_handlers()
     try:

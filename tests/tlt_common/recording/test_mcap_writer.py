@@ -20,10 +20,10 @@ SOURCE = MessageDefinitionSource()
 def write_strings(path: Path, count: int, compression: str, flush_every: int = 0) -> None:
     writer = McapRecordingWriter(path, compression=compression, metadata={"run": "unit"})
     qos = offered_qos_yaml([subscription_qos([])])
-    chan_a = writer.add_channel("/a", "std_msgs/msg/String", SOURCE.full_text("std_msgs/msg/String"),
-                                qos, "RIHS01_abc")
-    chan_b = writer.add_channel("/b", "std_msgs/msg/String", SOURCE.full_text("std_msgs/msg/String"),
-                                qos)
+    chan_a = writer.add_channel(
+        "/a", "std_msgs/msg/String", SOURCE.full_text("std_msgs/msg/String"), qos, "RIHS01_abc"
+    )
+    chan_b = writer.add_channel("/b", "std_msgs/msg/String", SOURCE.full_text("std_msgs/msg/String"), qos)
     for i in range(count):
         channel = chan_a if i % 2 == 0 else chan_b
         writer.write(channel, serialize_message(String(data=f"m{i}")), 1_000 + i, 500 + i)

@@ -23,8 +23,7 @@ SOURCE = MessageDefinitionSource()
 
 
 def decode(type_name: str, data: bytes):
-    schema = Schema(id=1, name=type_name, encoding="ros2msg",
-                    data=SOURCE.full_text(type_name).encode())
+    schema = Schema(id=1, name=type_name, encoding="ros2msg", data=SOURCE.full_text(type_name).encode())
     decoder = LenientRos2DecoderFactory().decoder_for("cdr", schema)
     assert decoder is not None
     return decoder(data)
@@ -37,7 +36,7 @@ def test_field_lines_name_their_complex_types_only():
     assert field_base_type("string<=10 name") is None
     assert field_base_type("float64[4] values") is None
     assert field_base_type("uint8 KIND_VERTICAL = 1") is None
-    assert field_base_type("string GREETING=\"a # b\"") is None
+    assert field_base_type('string GREETING="a # b"') is None
     assert field_base_type("# only a comment") is None
     assert field_base_type("   ") is None
 
@@ -66,7 +65,8 @@ def test_full_text_lists_each_dependency_once_in_the_rosbag2_layout():
     sections = text.split(SEPARATOR + "\n")
     assert sections[0].startswith("# Telemetry of the lifter firmware")
     assert [s.splitlines()[0] for s in sections[1:]] == [
-        "MSG: std_msgs/Header", "MSG: builtin_interfaces/Time",
+        "MSG: std_msgs/Header",
+        "MSG: builtin_interfaces/Time",
     ]
     goal_status = SOURCE.full_text("action_msgs/msg/GoalStatusArray")
     assert goal_status.count("MSG: unique_identifier_msgs/UUID") == 1

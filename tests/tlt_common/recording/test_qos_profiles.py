@@ -33,8 +33,9 @@ def test_one_weaker_publisher_weakens_the_subscription_so_it_matches_all():
 
 
 def test_offered_profiles_yaml_has_rosbag2_version_9_fields():
-    profile = QoSProfile(depth=3, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                         deadline=Duration(seconds=1, nanoseconds=500))
+    profile = QoSProfile(
+        depth=3, durability=DurabilityPolicy.TRANSIENT_LOCAL, deadline=Duration(seconds=1, nanoseconds=500)
+    )
     loaded = yaml.safe_load(offered_qos_yaml([profile, BEST_EFFORT]))
     assert loaded[0] == {
         "history": "keep_last",

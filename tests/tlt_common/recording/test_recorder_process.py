@@ -27,8 +27,7 @@ from tlt_common.recording.cli import main
 from tlt_common.recording.reading import read_messages
 from tlt_common.recording.recovery import ScanResult, iter_flushed_messages, recover
 
-RECORDER = [sys.executable, "-c",
-            "import sys; from tlt_common.recording.cli import main; sys.exit(main())"]
+RECORDER = [sys.executable, "-c", "import sys; from tlt_common.recording.cli import main; sys.exit(main())"]
 FAST = ["--discovery-period", "0.2", "--flush-period", "0.2", "--progress-period", "1"]
 N = 10
 LATE = 5
@@ -42,8 +41,9 @@ class Recorder:
         self.out = out
         self.log_path = out.with_suffix(".log")
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen([*RECORDER, "--out", str(out), *FAST, *args],
-                                     stdout=self._log, stderr=subprocess.STDOUT)
+        self.proc = subprocess.Popen(
+            [*RECORDER, "--out", str(out), *FAST, *args], stdout=self._log, stderr=subprocess.STDOUT
+        )
 
     @property
     def log(self) -> str:
@@ -113,8 +113,10 @@ def recording(ros_node, tmp_path_factory) -> dict:
     mixed_lossy = None
     try:
         for pub in (latched, chatter, joints, lifter, feedback, mixed_reliable):
-            wait_until(lambda pub=pub: pub.get_subscription_count() > 0,
-                       f"the recorder to subscribe to {pub.topic_name}")
+            wait_until(
+                lambda pub=pub: pub.get_subscription_count() > 0,
+                f"the recorder to subscribe to {pub.topic_name}",
+            )
         for i in range(N):
             chatter.publish(String(data=f"c{i}"))
             js = JointState(name=["j"], position=[i * 0.5])
@@ -139,30 +141,52 @@ def recording(ros_node, tmp_path_factory) -> dict:
         mixed_lossy = node.create_publisher(
             String, f"{PREFIX}/mixed", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         )
-        wait_until(lambda: mixed_lossy.get_subscription_count() > 0,
-                   "the recorder to re-subscribe best effort")
+        wait_until(
+            lambda: mixed_lossy.get_subscription_count() > 0, "the recorder to re-subscribe best effort"
+        )
 
         def lossy_recorded() -> bool:
             mixed_lossy.publish(String(data="from best effort"))
             return flushed_counts(out)[f"{PREFIX}/mixed"] >= 1
 
         wait_until(lossy_recorded, "a best-effort message to reach the file")
-        expected = {f"{PREFIX}/chatter": N, f"{PREFIX}/joint_states": N, f"{PREFIX}/lifter/state": N,
-                    f"{PREFIX}/add_member/_action/feedback": N, f"{PREFIX}/late": LATE,
-                    f"{PREFIX}/latched": 1}
-        wait_until(lambda: all(flushed_counts(out)[t] >= n for t, n in expected.items()),
-                   "every published message to reach the file")
+        expected = {
+            f"{PREFIX}/chatter": N,
+            f"{PREFIX}/joint_states": N,
+            f"{PREFIX}/lifter/state": N,
+            f"{PREFIX}/add_member/_action/feedback": N,
+            f"{PREFIX}/late": LATE,
+            f"{PREFIX}/latched": 1,
+        }
+        wait_until(
+            lambda: all(flushed_counts(out)[t] >= n for t, n in expected.items()),
+            "every published message to reach the file",
+        )
         subscribers_of_excluded = sum(p.get_subscription_count() for p in (image, rgb, noise))
         time.sleep(2.5)  # progress is logged every second (FAST): let a loaded machine log one
         returncode = recorder.stop(signal.SIGINT)
     finally:
         recorder.stop(signal.SIGKILL)
-        for pub in (latched, image, rgb, noise, chatter, joints, lifter, feedback, mixed_reliable,
-                    mixed_lossy):
+        for pub in (
+            latched,
+            image,
+            rgb,
+            noise,
+            chatter,
+            joints,
+            lifter,
+            feedback,
+            mixed_reliable,
+            mixed_lossy,
+        ):
             if pub is not None:
                 node.destroy_publisher(pub)
-    return {"path": out, "returncode": returncode, "log": recorder.log,
-            "subscribers_of_excluded": subscribers_of_excluded}
+    return {
+        "path": out,
+        "returncode": returncode,
+        "log": recorder.log,
+        "subscribers_of_excluded": subscribers_of_excluded,
+    }
 
 
 def messages_by_topic(path: Path) -> dict[str, list]:
@@ -279,9 +303,7 @@ def test_sigkill_keeps_the_flushed_messages_and_recover_completes_the_file(ros_n
     assert recovered == [f"k{i}" for i in range(N)]
 
 
-def test_sigterm_finishes_the_file_sim_time_stamps_it_and_an_earlier_file_is_kept(
-    ros_node, tmp_path: Path
-):
+def test_sigterm_finishes_the_file_sim_time_stamps_it_and_an_earlier_file_is_kept(ros_node, tmp_path: Path):
     from rosgraph_msgs.msg import Clock
 
     out = tmp_path / "recording.mcap"

@@ -53,9 +53,11 @@ def test_messages_queued_between_takes_are_all_written_in_order(context, tmp_pat
     publisher_node = rclpy.create_node("takes_test_publisher", context=context)
     pubs = [publisher_node.create_publisher(Int32, t, QoSProfile(depth=PER_TOPIC)) for t in TOPICS]
     writer = McapRecordingWriter(tmp_path / "r.mcap")
-    recorder = TopicRecorder(writer, TopicFilter(topics=TOPICS), node_name="takes_test_record",
-                             context=context)
+    recorder = TopicRecorder(
+        writer, TopicFilter(topics=TOPICS), node_name="takes_test_record", context=context
+    )
     try:
+
         def subscribed() -> bool:
             recorder.discover()
             return all(p.get_subscription_count() for p in pubs)
@@ -86,12 +88,17 @@ def test_a_spinning_recorder_takes_on_its_timer(context, tmp_path: Path):
     publisher_node = rclpy.create_node("takes_test_publisher", context=context)
     pub = publisher_node.create_publisher(Int32, TOPICS[0], 10)
     writer = McapRecordingWriter(tmp_path / "r.mcap")
-    recorder = TopicRecorder(writer, TopicFilter(topics=TOPICS[:1]),
-                             RecorderTiming(discovery_period_s=0.1, take_period_s=0.02),
-                             node_name="takes_test_record", context=context)
+    recorder = TopicRecorder(
+        writer,
+        TopicFilter(topics=TOPICS[:1]),
+        RecorderTiming(discovery_period_s=0.1, take_period_s=0.02),
+        node_name="takes_test_record",
+        context=context,
+    )
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(recorder)
     try:
+
         def spun_until(condition) -> bool:
             executor.spin_once(timeout_sec=0.02)
             return condition()
@@ -99,8 +106,9 @@ def test_a_spinning_recorder_takes_on_its_timer(context, tmp_path: Path):
         wait_until(lambda: spun_until(pub.get_subscription_count), "the recorder to subscribe")
         for i in range(5):
             pub.publish(Int32(data=i))
-        wait_until(lambda: spun_until(lambda: writer.message_count == 5),
-                   "the timer to take the five messages")
+        wait_until(
+            lambda: spun_until(lambda: writer.message_count == 5), "the timer to take the five messages"
+        )
         recorder.stop()
     finally:
         executor.shutdown()

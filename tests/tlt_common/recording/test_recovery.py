@@ -25,7 +25,9 @@ def cut_recording(path: Path, compression: str) -> list[int]:
     recorder leaves it). Returns the file size after each flush."""
     writer = McapRecordingWriter(path, compression=compression)
     channel = writer.add_channel(
-        "/t", "std_msgs/msg/String", MessageDefinitionSource().full_text("std_msgs/msg/String"),
+        "/t",
+        "std_msgs/msg/String",
+        MessageDefinitionSource().full_text("std_msgs/msg/String"),
         offered_qos_yaml([subscription_qos([])]),
     )
     sizes = []

@@ -93,7 +93,11 @@ def test_server_that_came_up_behind_the_cache_gets_the_goal_instead_of_a_fault(r
             return AddMember.Result(success=True)
 
         server = ActionServer(
-            rig.node, AddMember, "/ars_x/add_member", execute_callback=execute, goal_callback=on_goal,
+            rig.node,
+            AddMember,
+            "/ars_x/add_member",
+            execute_callback=execute,
+            goal_callback=on_goal,
             callback_group=rig.group,
         )
         try:

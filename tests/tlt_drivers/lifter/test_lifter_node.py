@@ -235,7 +235,9 @@ def test_new_goal_replaces_the_running_one_and_cancel_stops(harness: Harness) ->
     first, second, third = h.executed
     record = ExecutedTrajectory
     assert [r.outcome for r in h.executed] == [
-        record.OUTCOME_ABORTED, record.OUTCOME_SUCCEEDED, record.OUTCOME_CANCELED
+        record.OUTCOME_ABORTED,
+        record.OUTCOME_SUCCEEDED,
+        record.OUTCOME_CANCELED,
     ]
     assert [r.planned_s for r in h.executed] == pytest.approx([10.0, 1.0, 10.0])
     assert "preempted" in first.error_string and second.error_code == 0

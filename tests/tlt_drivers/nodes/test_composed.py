@@ -29,7 +29,7 @@ TIMEOUT_S = 30.0
 
 # Toy nodes for spin_drivers: each publishes a count on /probe/<name> at 20 Hz; at its tenth tick
 # a "stuck" one blocks in its callback for good and a "raise" one raises.
-PROBE = textwrap.dedent('''
+PROBE = textwrap.dedent("""
     import sys, time
     from pathlib import Path
     from rclpy.node import Node
@@ -59,7 +59,7 @@ PROBE = textwrap.dedent('''
 
     pairs = [a.split("=") for a in sys.argv[2:]]
     sys.exit(spin_drivers("probe", [Driver(n, lambda n=n, m=m: Probe(n, m)) for n, m in pairs], []))
-''')
+""")
 
 
 class Listener:
@@ -101,8 +101,12 @@ def listener():
 def start_probe(tmp_path: Path, *nodes: str) -> subprocess.Popen:
     script = tmp_path / "probe.py"
     script.write_text(PROBE)
-    return subprocess.Popen([sys.executable, str(script), str(tmp_path), *nodes],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return subprocess.Popen(
+        [sys.executable, str(script), str(tmp_path), *nodes],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
 
 
 def stop(proc: subprocess.Popen) -> tuple[int, str]:
@@ -161,7 +165,8 @@ def test_the_lifter_and_top_grippers_drivers_in_one_process(tmp_path, listener):
     firmware = LifterFirmware(FirmwareConfig(init_duration_s=0.05))
     lifter_config = tmp_path / "lifter.yaml"  # the link timeout widened for a loaded test machine
     lifter_config.write_text(
-        LIFTER_CONFIG.read_text().replace("link_timeout_s: 0.2\n", "link_timeout_s: 1.0\n"))
+        LIFTER_CONFIG.read_text().replace("link_timeout_s: 0.2\n", "link_timeout_s: 1.0\n")
+    )
     lifter_states = listener.listen(LifterState, "/lifter/state")
     gripper_states = listener.listen(GripperState, "/top_grippers/state")
     chain = MightyZapChain([1, 2, 3, 4])
@@ -169,20 +174,42 @@ def test_the_lifter_and_top_grippers_drivers_in_one_process(tmp_path, listener):
     try:
         with PtyFirmwareServer(firmware, link_path=tmp_path / "lifter") as server:
             proc = subprocess.Popen(
-                [sys.executable, "-m", "tlt_drivers.nodes.composed",
-                 "--driver", "lifter", "--config", str(lifter_config), "--port", str(server.link_path),
-                 "--driver", "top-grippers", "--port", chain.port],
-                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                [
+                    sys.executable,
+                    "-m",
+                    "tlt_drivers.nodes.composed",
+                    "--driver",
+                    "lifter",
+                    "--config",
+                    str(lifter_config),
+                    "--port",
+                    str(server.link_path),
+                    "--driver",
+                    "top-grippers",
+                    "--port",
+                    chain.port,
+                ],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
             )
             try:
                 listener.spin_until(
-                    lambda: lifter_states and lifter_states[-1].link_ok
-                    and lifter_states[-1].state == LifterState.STATE_HARDWARE_CONTROL,
-                    "healthy LifterState", proc)
+                    lambda: (
+                        lifter_states
+                        and lifter_states[-1].link_ok
+                        and lifter_states[-1].state == LifterState.STATE_HARDWARE_CONTROL
+                    ),
+                    "healthy LifterState",
+                    proc,
+                )
                 listener.spin_until(
-                    lambda: gripper_states and gripper_states[-1].torque_enabled
-                    and not gripper_states[-1].fault,
-                    "healthy Top Grippers' state", proc)
+                    lambda: (
+                        gripper_states and gripper_states[-1].torque_enabled and not gripper_states[-1].fault
+                    ),
+                    "healthy Top Grippers' state",
+                    proc,
+                )
                 # A board that stops answering faults its own driver; the lifter's keeps its link.
                 chain.drop_link()
                 listener.spin_until(lambda: gripper_states[-1].fault, "the Top Grippers' fault", proc)

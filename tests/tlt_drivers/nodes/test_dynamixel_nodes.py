@@ -230,7 +230,8 @@ def test_camera_mounts_new_goal_replaces_running_one_and_joint_states_flow(harne
         # Each goal is recorded as it ended: the replaced one first, aborted well before its 5 s.
         harness.wait(lambda: len(executed) == 2, "two executed-trajectory records")
         assert [(r.outcome, r.planned_s) for r in executed] == [
-            (ExecutedTrajectory.OUTCOME_ABORTED, 5.0), (ExecutedTrajectory.OUTCOME_SUCCEEDED, 0.5)
+            (ExecutedTrajectory.OUTCOME_ABORTED, 5.0),
+            (ExecutedTrajectory.OUTCOME_SUCCEEDED, 0.5),
         ]
         assert executed[0].error_string == "replaced by a new goal" and list(executed[1].joint_names) == names
         assert stamp_seconds(executed[0].header.stamp) - stamp_seconds(executed[0].started) < 4.0

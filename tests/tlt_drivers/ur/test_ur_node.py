@@ -132,7 +132,7 @@ def test_joint_states_and_status_are_published(harness: Harness) -> None:
 def assert_joint_states_at_their_own_rate(h: Harness) -> None:
     start = len(h.joints)
     h.wait(lambda: len(h.joints) >= start + 25, "25 joint states")
-    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in h.joints[start + 1:]]
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in h.joints[start + 1 :]]
     gaps = [b - a for a, b in itertools.pairwise(stamps)]
     # Nearer a state period apart than a control cycle (it runs 2.5 times as often), on average and
     # for most gaps: a cycle late on a loaded machine is caught up on the next, and a state may go

@@ -15,8 +15,9 @@ def make(direction: int, active_low: bool = True):
     servo.write(11, bytes([MODE_EXTENDED_POSITION]))
     servo.write(64, b"\x01")
     chip = EmulatedGpioChip()
-    switch = WidthLimitSwitch(servo, chip, 2, active_low=active_low, lead_m_per_rev=LEAD,
-                              direction=direction, start_m=0.004)
+    switch = WidthLimitSwitch(
+        servo, chip, 2, active_low=active_low, lead_m_per_rev=LEAD, direction=direction, start_m=0.004
+    )
     return servo, chip, switch
 
 

@@ -68,8 +68,9 @@ def test_depth_noise_on_the_twins_render_grows_as_the_square_of_the_distance(sce
     # The floor and the machine seen by a lifter ZED: pixels from under a metre to past two.
     camera = names.zed_camera(0)
     frame = scene.render(camera, 640, 480, antialias=False)
-    model = dataclasses.replace(sensors.zed.depth, edge_px=0.0, thin_px=0.0, dropout=0.0,
-                                occlusion=False, specular_luminance=256.0)
+    model = dataclasses.replace(
+        sensors.zed.depth, edge_px=0.0, thin_px=0.0, dropout=0.0, occlusion=False, specular_luminance=256.0
+    )
     noisy = model.apply(frame.depth, None, frame.intrinsics.fx, np.random.default_rng(1))
     valid = (frame.depth > 0) & (noisy > 0)
     measured = []
@@ -91,24 +92,29 @@ def test_a_parts_silhouette_and_its_occlusion_shadow_have_no_depth(scene, sensor
     bf = sensors.zed.depth.baseline_m * frame.intrinsics.fx
     rows = np.flatnonzero(strut.any(axis=1))
     checked = 0
-    for row in rows[len(rows) // 4: 3 * len(rows) // 4]:
+    for row in rows[len(rows) // 4 : 3 * len(rows) // 4]:
         line = np.flatnonzero(strut[row])
         left, right = int(line.min()), int(line.max())
         # The silhouette: the strut's outermost pixels.
         assert noisy[row, left] == 0 and noisy[row, right] == 0
-        behind = frame.depth[row, left - 12:left - 2]
+        behind = frame.depth[row, left - 12 : left - 2]
         if not (behind > 1.5).all():
             continue
         # The shadow: background just left of the strut, seen by the left imager and hidden from
         # the right one for the disparity difference, has no depth.
         shadow = int(bf / frame.depth[row, left + 3] - bf / behind.max())
         assert shadow >= 5
-        assert (noisy[row, left - shadow + 2:left] == 0).all(), row
+        assert (noisy[row, left - shadow + 2 : left] == 0).all(), row
         checked += 1
     assert checked >= 3, "too few rows with the floor behind the strut's end"
     # Away from its edges, the strut keeps its depth.
-    inner = strut & ~np.roll(~strut, 2, 0) & ~np.roll(~strut, -2, 0) & ~np.roll(~strut, 2, 1) & \
-        ~np.roll(~strut, -2, 1)
+    inner = (
+        strut
+        & ~np.roll(~strut, 2, 0)
+        & ~np.roll(~strut, -2, 0)
+        & ~np.roll(~strut, 2, 1)
+        & ~np.roll(~strut, -2, 1)
+    )
     assert inner.sum() > 200 and (noisy[inner] > 0).mean() > 0.7
 
 

@@ -87,8 +87,12 @@ def test_bad_scenario_is_refused(tmp_path, faults, key, reason):
         (["bay1/cross_frame", "bay1/cross_frame"], [], "built[1]", "listed twice"),
         (["bay1/cross_frame", "foundation/x0_y0"], [], "built[1]", "only the members of bay 1"),
         (["bay1/vertical/x0_y1"], [], "built[0]", "needs 'bay1/cross_frame' built too"),
-        (["bay1/cross_frame", "bay1/diagonal/face_x0"], ["diagonal_dispenser_x"], "built[1]",
-         "dispenser 'diagonal_dispenser_x' runs out"),
+        (
+            ["bay1/cross_frame", "bay1/diagonal/face_x0"],
+            ["diagonal_dispenser_x"],
+            "built[1]",
+            "dispenser 'diagonal_dispenser_x' runs out",
+        ),
     ],
 )
 def test_bad_built_members_are_refused(built, empty, key, reason):

@@ -211,8 +211,12 @@ def test_a_carriage_held_for_a_moment_goes_on_at_the_servos_speed_without_an_ove
     _write(servo, GOAL_POSITION, round(0.25 * ticks_per_m), 4)
     carriage = Carriage(max_velocity=0.1)  # config/twin/edu.yaml width_max_velocity
     binding = ServoJointBinding(
-        "width", servo, lambda m: m * ticks_per_m, lambda t: t / ticks_per_m,
-        lambda: float(servo.get("goal_position")), tolerance=0.002,
+        "width",
+        servo,
+        lambda m: m * ticks_per_m,
+        lambda t: t / ticks_per_m,
+        lambda: float(servo.get("goal_position")),
+        tolerance=0.002,
     )
     dt = 0.002
 

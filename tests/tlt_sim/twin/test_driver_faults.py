@@ -43,8 +43,9 @@ def test_drivers_see_each_fault_at_its_time(make_twin, tmp_path):
     twin = make_twin(scenario=path)
     twin.start()
     grippers, mounts = _chain(twin, "active_grippers"), _chain(twin, "camera_mounts")
-    lifter = LifterSerialInterface(load_lifter_config(CONFIG_DIR / "lifter.yaml").with_port(
-        str(twin.run_dir / "lifter")))
+    lifter = LifterSerialInterface(
+        load_lifter_config(CONFIG_DIR / "lifter.yaml").with_port(str(twin.run_dir / "lifter"))
+    )
     assert lifter.configure() and lifter.activate(), lifter.fault
     try:
         assert grippers.read(time.monotonic()) and mounts.read(time.monotonic())

@@ -95,8 +95,9 @@ def test_every_device_fault_appears_at_its_time(make_twin, tmp_path):
 def test_a_servo_failure_on_a_servo_that_is_not_there_is_refused(make_twin):
     twin = make_twin()
     with pytest.raises(ValueError, match="active_grippers has no servo 9"):
-        FaultSchedule({"servo_failure": [{"link": "active_grippers", "servo_id": 9, "at_s": 1.0}]},
-                      twin.devices)
+        FaultSchedule(
+            {"servo_failure": [{"link": "active_grippers", "servo_id": 9, "at_s": 1.0}]}, twin.devices
+        )
 
 
 def test_shipped_device_fault_scenario_schedules_its_faults(tmp_path):
@@ -106,5 +107,8 @@ def test_shipped_device_fault_scenario_schedules_its_faults(tmp_path):
         # Switch 4 is stuck from time 0: it reads pressed as soon as the links are up.
         assert twin.devices.firmware.limit_switches()[4]
         assert twin.faults.pending == [
-            (30.0, "active_grippers servo 2 fails"), (60.0, "ur_x link drops"), (65.0, "ur_x link back")]
+            (30.0, "active_grippers servo 2 fails"),
+            (60.0, "ur_x link drops"),
+            (65.0, "ur_x link back"),
+        ]
     scene.close()

@@ -54,8 +54,7 @@ def test_camera_renders_only_when_subscribed_and_segments_the_part_in_view(make_
     scene = twin.scene
     part = next(p for p in scene.info.parts.values() if p.kind == "vertical")
     scene.place_in_view(part.name, "zed_1", 0.6)
-    cams = CameraStreams(twin_node, scene, twin.settings.replace(camera_rate_hz=10.0),
-                         load_camera_sensors())
+    cams = CameraStreams(twin_node, scene, twin.settings.replace(camera_rate_hz=10.0), load_camera_sensors())
 
     _run(twin, [cams], executor, lambda: scene.time >= 0.5, wall_s=5.0)
     assert sum(cams.renders.values()) == 0, "nobody subscribed: nothing rendered"
@@ -63,8 +62,9 @@ def test_camera_renders_only_when_subscribed_and_segments_the_part_in_view(make_
     got: dict[str, list] = {"seg": [], "info": [], "labels": []}
     probe.create_subscription(Image, topics.camera_topic("zed_1", "segmentation"), got["seg"].append, 10)
     probe.create_subscription(CameraInfo, topics.camera_topic("zed_1", "camera_info"), got["info"].append, 10)
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
     probe.create_subscription(String, topics.SEGMENTATION_LABELS, got["labels"].append, latched)
     start = scene.time
     _run(twin, [cams], executor, lambda: len(got["seg"]) >= 3 and got["labels"])
@@ -125,8 +125,9 @@ def test_every_renderer_is_made_before_the_first_frame(make_twin, ros, monkeypat
     monkeypatch.setattr(cameras.CameraRenderer, "__init__", counting_init)
     twin_node, probe, executor = ros
     twin = make_twin()
-    cams = CameraStreams(twin_node, twin.scene, twin.settings.replace(camera_rate_hz=10.0),
-                         load_camera_sensors())
+    cams = CameraStreams(
+        twin_node, twin.scene, twin.settings.replace(camera_rate_hz=10.0), load_camera_sensors()
+    )
     assert sorted(made) == [False, True], "the multisampled renderer for colour, the exact one for depth"
     made.clear()
 

@@ -23,9 +23,23 @@ def test_clock_advances_at_the_real_time_factor_and_links_come_and_go(tmp_path):
     run = tmp_path / "run"
     rtf = 0.5
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tlt_sim.twin.main", "--rtf", str(rtf), "--run-dir", str(run),
-         "--ur-x-host", "127.0.78.2", "--ur-y-host", "127.0.78.3"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ),
+        [
+            sys.executable,
+            "-m",
+            "tlt_sim.twin.main",
+            "--rtf",
+            str(rtf),
+            "--run-dir",
+            str(run),
+            "--ur-x-host",
+            "127.0.78.2",
+            "--ur-y-host",
+            "127.0.78.3",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=dict(os.environ),
     )
     ctx = Context()
     rclpy.init(context=ctx)
@@ -34,8 +48,10 @@ def test_clock_advances_at_the_real_time_factor_and_links_come_and_go(tmp_path):
     executor.add_node(node)
     samples: list[tuple[float, float]] = []
     node.create_subscription(
-        Clock, "/clock",
-        lambda m: samples.append((time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)), 100,
+        Clock,
+        "/clock",
+        lambda m: samples.append((time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)),
+        100,
     )
     try:
         deadline = time.monotonic() + 60.0

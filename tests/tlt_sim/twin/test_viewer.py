@@ -206,7 +206,6 @@ def test_open_viewer_never_waits_for_ever():
         release.set()
 
 
-
 _WINDOW_SCRIPT = """
 import time, mujoco
 from tlt_sim.twin.viewer import open_viewer, probe
@@ -241,16 +240,20 @@ def test_a_real_window_opens_syncs_and_closes_under_xvfb(tmp_path):
     if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed")
     display = _free_display()
-    server = subprocess.Popen(["Xvfb", display, "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server = subprocess.Popen(
+        ["Xvfb", display, "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 10.0
         while not Path(f"/tmp/.X11-unix/X{display[1:]}").exists() and time.monotonic() < deadline:
             time.sleep(0.05)
         env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
         env["DISPLAY"] = display
-        run = subprocess.run([sys.executable, "-c", _WINDOW_SCRIPT], env=env, capture_output=True,
-                             text=True, timeout=60)
+        run = subprocess.run(
+            [sys.executable, "-c", _WINDOW_SCRIPT], env=env, capture_output=True, text=True, timeout=60
+        )
         assert run.returncode == 0, run.stdout + run.stderr
         assert "window ok" in run.stdout
     finally:

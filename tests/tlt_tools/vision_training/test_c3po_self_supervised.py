@@ -76,8 +76,16 @@ def _weak_estimator(mission, name):
 def _keypoint_rms_mm(estimator, clouds):
     model = estimator.model
     kp = torch.as_tensor(model.keypoints, dtype=torch.float32)
-    truth = torch.stack([transform(kp, torch.as_tensor(c.true_pose[:3, :3], dtype=torch.float32),
-                                   torch.as_tensor(c.true_pose[:3, 3], dtype=torch.float32)) for c in clouds])
+    truth = torch.stack(
+        [
+            transform(
+                kp,
+                torch.as_tensor(c.true_pose[:3, :3], dtype=torch.float32),
+                torch.as_tensor(c.true_pose[:3, 3], dtype=torch.float32),
+            )
+            for c in clouds
+        ]
+    )
     with torch.no_grad():
         pred = estimator.detector(torch.stack([torch.from_numpy(c.points) for c in clouds]))
     return float(symmetric_keypoint_loss(pred, truth, torch.as_tensor(model.symmetries))) ** 0.5 * 1000
@@ -87,8 +95,9 @@ def test_scene_clouds_are_the_models_instances_with_a_frames_sides_joined(render
     images = ImageSet(rendered)
     pipeline = PartPipeline({}, max_points=512, keep_border_below=400)
     joints = scene_clouds(images, "corner_joint", pipeline)
-    expected = sum(int((images[i].labels == images.classes.index("corner_joint") + 1).sum())
-                   for i in range(len(images)))
+    expected = sum(
+        int((images[i].labels == images.classes.index("corner_joint") + 1).sum()) for i in range(len(images))
+    )
     assert 0 < len(joints) <= expected
     size = models_for_mission(mission)["corner_joint"].diameter
     for c in joints:
@@ -96,8 +105,9 @@ def test_scene_clouds_are_the_models_instances_with_a_frames_sides_joined(render
         # Every cloud is of the part whose pose it carries: its points lie around that pose.
         assert np.linalg.norm(np.median(c.points, axis=0) - c.true_pose[:3, 3]) < size
     frames = scene_clouds(images, "cross_frame", pipeline)
-    sides = sum(int((images[i].labels == images.classes.index("cross_frame") + 1).sum())
-                for i in range(len(images)))
+    sides = sum(
+        int((images[i].labels == images.classes.index("cross_frame") + 1).sum()) for i in range(len(images))
+    )
     parts = {c.source for c in frames}
     assert len(parts) == len(frames) and 0 < len(frames) < sides
     assert all(not c.source.split(":")[1].endswith(("side_0", "side_1", "side_2", "side_3")) for c in frames)
@@ -118,8 +128,9 @@ def test_certified_poses_teach_a_weak_detector_the_truth_it_never_sees(mission):
     assert 0 < len(samples) < len(train)  # some views are not certified: they give no label
     optimiser = torch.optim.Adam(estimator.detector.parameters(), lr=1e-3)
     generator = torch.Generator().manual_seed(0)
-    losses = [train_epoch(estimator.detector, estimator.model, samples, optimiser, 32, generator)
-              for _ in range(3)]
+    losses = [
+        train_epoch(estimator.detector, estimator.model, samples, optimiser, 32, generator) for _ in range(3)
+    ]
     assert losses[-1] < losses[0]
     # No pose label was read, yet the detector alone is now nearer the true keypoints.
     assert _keypoint_rms_mm(estimator, val) < 0.9 * before
@@ -148,8 +159,9 @@ def test_training_stops_at_the_target_and_when_learning_stops(mission):
     estimator = _weak_estimator(mission, "end_fitting")
     rng = np.random.default_rng(7)
     train, val = _views(estimator.model, 32, rng), _views(estimator.model, 16, rng)
-    _, history, reason = train_self_supervised(estimator, train, val, SelfSupervisedConfig(target=0.0),
-                                               lambda _: None)
+    _, history, reason = train_self_supervised(
+        estimator, train, val, SelfSupervisedConfig(target=0.0), lambda _: None
+    )
     assert len(history) == 1 and reason.startswith("the starting detector certifies")
     _, history, reason = train_self_supervised(
         estimator, train, val, SelfSupervisedConfig(epochs=5, patience=1, lr=0.0, target=1.01), lambda _: None
@@ -161,8 +173,26 @@ def test_training_stops_at_the_target_and_when_learning_stops(mission):
 
 def test_command_writes_weights_the_node_loads_with_a_plot(rendered, mission, tmp_path, capsys):
     out, plot = tmp_path / "corner_joint.pt", tmp_path / "curves.png"
-    rc = main(["--model", "corner_joint", "--images", str(rendered), "--val", str(rendered), "--epochs", "1",
-               "--target", "1.01", "--out", str(out), "--plot", str(plot), "--mission", MISSION])
+    rc = main(
+        [
+            "--model",
+            "corner_joint",
+            "--images",
+            str(rendered),
+            "--val",
+            str(rendered),
+            "--epochs",
+            "1",
+            "--target",
+            "1.01",
+            "--out",
+            str(out),
+            "--plot",
+            str(plot),
+            "--mission",
+            MISSION,
+        ]
+    )
     assert rc == 0
     text = capsys.readouterr().out
     assert "training clouds" in text and "epoch 0/1" in text and "stopped: " in text

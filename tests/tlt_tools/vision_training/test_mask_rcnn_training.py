@@ -191,8 +191,22 @@ def test_init_starts_from_trained_weights_and_a_new_head_starts_fresh(run, tmp_p
     assert read_manifest(out)["extra"]["figures"]["val_map"] >= first - 0.2
     assert main([*args, "--init", str(tmp_path / "none.pt")]) == 2
     assert "none.pt" in capsys.readouterr().err
-    assert main([*args, "--init", str(run["out"]), "--config", "fpn_channels=8", "--config",
-                 "backbone_channels=[4,4,4,4]", "--config", "representation=8"]) == 2
+    assert (
+        main(
+            [
+                *args,
+                "--init",
+                str(run["out"]),
+                "--config",
+                "fpn_channels=8",
+                "--config",
+                "backbone_channels=[4,4,4,4]",
+                "--config",
+                "representation=8",
+            ]
+        )
+        == 2
+    )
     assert "of the model's parameters (another --config?)" in capsys.readouterr().err
 
 
@@ -205,14 +219,30 @@ def test_evaluate_prints_ap_per_class_and_time(run, capsys):
     assert "strut_tube     AP50 -" in text and "ms per image" in text
 
 
-def test_validation_as_the_node_segments_is_named_in_the_log_manifest_and_evaluation(trained, tmp_path,
-                                                                                     capsys):
+def test_validation_as_the_node_segments_is_named_in_the_log_manifest_and_evaluation(
+    trained, tmp_path, capsys
+):
     """``--node-config``: the validation AP is that of the node's masks (the shipped model's case is
     tests/tlt_vision/segmentation/test_shipped_mask_rcnn.py), and every report says which it is."""
     node_yaml = str(Path(__file__).resolve().parents[3] / "config" / "vision" / "node.yaml")
     out = tmp_path / "w.pt"
-    args = ["--train", str(trained["train"]), "--val", str(trained["val"]), "--out", str(out),
-            "--epochs", "1", "--batch", "4", "--threads", "1", "--node-config", node_yaml, *CONFIG_ARGS]
+    args = [
+        "--train",
+        str(trained["train"]),
+        "--val",
+        str(trained["val"]),
+        "--out",
+        str(out),
+        "--epochs",
+        "1",
+        "--batch",
+        "4",
+        "--threads",
+        "1",
+        "--node-config",
+        node_yaml,
+        *CONFIG_ARGS,
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert f"val {trained['val']} (6 images, as the node segments ({node_yaml}))" in text
@@ -298,13 +328,15 @@ def test_sensor_noise_and_blur_change_the_colours_only_and_are_off_by_default():
     image[:, :, 30:] = 0.7  # a step edge, far from 0 and 1 so nothing is clipped
     still = Augment(flip=0.0, brightness=0.0, contrast=0.0)
 
-    noisy, t = augment(image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, noise=8.0),
-                       np.random.default_rng(3))
+    noisy, t = augment(
+        image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, noise=8.0), np.random.default_rng(3)
+    )
     residual = (noisy - image).std().item() * 255.0
     assert 0.5 < residual < 8.0
     assert torch.equal(t["masks"], masks) and torch.equal(t["boxes"], target["boxes"])
-    blurred, t = augment(image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, blur=2.0),
-                         np.random.default_rng(3))
+    blurred, t = augment(
+        image, target, Augment(flip=0.0, brightness=0.0, contrast=0.0, blur=2.0), np.random.default_rng(3)
+    )
     row = blurred[0, 20]
     assert 0.3 < row[29].item() < row[30].item() < 0.7  # the edge softened, the flats kept
     assert row[0].item() == pytest.approx(0.3) and row[-1].item() == pytest.approx(0.7)
@@ -362,8 +394,19 @@ def test_a_time_budget_trains_the_epochs_that_fit(tmp_path, capsys):
     assert epochs_within(600.0, 100.0, 2, 3, 20) == 3 + 10  # resumed: 50 s an epoch of this run
     images = write_set(tmp_path / "set", 4, seed=1)
     out = tmp_path / "w.pt"
-    args = ["--train", str(images), "--out", str(out), "--epochs", "5", "--time-budget-min", "1e-6",
-            "--threads", "1", *CONFIG_ARGS]
+    args = [
+        "--train",
+        str(images),
+        "--out",
+        str(out),
+        "--epochs",
+        "5",
+        "--time-budget-min",
+        "1e-6",
+        "--threads",
+        "1",
+        *CONFIG_ARGS,
+    ]
     assert main(args) == 0
     assert "time budget 1e-06 min: 1 epochs fit, not 5" in capsys.readouterr().out
     assert torch.load(out.parent / "w_checkpoint.pt", weights_only=True)["epoch"] == 1
@@ -378,8 +421,25 @@ def test_an_epoch_longer_than_the_budget_decays_the_learning_rate_over_itself(tm
     assert epochs_at_pace(360.0, 100.0, 0, 40) == 3 and epochs_at_pace(360.0, 100.0, 0, 2) == 2
     assert epochs_at_pace(360.0, 1000.0, 4, 40) == 5  # resumed after 4: at least one more
     images = write_set(tmp_path / "set", 16, seed=1)
-    args = ["--train", str(images), "--out", str(tmp_path / "w.pt"), "--epochs", "5", "--batch", "2",
-            "--lr", "5e-3", "--time-budget-min", "1e-6", "--threads", "1", "--log-every", "8", *CONFIG_ARGS]
+    args = [
+        "--train",
+        str(images),
+        "--out",
+        str(tmp_path / "w.pt"),
+        "--epochs",
+        "5",
+        "--batch",
+        "2",
+        "--lr",
+        "5e-3",
+        "--time-budget-min",
+        "1e-6",
+        "--threads",
+        "1",
+        "--log-every",
+        "8",
+        *CONFIG_ARGS,
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "time budget 1e-06 min: 1 epochs fit, not 5 (from the first 7 steps)" in text
@@ -439,7 +499,7 @@ def test_several_processes_train_one_model_on_their_shares_of_each_step(trained,
     history = figures["history"]
     assert history[-1]["train_losses"]["total"] < 0.7 * history[0]["train_losses"]["total"]
     assert max(h["val_map"] for h in history) >= trained["before"] + 0.5
-    assert main([*args[:-len(CONFIG_ARGS)], "--batch", "9", *CONFIG_ARGS]) == 2
+    assert main([*args[: -len(CONFIG_ARGS)], "--batch", "9", *CONFIG_ARGS]) == 2
     assert "16 images, fewer than --batch 9 times --ranks 2" in capfd.readouterr().err
     # Weights that cannot be used are refused once, before any process starts.
     assert main([*args, "--init", str(tmp_path / "none.pt")]) == 2

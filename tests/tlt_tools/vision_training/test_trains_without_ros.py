@@ -37,7 +37,11 @@ print("ok")
 def test_render_and_node_validation_import_no_ros() -> None:
     env_path = f"{ROOT / 'src'}:{ROOT / 'sim'}:{ROOT / 'tools'}"
     done = subprocess.run(
-        [sys.executable, "-c", PROBE], cwd=ROOT, capture_output=True, text=True, timeout=120,
+        [sys.executable, "-c", PROBE],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
         env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin", "HOME": "/tmp"},
     )
     assert done.returncode == 0, done.stderr[-2000:]

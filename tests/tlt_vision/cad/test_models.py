@@ -97,10 +97,14 @@ def test_surface_gradient_hand_computed(models):
     tube, cube, fitting = models["strut_tube/vertical"], models["corner_joint"], models["end_fitting"]
     cases = [
         (tube, [0.1, 0.0, 0.0], 0.0875, [1.0, 0.0, 0.0]),  # beside the axis
-        (tube, [0.0, 0.03, 0.4], np.hypot(0.03, 0.1) - 0.0125, [0.0, 0.03 / np.hypot(0.03, 0.1),
-                                                              0.1 / np.hypot(0.03, 0.1)]),  # past an end
+        (
+            tube,
+            [0.0, 0.03, 0.4],
+            np.hypot(0.03, 0.1) - 0.0125,
+            [0.0, 0.03 / np.hypot(0.03, 0.1), 0.1 / np.hypot(0.03, 0.1)],
+        ),  # past an end
         (cube, [0.125, 0.0, 0.0], 0.1, [1.0, 0.0, 0.0]),  # beyond a face
-        (cube, [0.035, -0.035, 0.0], 0.01 * np.sqrt(2), [0.5 ** 0.5, -(0.5 ** 0.5), 0.0]),  # an edge
+        (cube, [0.035, -0.035, 0.0], 0.01 * np.sqrt(2), [0.5**0.5, -(0.5**0.5), 0.0]),  # an edge
         (cube, [0.0, 0.0, -0.02], -0.005, [0.0, 0.0, -1.0]),  # inside, nearest the -z face
         (fitting, [0.05, 0.0, 0.065], 0.05, [0.6, 0.0, 0.8]),  # outside the rim
         (fitting, [0.0, 0.015, 0.0], -0.005, [0.0, 1.0, 0.0]),  # inside, nearest the side
@@ -121,8 +125,9 @@ def test_surface_gradient_is_the_signed_distances_gradient(models):
 
     names = ["corner_joint", "cross_frame", "end_fitting", "rivet", "strut_tube/vertical"]
     points = torch.tensor(np.random.default_rng(4).normal(0.0, 0.2, (len(names), 500, 3))).float()
-    for surface in [models[n].surface for n in names] + [SurfaceDistance.stacked([models[n].surface
-                                                                                  for n in names])]:
+    for surface in [models[n].surface for n in names] + [
+        SurfaceDistance.stacked([models[n].surface for n in names])
+    ]:
         q = points.clone().requires_grad_(True)
         (expected,) = torch.autograd.grad(surface.signed(q).sum(), q)
         sdf, grad = surface.signed_with_gradient(points)
@@ -141,6 +146,7 @@ def test_a_stacked_surface_measures_each_element_against_its_own_model(models):
     points = torch.tensor(np.random.default_rng(3).normal(0.0, 0.3, (len(names), 200, 3))).float()
     alone = torch.stack([models[n].surface.signed(points[i]) for i, n in enumerate(names)])
     assert torch.equal(stacked.signed(points), alone)
+
 
 def test_visible_points_face_the_camera(models):
     cube = models["corner_joint"]

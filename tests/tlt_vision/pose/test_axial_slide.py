@@ -58,8 +58,16 @@ def _view(fitting, hide_above_x: float | None, hide_below_x: float | None = None
 
 def _estimate(translation) -> PoseEstimate:
     cert = Certificate(True, 0.0003, 0.0025, 1, 1, ("side_a",), "")
-    return PoseEstimate("end_fitting", "end_fitting", ROTATION, np.asarray(translation, float),
-                        np.zeros((3, 3)), cert, 100, 0.0)
+    return PoseEstimate(
+        "end_fitting",
+        "end_fitting",
+        ROTATION,
+        np.asarray(translation, float),
+        np.zeros((3, 3)),
+        cert,
+        100,
+        0.0,
+    )
 
 
 def test_a_fitting_slid_past_its_visible_end_is_put_back_and_one_in_place_stays(fitting):
@@ -104,10 +112,12 @@ def test_the_pipeline_places_by_its_mask_a_fitting_posed_off_along_its_axis(fitt
     from tlt_vision.pipeline import Detection, PartPipeline
 
     mission = ROOT / "missions" / "one_bay.yaml"
-    estimator = load_estimators(load_config(ROOT / "config/vision/node.yaml", mission),
-                                load_mission(mission))["end_fitting"]
+    estimator = load_estimators(
+        load_config(ROOT / "config/vision/node.yaml", mission), load_mission(mission)
+    )["end_fitting"]
     mask, depth, _ = _view(fitting, hide_above_x=0.005)
     (seen,) = PartPipeline({"end_fitting": estimator}, axial_slide=AxialSlide()).observe(
-        [Detection("end_fitting", mask)], depth, K)
+        [Detection("end_fitting", mask)], depth, K
+    )
     assert seen.estimate.certified, seen.estimate.certificate.reason
     assert seen.estimate.translation == pytest.approx(TRUE, abs=0.0015)

@@ -98,4 +98,3 @@ def test_each_element_is_corrected_as_if_alone():
         assert torch.allclose(both.keypoints[b], alone.keypoints[0], atol=1e-6)
         assert torch.allclose(both.objective_after[b], alone.objective_after[0], rtol=1e-5)
     assert (both.objective_after < both.objective_before).all()
-

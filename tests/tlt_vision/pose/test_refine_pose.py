@@ -101,8 +101,9 @@ def test_an_end_fitting_fitted_end_on_turns_to_its_side_with_the_turned_starts()
     mask = torch.ones(obs.shape[:2], dtype=torch.bool)
     end_on = torch.tensor(rot @ _tilt_x(90.0) @ _turn_z(40.0), dtype=torch.float32)[None]
     t0 = torch.tensor(t + np.array([0.0, 0.0, 0.01]), dtype=torch.float32)[None]
-    turns = torch.tensor(np.stack([np.eye(3), _tilt_x(90.0), _tilt_x(90.0) @ _turn_z(90.0)]),
-                         dtype=torch.float32)[None]
+    turns = torch.tensor(
+        np.stack([np.eye(3), _tilt_x(90.0), _tilt_x(90.0) @ _turn_z(90.0)]), dtype=torch.float32
+    )[None]
 
     def axis_error_deg(r: torch.Tensor) -> float:
         return float(np.degrees(np.arccos(min(1.0, abs(r[0, :, 2].double().numpy() @ rot[:, 2])))))

@@ -73,8 +73,14 @@ def figures(tmp_path_factory) -> dict:
                 right += error < 0.02 * model.diameter
                 rotation.append(rotation_error_deg(model, e.rotation, true[:3, :3]))
                 translation.append(float(((e.translation - true[:3, 3]) ** 2).sum() ** 0.5))
-    result = {"whole": whole, "certified": certified, "right": right, "per_class": dict(per_class),
-              "rotation": statistics.median(rotation), "translation": statistics.median(translation)}
+    result = {
+        "whole": whole,
+        "certified": certified,
+        "right": right,
+        "per_class": dict(per_class),
+        "rotation": statistics.median(rotation),
+        "translation": statistics.median(translation),
+    }
     print(f"shipped C-3PO on {IMAGES} fresh images (seed {HELD_OUT_SEED}), the twin's masks: {result}")
     return result
 

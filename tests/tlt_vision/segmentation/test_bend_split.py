@@ -15,8 +15,9 @@ RADIUS = 0.015
 SIDE = 3
 
 
-def _sides(*rects: tuple[slice, slice], shape=(160, 200), z: float = 2.0
-           ) -> tuple[list[np.ndarray], np.ndarray]:
+def _sides(
+    *rects: tuple[slice, slice], shape=(160, 200), z: float = 2.0
+) -> tuple[list[np.ndarray], np.ndarray]:
     """Bars 8 px wide facing the camera at ``z``: each a side of a frame, in one depth image."""
     depth = np.full(shape, np.inf)
     bars = []
@@ -31,8 +32,12 @@ def _sides(*rects: tuple[slice, slice], shape=(160, 200), z: float = 2.0
 def _one_region(mask: np.ndarray) -> dict[str, torch.Tensor]:
     """The semantic head's detections of a frame with one frame-side region, ``mask``."""
     m = torch.from_numpy(mask)[None]
-    return {"boxes": boxes_from_masks(m), "labels": torch.tensor([SIDE]), "scores": torch.tensor([0.9]),
-            "masks": m}
+    return {
+        "boxes": boxes_from_masks(m),
+        "labels": torch.tensor([SIDE]),
+        "scores": torch.tensor([0.9]),
+        "masks": m,
+    }
 
 
 def _cut(mask: np.ndarray, depth: np.ndarray, split: BendSplit) -> list[np.ndarray]:

@@ -23,8 +23,12 @@ TUBE, FITTING = 1, 2
 
 def _result(masks: list[np.ndarray], labels: list[int], scores: list[float]) -> dict[str, torch.Tensor]:
     m = torch.from_numpy(np.stack(masks))
-    return {"boxes": boxes_from_masks(m), "labels": torch.tensor(labels), "scores": torch.tensor(scores),
-            "masks": m}
+    return {
+        "boxes": boxes_from_masks(m),
+        "labels": torch.tensor(labels),
+        "scores": torch.tensor(scores),
+        "masks": m,
+    }
 
 
 def _tee() -> tuple[np.ndarray, np.ndarray]:
@@ -221,8 +225,9 @@ def test_pieces_not_as_wide_as_their_part_are_scored_down():
     tube, panel = np.zeros(depth.shape, dtype=bool), np.zeros(depth.shape, dtype=bool)
     tube[20:32, 10:110] = True
     panel[50:90, 30:130] = True
-    split = DepthSplit(jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40,
-                       width_band=(0.6, 1.3), width_penalty=0.3)
+    split = DepthSplit(
+        jump=0.02, jump_per_m=0.01, min_area=6, full_score_area=40, width_band=(0.6, 1.3), width_penalty=0.3
+    )
     result = _result([tube | panel], [TUBE], [0.8])
 
     def scores(*args):

@@ -59,8 +59,15 @@ def test_pasting_in_the_box_gives_what_sampling_the_whole_image_gives():
     # beyond it are zero, including boxes at the image's edges, sub-pixel and fractional ones.
     torch.manual_seed(0)
     h, w = 40, 52
-    boxes = torch.tensor([[3.2, 4.7, 20.1, 11.3], [0.0, 0.0, 52.0, 40.0], [40.5, 30.2, 52.0, 40.0],
-                          [10.2, 10.3, 10.8, 10.9], [-2.0, 35.0, 5.0, 41.0]])
+    boxes = torch.tensor(
+        [
+            [3.2, 4.7, 20.1, 11.3],
+            [0.0, 0.0, 52.0, 40.0],
+            [40.5, 30.2, 52.0, 40.0],
+            [10.2, 10.3, 10.8, 10.9],
+            [-2.0, 35.0, 5.0, 41.0],
+        ]
+    )
     probs = torch.rand(len(boxes), 14, 14)
     ys, xs = torch.arange(h) + 0.5, torch.arange(w) + 0.5
     gx = (xs[None] - boxes[:, :1]) / (boxes[:, 2:3] - boxes[:, :1]) * 2 - 1

@@ -11,8 +11,10 @@ def _pairs(mask: np.ndarray) -> set[frozenset[tuple[int, int]]]:
     found = []
     for first, y2, x2 in neighbour_pairs(ys, xs, mask.shape):
         member = mask[y2, x2]
-        found += [frozenset({(int(ys[a]), int(xs[a])), (int(b), int(c))})
-                  for a, b, c in zip(first[member], y2[member], x2[member], strict=True)]
+        found += [
+            frozenset({(int(ys[a]), int(xs[a])), (int(b), int(c))})
+            for a, b, c in zip(first[member], y2[member], x2[member], strict=True)
+        ]
     assert len(found) == len(set(found))  # no pair twice
     return set(found)
 

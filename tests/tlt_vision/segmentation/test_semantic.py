@@ -10,10 +10,19 @@ from tlt_vision.segmentation.model import MaskRCNN, predict
 from tlt_vision.segmentation.semantic import instances_from_semantic, label_map, pixel_classes, semantic_loss
 from tlt_vision.segmentation.synthetic import toy_batch
 
-TINY = MaskRCNNConfig(backbone_channels=(8, 8, 16, 16), fpn_channels=16, representation=32, mask_convs=1,
-                      rpn_pre_nms_top_n=100, rpn_post_nms_top_n_train=50, rpn_post_nms_top_n_test=30,
-                      rpn_batch_per_image=64, roi_batch_per_image=32, semantic_channels=16,
-                      semantic_classes=("strut_tube", "cross_frame"))
+TINY = MaskRCNNConfig(
+    backbone_channels=(8, 8, 16, 16),
+    fpn_channels=16,
+    representation=32,
+    mask_convs=1,
+    rpn_pre_nms_top_n=100,
+    rpn_post_nms_top_n_train=50,
+    rpn_post_nms_top_n_test=30,
+    rpn_batch_per_image=64,
+    roi_batch_per_image=32,
+    semantic_channels=16,
+    semantic_classes=("strut_tube", "cross_frame"),
+)
 
 
 def _probs(label_image: np.ndarray, classes: int = 6, confidence: float = 0.9) -> torch.Tensor:

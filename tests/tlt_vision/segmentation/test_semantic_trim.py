@@ -21,9 +21,13 @@ def _result() -> dict[str, torch.Tensor]:
     probs[TUBE, :, 4] = 0.9
     probs[TUBE, :, 5] = 0.3  # not above 0.3: kept
     probs[FRAME, 0:2, 0:2] = 0.8
-    return {"boxes": torch.tensor([[2.0, 2, 6, 6], [2, 2, 6, 6], [0, 0, 2, 2]]),
-            "labels": torch.tensor([FITTING, JOINT, FITTING]), "scores": torch.tensor([0.9, 0.8, 0.7]),
-            "masks": masks, "semantic_probs": probs}
+    return {
+        "boxes": torch.tensor([[2.0, 2, 6, 6], [2, 2, 6, 6], [0, 0, 2, 2]]),
+        "labels": torch.tensor([FITTING, JOINT, FITTING]),
+        "scores": torch.tensor([0.9, 0.8, 0.7]),
+        "masks": masks,
+        "semantic_probs": probs,
+    }
 
 
 def test_the_named_class_loses_the_thin_parts_pixels_and_an_emptied_instance_is_dropped():

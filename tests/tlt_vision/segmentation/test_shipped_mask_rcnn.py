@@ -91,14 +91,20 @@ def results(held_out) -> dict[str, dict]:
         ap["rgb"].add(found, truth)
         cut = split_by_depth(found, sample.depth, model.cfg.semantic_labels, split, sample.intrinsics, radii)
         ap["cut"].add(cut, truth)
-        ap["unbent"].add(split_by_depth(found, sample.depth, model.cfg.semantic_labels, unbent,
-                                        sample.intrinsics, radii), truth)
+        ap["unbent"].add(
+            split_by_depth(found, sample.depth, model.cfg.semantic_labels, unbent, sample.intrinsics, radii),
+            truth,
+        )
         tuned = detect_rgb(unvoted, sample.rgb, manifest["settings"]["max_size"])
-        ap["unvoted"].add(split_by_depth(tuned, sample.depth, node.cfg.semantic_labels, split,
-                                         sample.intrinsics, radii), truth)
+        ap["unvoted"].add(
+            split_by_depth(tuned, sample.depth, node.cfg.semantic_labels, split, sample.intrinsics, radii),
+            truth,
+        )
         tuned = detect_rgb(node, sample.rgb, manifest["settings"]["max_size"])
-        ap["node"].add(split_by_depth(tuned, sample.depth, node.cfg.semantic_labels, voted,
-                                      sample.intrinsics, radii), truth)
+        ap["node"].add(
+            split_by_depth(tuned, sample.depth, node.cfg.semantic_labels, voted, sample.intrinsics, radii),
+            truth,
+        )
     out = {kind: acc.result() for kind, acc in ap.items()}
     print(f"{WEIGHTS.name}: mask AP50 on {len(held_out)} fresh images: {out}")
     return out
@@ -152,8 +158,11 @@ def test_the_nodes_segmenter_cuts_thin_regions_where_its_frame_has_depth(held_ou
             if det.object_class in thin:
                 assert _parts_in(det.mask, sample.depth, sample.intrinsics, split) == 1
         without = CameraFrame("zed_1", 0.0, "zed_1_optical", None, sample.intrinsics, {"rgb": sample.rgb})
-        merged += sum(_parts_in(d.mask, sample.depth, sample.intrinsics, split) > 1
-                      for d in seg.detect(without) if d.object_class in thin)
+        merged += sum(
+            _parts_in(d.mask, sample.depth, sample.intrinsics, split) > 1
+            for d in seg.detect(without)
+            if d.object_class in thin
+        )
     assert merged > 0
 
 
@@ -236,8 +245,13 @@ def test_the_trainers_validation_as_the_node_segments_scores_the_nodes_masks(hel
     for i in range(n):
         sample = held_out[i]
         found = seg.refine(detect_rgb(seg.model, sample.rgb, seg.max_size), sample.depth, sample.intrinsics)
-        acc.add(found, {"masks": torch.as_tensor(sample.masks, dtype=torch.bool),
-                        "labels": torch.as_tensor(sample.labels, dtype=torch.long)})
+        acc.add(
+            found,
+            {
+                "masks": torch.as_tensor(sample.masks, dtype=torch.bool),
+                "labels": torch.as_tensor(sample.labels, dtype=torch.long),
+            },
+        )
     assert as_node["map"] == pytest.approx(acc.result()["map"])
     assert as_node["map"] >= evaluate(model, held_out, max_size, n)["map"] + 0.1  # not the model alone
 

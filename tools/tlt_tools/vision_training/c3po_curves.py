@@ -51,13 +51,25 @@ def plot_curves(curves: dict[str, list[dict]], path: str | Path) -> Path:
         for key, style in (("train_loss", "-"), ("val_loss", "--")):
             points = [(h["epoch"], h[key]) for h in history if h.get(key) is not None]
             if points:
-                lx.plot(*zip(*points, strict=True), linestyle=style, color=colour,
-                        label=name if key == "train_loss" else None)
+                lx.plot(
+                    *zip(*points, strict=True),
+                    linestyle=style,
+                    color=colour,
+                    label=name if key == "train_loss" else None,
+                )
     cx.axhline(GOAL, color="grey", linestyle=":", linewidth=1, label="goal 95 %")
-    cx.set(xlabel="epoch", ylabel="validation clouds certified", ylim=(0, 1.02),
-           title="C-3PO: corrected poses certified")
-    lx.set(xlabel="epoch", ylabel="keypoint loss / (half the model's size)²", yscale="log",
-           title="loss: training (solid), validation (dashed)")
+    cx.set(
+        xlabel="epoch",
+        ylabel="validation clouds certified",
+        ylim=(0, 1.02),
+        title="C-3PO: corrected poses certified",
+    )
+    lx.set(
+        xlabel="epoch",
+        ylabel="keypoint loss / (half the model's size)²",
+        yscale="log",
+        title="loss: training (solid), validation (dashed)",
+    )
     cx.legend(fontsize=8, loc="lower right")
     lx.legend(fontsize=8)
     for axis in (cx, lx):

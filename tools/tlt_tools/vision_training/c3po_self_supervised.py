@@ -126,8 +126,13 @@ def scene_clouds(
             mask = np.logical_or.reduce([s.masks[j] for j in members])
             cloud = pipeline.cloud(Detection(model_name, mask), s.depth, intrinsics)
             if cloud.ok:
-                out.append(SceneCloud(cloud.points.astype(np.float32), f"{images.path(i).name}:{part}",
-                                      np.asarray(s.poses[members[0]], dtype=float)))
+                out.append(
+                    SceneCloud(
+                        cloud.points.astype(np.float32),
+                        f"{images.path(i).name}:{part}",
+                        np.asarray(s.poses[members[0]], dtype=float),
+                    )
+                )
             if limit is not None and len(out) >= limit:
                 return out
     return out
@@ -214,16 +219,24 @@ def train_self_supervised(
     for epoch in range(1, cfg.epochs + 1):
         t0 = time.monotonic()
         labelled = evaluate(estimator, train, cfg.label_batch)
-        samples = [(c.points, e.keypoints) for c, e in zip(train, labelled.estimates, strict=True)
-                   if e.certified]
+        samples = [
+            (c.points, e.keypoints) for c, e in zip(train, labelled.estimates, strict=True) if e.certified
+        ]
         if not samples:
             reason = f"epoch {epoch}: no training cloud certified, nothing to learn from"
             break
         loss = train_epoch(detector, estimator.model, samples, optimiser, cfg.batch, generator)
         result = evaluate(estimator, val, cfg.label_batch)
         seconds = time.monotonic() - t0
-        history.append({"epoch": epoch, "train_loss": loss, **labelled.figures("train"),
-                        **result.figures("val"), "seconds": seconds})
+        history.append(
+            {
+                "epoch": epoch,
+                "train_loss": loss,
+                **labelled.figures("train"),
+                **result.figures("val"),
+                "seconds": seconds,
+            }
+        )
         progress(_line(epoch, cfg.epochs, result, labelled, loss, seconds))
         if result.certified_fraction > best:
             best, best_state, since_best = result.certified_fraction, copy.deepcopy(detector.state_dict()), 0
@@ -240,14 +253,17 @@ def train_self_supervised(
     return detector, history, reason
 
 
-def _line(epoch: int, epochs: int, val: Evaluation, train: Evaluation | None, loss: float | None,
-          seconds: float) -> str:
+def _line(
+    epoch: int, epochs: int, val: Evaluation, train: Evaluation | None, loss: float | None, seconds: float
+) -> str:
     text = f"epoch {epoch}/{epochs}: "
     if train is not None and loss is not None:
         text += f"{train.certified}/{train.clouds} training clouds certified, loss {loss:.4f}; "
-    text += (f"validation certified {val.certified_fraction:.1%} (observably correct "
-             f"{val.observably_correct / max(val.clouds, 1):.1%}, non-degenerate "
-             f"{val.non_degenerate / max(val.clouds, 1):.1%})")
+    text += (
+        f"validation certified {val.certified_fraction:.1%} (observably correct "
+        f"{val.observably_correct / max(val.clouds, 1):.1%}, non-degenerate "
+        f"{val.non_degenerate / max(val.clouds, 1):.1%})"
+    )
     if val.add_s_ok is not None and val.certified:
         text += f", ADD-S ok {val.add_s_ok / val.certified:.1%} of certified"
     return text + f", {seconds:.1f} s"
@@ -263,8 +279,12 @@ def plot_history(history: list[dict], title: str, path: str | Path) -> Path:
     epochs = [h["epoch"] for h in history]
     fig, (ax, lx) = plt.subplots(1, 2, figsize=(10, 4))
     # Certified is the lower of its two conditions and often equal to one: drawn wide, underneath.
-    curves = (("val_certified", "certified", 5), ("val_observably_correct", "observably correct", 1.5),
-              ("val_non_degenerate", "non-degenerate", 1.5), ("val_add_s_ok", "ADD-S ok (of certified)", 1.5))
+    curves = (
+        ("val_certified", "certified", 5),
+        ("val_observably_correct", "observably correct", 1.5),
+        ("val_non_degenerate", "non-degenerate", 1.5),
+        ("val_add_s_ok", "ADD-S ok (of certified)", 1.5),
+    )
     for key, label, width in curves:
         points = [(e, h[key]) for e, h in zip(epochs, history, strict=True) if h.get(key) is not None]
         if points:
@@ -290,8 +310,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--images", nargs="+", required=True, type=Path, help="rendered image sets to train on")
     p.add_argument("--val", nargs="+", required=True, type=Path, help="rendered image sets to validate on")
     p.add_argument("--out", required=True, type=Path, help="weights file to write (.pt; manifest beside it)")
-    p.add_argument("--config", type=Path, default=Path("config/vision/node.yaml"),
-                   help="vision node configuration: the starting detector, corrector and cloud settings")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=Path("config/vision/node.yaml"),
+        help="vision node configuration: the starting detector, corrector and cloud settings",
+    )
     p.add_argument("--mission", type=Path, default=Path("missions/one_bay.yaml"))
     p.add_argument("--limit", type=int, help="at most this many training clouds")
     p.add_argument("--val-limit", type=int, help="at most this many validation clouds")
@@ -309,8 +333,9 @@ def main(argv: list[str] | None = None) -> int:
         mission = load_mission(args.mission)
         config = load_config(args.config, args.mission)
         if args.model not in config.raw["detectors"]:
-            raise ConfigError(args.config, "detectors",
-                              f"no {args.model!r} (known: {', '.join(config.raw['detectors'])})")
+            raise ConfigError(
+                args.config, "detectors", f"no {args.model!r} (known: {', '.join(config.raw['detectors'])})"
+            )
         start_path = config.detector_path(args.model)
         start = read_manifest(start_path)
         estimator = load_estimators(config, mission)[args.model]
@@ -319,20 +344,28 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, WeightsError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    pipeline = PartPipeline({}, max_points=config.raw["max_points"],
-                            keep_border_below=config.raw["keep_border_below"])
-    print(f"{args.model}: reading clouds from {len(train_sets)} training and {len(val_sets)} "
-          "validation images", flush=True)
+    pipeline = PartPipeline(
+        {}, max_points=config.raw["max_points"], keep_border_below=config.raw["keep_border_below"]
+    )
+    print(
+        f"{args.model}: reading clouds from {len(train_sets)} training and {len(val_sets)} validation images",
+        flush=True,
+    )
     train = scene_clouds(train_sets, args.model, pipeline, args.limit)
     val = scene_clouds(val_sets, args.model, pipeline, args.val_limit)
     for what, clouds, dirs in (("training", train, args.images), ("validation", val, args.val)):
         if not clouds:
-            print(f"error: no usable cloud of {args.model} in the {what} images "
-                  f"({', '.join(map(str, dirs))})", file=sys.stderr)
+            print(
+                f"error: no usable cloud of {args.model} in the {what} images ({', '.join(map(str, dirs))})",
+                file=sys.stderr,
+            )
             return 2
     sizes = [len(c.points) for c in train]
-    print(f"{len(train)} training clouds (median {statistics.median(sizes):.0f} points), "
-          f"{len(val)} validation clouds; starting from {start_path}", flush=True)
+    print(
+        f"{len(train)} training clouds (median {statistics.median(sizes):.0f} points), "
+        f"{len(val)} validation clouds; starting from {start_path}",
+        flush=True,
+    )
     detector, history, reason = train_self_supervised(
         estimator, train, val, cfg, lambda s: print(s, flush=True)
     )
@@ -345,8 +378,11 @@ def main(argv: list[str] | None = None) -> int:
         "train_clouds": len(train),
         "val_clouds": len(val),
         "corrector": config.raw["corrector"],
-        "started_from": {"path": str(start_path), "sha256": start.get("sha256"),
-                         "training": start.get("extra", {}).get("training")},
+        "started_from": {
+            "path": str(start_path),
+            "sha256": start.get("sha256"),
+            "training": start.get("extra", {}).get("training"),
+        },
         "stopped": reason,
     }
     manifest = save_detector(detector, estimator.model, args.out, training, history)

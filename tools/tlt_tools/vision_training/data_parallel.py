@@ -44,11 +44,13 @@ class Ranks:
         the images that would leave some process without a whole batch wait for another epoch's
         order, so every process takes every step (each step is a collective)."""
         if self.size == 1:
-            return [list(order[k:k + batch]) for k in range(0, len(order), batch)]
+            return [list(order[k : k + batch]) for k in range(0, len(order), batch)]
         steps = len(order) // (batch * self.size)
         start = self.rank * batch
-        return [list(order[s * batch * self.size + start:s * batch * self.size + start + batch])
-                for s in range(steps)]
+        return [
+            list(order[s * batch * self.size + start : s * batch * self.size + start + batch])
+            for s in range(steps)
+        ]
 
     def same_as_leader(self, model: nn.Module) -> None:
         """Overwrite this process's parameters and buffers with the leader's."""
@@ -76,7 +78,7 @@ class Ranks:
         offset = 0
         for p in params:
             n = p.numel()
-            p.grad.copy_(flat[offset:offset + n].view_as(p.grad))
+            p.grad.copy_(flat[offset : offset + n].view_as(p.grad))
             offset += n
 
     def mean(self, values: dict[str, float]) -> dict[str, float]:
@@ -119,8 +121,16 @@ def _free_port() -> int:
 REFUSED = 2  # the run's exit status when a process stops on one of ``refused``
 
 
-def _entry(rank: int, size: int, port: int, fn: Callable[..., int], args: tuple[Any, ...],
-           result: Any, refused: tuple[type[BaseException], ...], was_refused: Any) -> None:
+def _entry(
+    rank: int,
+    size: int,
+    port: int,
+    fn: Callable[..., int],
+    args: tuple[Any, ...],
+    result: Any,
+    refused: tuple[type[BaseException], ...],
+    was_refused: Any,
+) -> None:
     os.environ["MASTER_ADDR"], os.environ["MASTER_PORT"] = "127.0.0.1", str(port)
     dist.init_process_group("gloo", rank=rank, world_size=size)
     try:
@@ -140,8 +150,9 @@ def _entry(rank: int, size: int, port: int, fn: Callable[..., int], args: tuple[
         dist.destroy_process_group()
 
 
-def run_ranks(fn: Callable[..., int], size: int, *args: Any,
-              refused: tuple[type[BaseException], ...] = ()) -> int:
+def run_ranks(
+    fn: Callable[..., int], size: int, *args: Any, refused: tuple[type[BaseException], ...] = ()
+) -> int:
     """Run ``fn(*args, ranks)`` in ``size`` processes and return the leader's exit status. A
     process that raises one of ``refused`` (a bad input found only while running) prints
     ``error: <message>`` and ends the run with status 2; any other exception ends it raised here,
@@ -151,8 +162,9 @@ def run_ranks(fn: Callable[..., int], size: int, *args: Any,
     context = mp.get_context("spawn")
     result, was_refused = context.Value("i", 1), context.Value("i", 0)
     try:
-        mp.spawn(_entry, args=(size, _free_port(), fn, args, result, refused, was_refused), nprocs=size,
-                 join=True)
+        mp.spawn(
+            _entry, args=(size, _free_port(), fn, args, result, refused, was_refused), nprocs=size, join=True
+        )
     except (mp.ProcessExitedException, mp.ProcessRaisedException):
         if not was_refused.value:
             raise

@@ -70,10 +70,18 @@ def write_sample(path: str | Path, sample: Sample) -> None:
     np.savez_compressed(path, **arrays)
 
 
-def write_index(root: str | Path, classes: list[str], width: int, height: int, images: list[str],
-                settings: dict[str, Any]) -> None:
-    index = {"format": FORMAT, "version": VERSION, "classes": list(classes), "width": width,
-             "height": height, "images": list(images), "settings": settings}
+def write_index(
+    root: str | Path, classes: list[str], width: int, height: int, images: list[str], settings: dict[str, Any]
+) -> None:
+    index = {
+        "format": FORMAT,
+        "version": VERSION,
+        "classes": list(classes),
+        "width": width,
+        "height": height,
+        "images": list(images),
+        "settings": settings,
+    }
     tmp = Path(root) / (INDEX + ".tmp")
     tmp.write_text(json.dumps(index, indent=1))
     tmp.replace(Path(root) / INDEX)  # a set interrupted mid-write keeps its last whole index
@@ -149,8 +157,10 @@ class ImageSets:
             raise DatasetError("no image sets given")
         for other in sets[1:]:
             if other.classes != sets[0].classes:
-                raise DatasetError(f"{other.root / 'index.json'}: classes {other.classes} differ from "
-                                   f"{sets[0].root / 'index.json'}'s {sets[0].classes}")
+                raise DatasetError(
+                    f"{other.root / 'index.json'}: classes {other.classes} differ from "
+                    f"{sets[0].root / 'index.json'}'s {sets[0].classes}"
+                )
         self.sets = sets
         self.classes = sets[0].classes
         self.roots = [s.root for s in sets]

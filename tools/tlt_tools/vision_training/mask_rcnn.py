@@ -77,8 +77,14 @@ if TYPE_CHECKING:
 VERSION = "1"
 LOSSES = ("rpn_objectness", "rpn_box", "roi_cls", "roi_box", "roi_mask")
 SEMANTIC = "semantic"  # the semantic head's loss, when the model has one
-SHORT = {"rpn_objectness": "rpn_obj", "rpn_box": "rpn_box", "roi_cls": "cls", "roi_box": "box",
-         "roi_mask": "mask", SEMANTIC: "sem"}
+SHORT = {
+    "rpn_objectness": "rpn_obj",
+    "rpn_box": "rpn_box",
+    "roi_cls": "cls",
+    "roi_box": "box",
+    "roi_mask": "mask",
+    SEMANTIC: "sem",
+}
 
 
 class InputError(Exception):
@@ -110,8 +116,9 @@ def open_set(root: str | Path, classes: Sequence[str]) -> ImageSet:
     except DatasetError as exc:
         raise InputError(str(exc)) from exc
     if list(images.classes) != list(classes):
-        raise InputError(f"{images.root / 'index.json'}: classes {images.classes} differ from the "
-                         f"model's {list(classes)}")
+        raise InputError(
+            f"{images.root / 'index.json'}: classes {images.classes} differ from the model's {list(classes)}"
+        )
     if len(images) == 0:
         raise InputError(f"{images.root / 'index.json'}: the set has no images")
     return images
@@ -194,8 +201,9 @@ class TrainingImages(torch.utils.data.Dataset):
     seeded by (seed, epoch, i), so an epoch's images are the same whatever the number of loader
     workers, and a resumed run sees what it would have."""
 
-    def __init__(self, images: ImageSet | ImageSets, max_size: int | None, min_area: int, aug: Augment,
-                 seed: int) -> None:
+    def __init__(
+        self, images: ImageSet | ImageSets, max_size: int | None, min_area: int, aug: Augment, seed: int
+    ) -> None:
         self.images, self.max_size, self.min_area, self.aug, self.seed = images, max_size, min_area, aug, seed
         self.epoch = 0  # set before each epoch's loader is made (workers copy it then)
 
@@ -251,7 +259,10 @@ def node_segmenter(path: str | Path, model: MaskRCNN, max_size: int | None) -> M
 
 
 def evaluate(
-    model: MaskRCNN, images: ImageSet, max_size: int | None, limit: int | None = None,
+    model: MaskRCNN,
+    images: ImageSet,
+    max_size: int | None,
+    limit: int | None = None,
     node: MaskRcnnSegmenter | None = None,
 ) -> dict[str, Any]:
     """Mask AP50 of ``model`` on the set at full resolution: ``map``, ``per_class`` {name: AP}
@@ -271,15 +282,21 @@ def evaluate(
             if node is not None:
                 pred = node.refine(pred, s.depth, s.intrinsics)
             seconds += time.perf_counter() - t0
-            gt = {"masks": torch.as_tensor(s.masks, dtype=torch.bool),
-                  "labels": torch.as_tensor(s.labels, dtype=torch.long)}
+            gt = {
+                "masks": torch.as_tensor(s.masks, dtype=torch.bool),
+                "labels": torch.as_tensor(s.labels, dtype=torch.long),
+            }
             acc.add(pred, gt)
     finally:
         model.set_inference(**own)
     result = acc.result()
     per_class = {images.classes[label - 1]: ap for label, ap in result["per_class"].items()}
-    return {"map": result["map"], "per_class": per_class, "seconds_per_image": seconds / max(n, 1),
-            "images": n}
+    return {
+        "map": result["map"],
+        "per_class": per_class,
+        "seconds_per_image": seconds / max(n, 1),
+        "images": n,
+    }
 
 
 def format_ap(result: dict[str, Any], classes: Sequence[str]) -> str:
@@ -302,8 +319,12 @@ def _smooth(values: Sequence[float], window: int) -> np.ndarray:
     return out
 
 
-def plot_curves(path: Path, step_losses: Sequence[dict[str, float]], history: Sequence[dict[str, Any]],
-                classes: Sequence[str]) -> None:
+def plot_curves(
+    path: Path,
+    step_losses: Sequence[dict[str, float]],
+    history: Sequence[dict[str, Any]],
+    classes: Sequence[str],
+) -> None:
     """Losses per step (trailing mean over ~2 % of the run) and validation AP50 per epoch."""
     import matplotlib
 
@@ -344,8 +365,14 @@ def plot_curves(path: Path, step_losses: Sequence[dict[str, float]], history: Se
     plt.close(fig)
 
 
-def plot_samples(path: Path, model: MaskRCNN, images: ImageSet | ImageSets, max_size: int | None,
-                 count: int = 4, min_score: float = 0.5) -> None:
+def plot_samples(
+    path: Path,
+    model: MaskRCNN,
+    images: ImageSet | ImageSets,
+    max_size: int | None,
+    count: int = 4,
+    min_score: float = 0.5,
+) -> None:
     """The first ``count`` images of the set with the detections scoring ``min_score`` or more."""
     import matplotlib
 
@@ -366,15 +393,23 @@ def plot_samples(path: Path, model: MaskRCNN, images: ImageSet | ImageSets, max_
         det = detect_rgb(model, s.rgb, max_size)
         shown = s.rgb.astype(np.float32) / 255.0
         keep = det["scores"] >= min_score
-        for box, label, score, mask in zip(det["boxes"][keep], det["labels"][keep], det["scores"][keep],
-                                           det["masks"][keep], strict=True):
+        for box, label, score, mask in zip(
+            det["boxes"][keep], det["labels"][keep], det["scores"][keep], det["masks"][keep], strict=True
+        ):
             colour = np.array(colours(int(label) - 1)[:3])
             m = mask.numpy()
             shown[m] = 0.5 * shown[m] + 0.5 * colour
             x1, y1, x2, y2 = box.tolist()
             ax.add_patch(Rectangle((x1, y1), x2 - x1, y2 - y1, fill=False, color=colour, lw=1.2))
-            ax.text(x1, y1, f"{images.classes[int(label) - 1]} {float(score):.2f}", color="white",
-                    fontsize=7, va="bottom", bbox={"facecolor": colour, "alpha": 0.7, "pad": 1, "lw": 0})
+            ax.text(
+                x1,
+                y1,
+                f"{images.classes[int(label) - 1]} {float(score):.2f}",
+                color="white",
+                fontsize=7,
+                va="bottom",
+                bbox={"facecolor": colour, "alpha": 0.7, "pad": 1, "lw": 0},
+            )
         ax.imshow(shown)
         ax.set_title(f"{images.path(k).name}: {int(keep.sum())} detections, {len(s.labels)} true", fontsize=9)
     fig.tight_layout()
@@ -387,8 +422,11 @@ def plot_samples(path: Path, model: MaskRCNN, images: ImageSet | ImageSets, max_
 
 def output_paths(out: Path) -> dict[str, Path]:
     stem = out.with_suffix("")
-    return {"checkpoint": Path(f"{stem}_checkpoint.pt"), "curves": Path(f"{stem}_curves.png"),
-            "samples": Path(f"{stem}_samples.png")}
+    return {
+        "checkpoint": Path(f"{stem}_checkpoint.pt"),
+        "curves": Path(f"{stem}_curves.png"),
+        "samples": Path(f"{stem}_samples.png"),
+    }
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
@@ -445,8 +483,10 @@ def pace_probe_step(steps_per_epoch: int) -> int:
 
 
 def _budget_line(minutes: float, fit: int, epochs: int, how: str = "") -> str:
-    return (f"time budget {minutes:g} min: {fit} epochs fit, not {epochs}{how}; "
-            "the learning rate decays over those")
+    return (
+        f"time budget {minutes:g} min: {fit} epochs fit, not {epochs}{how}; "
+        "the learning rate decays over those"
+    )
 
 
 def _duration(seconds: float) -> str:
@@ -470,8 +510,9 @@ def validated_as(args: argparse.Namespace) -> str | None:
     return f"as the node segments ({args.node_config})" if args.node_config else "the model alone"
 
 
-def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str],
-                     val_as: str | None) -> dict[str, Any]:
+def _load_checkpoint(
+    path: Path, settings: dict[str, Any], classes: Sequence[str], val_as: str | None
+) -> dict[str, Any]:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError as exc:
@@ -483,17 +524,24 @@ def _load_checkpoint(path: Path, settings: dict[str, Any], classes: Sequence[str
     if ckpt["classes"] != list(classes):
         raise InputError(f"{path}: checkpoint classes {ckpt['classes']} differ from {list(classes)}")
     if ckpt["settings"] != settings:
-        diff = sorted(k for k in set(settings["model"]) | set(ckpt["settings"]["model"])
-                      if settings["model"].get(k) != ckpt["settings"]["model"].get(k))
+        diff = sorted(
+            k
+            for k in set(settings["model"]) | set(ckpt["settings"]["model"])
+            if settings["model"].get(k) != ckpt["settings"]["model"].get(k)
+        )
         if ckpt["settings"].get("max_size") != settings.get("max_size"):
             diff.append("max_size")
-        raise InputError(f"{path}: checkpoint was trained with other settings ({', '.join(diff)}); "
-                         "resume with the same --config and --max-size")
+        raise InputError(
+            f"{path}: checkpoint was trained with other settings ({', '.join(diff)}); "
+            "resume with the same --config and --max-size"
+        )
     validated = [h.get("val_as", "the model alone") for h in ckpt["history"] if h.get("val_map") is not None]
     if val_as is not None and validated and validated[-1] != val_as:
-        raise InputError(f"{path}: its epochs were validated {validated[-1]}, this run's would be "
-                         f"{val_as} (the best epoch would be chosen by two measures); resume with the "
-                         "same --node-config")
+        raise InputError(
+            f"{path}: its epochs were validated {validated[-1]}, this run's would be "
+            f"{val_as} (the best epoch would be chosen by two measures); resume with the "
+            "same --node-config"
+        )
     return ckpt
 
 
@@ -506,8 +554,10 @@ def init_from(model: MaskRCNN, path: Path, classes: Sequence[str]) -> list[str]:
     except WeightsError as exc:
         raise InputError(str(exc)) from exc
     if manifest["kind"] != KIND or manifest["classes"] != list(classes):
-        raise InputError(f"{path}: --init needs {KIND} weights for classes {list(classes)}, not "
-                         f"{manifest['kind']} weights for {manifest['classes']}")
+        raise InputError(
+            f"{path}: --init needs {KIND} weights for classes {list(classes)}, not "
+            f"{manifest['kind']} weights for {manifest['classes']}"
+        )
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises several types for a corrupt file
@@ -547,8 +597,10 @@ def open_inputs(args: argparse.Namespace) -> Inputs:
     if out.suffix != ".pt":
         raise InputError(f"{out}: --out must end in .pt")
     if len(train_set) < args.batch * args.ranks:
-        raise InputError(f"{', '.join(map(str, train_set.roots))}: {len(train_set)} images, fewer than "
-                         f"--batch {args.batch} times --ranks {args.ranks}")
+        raise InputError(
+            f"{', '.join(map(str, train_set.roots))}: {len(train_set)} images, fewer than "
+            f"--batch {args.batch} times --ranks {args.ranks}"
+        )
     if args.node_config:
         node_segmenter(args.node_config, MaskRCNN(cfg), args.max_size)  # refused here, not after an epoch
     return Inputs(cfg, settings, train_set, val_set, device, out)
@@ -572,7 +624,13 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     say = print if ranks.leader else _silent
     inputs = open_inputs(args)
     cfg, settings, train_set, val_set, device, out = (
-        inputs.cfg, inputs.settings, inputs.train_set, inputs.val_set, inputs.device, inputs.out)
+        inputs.cfg,
+        inputs.settings,
+        inputs.train_set,
+        inputs.val_set,
+        inputs.device,
+        inputs.out,
+    )
     paths = output_paths(out)
     if ranks.leader:
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -581,8 +639,11 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     model = MaskRCNN(cfg)
     if args.init:
         fresh = init_from(model, Path(args.init), cfg.classes)
-        say(f"initialised from {args.init}" + (f"; {len(fresh)} tensors fresh, from {fresh[0]}"
-                                                if fresh else ""), flush=True)
+        say(
+            f"initialised from {args.init}"
+            + (f"; {len(fresh)} tensors fresh, from {fresh[0]}" if fresh else ""),
+            flush=True,
+        )
     model.to(device)
     node = None
     if args.node_config and ranks.leader:  # only the leader validates
@@ -610,14 +671,19 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     ranks.same_as_leader(model)
     if ranks.size > 1:
         torch.manual_seed(args.seed + ranks.rank)  # each process samples its own anchors and RoIs
-    say(f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
+    say(
+        f"train {', '.join(map(str, train_set.roots))} ({len(train_set)} images)"
         + (f", val {val_set.root} ({len(val_set)} images, {val_as})" if val_set else ", no validation set")
         + f"; {sum(p.numel() for p in model.parameters()) / 1e6:.2f} M parameters; "
         f"{steps_per_epoch} steps per epoch; max size {args.max_size or 'full'}; {args.threads} threads; "
         f"device {device}; {args.workers} loader workers"
-        + (f"; {ranks.size} processes sharing each step's {args.batch * ranks.size} images"
-           if ranks.size > 1 else ""),
-        flush=True)
+        + (
+            f"; {ranks.size} processes sharing each step's {args.batch * ranks.size} images"
+            if ranks.size > 1
+            else ""
+        ),
+        flush=True,
+    )
     data = TrainingImages(train_set, args.max_size, args.min_area, aug, args.seed)
     probe = pace_probe_step(steps_per_epoch) if args.time_budget_min is not None else 0
     t_start = time.perf_counter()
@@ -628,27 +694,39 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         order = np.random.default_rng([args.seed, epoch]).permutation(len(train_set)).tolist()
         data.epoch = epoch
         loader = torch.utils.data.DataLoader(
-            data, batch_sampler=ranks.batches(order, args.batch),
-            num_workers=args.workers, collate_fn=_as_list, worker_init_fn=_one_thread,
-            prefetch_factor=4 if args.workers else None)
+            data,
+            batch_sampler=ranks.batches(order, args.batch),
+            num_workers=args.workers,
+            collate_fn=_as_list,
+            worker_init_fn=_one_thread,
+            prefetch_factor=4 if args.workers else None,
+        )
         t_epoch = t_window = time.perf_counter()
         window_images = 0
         epoch_losses: list[dict[str, float]] = []
         for step, batch in enumerate(loader):
             sizes = {tuple(b[0].shape[-2:]) for b in batch}
             if len(sizes) > 1:
-                raise InputError(f"{', '.join(map(str, train_set.roots))}: images of different sizes "
-                                 f"{sorted(sizes)} in the training sets")
+                raise InputError(
+                    f"{', '.join(map(str, train_set.roots))}: images of different sizes "
+                    f"{sorted(sizes)} in the training sets"
+                )
             global_step = epoch * steps_per_epoch + step
             for group in optimizer.param_groups:
                 group["lr"] = learning_rate(global_step, total_steps, args.lr)
             images = torch.stack([b[0] for b in batch]).to(device)
             targets = [{k: v.to(device) for k, v in b[1].items()} for b in batch]
-            losses = ranks.mean(train_step(model, optimizer, images, targets,
-                                           before_step=lambda: ranks.average_gradients(model)))
+            losses = ranks.mean(
+                train_step(
+                    model, optimizer, images, targets, before_step=lambda: ranks.average_gradients(model)
+                )
+            )
             if not math.isfinite(losses["total"]):
-                say(f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
-                    "try a lower --lr", file=sys.stderr)
+                say(
+                    f"error: loss is {losses['total']} at epoch {epoch + 1} step {step + 1}; "
+                    "try a lower --lr",
+                    file=sys.stderr,
+                )
                 return 1
             step_losses.append(losses)
             epoch_losses.append(losses)
@@ -668,9 +746,12 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                 rate = window_images / max(now - t_window, 1e-9)
                 left = (now - t_start) / steps_done * (total_steps - global_step - 1)
                 terms = " ".join(f"{SHORT[k]} {losses[k]:.3f}" for k in loss_keys)
-                say(f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
+                say(
+                    f"epoch {epoch + 1}/{epochs} step {step + 1}/{steps_per_epoch} | "
                     f"{rate:.2f} img/s | {terms} total {losses['total']:.3f} | "
-                    f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}", flush=True)
+                    f"lr {optimizer.param_groups[0]['lr']:.1e} | ETA {_duration(left)}",
+                    flush=True,
+                )
                 t_window, window_images = now, 0
         if not ranks.replicas_agree(model):
             say(f"error: the {ranks.size} processes' weights differ after epoch {epoch + 1}", file=sys.stderr)
@@ -685,13 +766,19 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
         improved = True
         if val_set is not None and ranks.leader:
             result = evaluate(model, val_set, args.max_size, args.val_limit, node)
-            record.update(val_map=result["map"], val_ap50=result["per_class"], val_as=val_as,
-                          val_seconds_per_image=result["seconds_per_image"])
+            record.update(
+                val_map=result["map"],
+                val_ap50=result["per_class"],
+                val_as=val_as,
+                val_seconds_per_image=result["seconds_per_image"],
+            )
             improved = result["map"] > best_map
-            say(f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
+            say(
+                f"epoch {epoch + 1}/{epochs} val {format_ap(result, cfg.classes)} | "
                 f"{result['seconds_per_image'] * 1e3:.0f} ms/image | train loss "
                 f"{record['train_losses']['total']:.3f}" + (" | best so far" if improved else ""),
-                flush=True)
+                flush=True,
+            )
         history.append(record)
         seconds = seconds_before + time.perf_counter() - t_start
         if improved and ranks.leader:
@@ -709,7 +796,10 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
                 "val_map": record["val_map"],
                 "val_ap50": record["val_ap50"],
                 "seconds": round(seconds, 1),
-                "batch": args.batch, "processes": ranks.size, "lr": args.lr, "seed": args.seed,
+                "batch": args.batch,
+                "processes": ranks.size,
+                "lr": args.lr,
+                "seed": args.seed,
                 "min_area": args.min_area,
                 "device": str(device),
                 "augment": asdict(aug),
@@ -718,18 +808,35 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
             save_weights(model, out, KIND, VERSION, cfg.classes, settings, {"figures": figures})
             say(f"saved {out} (epoch {epoch + 1})", flush=True)
         if ranks.leader:
-            _save_checkpoint(paths["checkpoint"], {
-                "kind": f"{KIND}_checkpoint", "classes": list(cfg.classes), "settings": settings,
-                "epoch": epoch + 1, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                "torch_rng": torch.get_rng_state(), "history": history, "step_losses": step_losses,
-                "best_map": best_map, "seconds": seconds,
-            })
+            _save_checkpoint(
+                paths["checkpoint"],
+                {
+                    "kind": f"{KIND}_checkpoint",
+                    "classes": list(cfg.classes),
+                    "settings": settings,
+                    "epoch": epoch + 1,
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "torch_rng": torch.get_rng_state(),
+                    "history": history,
+                    "step_losses": step_losses,
+                    "best_map": best_map,
+                    "seconds": seconds,
+                },
+            )
             plot_curves(paths["curves"], step_losses, history, cfg.classes)
         epoch += 1
         if args.time_budget_min is not None:
             # The leader's clock decides, so that every process trains the same epochs.
-            fit = ranks.from_leader(epochs_within(args.time_budget_min * 60.0, time.perf_counter() - t_start,
-                                                  epoch - start_epoch, epoch, epochs))
+            fit = ranks.from_leader(
+                epochs_within(
+                    args.time_budget_min * 60.0,
+                    time.perf_counter() - t_start,
+                    epoch - start_epoch,
+                    epoch,
+                    epochs,
+                )
+            )
             if fit < epochs:
                 say(_budget_line(args.time_budget_min, fit, epochs), flush=True)
                 epochs, total_steps = fit, fit * steps_per_epoch
@@ -740,8 +847,11 @@ def train(args: argparse.Namespace, ranks: Ranks | None = None) -> int:
     best, _ = load_mask_rcnn(out, cfg.classes)  # the saved file, checked as the node will load it
     plot_samples(paths["samples"], best, val_set or train_set, args.max_size)
     plot_curves(paths["curves"], step_losses, history, cfg.classes)
-    print(f"wrote {out}, {paths['checkpoint']}, {paths['curves']}, {paths['samples']} in "
-          f"{_duration(time.perf_counter() - t_start)}", flush=True)
+    print(
+        f"wrote {out}, {paths['checkpoint']}, {paths['curves']}, {paths['samples']} in "
+        f"{_duration(time.perf_counter() - t_start)}",
+        flush=True,
+    )
     return 0
 
 
@@ -757,9 +867,11 @@ def evaluate_command(args: argparse.Namespace) -> int:
     images = open_set(args.val, model.cfg.classes)
     node = node_segmenter(args.node_config, model, max_size) if args.node_config else None
     result = evaluate(model, images, max_size, args.val_limit, node)
-    print(f"{args.evaluate} on {images.root} ({result['images']} images, max size {max_size or 'full'}, "
-          f"{args.threads} threads, {device}), "
-          + (f"as the node segments ({args.node_config})" if node is not None else "the model alone"))
+    print(
+        f"{args.evaluate} on {images.root} ({result['images']} images, max size {max_size or 'full'}, "
+        f"{args.threads} threads, {device}), "
+        + (f"as the node segments ({args.node_config})" if node is not None else "the model alone")
+    )
     for c in model.cfg.classes:
         ap = result["per_class"].get(c)
         print(f"  {c:<14} AP50 {ap:.3f}" if ap is not None else f"  {c:<14} AP50 -  (no instances)")
@@ -769,52 +881,98 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m tlt_tools.vision_training.mask_rcnn",
-                                description=__doc__.split("\n")[0])
-    p.add_argument("--train", nargs="+",
-                   help="training image sets (directories with index.json), read as one")
+    p = argparse.ArgumentParser(
+        prog="python -m tlt_tools.vision_training.mask_rcnn", description=__doc__.split("\n")[0]
+    )
+    p.add_argument(
+        "--train", nargs="+", help="training image sets (directories with index.json), read as one"
+    )
     p.add_argument("--val", help="validation image set: AP50 after each epoch, best epoch kept")
-    p.add_argument("--out", default="build/vision/mask_rcnn.pt",
-                   help="weights file (.pt); manifest beside it")
+    p.add_argument(
+        "--out", default="build/vision/mask_rcnn.pt", help="weights file (.pt); manifest beside it"
+    )
     p.add_argument("--epochs", type=int, default=20)
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=1e-3, help="AdamW peak learning rate")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
-    p.add_argument("--device", default="cpu",
-                   help="torch device to train and evaluate on (cpu, cuda, cuda:1)")
-    p.add_argument("--workers", type=int, default=0,
-                   help="processes loading and augmenting training images (0: the training process); "
-                        "with --ranks, each training process's")
-    p.add_argument("--ranks", type=int, default=1,
-                   help="training processes on the device, each on --batch images of every step, their "
-                        "gradients averaged (the step's batch is --batch times --ranks)")
-    p.add_argument("--max-size", type=int, default=None,
-                   help="downscale images so the longest side is at most this (pixels); recorded in the "
-                        "manifest so inference uses the same size (default: full size)")
-    p.add_argument("--min-area", type=int, default=4,
-                   help="drop training instances with fewer pixels than this at the model's size")
-    p.add_argument("--sensor-noise", type=float, default=0.0, metavar="GREY_LEVELS",
-                   help="Gaussian colour noise of each training image, 1 sigma uniform in 0..this grey"
-                        " levels of 255, as a real camera's sensor adds (default 0: none)")
-    p.add_argument("--blur", type=float, default=0.0, metavar="PIXELS",
-                   help="Gaussian blur of each training image, sigma uniform in 0..this pixels at the"
-                        " model's size, as real optics add (default 0: none)")
-    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
-                   help="MaskRCNNConfig field (JSON value), e.g. fpn_channels=32; repeatable")
-    p.add_argument("--time-budget-min", type=float, default=None,
-                   help="train only the epochs that fit in this many minutes, judged from the epochs run "
-                        "(the learning rate's decay is fitted to them)")
+    p.add_argument(
+        "--device", default="cpu", help="torch device to train and evaluate on (cpu, cuda, cuda:1)"
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        help="processes loading and augmenting training images (0: the training process); "
+        "with --ranks, each training process's",
+    )
+    p.add_argument(
+        "--ranks",
+        type=int,
+        default=1,
+        help="training processes on the device, each on --batch images of every step, their "
+        "gradients averaged (the step's batch is --batch times --ranks)",
+    )
+    p.add_argument(
+        "--max-size",
+        type=int,
+        default=None,
+        help="downscale images so the longest side is at most this (pixels); recorded in the "
+        "manifest so inference uses the same size (default: full size)",
+    )
+    p.add_argument(
+        "--min-area",
+        type=int,
+        default=4,
+        help="drop training instances with fewer pixels than this at the model's size",
+    )
+    p.add_argument(
+        "--sensor-noise",
+        type=float,
+        default=0.0,
+        metavar="GREY_LEVELS",
+        help="Gaussian colour noise of each training image, 1 sigma uniform in 0..this grey"
+        " levels of 255, as a real camera's sensor adds (default 0: none)",
+    )
+    p.add_argument(
+        "--blur",
+        type=float,
+        default=0.0,
+        metavar="PIXELS",
+        help="Gaussian blur of each training image, sigma uniform in 0..this pixels at the"
+        " model's size, as real optics add (default 0: none)",
+    )
+    p.add_argument(
+        "--config",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="MaskRCNNConfig field (JSON value), e.g. fpn_channels=32; repeatable",
+    )
+    p.add_argument(
+        "--time-budget-min",
+        type=float,
+        default=None,
+        help="train only the epochs that fit in this many minutes, judged from the epochs run "
+        "(the learning rate's decay is fitted to them)",
+    )
     p.add_argument("--log-every", type=int, default=10, help="steps between progress lines")
     p.add_argument("--val-limit", type=int, default=None, help="evaluate on the first N validation images")
-    p.add_argument("--node-config", metavar="NODE_YAML",
-                   help="validate the masks as the vision node configured by this file makes them "
-                        "(e.g. config/vision/node.yaml), not the model's alone")
+    p.add_argument(
+        "--node-config",
+        metavar="NODE_YAML",
+        help="validate the masks as the vision node configured by this file makes them "
+        "(e.g. config/vision/node.yaml), not the model's alone",
+    )
     p.add_argument("--resume", help="checkpoint (<out stem>_checkpoint.pt) to continue from")
-    p.add_argument("--init", metavar="WEIGHTS",
-                   help="start from these trained weights (tensors of the same name and shape)")
-    p.add_argument("--evaluate", metavar="WEIGHTS",
-                   help="evaluate these weights on --val instead of training")
+    p.add_argument(
+        "--init",
+        metavar="WEIGHTS",
+        help="start from these trained weights (tensors of the same name and shape)",
+    )
+    p.add_argument(
+        "--evaluate", metavar="WEIGHTS", help="evaluate these weights on --val instead of training"
+    )
     args = p.parse_args(argv)
     for name in ("epochs", "batch", "threads", "log_every", "ranks"):
         if getattr(args, name) < 1:

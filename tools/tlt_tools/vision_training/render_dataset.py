@@ -208,8 +208,10 @@ class TwinRenderer:
         limit = (m.vis.global_.offwidth, m.vis.global_.offheight)
         if settings.width > limit[0] or settings.height > limit[1]:
             self.scene.close()
-            raise RenderError(f"{settings.width}x{settings.height} exceeds the twin's offscreen buffer "
-                              f"{limit[0]}x{limit[1]} (config/twin/edu.yaml)")
+            raise RenderError(
+                f"{settings.width}x{settings.height} exceeds the twin's offscreen buffer "
+                f"{limit[0]}x{limit[1]} (config/twin/edu.yaml)"
+            )
         self.parts = self.scene.info.parts
         self.by_body = {p.body: p for p in self.parts.values()}
         self.struts = {
@@ -445,7 +447,10 @@ class TwinRenderer:
         weights = np.array([s.scenes[k] for k in kinds])
         kind = kinds[int(rng.choice(len(kinds), p=weights / weights.sum()))]
         camera = {
-            "held": self._held, "presented": self._presented, "scatter": self._scatter, "bay": self._bay,
+            "held": self._held,
+            "presented": self._presented,
+            "scatter": self._scatter,
+            "bay": self._bay,
             "feeder": self._feeder,
         }[kind](rng)
         return self._capture(camera, rng), kind
@@ -516,8 +521,16 @@ def write_preview(path: str | Path, samples: list[Sample], columns: int = 3, til
             cv2.drawContours(image, contours, -1, CLASS_BGR[cls], 1)
             ys, xs = np.nonzero(small)
             if len(xs) >= 0.003 * size[0] * size[1]:  # naming every rack part would hide the image
-                cv2.putText(image, cls, (int(xs.mean()), int(ys.mean())), cv2.FONT_HERSHEY_SIMPLEX,
-                            0.35, CLASS_BGR[cls], 1, cv2.LINE_AA)
+                cv2.putText(
+                    image,
+                    cls,
+                    (int(xs.mean()), int(ys.mean())),
+                    cv2.FONT_HERSHEY_SIMPLEX,
+                    0.35,
+                    CLASS_BGR[cls],
+                    1,
+                    cv2.LINE_AA,
+                )
         tiles.append(image)
     while len(tiles) % columns:
         tiles.append(np.zeros_like(tiles[0]))
@@ -528,7 +541,11 @@ def write_preview(path: str | Path, samples: list[Sample], columns: int = 3, til
 
 # -- the command -------------------------------------------------------------------------------
 def render_set(
-    out: Path, count: int, settings: RenderSettings, progress_every: int = 1, index_every: int = 10,
+    out: Path,
+    count: int,
+    settings: RenderSettings,
+    progress_every: int = 1,
+    index_every: int = 10,
     preview_count: int = 6,
 ) -> list[str]:
     """Render ``count`` images into ``out`` with progress on stderr; returns the files written."""
@@ -602,20 +619,37 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--mission", type=Path, default=DEFAULT_MISSION, help="mission of the tower and parts")
     p.add_argument("--defective-fraction", type=float, default=0.2, help="probability a strut is defective")
-    p.add_argument("--min-pixels", type=int, default=RenderSettings.min_pixels,
-                   help="instances with fewer visible pixels are dropped")
-    p.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=True,
-                   help="multisampled RGB (as the detectors see); --no-antialias is cheaper")
+    p.add_argument(
+        "--min-pixels",
+        type=int,
+        default=RenderSettings.min_pixels,
+        help="instances with fewer visible pixels are dropped",
+    )
+    p.add_argument(
+        "--antialias",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="multisampled RGB (as the detectors see); --no-antialias is cheaper",
+    )
     p.add_argument("--progress-every", type=int, default=1, help="print progress every k images")
-    p.add_argument("--lighting", default="",
-                   help="light every image by this preset of config/twin/lighting.yaml (lunar) "
-                        "instead of random lights")
-    p.add_argument("--cameras", type=Path,
-                   help="take the images through these camera models (config/twin/cameras.yaml); "
-                        "default: the exact render")
-    p.add_argument("--scenes", nargs="+", metavar="KIND=WEIGHT",
-                   help=f"how often each scene kind is drawn (relative; kinds left out are not drawn): "
-                        f"{', '.join(SCENES)}; default {_weights_text(RenderSettings().scenes)}")
+    p.add_argument(
+        "--lighting",
+        default="",
+        help="light every image by this preset of config/twin/lighting.yaml (lunar) instead of random lights",
+    )
+    p.add_argument(
+        "--cameras",
+        type=Path,
+        help="take the images through these camera models (config/twin/cameras.yaml); "
+        "default: the exact render",
+    )
+    p.add_argument(
+        "--scenes",
+        nargs="+",
+        metavar="KIND=WEIGHT",
+        help=f"how often each scene kind is drawn (relative; kinds left out are not drawn): "
+        f"{', '.join(SCENES)}; default {_weights_text(RenderSettings().scenes)}",
+    )
     args = p.parse_args(argv)
     if args.count < 1:
         return _fail(f"--count must be at least 1, got {args.count}")
