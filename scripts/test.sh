@@ -22,8 +22,9 @@ cd "$ROOT"
 # other workers; with one thread each the vision and bench tests finish sooner and use less CPU.
 # Code that sets its own count (the vision node's torch_threads, the trainers' --threads) still does.
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
-echo "[test] ruff check"
+echo "[test] ruff check, ruff format --check"
 "$VENV/bin/ruff" check --quiet $(ls -d src sim tools tests bench 2>/dev/null)
+"$VENV/bin/ruff" format --check --quiet $(ls -d src sim tools tests bench 2>/dev/null)
 # The packages and settings are in pyproject.toml ([tool.mypy]); its cache under build/ makes a
 # second run read only the files that changed.
 echo "[test] mypy"
