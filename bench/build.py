@@ -151,7 +151,7 @@ def read_motions(recording: Path) -> list[Motion]:
     from tlt_interfaces.msg import ExecutedTrajectory
 
     from tlt_common.recording.reading import read_messages
-    from tlt_common.stamps import stamp_seconds
+    from tlt_common.ros.stamps import stamp_seconds
 
     with open(recording, "rb") as stream:
         summary = make_reader(stream).get_summary()

@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     if os.environ.get("TLT_BENCH_ROLE") == "bare":
         return serve_bare()
 
-    from tlt_common.ros_isolation import isolate
+    from tlt_common.ros.isolation import isolate
 
     env = dict(os.environ)
     isolate(env)

@@ -35,7 +35,7 @@ def measure(rate_hz: float, window_s: float, settle_s: float = 8.0) -> tuple[flo
     from tlt_sim.emulators.ur_controller import URControllerConfig
     from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
-    from tlt_common.ros_isolation import isolate
+    from tlt_common.ros.isolation import isolate
 
     env = dict(os.environ)
     isolate(env)

@@ -40,7 +40,7 @@ from tlt_ars.planning.world import SceneConfig, Width, build_scene
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal
-from tlt_common.stamps import split_seconds
+from tlt_common.ros.stamps import split_seconds
 
 # Largest joint offset (rad) between the arm and a trajectory's first point when it is sent.
 START_TOLERANCE = 0.05

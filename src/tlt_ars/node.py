@@ -73,16 +73,16 @@ from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.config_schema import ConfigError, load_yaml
-from tlt_common.direct_executor import DirectMultiThreadedExecutor
-from tlt_common.executor_stop import stop_executor
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import load_mission
-from tlt_common.node_teardown import destroy_node
-from tlt_common.periodic_timer import create_periodic_timer
-from tlt_common.sim_clock_watch import watch_sim_clock
-from tlt_common.stop_signals import stop_on_signals
-from tlt_common.topic_silence_watch import TopicSilenceWatch
+from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor
+from tlt_common.ros.executor_stop import stop_executor
+from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.periodic_timer import create_periodic_timer
+from tlt_common.ros.sim_clock_watch import watch_sim_clock
+from tlt_common.ros.stop_signals import stop_on_signals
+from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
 
 ACTION_TYPES = {
     "add_cross_frame": AddCrossFrame,

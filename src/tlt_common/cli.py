@@ -41,7 +41,7 @@ def launch_main(argv: list[str]) -> int:
     if args.isolated:
         import os
 
-        from tlt_common.ros_isolation import isolate
+        from tlt_common.ros.isolation import isolate
 
         print(f"[launch] isolated: ROS_DOMAIN_ID={isolate(os.environ)}, localhost discovery", flush=True)
     try:

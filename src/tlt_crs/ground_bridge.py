@@ -41,7 +41,7 @@ from tlt_common.bt.status_codec import TreeShape, encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
-from tlt_common.periodic_timer import create_periodic_timer
+from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_crs.commands import CommandQueue
 from tlt_crs.context import CrsContext
 from tlt_crs.ground_link.link import GroundCommand, GroundLink

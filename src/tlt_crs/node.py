@@ -44,16 +44,16 @@ from tlt_common.bt.ros import TreeStatusPublisher
 from tlt_common.bt.status_codec import TreeShape
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
-from tlt_common.direct_executor import DirectMultiThreadedExecutor
-from tlt_common.executor_stop import stop_executor
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
 from tlt_common.mission.tower_model import TowerModel, TowerModelError
-from tlt_common.periodic_timer import create_periodic_timer
-from tlt_common.sim_clock_watch import watch_sim_clock
-from tlt_common.stop_signals import stop_on_signals
-from tlt_common.topic_silence_watch import TopicSilenceWatch
+from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor
+from tlt_common.ros.executor_stop import stop_executor
+from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.periodic_timer import create_periodic_timer
+from tlt_common.ros.sim_clock_watch import watch_sim_clock
+from tlt_common.ros.stop_signals import stop_on_signals
+from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
 from tlt_crs.behaviours.inspection import serve_inspect_part
 from tlt_crs.commands import CommandProcessor, CommandQueue
 from tlt_crs.config import REPO_CONFIG, CrsConfig, load_config
@@ -118,7 +118,7 @@ class CrsNode(LeanNode):
         )
         serve_inspect_part(self.ctx, self._service_group)
         # On the steady clock on hardware: a system clock set back must not stop the tree and its
-        # reports (tlt_common.periodic_timer); the tree's own timeouts stay on mission time.
+        # reports (tlt_common.ros.periodic_timer); the tree's own timeouts stay on mission time.
         create_periodic_timer(self, 1.0 / config.tick_rate_hz, self.tick, callback_group=tick_group)
         create_periodic_timer(
             self, 1.0 / config.progress_rate_hz, self.publish_progress, callback_group=tick_group
@@ -327,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
             if bridge is not None:
                 bridge.close()
             # Callbacks still running when the node is destroyed use freed handles: give them
-            # time to return first (the context is still valid: tlt_common.stop_signals).
+            # time to return first (the context is still valid: tlt_common.ros.stop_signals).
             for error in stop_executor(executor, 5.0):
                 node.get_logger().warning(f"a callback ended with {error!r} at shutdown")
             node.destroy_node()

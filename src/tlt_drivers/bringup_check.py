@@ -31,9 +31,9 @@ from tlt_interfaces.srv import SetActuatorState, SetLifterMode
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from tlt_common import ros_names
-from tlt_common.action_client import SerialisedActionClient
-from tlt_common.lean_node import LeanNode
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.stamps import set_stamp
 
 COMPONENTS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
 

@@ -3,7 +3,7 @@
 On the twin (``use_sim_time``) the loop runs on sim time, which stands still while the twin waits
 for a late driver. The far end (the twin's emulators) is on sim time too, so a link watchdog must
 count in the same time base, or every pause of the simulation would look like a dead link. On
-hardware it is the monotonic clock, as the loop's timer is (``tlt_common.periodic_timer``: a
+hardware it is the monotonic clock, as the loop's timer is (``tlt_common.ros.periodic_timer``: a
 system clock set back must not stop a stream that a watchdog at the far end guards).
 """
 
@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
-from tlt_common.periodic_timer import runs_on_sim_time
+from tlt_common.ros.periodic_timer import runs_on_sim_time
 
 
 def loop_clock(node: Node) -> Callable[[], float]:

@@ -47,13 +47,13 @@ from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTa
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
-from tlt_common.direct_executor import DirectMultiThreadedExecutor, QuickCallbackGroup
-from tlt_common.executor_stop import stop_executor
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.lean_node import LeanNode
 from tlt_common.mission.schema import Mission, load_mission
-from tlt_common.spin_loop import spin
-from tlt_common.stop_signals import stop_on_signals
+from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor, QuickCallbackGroup
+from tlt_common.ros.executor_stop import stop_executor
+from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.spin_loop import spin
+from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_vision.apriltag import TagConfig, TagLocator
 from tlt_vision.camera_frames import FrameGrabber, SegmentationLabels
 from tlt_vision.frames import CameraRig
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     share_the_interpreter_quickly()  # poses are computed beside the executor's busy threads
     # rclpy's own handler would shut the context down under a pose being computed on an executor
-    # thread: a signal asks the spin loop to end instead (tlt_common/stop_signals.py).
+    # thread: a signal asks the spin loop to end instead (tlt_common/ros/stop_signals.py).
     stop = stop_on_signals()
     rclpy.init(args=["tlt-vision", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     node = None

@@ -14,7 +14,7 @@ from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.recording.mcap_writer import McapRecordingWriter
 from tlt_common.recording.message_definitions import MessageDefinitionSource
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.stamps import set_stamp
 from tlt_gsw.archive import Recorder
 
 DEFS = load_definitions()

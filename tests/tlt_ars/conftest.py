@@ -48,12 +48,12 @@ from tlt_ars.node import ArsNode
 from tlt_ars.planning.targets import dispenser_targets, part_in_tool, placement_targets
 from tlt_ars.planning.world import dispenser_frame
 from tlt_common import ros_names
-from tlt_common.action_client import SerialisedActionClient
 from tlt_common.config_schema import load_yaml
-from tlt_common.executor_stop import stop_executor
 from tlt_common.geometry.transforms import pose_error
-from tlt_common.node_teardown import destroy_node
-from tlt_common.spin_loop import spin
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.executor_stop import stop_executor
+from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.spin_loop import spin
 from tlt_drivers.dynamixel.config import validate_chain
 from tlt_drivers.nodes.ee import EndEffectorNode
 from tlt_drivers.ur.config import CONFIG_DIR as UR_CONFIG_DIR

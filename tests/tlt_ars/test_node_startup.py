@@ -27,11 +27,11 @@ from tlt_ars.planning.reachability import UnreachableMember
 from tlt_ars.planning.targets import Target
 from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
 from tlt_common import ros_names
-from tlt_common.action_client import SerialisedActionClient
-from tlt_common.action_graph import describe_action_server_graph
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
-from tlt_common.node_teardown import destroy_node
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.action_graph import describe_action_server_graph
+from tlt_common.ros.node_teardown import destroy_node
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -35,8 +35,8 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
 from tlt_common import ros_names
-from tlt_common.executor_stop import stop_executor
-from tlt_common.node_teardown import destroy_node
+from tlt_common.ros.executor_stop import stop_executor
+from tlt_common.ros.node_teardown import destroy_node
 
 REPO = Path(__file__).resolve().parents[2]
 ONE_BAY = REPO / "missions" / "one_bay.yaml"

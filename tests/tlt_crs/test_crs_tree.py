@@ -341,7 +341,7 @@ def test_start_is_refused_until_vision_is_up(rig, crs, crs_node):
 def test_the_tree_ticks_on_while_ros_time_stands_still(rig, crs, crs_node, stop_ros_time):
     # On hardware ROS time is the system clock; set back, it stands still for a timer on it, which
     # stopped the tree for as long as the step (its progress and the ground telemetry are on the
-    # same kind of timer, tlt_common.periodic_timer).
+    # same kind of timer, tlt_common.ros.periodic_timer).
     ticks: list[int] = []
     crs_node.tick_listeners.append(lambda: ticks.append(1))
     stop_ros_time(crs_node)

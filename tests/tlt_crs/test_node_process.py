@@ -16,7 +16,7 @@ import yaml
 
 from tlt_common import json_lines
 from tlt_common.free_port import free_udp_port
-from tlt_common.ros_isolation import isolate
+from tlt_common.ros.isolation import isolate
 
 
 def _config(tmp_path, crs, mission=None, **extra):

@@ -28,7 +28,7 @@ from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.reasons import Reason, Severity
 from tlt_common.free_port import free_udp_port
 from tlt_common.mission.member_states import pack_member_states
-from tlt_common.ros_isolation import isolate
+from tlt_common.ros.isolation import isolate
 from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli, mission_job
 from tlt_gsw.archive import query

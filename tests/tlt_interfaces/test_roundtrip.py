@@ -16,9 +16,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from tlt_common.action_client import SerialisedActionClient
 from tlt_common.interfaces import iter_interfaces, message_parts, sample_message
-from tlt_common.spin_loop import spin
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.spin_loop import spin
 
 INTERFACES = list(iter_interfaces())
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)

@@ -44,7 +44,7 @@ from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
 from tlt_common.config_schema import load_yaml
 from tlt_common.geometry.transforms import pose_error, pose_matrix
-from tlt_common.spin_loop import spin
+from tlt_common.ros.spin_loop import spin
 from tlt_vision.frames import FrameUnavailable, arm_joint_names, grasp_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main
 from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict

@@ -35,8 +35,8 @@ from pathlib import Path
 import mujoco
 
 from tlt_common.config_schema import ConfigError
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
-from tlt_common.stop_signals import stop_on_signals
+from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_drivers.gpio.config import run_dir as default_run_dir
 from tlt_sim.model import names
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS, load_camera_sensors, offset_mounts
@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     # on a flag instead.
     stop = stop_on_signals()
     rclpy.init(args=["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    from tlt_common.lean_node import LeanNode
+    from tlt_common.ros.lean_node import LeanNode
     from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
 
     node = LeanNode("twin")

@@ -40,7 +40,7 @@ from std_msgs.msg import String
 from tlt_interfaces.msg import TransformArray
 
 from tlt_common.geometry.transforms import rotation_to_quaternion
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.stamps import set_stamp
 from tlt_sim.model import names
 from tlt_sim.model.camera_sensor import CameraSensors
 from tlt_sim.model.scene import Scene

@@ -99,7 +99,7 @@ def check_run_name(run: str) -> None:
 
 def default_run_name(environ: dict[str, str] | os._Environ[str] = os.environ) -> str:
     """``TLT_HOSTS_RUN`` if set, else ``d<ROS_DOMAIN_ID>``: a run's domain id is already claimed
-    exclusively (tlt_common.ros_isolation), so two runs on one machine get different networks."""
+    exclusively (tlt_common.ros.isolation), so two runs on one machine get different networks."""
     return environ.get("TLT_HOSTS_RUN") or f"d{environ.get('ROS_DOMAIN_ID') or 0}"
 
 

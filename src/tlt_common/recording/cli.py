@@ -25,11 +25,11 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
-from tlt_common.direct_executor import DirectExecutor
 from tlt_common.recording.mcap_writer import McapRecordingWriter, available_compressions
 from tlt_common.recording.recorder import RecorderTiming, TopicRecorder
 from tlt_common.recording.topic_filter import IMAGE_PATTERN, TopicFilter
-from tlt_common.stop_signals import stop_on_signals
+from tlt_common.ros.direct_executor import DirectExecutor
+from tlt_common.ros.stop_signals import stop_on_signals
 
 SIGNAL_CHECK_S = 0.1  # longest wait for traffic before the loop looks at the stop flag again
 

@@ -35,7 +35,6 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
-from tlt_common.lean_node import LeanNode
 from tlt_common.recording.header_stamp import header_stamp_ns
 from tlt_common.recording.mcap_writer import McapRecordingWriter
 from tlt_common.recording.message_definitions import (
@@ -46,6 +45,7 @@ from tlt_common.recording.message_definitions import (
 from tlt_common.recording.message_types import UnknownMessageType, import_message_type
 from tlt_common.recording.qos_profiles import offered_qos_yaml, subscription_qos
 from tlt_common.recording.topic_filter import TopicFilter
+from tlt_common.ros.lean_node import LeanNode
 
 
 @dataclass

@@ -30,7 +30,7 @@ from py_trees.common import Status
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCondition
-from tlt_common.stamps import set_stamp, stamp_seconds
+from tlt_common.ros.stamps import set_stamp, stamp_seconds
 from tlt_crs.context import CrsContext
 
 Predicate = Callable[[Any], bool]

@@ -18,7 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from tlt_interfaces.msg import ExecutedTrajectory
 
 from tlt_common import ros_names
-from tlt_common.stamps import stamp_seconds
+from tlt_common.ros.stamps import stamp_seconds
 
 SUCCEEDED = ExecutedTrajectory.OUTCOME_SUCCEEDED
 ABORTED = ExecutedTrajectory.OUTCOME_ABORTED

@@ -35,8 +35,8 @@ from tlt_interfaces.srv import SetLifterMode
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
-from tlt_common.lean_node import LeanNode
-from tlt_common.periodic_timer import create_periodic_timer
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock

@@ -20,7 +20,7 @@ from rclpy.timer import Timer
 from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
-from tlt_common.periodic_timer import create_periodic_timer
+from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers.group_position import JointGroupPositionController
 from tlt_drivers.controllers.ros_adapters import GroupPositionCommandSubscriber, TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from tlt_common.lean_node import LeanNode
+from tlt_common.ros.lean_node import LeanNode
 from tlt_drivers.dynamixel.chain_interface import DynamixelChainInterface
 from tlt_drivers.nodes.driver_loop import DriverLoop
 

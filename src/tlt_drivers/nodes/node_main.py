@@ -33,8 +33,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from tlt_common.config_schema import ConfigError
-from tlt_common.direct_executor import DirectExecutor
-from tlt_common.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.direct_executor import DirectExecutor
+from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 
 HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "hardware"
 

@@ -13,7 +13,7 @@ from typing import Any
 from tlt_interfaces.msg import GripperState
 
 from tlt_common import ros_names
-from tlt_common.lean_node import LeanNode
+from tlt_common.ros.lean_node import LeanNode
 from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.driver_loop import DriverLoop

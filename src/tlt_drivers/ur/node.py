@@ -35,8 +35,8 @@ from tlt_interfaces.msg import HardwareStatus
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
-from tlt_common.lean_node import LeanNode
-from tlt_common.periodic_timer import create_periodic_timer
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle

@@ -14,7 +14,7 @@ import numpy as np
 from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from tlt_common.mission.schema import Mission
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.stamps import set_stamp
 from tlt_vision import inspection
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.camera_frames import NoFrame

@@ -13,7 +13,7 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from tlt_common.geometry.transforms import invert, pose_matrix
 from tlt_common.mission.schema import Mission
 from tlt_common.mission.tag_mounts import tag_mount
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.stamps import set_stamp
 from tlt_vision.apriltag import TagLocator, dispenser_tag_ids
 from tlt_vision.camera_frames import NoFrame
 from tlt_vision.frames import CameraRig, FrameUnavailable

@@ -10,7 +10,7 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from tlt_interfaces.msg import CertifiedPose, InspectionReport
 
 from tlt_common.geometry.transforms import rotation_to_quaternion
-from tlt_common.stamps import set_stamp
+from tlt_common.ros.stamps import set_stamp
 from tlt_vision import inspection
 from tlt_vision.pose.estimator import PoseEstimate
 

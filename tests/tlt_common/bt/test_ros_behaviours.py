@@ -23,8 +23,8 @@ from tlt_interfaces.msg import GripperState
 from tlt_interfaces.srv import SetBlackboardValue
 
 from tlt_common.bt.ros import ActionGoal, ServiceCall, TopicCache, TopicCondition, TopicData
-from tlt_common.node_teardown import destroy_node
-from tlt_common.spin_loop import spin
+from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.spin_loop import spin
 
 
 class FakeClock:

@@ -25,7 +25,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember
 
-from tlt_common.action_client import SerialisedActionClient
+from tlt_common.ros.action_client import SerialisedActionClient
 
 ACTION = "hosts/add_member"
 

@@ -14,7 +14,7 @@ import pytest
 import rclpy
 from py_trees.common import Status
 
-from tlt_common.ros_isolation import isolate
+from tlt_common.ros.isolation import isolate
 from tlt_crs.behaviours.actuators import Actuators
 
 

@@ -21,9 +21,9 @@ from tlt_interfaces.srv import SetLifterMode
 from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware, PtyFirmwareServer
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from tlt_common.action_client import SerialisedActionClient
-from tlt_common.node_teardown import destroy_node
-from tlt_common.stamps import stamp_seconds
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.stamps import stamp_seconds
 from tlt_drivers.lifter.config import load_lifter_config
 from tlt_drivers.lifter.node import STATE_TOPIC, STATUS_TOPIC, LifterNode, main
 

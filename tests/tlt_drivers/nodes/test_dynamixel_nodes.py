@@ -29,9 +29,9 @@ from tlt_sim.emulators.dynamixel_servo import HW_OVERLOAD
 from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from tlt_common.action_client import SerialisedActionClient
-from tlt_common.node_teardown import destroy_node
-from tlt_common.stamps import stamp_seconds
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.stamps import stamp_seconds
 from tlt_drivers.dynamixel.config import load_chain, validate_chain
 from tlt_drivers.mightyzap.config import load_mightyzap
 from tlt_drivers.nodes.active_grippers import GripperGroupNode

@@ -26,8 +26,8 @@ from tlt_sim.emulators.ur_controller_process import URControllerProcess
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common import ros_names
-from tlt_common.action_client import SerialisedActionClient
-from tlt_common.node_teardown import destroy_node
+from tlt_common.ros.action_client import SerialisedActionClient
+from tlt_common.ros.node_teardown import destroy_node
 from tlt_drivers.ur.config import CONFIG_DIR, load_ur_config
 from tlt_drivers.ur.node import URNode
 

@@ -7,7 +7,7 @@ from typing import Any
 from rclpy.action import ActionClient
 from rclpy.node import Node
 
-from tlt_common.action_client import SerialisedActionClient
+from tlt_common.ros.action_client import SerialisedActionClient
 
 
 def _clients_of(node: Node) -> dict[tuple[str, str], Any]:

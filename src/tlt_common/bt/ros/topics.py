@@ -14,12 +14,12 @@ from rclpy.qos import QoSProfile
 
 from tlt_common.bt.nodes import Action, Condition
 from tlt_common.bt.ros.clock import Clock, node_clock
-from tlt_common.direct_executor import QuickCallbackGroup
+from tlt_common.ros.direct_executor import QuickCallbackGroup
 
 
 class TopicCache:
     """Latest message and its arrival time (on ``clock``, and on the wall clock for
-    :mod:`tlt_common.topic_silence_watch`) per topic, one subscription per topic.
+    :mod:`tlt_common.ros.topic_silence_watch`) per topic, one subscription per topic.
 
     Several behaviours reading one topic share its subscription. Callbacks run on the executor's
     thread; readers get a (message, stamp) pair replaced atomically.

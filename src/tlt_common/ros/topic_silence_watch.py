@@ -6,10 +6,11 @@ nothing says why the states stopped: the driver is down, or it publishes and thi
 receives it. After a network cut heals, Fast DDS can rediscover a participant without matching its
 endpoints again (docs/deployment.md): the publisher is in this process's graph, yet matched to none
 of its subscriptions. :class:`TopicSilenceWatch` is a thread on the wall clock, outside the
-executor, that logs a warning when a watched topic of a :class:`~tlt_common.bt.ros.TopicCache` has
-been silent for ``stall_s`` seconds of wall time, naming how many publishers the graph knows and how
-many are matched to the subscription, again every ``repeat_s`` seconds while it stays silent (what
-DDS sees changes when a cut link heals), and a note when the topic is heard again.
+executor, that logs a warning when a watched topic of a :class:`HeardTopics` (such as
+:class:`~tlt_common.bt.ros.TopicCache`) has been silent for ``stall_s`` seconds of wall time,
+naming how many publishers the graph knows and how many are matched to the subscription, again
+every ``repeat_s`` seconds while it stays silent (what DDS sees changes when a cut link heals), and
+a note when the topic is heard again.
 """
 
 from __future__ import annotations
@@ -17,17 +18,34 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from typing import Protocol
 
-from tlt_common.bt.ros import TopicCache
-from tlt_common.watch_thread import WatchThread
+from tlt_common.ros.watch_thread import WatchThread
 
 _log = logging.getLogger("tlt.topic_silence")
+
+
+class HeardTopics(Protocol):
+    """What the watch asks of the subscriptions it watches. ``tlt_common.bt.ros.TopicCache`` is
+    one; a protocol rather than that class, as the behaviour trees' ROS package imports this one."""
+
+    def topics(self) -> list[str]:
+        """The topics subscribed to."""
+        ...
+
+    def heard(self, topic: str) -> float | None:
+        """``time.monotonic()`` when the newest message on ``topic`` arrived; None before the first."""
+        ...
+
+    def publishers(self, topic: str) -> tuple[int, int]:
+        """(publishers of ``topic`` this process's graph knows, those matched to its subscription)."""
+        ...
 
 
 class TopicSilenceWatch(WatchThread):
     """Watch ``topics`` of ``cache``; ``silences`` lists (topic, graph publishers, matched) reported."""
 
-    def __init__(self, cache: TopicCache, topics: Sequence[str], name: str, stall_s: float = 10.0,
+    def __init__(self, cache: HeardTopics, topics: Sequence[str], name: str, stall_s: float = 10.0,
                  repeat_s: float = 30.0, period_s: float = 1.0) -> None:  # fmt: skip
         unknown = [t for t in topics if t not in cache.topics()]
         if unknown:
@@ -77,4 +95,4 @@ class TopicSilenceWatch(WatchThread):
                 )
 
 
-__all__ = ["TopicSilenceWatch"]
+__all__ = ["HeardTopics", "TopicSilenceWatch"]

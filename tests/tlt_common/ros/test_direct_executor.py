@@ -20,9 +20,9 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from tlt_interfaces.action import FollowJointTrajectory
 
-from tlt_common.direct_executor import DirectExecutor, DirectMultiThreadedExecutor, QuickCallbackGroup
-from tlt_common.lean_node import LeanNode
-from tlt_common.node_teardown import destroy_node
+from tlt_common.ros.direct_executor import DirectExecutor, DirectMultiThreadedExecutor, QuickCallbackGroup
+from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.node_teardown import destroy_node
 
 TIMEOUT_S = 10.0
 

@@ -8,7 +8,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 
-from tlt_common.lean_node import QOS_EVENTS_ENV, LeanNode
+from tlt_common.ros.lean_node import QOS_EVENTS_ENV, LeanNode
 
 
 def _node(name: str):

@@ -1,5 +1,5 @@
-"""The thread under the process watches (:mod:`tlt_common.sim_clock_watch`,
-:mod:`tlt_common.topic_silence_watch`): on the wall clock and outside the executor, so it still runs
+"""The thread under the process watches (:mod:`tlt_common.ros.sim_clock_watch`,
+:mod:`tlt_common.ros.topic_silence_watch`): on the wall clock and outside the executor, so it still runs
 when the executor, or the sim time that drives it, does not."""
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from tlt_common.watch_thread import WatchThread
+from tlt_common.ros.watch_thread import WatchThread
 
 _log = logging.getLogger("tlt.sim_clock")
 

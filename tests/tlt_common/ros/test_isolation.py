@@ -13,10 +13,10 @@ import rclpy
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from tlt_common.ros_isolation import claim_domain
+from tlt_common.ros.isolation import claim_domain
 
 CLAIM = (
-    "from tlt_common.ros_isolation import claim_domain; import sys, time; "
+    "from tlt_common.ros.isolation import claim_domain; import sys, time; "
     "print(claim_domain(sys.argv[1]), flush=True); time.sleep(30)"
 )
 

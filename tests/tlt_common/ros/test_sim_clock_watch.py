@@ -11,7 +11,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
-from tlt_common.sim_clock_watch import watch_sim_clock
+from tlt_common.ros.sim_clock_watch import watch_sim_clock
 
 STALLED = "no /clock for"
 AGAIN = "sim time moves again"

@@ -7,7 +7,7 @@ import sys
 
 PROGRAM = """
 import os, signal
-from tlt_common.stop_signals import stop_on_signals
+from tlt_common.ros.stop_signals import stop_on_signals
 stop = stop_on_signals()
 os.kill(os.getpid(), signal.SIGTERM)
 os.kill(os.getpid(), signal.SIGINT)

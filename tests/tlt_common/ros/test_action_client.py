@@ -6,7 +6,7 @@ import rclpy
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember
 
-from tlt_common.action_client import SerialisedActionClient
+from tlt_common.ros.action_client import SerialisedActionClient
 
 
 def test_a_client_is_usable_by_the_executor_as_soon_as_the_node_holds_it(monkeypatch):

@@ -13,7 +13,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 
-from tlt_common.executor_stop import stop_executor
+from tlt_common.ros.executor_stop import stop_executor
 
 
 @pytest.fixture

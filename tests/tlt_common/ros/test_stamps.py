@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Duration, Time
 
-from tlt_common.stamps import set_stamp, split_seconds
+from tlt_common.ros.stamps import set_stamp, split_seconds
 
 
 def test_sim_time_summed_in_steps_is_stamped_in_order_and_on_the_whole_second():

@@ -14,7 +14,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
 from tlt_common.bt.ros import TopicCache
-from tlt_common.topic_silence_watch import TopicSilenceWatch
+from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
 
 SILENT = "nothing on"
 AGAIN = "heard again"

@@ -11,8 +11,8 @@ from rclpy.action import ActionServer
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember
 
-from tlt_common.action_graph import describe_action_server_graph
-from tlt_common.node_teardown import destroy_node
+from tlt_common.ros.action_graph import describe_action_server_graph
+from tlt_common.ros.node_teardown import destroy_node
 
 pytestmark = pytest.mark.timeout(60)
 
