@@ -318,7 +318,7 @@ def measure(
             k = Intrinsics.from_matrix(s.intrinsics)
             camera = camera_of(s.intrinsics, s.depth.shape[0])
             _, depth = sensors.for_camera(camera).apply(s.rgb, s.depth, k.fx, sensors.frame_rng(camera, i))
-            noise = config.depth_noise_of(camera)
+            noise = config.depth_noise_of(camera, k.fx)
             cam = "zed" if camera.startswith("zed") else "d405"
             items = []
             for j, (label, name, pose) in enumerate(zip(s.labels, s.names, s.poses, strict=True)):

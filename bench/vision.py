@@ -401,7 +401,7 @@ def main() -> int:
             if args.image_noise:
                 s = with_image_noise(s, args.image_noise, i)
             intrinsics = Intrinsics.from_matrix(s.intrinsics)
-            noise = config.depth_noise_of(camera_of(s.intrinsics, s.depth.shape[0]))
+            noise = config.depth_noise_of(camera_of(s.intrinsics, s.depth.shape[0]), intrinsics.fx)
             t0 = time.perf_counter()
             rgb_only = detect_rgb(model, s.rgb, max_size)
             pred = segmenter.refine(rgb_only, s.depth, s.intrinsics)

@@ -24,17 +24,23 @@ focal length ``f`` in pixels), so ``per_m2`` is ``s / (b f)``, per metre:
   lower noise: the same allowance then comes at a greater depth, where a part is a few pixels
   across and the window a large share of it.
 
-The residual assumes noise independent from pixel to pixel, as the benches draw it; a real
-camera's is correlated over a few pixels, which the filter takes down less: give as ``fraction``
-the 1 sigma a flat target at depth z shows after the filter, times ``window / (1.2533 z)``.
+A stereo camera's noise is shared by neighbouring pixels (the matcher's window makes them err
+together), which the median takes down less than independent noise: ``shared`` is how much more
+of it the window leaves (:func:`median_share`, from the noise's correlation length in the frame's
+pixels; 1 for independent noise). The correlation is a property of the camera at its native
+resolution, so the share depends on the frame's focal length: :meth:`DepthNoise.for_frame`.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import ndimage
+
+from tlt_common.pixel_noise import correlated_field
 
 # The 90th percentile of |N(0, 1)|: the certificate's percentile of a Gaussian's distances.
 P90_OF_NORMAL = 1.6449
@@ -51,10 +57,23 @@ class DepthNoise:
     window: int = 5  # pixels, odd
     max_allowance: float = 0.02
     per_m2: float = 0.0  # 1/m: a stereo camera's disparity error over baseline times focal length
+    # The noise neighbouring pixels share: over ``correlation_px`` pixels of the camera at its
+    # native resolution, whose focal length is ``focal_px``; and the share of it the window's
+    # median leaves over an independent noise's, for the frame at hand (:meth:`for_frame`).
+    correlation_px: float = 0.0
+    focal_px: float = 0.0
+    shared: float = 1.0
 
     @property
     def exact(self) -> bool:
         return self.fraction <= 0.0 and self.per_m2 <= 0.0
+
+    def for_frame(self, fx: float) -> DepthNoise:
+        """This noise in a frame of focal length ``fx`` (pixels): the median's share of the noise
+        correlated over ``correlation_px * fx / focal_px`` of its pixels."""
+        if self.correlation_px <= 0.0 or self.focal_px <= 0.0:
+            return self
+        return replace(self, shared=median_share(self.correlation_px * fx / self.focal_px, self.window))
 
     def sigma(self, depth: float | np.ndarray) -> float | np.ndarray:
         """1 sigma (m) of a raw pixel's depth at ``depth`` (m; one or an array)."""
@@ -64,7 +83,7 @@ class DepthNoise:
         """1 sigma (m) of a filtered point's depth at ``depth`` (m)."""
         if self.exact:
             return 0.0
-        return self.sigma(depth) * MEDIAN_EFFICIENCY / self.window
+        return self.sigma(depth) * MEDIAN_EFFICIENCY / self.window * self.shared
 
     def allowance(self, depth: float) -> float:
         """What the certificate allows for the residual noise at ``depth`` (m), added to a
@@ -78,6 +97,22 @@ class DepthNoise:
 
 
 EXACT = DepthNoise()
+
+
+@functools.lru_cache(maxsize=64)
+def median_share(correlation_px: float, window: int) -> float:
+    """How much more of a noise correlated over ``correlation_px`` pixels (a Gaussian kernel's
+    sigma) a ``window`` x ``window`` median leaves than of independent noise: measured once on a
+    drawn field of it (the same draw every time), since no closed form gives it."""
+    correlation_px = round(correlation_px, 2)
+    if correlation_px < 0.3:
+        return 1.0
+    rng = np.random.default_rng(0)
+    white = rng.standard_normal((192, 192))
+    shared = correlated_field(white, correlation_px)
+    filtered = ndimage.median_filter(shared, window)[window:-window, window:-window]
+    independent = ndimage.median_filter(white, window)[window:-window, window:-window]
+    return float(np.std(filtered) / np.std(independent))
 
 
 def window_median(
@@ -104,4 +139,4 @@ def with_noise(depth: np.ndarray, fraction: float, rng: np.random.Generator) -> 
     return (d * (1 + fraction * rng.standard_normal(d.shape))).astype(d.dtype)
 
 
-__all__ = ["EXACT", "DepthNoise", "window_median", "with_noise"]
+__all__ = ["EXACT", "DepthNoise", "median_share", "window_median", "with_noise"]

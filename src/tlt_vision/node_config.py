@@ -64,20 +64,23 @@ _POSITIVE = {"minimum": 1e-6}
 
 
 def _camera_noise(value: object) -> str | None:
-    """A camera's depth noise: a fraction of the depth, or {fraction, per_m2}."""
+    """A camera's depth noise: a fraction of the depth, or {fraction, per_m2, correlation_px,
+    focal_px}."""
 
     def bad(v: object, top: float) -> bool:
         return isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= top
 
     if isinstance(value, dict):
-        unknown = set(value) - {"fraction", "per_m2"}
+        tops = {"fraction": 0.1, "per_m2": 0.1, "correlation_px": 20.0, "focal_px": 10000.0}
+        unknown = set(value) - set(tops)
         if unknown:
-            return f"unknown keys {sorted(unknown)} (fraction, per_m2)"
-        if bad(value.get("fraction", 0.0), 0.1) or bad(value.get("per_m2", 0.0), 0.1):
-            return f"fraction and per_m2 must be numbers from 0 to 0.1, got {value!r}"
+            return f"unknown keys {sorted(unknown)} ({', '.join(tops)})"
+        for key, top in tops.items():
+            if bad(value.get(key, 0.0), top):
+                return f"{key} must be a number from 0 to {top:g}, got {value.get(key)!r}"
         return None
     if bad(value, 0.1):
-        return f"expected a fraction of the depth from 0 to 0.1 or {{fraction, per_m2}}, got {value!r}"
+        return f"expected a fraction of the depth from 0 to 0.1 or {{fraction, per_m2, ...}}, got {value!r}"
     return None
 
 
@@ -458,15 +461,20 @@ class VisionConfig:
         raw["depth_noise"].update(fraction=0.0, cameras={})
         return VisionConfig(raw, self.source)
 
-    def depth_noise_of(self, camera: str) -> DepthNoise:
-        """The noise of the configured ``camera``'s depth."""
+    def depth_noise_of(self, camera: str, fx: float | None = None) -> DepthNoise:
+        """The noise of the configured ``camera``'s depth; given the frame's focal length ``fx``
+        (pixels), with the share of it that neighbouring pixels' sharing leaves after the filter."""
         default = self.depth_noise
         own = self.raw["depth_noise"]["cameras"].get(camera)
         if own is None:
             return default
-        if isinstance(own, dict):
-            return replace(default, fraction=own.get("fraction", 0.0), per_m2=own.get("per_m2", 0.0))
-        return replace(default, fraction=own)
+        if not isinstance(own, dict):
+            return replace(default, fraction=own)
+        noise = replace(
+            default,
+            **{k: float(own.get(k, 0.0)) for k in ("fraction", "per_m2", "correlation_px", "focal_px")},
+        )
+        return noise if fx is None else noise.for_frame(fx)
 
     @property
     def free_space(self) -> FreeSpace:

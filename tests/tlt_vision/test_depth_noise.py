@@ -51,6 +51,23 @@ def test_added_noise_is_the_fraction_of_each_pixels_depth_and_no_depth_stays_non
     assert np.mean(noisy[10:]) == pytest.approx(2.0, abs=0.001)
 
 
+def test_the_median_leaves_more_of_a_noise_neighbouring_pixels_share():
+    """Measured against independent noise's; none shared, the same."""
+    from scipy import ndimage
+
+    from tlt_common.pixel_noise import correlated_field
+    from tlt_vision.depth_noise import median_share
+
+    assert median_share(0.0, 5) == 1.0
+    assert 1.0 < median_share(0.7, 5) < median_share(2.0, 5) < 5 / 1.2533
+    # A fresh field: the median of 5 x 5 leaves the measured share over independent noise's.
+    rng = np.random.default_rng(11)
+    white = rng.standard_normal((300, 300))
+    shared = ndimage.median_filter(correlated_field(white, 2.0), 5).std()
+    independent = ndimage.median_filter(white, 5).std()
+    assert shared / independent == pytest.approx(median_share(2.0, 5), rel=0.1)
+
+
 def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_cut_camera_by_camera():
     from tlt_common.config_schema import ConfigError, load_yaml
     from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
@@ -61,6 +78,11 @@ def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_c
     # Each shipped camera's is a stereo camera's, growing with the depth's square.
     zed = shipped.depth_noise_of("zed_1")
     assert zed.fraction == 0 and zed.sigma(2.0) == pytest.approx(4 * zed.sigma(1.0))
+    # Its noise is shared by neighbouring pixels: the median leaves more of it, the more so the
+    # more pixels of the frame the sharing spans.
+    coarse, fine = shipped.depth_noise_of("zed_1", 171.0), shipped.depth_noise_of("zed_1", 514.0)
+    assert zed.shared == 1.0 < coarse.shared < fine.shared
+    assert fine.residual(1.0) > coarse.residual(1.0) > zed.residual(1.0)
     assert shipped.with_exact_depth().depth_noise_of("zed_1").exact
     raw["depth_noise"] = {"fraction": 0.005, "cameras": {"ars_x/d405_a": 0.001}}
     config = config_from_dict(raw)
@@ -71,6 +93,9 @@ def test_the_configured_noise_reaches_the_clouds_the_certificates_and_the_bend_c
     assert config.depth_noise_of("ars_x/d405_a") == DepthNoise(fraction=0.001, window=5, max_allowance=0.02)
     raw["depth_noise"]["cameras"] = {"zed_1": {"per_m2": 0.008}}
     assert config_from_dict(raw).depth_noise_of("zed_1").sigma(2.0) == pytest.approx(0.032)
+    raw["depth_noise"]["cameras"] = {"zed_1": {"per_m2": 0.008, "focal": 500}}
+    with pytest.raises(ConfigError, match=r"depth_noise\.cameras\.zed_1.*unknown keys"):
+        config_from_dict(raw)
     raw["depth_noise"]["cameras"] = {"zed_1": {"per_m2": -1}}
     with pytest.raises(ConfigError, match=r"depth_noise\.cameras\.zed_1.*per_m2"):
         config_from_dict(raw)

@@ -52,6 +52,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from tlt_common.config_schema import Field, load_validated, opt
+from tlt_common.pixel_noise import correlated_field
 
 REPO = Path(__file__).resolve().parents[3]
 DEFAULT_CAMERAS = REPO / "config" / "twin" / "cameras.yaml"
@@ -213,16 +214,8 @@ def offset_mounts(model: mujoco.MjModel, sensors: CameraSensors, cameras: Iterab
 
 
 def correlated_normal(shape: tuple[int, ...], length_px: float, rng: np.random.Generator) -> np.ndarray:
-    """Standard normal noise of ``shape`` smoothed by a Gaussian of ``length_px`` (pixels), scaled
-    back to unit variance: noise that neighbouring pixels share."""
-    white = rng.standard_normal(shape)
-    if length_px < 0.3:
-        return white
-    smooth = ndimage.gaussian_filter(white, length_px, mode="reflect")
-    impulse = np.zeros(int(8 * length_px) * 2 + 1)
-    impulse[len(impulse) // 2] = 1.0
-    kernel = ndimage.gaussian_filter1d(impulse, length_px, mode="constant")
-    return smooth / (float(np.sum(kernel**2)) ** (len(shape) / 2))
+    """Standard normal noise of ``shape`` that neighbouring pixels share over ``length_px``."""
+    return correlated_field(rng.standard_normal(shape), length_px)
 
 
 def _occluded(disparity: np.ndarray) -> np.ndarray:

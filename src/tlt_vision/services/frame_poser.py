@@ -39,7 +39,7 @@ class FramePoser:
             frame.intrinsics,
             frame.get("rgb"),
             prior,
-            self.config.depth_noise_of(frame.camera),
+            self.config.depth_noise_of(frame.camera, float(frame.camera_matrix[0, 0])),
         )
 
     def within(
