@@ -17,7 +17,7 @@ import time
 
 import rtde_control
 import rtde_receive
-from tlt_sim.emulators.ur_controller import URControllerConfig
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
 STEP = 0.02  # rad per command; motion shows as soon as any joint moves by more than THRESHOLD

@@ -32,7 +32,7 @@ def _cpu_s(pid: int) -> float:
 
 def measure(rate_hz: float, window_s: float, settle_s: float = 8.0) -> tuple[float, float]:
     """(emulator, driver) CPU as a fraction of one core, the driver asking ``rate_hz``."""
-    from tlt_sim.emulators.ur_controller import URControllerConfig
+    from tlt_sim.emulators.ur_controller_config import URControllerConfig
     from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
     from tlt_common.ros.isolation import isolate

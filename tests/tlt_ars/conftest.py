@@ -40,7 +40,7 @@ from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, Foundat
 from tlt_interfaces.msg import DispenserState, EndEffectorState, MemberState, MissionProgress
 from tlt_interfaces.srv import CheckAlignment, GroundCommand, InspectPart, LocateTag
 from tlt_sim.emulators.dynamixel_chain import DynamixelChain
-from tlt_sim.emulators.ur_controller import URControllerConfig
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
 from tlt_ars.config import ars_config_from_dict, default_config_path

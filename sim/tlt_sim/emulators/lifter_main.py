@@ -15,7 +15,8 @@ from pathlib import Path
 
 from tlt_common.config_schema import ConfigError
 
-from .lifter_firmware import FirmwareFaults, LifterFirmware, PtyFirmwareServer, load_firmware_config
+from .lifter_firmware import FirmwareFaults, LifterFirmware, load_firmware_config
+from .lifter_pty import PtyFirmwareServer
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / "config" / "sim" / "lifter_firmware.yaml"
 

@@ -38,135 +38,24 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
-from tlt_common.config_schema import Field, load_validated, opt
 from tlt_sim.emulators import rtde_wire as wire
-from tlt_sim.emulators.ur_arm import HOME, UR10eArm
+from tlt_sim.emulators.rtde_session import (
+    Connection,
+    handle_message,
+    output_values,
+    runtime_state,
+    safety_status_bits,
+)
+from tlt_sim.emulators.ur_arm import UR10eArm
 from tlt_sim.emulators.ur_control_script import ControlScript, Registers
+from tlt_sim.emulators.ur_controller_config import URControllerConfig, load_controller_config
+from tlt_sim.emulators.ur_dashboard import dashboard_answer
 
 log = logging.getLogger("tlt.sim.ur")
 
-# RTDE enumerations (UR RTDE guide).
-ROBOT_MODE_RUNNING = 7
-JOINT_MODE_RUNNING = 253
-SAFETY_MODE_NORMAL = 1
-SAFETY_MODE_PROTECTIVE_STOP = 3
-RUNTIME_STOPPED = 1
-RUNTIME_PLAYING = 2
-SAFETY_BIT_NORMAL = 1 << 0
-SAFETY_BIT_PROTECTIVE_STOP = 1 << 2
-SAFETY_BIT_STOPPED_DUE_TO_SAFETY = 1 << 10
-ROBOT_BIT_POWER_ON = 1 << 0
-ROBOT_BIT_PROGRAM_RUNNING = 1 << 1
-
-
-def _zero(kind: str) -> object:
-    if kind.startswith("VECTOR"):
-        return [0.0 if kind.endswith("D") else 0] * int(kind[6])
-    return 0.0 if kind == "DOUBLE" else (False if kind == "BOOL" else 0)
-
-
-# Variables the emulator has no model for read as zero of their type, never NOT_FOUND.
-_DEFAULTS = {name: _zero(kind) for name, kind in wire.OUTPUT_TYPES.items()}
-
 _OFFSET = re.compile(r"global\s+reg_offset_int\s*=\s*(\d+)")
-
-
-@dataclass
-class URControllerConfig:
-    """Where and what the emulated controller is."""
-
-    host: str = "127.0.0.1"
-    dashboard_port: int = 29999
-    rtde_port: int = 30004
-    script_port: int = 30003
-    version: tuple[int, int, int, int] = (5, 11, 0, 108249)
-    serial_number: str = "20235500001"
-    remote_control: bool = True
-    unlock_delay_s: float = 5.0  # the controller refuses an unlock this soon after the stop
-    tick_hz: float = 500.0
-    clock: str = "internal"  # "internal": wall time steps the arm; "external": advance(dt) does
-    q0: Sequence[float] = field(default_factory=lambda: list(HOME))
-    # Faults present from the start (tests inject more through the emulator's methods).
-    fault_no_answer: bool = False
-    fault_protective_stop: bool = False
-    fault_link_down: bool = False
-
-
-CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "sim"
-
-
-def _six(values: list) -> str | None:
-    return None if len(values) == 6 else f"expected 6 joint values, got {len(values)}"
-
-
-CONFIG_SCHEMA = {
-    "host": Field("str", doc="loopback address of this arm's controller"),
-    "version": opt(
-        "list",
-        [5, 11, 0, 108249],
-        item=Field("int", minimum=0),
-        check=lambda v: None if len(v) == 4 else "expected [major, minor, bugfix, build]",
-    ),
-    "serial_number": opt("str", "20235500001"),
-    "remote_control": opt("bool", True),
-    "unlock_delay_s": opt("float", 5.0, minimum=0.0),
-    "tick_hz": opt("float", 500.0, minimum=10.0, maximum=1000.0),
-    "clock": opt("str", "internal", choices=("internal", "external")),
-    "q0": opt("list", list(HOME), item=Field("float"), check=_six),
-    "faults": opt(
-        "dict",
-        {"no_answer": False, "protective_stop": False, "link_down": False},
-        schema={
-            "no_answer": opt("bool", False),
-            "protective_stop": opt("bool", False),
-            "link_down": opt("bool", False),
-        },
-    ),
-}
-
-
-def load_controller_config(path: str | Path) -> URControllerConfig:
-    """Load ``config/sim/ur_<arm>_controller.yaml``; ``ConfigError`` names file, key and reason."""
-    doc = load_validated(path, CONFIG_SCHEMA)
-    faults = doc.pop("faults")
-    return URControllerConfig(
-        **{k: v for k, v in doc.items() if k != "version"},
-        version=tuple(doc["version"][:4]),
-        fault_no_answer=faults["no_answer"],
-        fault_protective_stop=faults["protective_stop"],
-        fault_link_down=faults["link_down"],
-    )
-
-
-class _Connection:
-    """One accepted socket with a send lock (replies and streamed data share it)."""
-
-    def __init__(self, sock: socket.socket, kind: str) -> None:
-        self.sock = sock
-        self.kind = kind
-        self.send_lock = threading.Lock()
-        self.closed = False
-        # RTDE only
-        self.output: wire.Recipe | None = None
-        self.inputs: dict[int, wire.Recipe] = {}
-        self.period = 0.002
-        self.next_send = 0.0
-        self.started = False
-
-    def send(self, data: bytes) -> None:
-        with self.send_lock:
-            self.sock.sendall(data)
-
-    def close(self) -> None:
-        self.closed = True
-        with contextlib.suppress(OSError):
-            self.sock.shutdown(socket.SHUT_RDWR)
-        with contextlib.suppress(OSError):
-            self.sock.close()
 
 
 class URControllerEmulator:
@@ -187,14 +76,14 @@ class URControllerEmulator:
         self.protective_stopped = False
         self.protective_stop_reason = ""
         self._protective_since = 0.0
-        self._program_conn: _Connection | None = None
+        self._program_conn: Connection | None = None
         self._lock = threading.RLock()
         self._answering = threading.Event()
         self._answering.set()
         self._link_up = True
         self._stop = threading.Event()
         self._listeners: list[socket.socket] = []
-        self._connections: list[_Connection] = []
+        self._connections: list[Connection] = []
         self._threads: list[threading.Thread] = []
         self._t0 = time.monotonic()
         self._sim_time = 0.0
@@ -322,12 +211,10 @@ class URControllerEmulator:
 
     @property
     def runtime_state(self) -> int:
-        return RUNTIME_PLAYING if self.program_running else RUNTIME_STOPPED
+        return runtime_state(self.program_running)
 
     def safety_status_bits(self) -> int:
-        if self.protective_stopped:
-            return SAFETY_BIT_PROTECTIVE_STOP | SAFETY_BIT_STOPPED_DUE_TO_SAFETY
-        return SAFETY_BIT_NORMAL
+        return safety_status_bits(self.protective_stopped)
 
     def advance(self, dt: float) -> None:
         """Step the arm by ``dt`` seconds of simulated time (``clock="external"``)."""
@@ -341,64 +228,7 @@ class URControllerEmulator:
 
     def _outputs(self) -> dict[str, object]:
         """Every output variable's current value, by RTDE name."""
-        arm = self.arm
-        q, qd = arm.positions(), arm.velocities()
-        tcp = arm.tcp_pose()
-        target_q = arm.target_q.tolist()
-        robot_bits = ROBOT_BIT_POWER_ON | (ROBOT_BIT_PROGRAM_RUNNING if self.program_running else 0)
-        zeros6 = [0.0] * 6
-        values: dict[str, object] = dict(_DEFAULTS)
-        values.update(
-            {
-                "timestamp": self.timestamp(),
-                "target_q": target_q,
-                "target_qd": qd,
-                "target_qdd": zeros6,
-                "target_current": zeros6,
-                "target_moment": zeros6,
-                "actual_q": q,
-                "actual_qd": qd,
-                "actual_qdd": zeros6,
-                "actual_current": zeros6,
-                "actual_current_window": zeros6,
-                "actual_moment": zeros6,
-                "joint_control_output": zeros6,
-                "actual_TCP_pose": tcp,
-                "actual_TCP_speed": zeros6,
-                "actual_TCP_force": zeros6,
-                "target_TCP_pose": tcp,
-                "target_TCP_speed": zeros6,
-                "actual_digital_input_bits": 0,
-                "joint_temperatures": [30.0] * 6,
-                "actual_execution_time": 0.2,
-                "robot_mode": ROBOT_MODE_RUNNING,
-                "joint_mode": [JOINT_MODE_RUNNING] * 6,
-                "safety_mode": SAFETY_MODE_PROTECTIVE_STOP if self.protective_stopped else SAFETY_MODE_NORMAL,
-                "safety_status": SAFETY_MODE_PROTECTIVE_STOP
-                if self.protective_stopped
-                else SAFETY_MODE_NORMAL,
-                "actual_tool_accelerometer": [0.0, 0.0, 9.81],
-                "speed_scaling": 1.0,
-                "target_speed_fraction": 1.0,
-                "actual_momentum": 0.0,
-                "actual_main_voltage": 48.0,
-                "actual_robot_voltage": 48.0,
-                "actual_robot_current": 0.5,
-                "actual_joint_voltage": [48.0] * 6,
-                "actual_digital_output_bits": 0,
-                "runtime_state": self.runtime_state,
-                "elbow_position": [0.0, 0.0, 0.0],
-                "elbow_velocity": [0.0, 0.0, 0.0],
-                "robot_status_bits": robot_bits,
-                "safety_status_bits": self.safety_status_bits(),
-                "payload": self.program.payload[0] if self.program else 0.0,
-                "payload_cog": self.program.payload[1] if self.program else [0.0, 0.0, 0.0],
-                "payload_inertia": zeros6,
-                "ft_raw_wrench": zeros6,
-                "script_control_line": 0,
-            }
-        )
-        return values
+        return output_values(self.arm, self.timestamp(), self.program, self.protective_stopped)
 
     # --- controller cycle ------------------------------------------------------------------------
     def _tick_loop(self) -> None:
@@ -466,7 +296,7 @@ class URControllerEmulator:
             # A client that stops reading must not stall the controller thread's sends: after
             # 1 s a send fails (reads stay blocking) and that client is dropped.
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, struct.pack("ll", 1, 0))
-            conn = _Connection(sock, kind)
+            conn = Connection(sock, kind)
             with self._lock:
                 self._connections.append(conn)
             handler = {
@@ -476,7 +306,7 @@ class URControllerEmulator:
             }
             self._spawn(handler[kind], f"{kind}-conn", conn)
 
-    def _drop(self, conn: _Connection) -> None:
+    def _drop(self, conn: Connection) -> None:
         conn.close()
         with self._lock:
             if conn in self._connections:
@@ -491,67 +321,18 @@ class URControllerEmulator:
             if self._stop.is_set():
                 return
 
-    def _serve_rtde(self, conn: _Connection) -> None:
+    def _serve_rtde(self, conn: Connection) -> None:
         try:
             while not self._stop.is_set() and not conn.closed:
                 kind, payload = wire.read_message(conn.sock)
                 self._wait_answering()
-                self._handle_rtde(conn, kind, payload)
+                handle_message(conn, kind, payload, self.config, self.registers, self.unknown_names)
         except (OSError, ConnectionError, wire.ProtocolError) as exc:
             log.debug("%s: RTDE client left: %s", self.config.host, exc)
         finally:
             self._drop(conn)
 
-    def _handle_rtde(self, conn: _Connection, kind: int, payload: bytes) -> None:
-        if kind == wire.REQUEST_PROTOCOL_VERSION:
-            conn.send(wire.frame(kind, b"\x01"))
-        elif kind == wire.GET_URCONTROL_VERSION:
-            conn.send(wire.frame(kind, struct.pack(">IIII", *self.config.version)))
-        elif kind == wire.SETUP_OUTPUTS:
-            (frequency,) = struct.unpack(">d", payload[:8])
-            recipe = wire.Recipe(1, wire.parse_names(payload[8:]), wire.OUTPUT_TYPES)
-            if recipe.unknown:
-                log.error("%s: unknown output names %s", self.config.host, recipe.unknown)
-                self.unknown_names.extend(recipe.unknown)
-            conn.output = recipe
-            conn.period = 1.0 / frequency if frequency > 0 else 1.0 / self.config.tick_hz
-            conn.send(wire.frame(kind, recipe.answer()))
-        elif kind == wire.SETUP_INPUTS:
-            recipe = wire.Recipe(len(conn.inputs) + 1, wire.parse_names(payload), wire.INPUT_TYPES)
-            if recipe.unknown:
-                self.unknown_names.extend(recipe.unknown)
-            conn.inputs[recipe.recipe_id] = recipe
-            conn.send(wire.frame(kind, recipe.answer()))
-        elif kind == wire.START:
-            ok = conn.output is not None and conn.output.valid
-            conn.send(wire.frame(kind, b"\x01" if ok else b"\x00"))
-            conn.next_send = time.monotonic()
-            conn.started = ok
-        elif kind == wire.PAUSE:
-            conn.started = False
-            conn.send(wire.frame(kind, b"\x01"))
-        elif kind == wire.DATA_PACKAGE:
-            recipe = conn.inputs.get(payload[0]) if payload else None
-            if recipe is None or not recipe.valid:
-                log.warning("%s: data package for unknown input recipe", self.config.host)
-                return
-            self._apply_inputs(recipe.unpack(payload))
-        else:
-            log.warning("%s: unknown RTDE message type %d", self.config.host, kind)
-
-    def _apply_inputs(self, values: dict[str, object]) -> None:
-        with self.registers.lock:
-            for name, value in values.items():
-                reg = wire.register_index(name)
-                if reg is None:
-                    continue
-                kind, index = reg
-                if kind == "int":
-                    self.registers.in_int[index] = int(value)
-                else:
-                    self.registers.in_double[index] = float(value)
-
-    def _serve_dashboard(self, conn: _Connection) -> None:
+    def _serve_dashboard(self, conn: Connection) -> None:
         try:
             self._wait_answering()
             conn.send(b"Connected: Universal Robots Dashboard Server\n")
@@ -574,68 +355,18 @@ class URControllerEmulator:
             self._drop(conn)
 
     def dashboard_answer(self, request: str) -> str:
-        """The dashboard server's answer to one request line."""
-        major, minor, bugfix, build = self.config.version
-        req = request.strip()
-        low = req.lower()
-        running = self.program_running
-        if req == "PolyscopeVersion":
-            return f"URSoftware {major}.{minor}.{bugfix}.{build} (Jan 01 2023)"
-        if low == "get serial number":
-            return self.config.serial_number
-        if low == "is in remote control":
-            return "true" if self.config.remote_control else "false"
-        if low == "get robot model":
-            return "UR10"
-        if low == "robotmode":
-            return "Robotmode: RUNNING"
-        if low == "safetymode":
-            return "Safetymode: PROTECTIVE_STOP" if self.protective_stopped else "Safetymode: NORMAL"
-        if low == "safetystatus":
-            return "Safetystatus: PROTECTIVE_STOP" if self.protective_stopped else "Safetystatus: NORMAL"
-        if low == "programstate":
-            return "PLAYING rtde_control" if running else "STOPPED rtde_control"
-        if low == "running":
-            return f"Program running: {'true' if running else 'false'}"
-        if low == "stop":
-            self.stop_program("stopped from the dashboard")
-            return "Stopped"
-        if low == "pause":
-            return "Failed to execute: pause"
-        if low == "play":
-            if self.protective_stopped or not self.program_text or self._program_conn is None:
-                return "Failed to execute: play"
-            self._start_program(self.program_text, self._program_conn)
-            return "Starting program"
-        if low == "unlock protective stop":
-            return self.unlock_protective_stop()
-        if low == "close safety popup":
-            return "closing safety popup"
-        if low == "close popup":
-            return "closing popup"
-        if low.startswith("popup "):
-            return "showing popup"
-        if low == "power on":
-            return "Powering on"
-        if low == "power off":
-            return "Powering off"
-        if low == "brake release":
-            return "Brake releasing"
-        if low == "restart safety":
-            return "Restarting safety"
-        if low == "get loaded program":
-            return "Loaded program: rtde_control" if self.program_text else "No program loaded"
-        if low == "isprogramsaved":
-            return "true rtde_control"
-        if low.startswith("addtolog "):
-            return "Added log message"
-        if low.startswith("setuserrole "):
-            return f"Setting user role: {req.split(' ', 1)[1]}"
-        if low == "quit":
-            return "Disconnected"
-        return f"could not understand: '{req}'"
+        """The dashboard server's answer to one request line (:mod:`~tlt_sim.emulators.ur_dashboard`)."""
+        return dashboard_answer(self, request)
 
-    def _serve_script(self, conn: _Connection) -> None:
+    def play(self) -> bool:
+        """The dashboard's ``play``: start the last program again on the script connection it came
+        on; False when refused (a protective stop, no program, or its connection gone)."""
+        if self.protective_stopped or not self.program_text or self._program_conn is None:
+            return False
+        self._start_program(self.program_text, self._program_conn)
+        return True
+
+    def _serve_script(self, conn: Connection) -> None:
         text = ""
         try:
             while not self._stop.is_set() and not conn.closed:
@@ -650,7 +381,7 @@ class URControllerEmulator:
         finally:
             self._drop(conn)
 
-    def _take_programs(self, text: str, conn: _Connection) -> str:
+    def _take_programs(self, text: str, conn: Connection) -> str:
         """Start every complete top-level program in ``text``; return the unfinished rest."""
         lines = text.split("\n")
         rest_start = 0
@@ -670,7 +401,7 @@ class URControllerEmulator:
                 rest_start = i + 1
         return "\n".join(lines[rest_start:])
 
-    def _start_program(self, program: str, conn: _Connection) -> None:
+    def _start_program(self, program: str, conn: Connection) -> None:
         self.scripts_received += 1
         if "rtde_cmd" not in program:
             log.error("%s: a program other than ur-rtde's control script is not executed", self.config.host)
@@ -729,4 +460,4 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     raise SystemExit(main())
 
-__all__ = ["CONFIG_DIR", "URControllerConfig", "URControllerEmulator", "load_controller_config", "main"]
+__all__ = ["URControllerEmulator", "main"]

@@ -15,7 +15,8 @@ from dataclasses import asdict
 from typing import Any
 
 from tlt_sim.emulators.piped_calls import PipedCalls, answer_one
-from tlt_sim.emulators.ur_controller import URControllerConfig, URControllerEmulator
+from tlt_sim.emulators.ur_controller import URControllerEmulator
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 
 _ALLOWED = {
     "protective_stop",

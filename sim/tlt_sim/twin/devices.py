@@ -33,10 +33,11 @@ from tlt_drivers.mightyzap.config import validate_mightyzap
 from tlt_sim.emulators.dynamixel_chain import DynamixelChain
 from tlt_sim.emulators.dynamixel_servo import DynamixelServo
 from tlt_sim.emulators.gpio_chip import EmulatedGpioChip
-from tlt_sim.emulators.lifter_firmware import LifterFirmware, PtyFirmwareServer, load_firmware_config
+from tlt_sim.emulators.lifter_firmware import LifterFirmware, load_firmware_config
+from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 from tlt_sim.emulators.mightyzap_chain import ADDR_GOAL_POSITION, MightyZapActuator, MightyZapChain
 from tlt_sim.emulators.pty_device import publish_link, withdraw_link
-from tlt_sim.emulators.ur_controller import load_controller_config
+from tlt_sim.emulators.ur_controller_config import load_controller_config
 from tlt_sim.model import names
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.bindings import (

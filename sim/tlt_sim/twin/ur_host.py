@@ -23,7 +23,8 @@ from dataclasses import asdict
 from typing import Any
 
 from tlt_sim.emulators.piped_calls import PipedCalls, answer_one
-from tlt_sim.emulators.ur_controller import URControllerConfig, URControllerEmulator
+from tlt_sim.emulators.ur_controller import URControllerEmulator
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 
 MAX_STEP_S = 0.002
 _CALLS = {

@@ -14,37 +14,38 @@ two ways to move it:
   ``(kind, recorded_at)`` index, and counts the link figures with one scan of the packets up to the
   position (the only part whose cost grows with the archive).
 
-State kept: link figures (packets, bytes, gaps counted per APID with the link's own
-:class:`GapTracker`, CRC errors, rejections, rates over a window, last packet time), the newest
-fields of every housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets
-and the datagrams the GSW itself rejected), commands sent with each acknowledgement stage matched
-by security sequence number, each agent's decoded tree status, and the series of plotted fields.
+State kept: the link figures (:mod:`~tlt_gsw.gui.link_counter`), the newest fields of every
+housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets and the datagrams
+the GSW itself rejected), commands sent with each acknowledgement stage matched by security
+sequence number, each agent's tree status (:mod:`~tlt_gsw.gui.agent_trees`), and the series of
+plotted fields. The records it builds are in :mod:`~tlt_gsw.gui.archive_records`.
 """
 
 from __future__ import annotations
 
 import sqlite3
 import struct
-from collections import Counter, deque
+from collections import deque
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from py_trees.common import Status
-
-from tlt_common.bt.status_codec import (
-    DecodedStatus,
-    Reassembler,
-    StatusCodecError,
-    StatusPart,
-    TreeShape,
-    unpack_statuses,
-)
+from tlt_common.bt.status_codec import TreeShape
 from tlt_common.ccsds.codec import PRIMARY_HEADER_LEN, TIME_LEN
-from tlt_common.ccsds.definitions import Definitions, FieldDef
-from tlt_common.ccsds.sequence import GapTracker
+from tlt_common.ccsds.definitions import Definitions
 from tlt_gsw.archive import query as archive_query
+from tlt_gsw.gui.agent_trees import AgentTrees, TreeState, status_part
+from tlt_gsw.gui.archive_records import (
+    AckRecord,
+    Changes,
+    CommandRecord,
+    EventRecord,
+    HousekeepingSnapshot,
+    PacketSummary,
+    rejection_event,
+    typed_value,
+)
+from tlt_gsw.gui.link_counter import LinkCounter, LinkFigures
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
 
 NON_HOUSEKEEPING = ("ack", "event", "tree_status")
@@ -55,136 +56,6 @@ _SUMMARY = (
     "FROM packets"
 )
 TREE_PARTS_PER_REFRESH = 256
-
-
-@dataclass(frozen=True)
-class PacketSummary:
-    """One archived packet without its bytes (the packet view reads those on demand)."""
-
-    id: int
-    direction: str
-    recorded_at: float
-    packet_time: float | None
-    apid: int | None
-    seq_count: int | None
-    kind: str | None
-    status: str
-    detail: str | None
-    size: int
-
-
-@dataclass(frozen=True)
-class AckRecord:
-    """One acknowledgement stage of a command."""
-
-    stage: str  # accepted, rejected, completed, failed
-    reason: str
-    detail: str
-    time: float
-    packet_id: int
-
-
-@dataclass
-class CommandRecord:
-    """A command sent (a ``tx`` packet) and the acknowledgements that answer it."""
-
-    security_seq: int
-    name: str
-    params: dict[str, Any]
-    sent_at: float | None  # None: an ack for a command that is not in the archive (another GSW)
-    packet_id: int | None
-    acks: list[AckRecord] = field(default_factory=list)
-
-    @property
-    def last_stage(self) -> str:
-        return self.acks[-1].stage if self.acks else "sent"
-
-
-@dataclass(frozen=True)
-class EventRecord:
-    """An event for operators: a CRS ``event`` packet, or a datagram the GSW rejected."""
-
-    packet_id: int
-    time: float
-    severity: str
-    source: str
-    code: str
-    reason: str
-    text: str
-
-
-@dataclass(frozen=True)
-class HousekeepingSnapshot:
-    """The newest packet of one housekeeping kind."""
-
-    kind: str
-    packet_id: int
-    time: float
-    recorded_at: float
-    fields: dict[str, Any]
-
-
-@dataclass
-class TreeState:
-    """The newest status an agent sent; ``decoded`` when its shape definition is known."""
-
-    agent: str
-    tick: int
-    shape_hash: int
-    node_count: int
-    decoded: DecodedStatus | None = None
-    counts: Counter = field(default_factory=Counter)  # Status -> nodes, of the parts seen
-    error: str | None = None
-    packet_id: int = 0
-
-
-@dataclass
-class LinkFigures:
-    """Counters of the GSW end, as the archive shows them up to the position."""
-
-    packets_rx: int = 0
-    bytes_rx: int = 0
-    packets_tx: int = 0
-    bytes_tx: int = 0
-    crc_errors: int = 0
-    rejections: int = 0
-    by_reason: Counter = field(default_factory=Counter)
-    last_rx_at: float | None = None
-    gaps: int = 0
-    missing: int = 0
-    rate_pps: float = 0.0
-    rate_bps: float = 0.0
-
-
-@dataclass
-class Changes:
-    """What one advance or seek changed, so the views redraw only that."""
-
-    reset: bool = False
-    packets: int = 0
-    kinds: set[str] = field(default_factory=set)
-    events: list[EventRecord] = field(default_factory=list)
-    commands: set[int] = field(default_factory=set)
-    trees: set[str] = field(default_factory=set)
-    series: set[tuple[str, str]] = field(default_factory=set)
-
-    def __bool__(self) -> bool:
-        return bool(
-            self.reset or self.packets or self.kinds or self.events or self.commands or self.trees
-            or self.series
-        )  # fmt: skip
-
-
-def typed_value(fd: FieldDef | None, value: Any) -> Any:
-    """A stored field value as the definitions type it (SQLite keeps booleans as 0/1 and u64 above
-    2^63 - 1 as text)."""
-    if fd is None or value is None:
-        return value
-    if fd.type == "bool":
-        return bool(value)
-    if fd.type == "u64" and isinstance(value, str):
-        return int(value)
-    return value
 
 
 class ArchiveModel:
@@ -207,8 +78,7 @@ class ArchiveModel:
     ) -> None:
         self.conn = conn
         self.defs = defs
-        self.shapes = dict(shapes or {})
-        self.definition_files = definition_files
+        self.agent_trees = AgentTrees(shapes, definition_files)
         self.packet_rows = packet_rows
         self.event_rows = event_rows
         self.command_rows = command_rows
@@ -239,18 +109,24 @@ class ArchiveModel:
     def _reset(self) -> None:
         self.position = 0
         self.position_time: float | None = None
-        self.figures = LinkFigures()
-        self._gaps = GapTracker()
-        self._rate: deque[tuple[float, int]] = deque()
-        self._rate_bytes = 0
+        self.link = LinkCounter(self.rate_window_s)
         self.packets: deque[PacketSummary] = deque(maxlen=self.packet_rows)
         self.housekeeping: dict[tuple[str, str], HousekeepingSnapshot] = {}  # (kind, instance)
         self.events: deque[EventRecord] = deque(maxlen=self.event_rows)
         self.commands: dict[int, CommandRecord] = {}
-        self.trees: dict[str, TreeState] = {}
-        self._reassemblers = {agent: Reassembler(shape) for agent, shape in self.shapes.items()}
+        self.agent_trees.reset()
         for key in self.series:
             self.series[key] = {}
+
+    @property
+    def trees(self) -> dict[str, TreeState]:
+        """Each agent's newest tree status (see :class:`AgentTrees`)."""
+        return self.agent_trees.trees
+
+    @property
+    def shapes(self) -> dict[str, TreeShape]:
+        """The tree shapes known for each agent, read again when an agent's shape changes."""
+        return self.agent_trees.shapes
 
     def head(self) -> int:
         """The id of the newest packet in the archive (0 when empty)."""
@@ -315,16 +191,7 @@ class ArchiveModel:
 
     def link_figures(self, now: float | None = None) -> LinkFigures:
         """The counters, with rates over ``rate_window_s`` ending at ``now`` (default: the position)."""
-        now = self.position_time if now is None else now
-        figures = self.figures
-        figures.gaps, figures.missing = self._gaps.gaps, self._gaps.missing
-        if now is None:
-            figures.rate_pps = figures.rate_bps = 0.0
-            return figures
-        self._trim_rate(now)  # running sums over (now - window, newest]: no pass over the window
-        figures.rate_pps = len(self._rate) / self.rate_window_s
-        figures.rate_bps = self._rate_bytes / self.rate_window_s
-        return figures
+        return self.link.figures_at(self.position_time if now is None else now)
 
     # -- plots ------------------------------------------------------------------------------
     def add_plot_field(self, kind: str, name: str, *, load: bool = True) -> None:
@@ -409,14 +276,14 @@ class ArchiveModel:
             for r in self.conn.execute(f"{_SUMMARY} WHERE id > ? AND id <= ? ORDER BY id", (lo, hi))
         ]
         for row in rows:
-            self._count(row.direction, row.status, row.apid, row.seq_count, row.size, row.recorded_at)
+            self.link.count(row.direction, row.status, row.apid, row.seq_count, row.size, row.recorded_at)
         self.packets.extend(rows)
         changes.packets = len(rows)
         by_kind: dict[str, list[int]] = {}
         for row in rows:
             if row.status != "ok" or row.kind is None:
                 if row.direction == "rx":
-                    changes.events.append(self._rejection_event(row))
+                    changes.events.append(rejection_event(row))
                 continue
             by_kind.setdefault(row.kind, []).append(row.id)
         self._apply_housekeeping({k: v for k, v in by_kind.items() if k in self.hk_kinds}, changes)
@@ -455,7 +322,7 @@ class ArchiveModel:
             "CASE WHEN status != 'ok' THEN detail END FROM packets WHERE id <= ? ORDER BY id",
             (target,),
         ):
-            self._count(direction, status, apid, seq, size, recorded)
+            self.link.count(direction, status, apid, seq, size, recorded)
             if direction == "rx" and (status != "ok" or kind is None):
                 rejected.append(
                     EventRecord(pid, recorded, "warning", "gsw", "DATAGRAM_REJECTED", status, detail or "")
@@ -494,39 +361,6 @@ class ArchiveModel:
         return changes
 
     # -- per-packet work --------------------------------------------------------------------
-    def _count(
-        self, direction: str, status: str, apid: int | None, seq: int | None, size: int, recorded: float
-    ) -> None:
-        f = self.figures
-        if direction == "rx":
-            f.packets_rx += 1
-            f.bytes_rx += size
-            f.last_rx_at = recorded
-            self._rate.append((recorded, size))
-            self._rate_bytes += size
-            self._trim_rate(recorded)
-            if status != "ok":
-                f.rejections += 1
-                f.by_reason[status] += 1
-                if status == "bad_crc":
-                    f.crc_errors += 1
-            elif apid is not None and seq is not None:
-                self._gaps.observe(apid, seq)
-        else:
-            f.packets_tx += 1
-            f.bytes_tx += size
-
-    def _trim_rate(self, now: float) -> None:
-        rate = self._rate
-        while rate and rate[0][0] <= now - self.rate_window_s:
-            self._rate_bytes -= rate.popleft()[1]
-
-    @staticmethod
-    def _rejection_event(row: PacketSummary) -> EventRecord:
-        return EventRecord(
-            row.id, row.recorded_at, "warning", "gsw", "DATAGRAM_REJECTED", row.status, row.detail or ""
-        )
-
     def _field_ids(self, kind: str) -> dict[int, str]:
         ids = self._field_id_cache.get(kind)
         if not ids:
@@ -655,75 +489,10 @@ class ArchiveModel:
         ]
 
     def _apply_trees(self, ids: list[int], changes: Changes) -> None:
-        """Decode the newest tick of each agent among the parts ``ids`` (older ticks are superseded)."""
-        parts: list[tuple[int, StatusPart]] = []
-        for pid, f in sorted(self._kind_fields("tree_status", ids).items()):
-            try:
-                parts.append((pid, StatusPart(
-                    str(f["agent"]), int(f["shape_hash"]), int(f["tick"]), int(f["node_count"]),
-                    int(f["part_index"]), int(f["part_count"]), int(f["first_node"]), bytes(f["status"]),
-                )))  # fmt: skip
-            except (KeyError, TypeError, ValueError):
-                continue
-        newest: dict[str, int] = {}
-        for _, part in parts:
-            newest[part.agent] = max(newest.get(part.agent, -1), part.tick_count)
-        # Of the newest tick, the last copy of each part (a resent part replaces the earlier one).
-        latest = {(p.agent, p.part_index): (pid, p) for pid, p in parts if p.tick_count == newest[p.agent]}
-        for pid, part in sorted(latest.values(), key=lambda item: item[0]):
-            state = self.trees.get(part.agent)
-            if state is None or part.tick_count > state.tick or part.shape_hash != state.shape_hash:
-                state = TreeState(part.agent, part.tick_count, part.shape_hash, part.node_count)
-                self.trees[part.agent] = state
-            elif part.tick_count < state.tick:
-                continue
-            state.packet_id = pid
-            remaining = part.node_count - part.first_node
-            try:
-                for status in unpack_statuses(part.status, min(remaining, len(part.status) * 4)):
-                    state.counts[status] += 1
-            except StatusCodecError as exc:
-                state.error = str(exc)
-            reassembler = self._reassemblers.get(part.agent)
-            if (reassembler is None or reassembler.shape.hash != part.shape_hash) and self.definition_files:
-                shape = self.definition_files.changed(part.agent)  # the agent may have a new tree
-                if shape is not None:
-                    self.shapes[part.agent] = shape
-                    reassembler = self._reassemblers[part.agent] = Reassembler(shape)
-            if reassembler is None:
-                state.error = state.error or (
-                    f"no tree definition for agent {part.agent!r} (shape {part.shape_hash:08x}, "
-                    f"{part.node_count} nodes): name one under tree_definitions in the GUI config"
-                )
-            else:
-                try:
-                    decoded = reassembler.add(part)
-                except StatusCodecError as exc:
-                    state.error = str(exc)
-                else:
-                    if decoded is not None:
-                        state.decoded = decoded
-                        state.error = None
-            changes.trees.add(part.agent)
+        """Decode the newest tick of each agent among the parts ``ids`` (see :class:`AgentTrees`)."""
+        fields = sorted(self._kind_fields("tree_status", ids).items())
+        parts = [(pid, part) for pid, f in fields if (part := status_part(f)) is not None]
+        changes.trees |= self.agent_trees.apply(parts)
 
 
-def status_counts(state: TreeState) -> dict[Status, int]:
-    """Nodes per status of an agent's newest tick (decoded when possible, else the parts seen)."""
-    if state.decoded is not None:
-        return dict(Counter(s for _, s in state.decoded.nodes))
-    return dict(state.counts)
-
-
-__all__ = [
-    "AckRecord",
-    "ArchiveModel",
-    "Changes",
-    "CommandRecord",
-    "EventRecord",
-    "HousekeepingSnapshot",
-    "LinkFigures",
-    "PacketSummary",
-    "TreeState",
-    "status_counts",
-    "typed_value",
-]
+__all__ = ["ArchiveModel"]

@@ -12,7 +12,7 @@ from collections.abc import Iterable
 
 from PySide6 import QtWidgets
 
-from tlt_gsw.gui.archive_model import CommandRecord
+from tlt_gsw.gui.archive_records import CommandRecord
 from tlt_gsw.gui.style import STAGE_COLOURS, brush, clock_text, compact
 
 COLUMNS = ("Sent", "Command", "Stages", "Reason", "Detail", "Parameters", "Security seq")

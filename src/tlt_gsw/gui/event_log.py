@@ -11,7 +11,7 @@ from collections.abc import Iterable
 
 from PySide6 import QtWidgets
 
-from tlt_gsw.gui.archive_model import EventRecord
+from tlt_gsw.gui.archive_records import EventRecord
 from tlt_gsw.gui.style import SEVERITIES, SEVERITY_COLOURS, brush, clock_text, compact
 
 COLUMNS = ("Time", "Severity", "Source", "Code", "Reason", "Text")

@@ -17,7 +17,7 @@ from pathlib import Path
 from PySide6 import QtGui, QtWidgets
 
 from tlt_common.ccsds.definitions import Definitions, PacketDef
-from tlt_gsw.gui.archive_model import HousekeepingSnapshot
+from tlt_gsw.gui.archive_records import HousekeepingSnapshot
 from tlt_gsw.gui.style import LIMIT_COLOURS, brush, clock_text, compact, limit_text, value_text
 
 _FIXED = ("Unit", "Yellow", "Red", "Description")

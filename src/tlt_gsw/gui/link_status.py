@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtWidgets
 
-from tlt_gsw.gui.archive_model import LinkFigures
+from tlt_gsw.gui.link_counter import LinkFigures
 from tlt_gsw.gui.style import BAD_COLOUR, LIMIT_COLOURS, OK_COLOUR, rate_text
 
 _ITEMS = (

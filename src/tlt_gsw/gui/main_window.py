@@ -24,7 +24,8 @@ from pathlib import Path
 from PySide6 import QtCore, QtWidgets
 
 from tlt_common.mission.schema import Mission
-from tlt_gsw.gui.archive_model import ArchiveModel, Changes
+from tlt_gsw.gui.archive_model import ArchiveModel
+from tlt_gsw.gui.archive_records import Changes
 from tlt_gsw.gui.command_history import CommandHistory
 from tlt_gsw.gui.command_panel import CommandPanel, Sender
 from tlt_gsw.gui.config import GuiConfig

@@ -14,7 +14,8 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from tlt_gsw.gui.archive_model import ArchiveModel, PacketSummary
+from tlt_gsw.gui.archive_model import ArchiveModel
+from tlt_gsw.gui.archive_records import PacketSummary
 from tlt_gsw.gui.style import BAD_COLOUR, clock_text, compact
 
 COLUMNS = ("Id", "Dir", "Recorded", "APID", "Seq", "Kind", "Status", "Bytes")

@@ -13,7 +13,7 @@ from __future__ import annotations
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from tlt_common.mission.schema import Mission
-from tlt_gsw.gui.archive_model import HousekeepingSnapshot
+from tlt_gsw.gui.archive_records import HousekeepingSnapshot
 from tlt_gsw.gui.style import brush
 from tlt_gsw.gui.tower_layout import (
     INSPECTED,

@@ -15,7 +15,8 @@ from py_trees.common import Status
 from PySide6 import QtWidgets
 
 from tlt_common.bt.status_codec import TreeShape
-from tlt_gsw.gui.archive_model import ArchiveModel, status_counts
+from tlt_gsw.gui.agent_trees import status_counts
+from tlt_gsw.gui.archive_model import ArchiveModel
 from tlt_gsw.gui.style import STATUS_NAMES, brush, status_colour
 
 _SYMBOL = {"sequence": "[-->]", "fallback": "[?]", "parallel": "[=>]", "decorator": "[◇]"}

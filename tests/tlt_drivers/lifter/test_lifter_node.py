@@ -18,7 +18,8 @@ from rclpy.node import Node
 from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import ExecutedTrajectory, HardwareStatus, LifterState
 from tlt_interfaces.srv import SetLifterMode
-from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware, PtyFirmwareServer
+from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware
+from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_common.ros.action_client import SerialisedActionClient

@@ -12,7 +12,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from tlt_interfaces.msg import LifterState
 from tlt_interfaces.srv import SetLifterMode
-from tlt_sim.emulators.lifter_firmware import FirmwareConfig, LifterFirmware, PtyFirmwareServer
+from tlt_sim.emulators.lifter_firmware import FirmwareConfig, LifterFirmware
+from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 
 from tlt_drivers.lifter.config import DEFAULT_CONFIG
 from tlt_drivers.lifter.protocol import FirmwareState

@@ -11,7 +11,8 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware, PtyFirmwareServer
+from tlt_sim.emulators.lifter_firmware import Button, FirmwareConfig, LifterFirmware
+from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.lifter.config import load_lifter_config

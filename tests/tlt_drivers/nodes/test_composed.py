@@ -18,7 +18,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 from tlt_interfaces.msg import GripperState, LifterState
-from tlt_sim.emulators.lifter_firmware import FirmwareConfig, LifterFirmware, PtyFirmwareServer
+from tlt_sim.emulators.lifter_firmware import FirmwareConfig, LifterFirmware
+from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 
 from tlt_drivers.lifter.config import DEFAULT_CONFIG as LIFTER_CONFIG

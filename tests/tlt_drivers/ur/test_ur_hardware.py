@@ -9,7 +9,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from tlt_sim.emulators.ur_controller import URControllerConfig
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
 from tlt_drivers.hardware_interface import Lifecycle

@@ -21,7 +21,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from tlt_interfaces.action import FollowJointTrajectory
 from tlt_interfaces.msg import HardwareStatus
-from tlt_sim.emulators.ur_controller import URControllerConfig
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 from trajectory_msgs.msg import JointTrajectoryPoint
 

@@ -14,7 +14,8 @@ from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_gsw.archive.query import open_archive
 from tlt_gsw.archive.recorder import Recorder
-from tlt_gsw.gui.archive_model import ArchiveModel, status_counts
+from tlt_gsw.gui.agent_trees import status_counts
+from tlt_gsw.gui.archive_model import ArchiveModel
 from tlt_gsw.gui.demo_archive import demo_tree, set_demo_statuses
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles, load_tree_definition, write_tree_definition
 

@@ -13,7 +13,7 @@ import pytest
 import rtde_control
 import rtde_receive
 from tlt_sim.emulators.ur_arm import HOME
-from tlt_sim.emulators.ur_controller import URControllerConfig
+from tlt_sim.emulators.ur_controller_config import URControllerConfig
 from tlt_sim.emulators.ur_controller_process import URControllerProcess
 
 HOST = "127.0.0.64"  # a loopback address no other test file's emulated arm uses (files run side by side)

@@ -9,7 +9,8 @@ import time
 
 import pytest
 import yaml
-from tlt_sim.emulators.ur_controller import CONFIG_DIR, URControllerEmulator, load_controller_config
+from tlt_sim.emulators.ur_controller import URControllerEmulator
+from tlt_sim.emulators.ur_controller_config import CONFIG_DIR, load_controller_config
 
 from tlt_common.config_schema import ConfigError
 from tlt_drivers.ur.rtde_link import probe_rtde

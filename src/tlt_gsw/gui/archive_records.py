@@ -1,0 +1,127 @@
+"""The records the GSW displays are drawn from, as :class:`~tlt_gsw.gui.archive_model.ArchiveModel`
+builds them from the telemetry archive: packets, commands with their acknowledgements, events,
+housekeeping snapshots, and what one refresh changed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from tlt_common.ccsds.definitions import FieldDef
+
+
+@dataclass(frozen=True)
+class PacketSummary:
+    """One archived packet without its bytes (the packet view reads those on demand)."""
+
+    id: int
+    direction: str
+    recorded_at: float
+    packet_time: float | None
+    apid: int | None
+    seq_count: int | None
+    kind: str | None
+    status: str
+    detail: str | None
+    size: int
+
+
+@dataclass(frozen=True)
+class AckRecord:
+    """One acknowledgement stage of a command."""
+
+    stage: str  # accepted, rejected, completed, failed
+    reason: str
+    detail: str
+    time: float
+    packet_id: int
+
+
+@dataclass
+class CommandRecord:
+    """A command sent (a ``tx`` packet) and the acknowledgements that answer it."""
+
+    security_seq: int
+    name: str
+    params: dict[str, Any]
+    sent_at: float | None  # None: an ack for a command that is not in the archive (another GSW)
+    packet_id: int | None
+    acks: list[AckRecord] = field(default_factory=list)
+
+    @property
+    def last_stage(self) -> str:
+        return self.acks[-1].stage if self.acks else "sent"
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """An event for operators: a CRS ``event`` packet, or a datagram the GSW rejected."""
+
+    packet_id: int
+    time: float
+    severity: str
+    source: str
+    code: str
+    reason: str
+    text: str
+
+
+@dataclass(frozen=True)
+class HousekeepingSnapshot:
+    """The newest packet of one housekeeping kind."""
+
+    kind: str
+    packet_id: int
+    time: float
+    recorded_at: float
+    fields: dict[str, Any]
+
+
+@dataclass
+class Changes:
+    """What one advance or seek changed, so the views redraw only that."""
+
+    reset: bool = False
+    packets: int = 0
+    kinds: set[str] = field(default_factory=set)
+    events: list[EventRecord] = field(default_factory=list)
+    commands: set[int] = field(default_factory=set)
+    trees: set[str] = field(default_factory=set)
+    series: set[tuple[str, str]] = field(default_factory=set)
+
+    def __bool__(self) -> bool:
+        return bool(
+            self.reset or self.packets or self.kinds or self.events or self.commands or self.trees
+            or self.series
+        )  # fmt: skip
+
+
+def rejection_event(row: PacketSummary) -> EventRecord:
+    """The event shown for a datagram the GSW rejected."""
+    return EventRecord(
+        row.id, row.recorded_at, "warning", "gsw", "DATAGRAM_REJECTED", row.status, row.detail or ""
+    )
+
+
+def typed_value(fd: FieldDef | None, value: Any) -> Any:
+    """A stored field value as the definitions type it (SQLite keeps booleans as 0/1 and u64 above
+    2^63 - 1 as text)."""
+    if fd is None or value is None:
+        return value
+    if fd.type == "bool":
+        return bool(value)
+    if fd.type == "u64" and isinstance(value, str):
+        return int(value)
+    return value
+
+
+__all__ = [
+    "AckRecord",
+    "Changes",
+    "CommandRecord",
+    "EventRecord",
+    "HousekeepingSnapshot",
+    "PacketSummary",
+    "rejection_event",
+    "typed_value",
+]
