@@ -67,7 +67,7 @@ from tlt_ars.config import (
 )
 from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
-from tlt_ars.motion import MotionPlanner
+from tlt_ars.motion_planner import MotionPlanner
 from tlt_ars.request_data import RequestFile, RequestFileError
 from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names

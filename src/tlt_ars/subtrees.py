@@ -89,7 +89,8 @@ from tlt_ars.behaviours.vision import (
 )
 from tlt_ars.config import PoseSpec
 from tlt_ars.context import ArsContext
-from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
+from tlt_ars.motion import Settle, move
+from tlt_ars.motion_planner import MotionGoal, MotionPlanner
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_common.bt.deferred import DeferredSequence
 from tlt_common.bt.nodes import Action, Condition
