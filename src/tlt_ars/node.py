@@ -41,12 +41,9 @@ under a lock and wait for their result; planning runs in the context's planning 
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,24 +52,20 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
-from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
 from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
-from tlt_ars.config import (
-    ArsConfig,
-    ars_config_from_dict,
-    check_against_mission,
-    default_config_path,
-)
+from tlt_ars.command_line import build_parser, config_from_args
+from tlt_ars.config import ArsConfig, check_against_mission
 from tlt_ars.context import ArsContext
+from tlt_ars.goals import ACTION_TYPES, ActiveGoal, request_of
 from tlt_ars.mission_state import Request
-from tlt_ars.motion import MotionPlanner
+from tlt_ars.motion_planner import MotionPlanner
 from tlt_ars.request_data import RequestFile, RequestFileError
 from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
 from tlt_common.bt.ros import TreeStatusPublisher
-from tlt_common.config_schema import ConfigError, load_yaml
+from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import load_mission
 from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor
 from tlt_common.ros.executor_stop import stop_executor
@@ -84,47 +77,9 @@ from tlt_common.ros.sim_clock_watch import watch_sim_clock
 from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
 
-ACTION_TYPES = {
-    "add_cross_frame": AddCrossFrame,
-    "add_member": AddMember,
-    "affix_member": AffixMember,
-    "foundation_rivet": FoundationRivet,
-}
-
-
-def request_of(kind: str, goal: Any) -> Request:
-    """The CRS goal of request ``kind`` as a :class:`Request`."""
-    if kind == "foundation_rivet":
-        return Request(kind, goal.joint_id, goal.ars)
-    return Request(
-        kind,
-        goal.member_id,
-        goal.ars,
-        bay=int(goal.bay),
-        kind=int(getattr(goal, "kind", 0)),
-        position=getattr(goal, "position", ""),
-    )
-
-
 # How long a goal the mission check refuses waits for a fresher MissionProgress (the CRS sends one
 # on every model change and at progress_rate_hz), wall seconds.
 FRESH_PROGRESS_WAIT_S = 2.0
-
-
-@dataclass
-class ActiveGoal:
-    """The goal the ARS is working on, and how it ends."""
-
-    kind: str
-    handle: Any
-    request: Request
-    done: threading.Event
-    outcome: tuple[str, str] | None = None  # ("succeeded" | "aborted" | "canceled", reason)
-    cancel_requested: bool = False
-    stopping_since: float | None = None
-    discarded_from: list[str] = field(default_factory=list)  # the dispenser of each part discarded
-    successor: ActiveGoal | None = None  # the newer goal for the same request that took the job over
-    feedback: tuple[str, float] | None = None  # the step and progress last sent to the CRS
 
 
 def _coarse_poses_for_mission(config: ArsConfig, scene: Any) -> ArsConfig:
@@ -463,56 +418,6 @@ class ArsNode(LeanNode):
     def close(self) -> None:
         self.finished.set()
         self.ctx.close()
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="ars", description="Assistant Robot System: action servers and behaviour tree of one arm"
-    )
-    p.add_argument("--ars", choices=ros_names.ARS_AGENTS, required=True, help="which ARS this process is")
-    p.add_argument("--config", type=Path, help="ARS file (default config/ars/<ars>.yaml)")
-    p.add_argument("--mission", type=Path, help="mission file (overrides the ARS file; the same as the CRS)")
-    p.add_argument(
-        "--state-file",
-        type=Path,
-        help="where a held part, a rivet and a request that set its member are kept for a restart"
-        " (overrides the ARS file)",
-    )
-    p.add_argument(
-        "--velocity-scale",
-        type=_optional_float,
-        metavar="FRACTION",
-        help="the arm's speed as a fraction of its limits (overrides arm.velocity_scale; empty: the"
-        " ARS file's)",
-    )
-    p.add_argument("--no-reach-check", action="store_true", help="skip the start-up reachability check")
-    return p
-
-
-def _optional_float(text: str) -> float | None:
-    # A launch set passes an unset variable as an empty argument: the ARS file's value then.
-    return float(text) if text.strip() else None
-
-
-def config_from_args(args: argparse.Namespace) -> ArsConfig:
-    """The ARS file with the command line's overrides, validated; :class:`ConfigError` names the
-    file (and the option), the key and the reason."""
-    path = args.config or default_config_path(args.ars)
-    overrides: dict[str, Any] = {
-        key: str(value.resolve())
-        for key, value in (("mission", args.mission), ("state_file", args.state_file))
-        if value is not None
-    }
-    raw = load_yaml(path)
-    source = str(path)
-    if args.velocity_scale is not None:
-        arm = raw.get("arm")
-        overrides["arm"] = {**(arm if isinstance(arm, dict) else {}), "velocity_scale": args.velocity_scale}
-        source += f" with --velocity-scale {args.velocity_scale:g}"
-    config = ars_config_from_dict({**raw, **overrides}, source)
-    if config.ars != args.ars:
-        raise ConfigError(path, "ars", f"file is for '{config.ars}', not '{args.ars}'")
-    return config
 
 
 def main(argv: Sequence[str] | None = None) -> int:

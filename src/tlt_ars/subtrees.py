@@ -1,5 +1,8 @@
 """The ARS subtrees of paper §V.C.3, Figs. 28-40, each a function that builds it on its own from
-the request's parameters and the mission, so each can be ticked and tested alone.
+the request's parameters and the mission, so each can be ticked and tested alone. Kept as one
+module over 500 lines: one builder whose subtrees call each other as the paper's figures nest
+(Fig. 32 holds Figs. 33-37), read against the table below; the behaviours they use are in
+``tlt_ars.behaviours``.
 
 The pattern of §V.C.3: a hard-coded coarse approach (``poses`` in the ARS file for dispensers and
 inspection; the mission's placement and joint positions for the tower), a fine approach (the
@@ -59,7 +62,6 @@ from collections.abc import Callable
 
 import numpy as np
 import py_trees
-from py_trees.common import Status
 
 from tlt_ars.behaviours.end_effector import (
     CommandWidth,
@@ -70,6 +72,7 @@ from tlt_ars.behaviours.end_effector import (
     grasp,
     release,
 )
+from tlt_ars.behaviours.member_record import ArmStillThere, MarkSetting, RecordMember
 from tlt_ars.behaviours.parts import (
     CountDiscard,
     DispenserHasParts,
@@ -89,10 +92,10 @@ from tlt_ars.behaviours.vision import (
 )
 from tlt_ars.config import PoseSpec
 from tlt_ars.context import ArsContext
-from tlt_ars.motion import MotionGoal, MotionPlanner, Settle, move
+from tlt_ars.motion import Settle, move
+from tlt_ars.motion_planner import MotionGoal, MotionPlanner
 from tlt_ars.planning.targets import Target, placement_targets, rivet_targets
 from tlt_common.bt.deferred import DeferredSequence
-from tlt_common.bt.nodes import Action, Condition
 from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 from tlt_common.mission.schema import Member
 
@@ -135,66 +138,6 @@ def chosen(ctx: ArsContext, key: str, use: str = "pose", contact: bool = False) 
     if target is None:
         raise RuntimeError(f"no '{key}' target was chosen by an earlier approach")
     return MotionGoal(targets=[target], use=use, contact=contact, key=key, straight=True)
-
-
-class RecordMember(Action):
-    """Record in the ARS's mission state that the request's member is ``what`` (placed, affixed,
-    riveted). Writes the mission state, ``RequestData.recorded`` and the state file
-    (:meth:`ArsContext.record`). SUCCESS at once; FAILURE without a member, or when the state file
-    cannot be written (the member is still known set in memory, and finished when sent again)."""
-
-    def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
-        super().__init__(name)
-        self.ctx, self.what = ctx, what
-
-    def update(self) -> Status:
-        member = self.ctx.data.member
-        if member is None:
-            return self.fail("no member in this request")
-        if (why := self.ctx.record(self.what)) is not None:
-            return self.fail(f"{member.id} {self.what}, but {why}")
-        self.feedback_message = f"{member.id} {self.what}"
-        return Status.SUCCESS
-
-
-class MarkSetting(Action):
-    """Keep in the state file that the step that sets the request's member begins: ``what`` it
-    sets (placed, affixed, riveted) and the arm's joints now. Writes ``RequestData.setting`` and
-    ``setting_q`` (:meth:`ArsContext.record` clears them). SUCCESS at once; FAILURE without a fresh
-    joint state, or when the state file cannot be written (the step does not begin)."""
-
-    def __init__(self, name: str, ctx: ArsContext, what: str) -> None:
-        super().__init__(name)
-        self.ctx, self.what = ctx, what
-
-    def update(self) -> Status:
-        q = self.ctx.arm_q()
-        if q is None:
-            return self.fail(f"no fresh joint state on '{self.ctx.joint_topic}'")
-        data = self.ctx.data
-        data.setting, data.setting_q = self.what, tuple(float(v) for v in q)
-        if (why := self.ctx.keep()) is not None:
-            return self.fail(why)
-        return Status.SUCCESS
-
-
-class ArmStillThere(Condition):
-    """True when the arm stands where the step that sets the member began (every joint within
-    ``tolerance`` rad of ``RequestData.setting_q``): only there may a step left in doubt be done
-    again."""
-
-    def __init__(self, name: str, ctx: ArsContext, tolerance: float = 0.005) -> None:
-        super().__init__(name)
-        self.ctx, self.tolerance = ctx, tolerance
-
-    def evaluate(self) -> bool:
-        began_at, q = self.ctx.data.setting_q, self.ctx.arm_q()
-        if began_at is None or q is None:
-            self.feedback_message = "no fresh joint state" if q is None else "no joints kept for the step"
-            return False
-        off = float(np.max(np.abs(q - np.asarray(began_at))))
-        self.feedback_message = f"the arm is {off:.4f} rad from where the step began"
-        return off <= self.tolerance
 
 
 class SubtreeBuilder:
@@ -603,9 +546,6 @@ def _rivet(member: Member, step: str):
 
 
 __all__ = [
-    "ArmStillThere",
-    "MarkSetting",
-    "RecordMember",
     "SubtreeBuilder",
     "back_out",
     "chosen",

@@ -32,7 +32,7 @@ from py_trees.common import Status
 
 from tlt_ars.context import ArsContext
 from tlt_ars.mission_state import Request
-from tlt_ars.motion import MotionPlanner
+from tlt_ars.motion_planner import MotionPlanner
 from tlt_ars.subtrees import SubtreeBuilder
 from tlt_common.bt.deferred import DeferredSequence, build_deferred
 from tlt_common.bt.nodes import Action, Condition

@@ -15,7 +15,8 @@ from tlt_interfaces.action import AddMember
 from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.mission_state import Request
-from tlt_ars.motion import ExecuteTrajectory, MotionGoal, TrajectorySlot
+from tlt_ars.motion import ExecuteTrajectory, TrajectorySlot
+from tlt_ars.motion_planner import MotionGoal
 from tlt_ars.planning.planner import PlanningFailed
 from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import tower_origin

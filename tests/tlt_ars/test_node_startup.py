@@ -20,9 +20,10 @@ from tlt_interfaces.action import AddMember, AffixMember
 from tlt_interfaces.msg import MemberState, MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
+from tlt_ars.command_line import build_parser, config_from_args
 from tlt_ars.config import ars_config_from_dict, default_config_path
 from tlt_ars.mission_state import Request
-from tlt_ars.node import ArsNode, build_parser, config_from_args, main
+from tlt_ars.node import ArsNode, main
 from tlt_ars.planning.reachability import UnreachableMember
 from tlt_ars.planning.targets import Target
 from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
@@ -271,7 +272,7 @@ def test_a_request_starts_on_a_tick_when_its_goal_is_accepted_not_at_the_next_pe
 def test_a_request_s_later_phases_are_built_on_the_tick_after_the_one_that_starts_it():
     """The CRS waits for a request's first tick: on it only the first phase of an Add Member is
     built; the rest are built on the next tick, the same branch as one built whole."""
-    from tlt_ars.node import request_of
+    from tlt_ars.goals import request_of
     from tlt_ars.tree import Job, progress
     from tlt_common.bt.status_codec import TreeShape
 

@@ -12,7 +12,8 @@ import rclpy
 from py_trees.common import Status
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from tlt_ars.motion import ExecuteTrajectory, MotionGoal, PlanMotion, TrajectorySlot
+from tlt_ars.motion import ExecuteTrajectory, PlanMotion, TrajectorySlot
+from tlt_ars.motion_planner import MotionGoal
 from tlt_ars.planning.planner import PlanningFailed
 
 
@@ -284,7 +285,7 @@ def test_execute_waits_for_the_arm_to_be_active_again_before_it_sends_the_goal(d
 def test_a_pose_goal_whose_candidates_all_ran_out_of_search_time_fails_as_a_timeout():
     """PlanMotion searches again only after a timeout: a pose goal tried over its candidates must
     say so when each of them ran out of time, not that none can be reached."""
-    from tlt_ars.motion import MotionPlanner
+    from tlt_ars.motion_planner import MotionPlanner
     from tlt_ars.planning.targets import inspection_targets
     from tlt_ars.planning.world import load_scene_config
     from tlt_common.mission.schema import load_mission

@@ -12,9 +12,9 @@ import pytest
 from py_trees.common import Status
 
 from tlt_ars.behaviours.end_effector import KeepData
+from tlt_ars.behaviours.member_record import ArmStillThere
 from tlt_ars.behaviours.parts import ReplaceDiscarded
 from tlt_ars.request_data import RequestData
-from tlt_ars.subtrees import ArmStillThere
 from tlt_ars.tree import failure_reason, progress, running_step
 from tlt_common.bt.nodes import Action
 

@@ -23,7 +23,7 @@ from tlt_interfaces.srv import SetActuatorState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from tlt_ars.context import ArsContext
-from tlt_ars.motion import duration_msg
+from tlt_ars.motion_planner import duration_msg
 from tlt_ars.request_data import RequestData
 from tlt_common import ros_names
 from tlt_common.bt.nodes import Action

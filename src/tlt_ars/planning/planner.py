@@ -26,6 +26,10 @@ instead, through IK solutions that follow each other, with the same dense check.
 
 Failures raise :class:`PlanningFailed` with ``kind`` (ik, start_collision, goal_collision,
 limits, timeout, dense_check, collision, goal_rejected) and a reason a person can act on.
+
+Kept as one module over 500 lines: one :class:`Planner` whose steps above share its scene, its
+deadline and the set of segments already checked densely, each step a method in the order listed;
+the time parameterisation that follows a plan is apart (``time_parameterisation``).
 """
 
 from __future__ import annotations

@@ -9,6 +9,11 @@ top beams (group ``lifter``), dispenser racks (``dispensers``), the tower as bui
 World frame: z up, floor at ``site.floor_z``. The tower frame (mission joints) sits at
 ``base_origin + (0, 0, build_level + n * bay_height)`` while bay n is built: bay n's bottom cross
 frame at the build level, the bays above it already lifted (the twin's convention).
+
+Kept as one module over 500 lines: the scene file's schema and :class:`SceneConfig` (about half)
+and the shapes drawn from its keys are one description of the world; the loader could stand in a
+module of its own, but some twenty-five modules of the ARS, the tools and the tests of the twin and
+of vision import the two together from here.
 """
 
 from __future__ import annotations
