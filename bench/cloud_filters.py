@@ -53,7 +53,7 @@ from scipy.spatial import cKDTree
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS, load_camera_sensors
 from tlt_sim.model.config import load_edu
 from tlt_tools.vision_training.dataset import instance_model
-from tlt_tools.vision_training.render_dataset import CLASSES, RenderSettings, TwinRenderer
+from tlt_tools.vision_training.twin_renderer import CLASSES, RenderSettings, TwinRenderer
 
 from tlt_common.mission.schema import load_mission
 from tlt_vision.cad.models import CadModel

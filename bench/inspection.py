@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from tlt_tools.vision_training.render_dataset import ARMS, inspection_joints
+from tlt_tools.vision_training.twin_renderer import ARMS, inspection_joints
 
 from tlt_common.config_schema import load_yaml
 from tlt_common.geometry.transforms import pose_matrix

@@ -71,7 +71,8 @@ import torch
 from tlt_sim.model.camera_sensor import DEFAULT_CAMERAS
 from tlt_sim.model.config import load_edu
 from tlt_tools.vision_training.dataset import ImageSet, Sample, instance_model
-from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
+from tlt_tools.vision_training.render_dataset import render_set
+from tlt_tools.vision_training.twin_renderer import RenderSettings
 
 from tlt_common.mission.schema import load_mission
 from tlt_vision.depth_noise import EXACT, DepthNoise, with_noise

@@ -752,7 +752,7 @@ def test_an_arms_end_effector_is_taken_out_of_the_depth_where_the_twin_has_it(ri
     """InspectPart poses the part on a depth without the arms' own EE bodies (node.yaml
     ``ee_self_filter``), placed by the published joint states: the pixels the node drops are the
     ones the twin's own EE boxes and jaw capsules hold."""
-    from tlt_tools.vision_training.render_dataset import inspection_joints
+    from tlt_tools.vision_training.twin_renderer import inspection_joints
 
     joints = inspection_joints()["ars_x"]
     boxes = [f"ars_x/{name}" for name in rig.vision.config.raw["ee_self_filter"]["boxes"]]

@@ -193,7 +193,7 @@ def test_a_rivet_whose_mask_took_in_its_neighbour_in_the_feeder_is_posed_from_it
     as the model's masks do (a tenth to a third more pixels). With the node's configuration (rivets'
     own 1 cm link, their largest piece kept) every one is certified at its true pose; with the
     common 2 cm link the neighbour's points stay and pull the fit off."""
-    render_dataset = pytest.importorskip("tlt_tools.vision_training.render_dataset")
+    twin_renderer = pytest.importorskip("tlt_tools.vision_training.twin_renderer")
     from tlt_common.mission.schema import load_mission
     from tlt_vision.node_config import load_config
     from tlt_vision.part_inspection import load_estimators
@@ -207,10 +207,10 @@ def test_a_rivet_whose_mask_took_in_its_neighbour_in_the_feeder_is_posed_from_it
     node = PartPipeline({"rivet": estimator}, **options)
     one_link = replace(options["detached"], links=())
     common = PartPipeline({"rivet": estimator}, **{**options, "detached": one_link})
-    renderer = render_dataset.TwinRenderer(
-        render_dataset.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0)
+    renderer = twin_renderer.TwinRenderer(
+        twin_renderer.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0)
     )
-    rivet = render_dataset.CLASSES.index("rivet") + 1
+    rivet = twin_renderer.CLASSES.index("rivet") + 1
     results: dict[str, list[tuple[bool, float]]] = {"node": [], "common": []}
     try:
         for i in (2, 3):  # the tray seen close, rivets side by side in the image

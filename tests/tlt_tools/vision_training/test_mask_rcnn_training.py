@@ -12,20 +12,15 @@ import pytest
 import torch
 from tlt_tools.vision_training.data_parallel import Ranks
 from tlt_tools.vision_training.dataset import ImageSet, Sample, write_index, write_sample
-from tlt_tools.vision_training.mask_rcnn import (
-    Augment,
-    augment,
+from tlt_tools.vision_training.mask_rcnn import main, parse_args
+from tlt_tools.vision_training.mask_rcnn_data import Augment, augment, gaussian_blur, load_sample, open_set
+from tlt_tools.vision_training.mask_rcnn_evaluation import evaluate
+from tlt_tools.vision_training.mask_rcnn_training import (
     build_config,
     epochs_at_pace,
     epochs_within,
-    evaluate,
-    gaussian_blur,
     learning_rate,
-    load_sample,
-    main,
-    open_set,
     pace_probe_step,
-    parse_args,
     parse_overrides,
 )
 

@@ -16,14 +16,8 @@ from tlt_vision.segmentation.config import CLASSES
 
 pytest.importorskip("tlt_sim.model.scene")
 from tlt_sim.model import names
-from tlt_tools.vision_training.render_dataset import (
-    ARMS,
-    PREVIEW,
-    ZED,
-    RenderSettings,
-    TwinRenderer,
-    main,
-)
+from tlt_tools.vision_training.render_dataset import PREVIEW, main
+from tlt_tools.vision_training.twin_renderer import ARMS, ZED, RenderSettings, TwinRenderer
 
 W, H = 160, 120
 

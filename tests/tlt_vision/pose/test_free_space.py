@@ -84,7 +84,7 @@ def test_checked_takes_the_certificate_only_from_a_pose_standing_in_free_space()
 
 
 # -- rivets seen end-on in the twin ----------------------------------------------------------------
-render_dataset = pytest.importorskip("tlt_tools.vision_training.render_dataset")
+twin_renderer = pytest.importorskip("tlt_tools.vision_training.twin_renderer")
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -110,10 +110,10 @@ def test_rivets_seen_end_on_in_their_feeder_are_not_certified_lying_across_their
         "unchecked": PartPipeline({"rivet": plain}, free_space=None, **opts),
         "node": PartPipeline({"rivet": turned}, free_space=config.free_space, **opts),
     }
-    settings = render_dataset.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0)
-    renderer = render_dataset.TwinRenderer(settings)
+    settings = twin_renderer.RenderSettings(seed=11, scenes={"feeder": 1.0}, defective_fraction=0.0)
+    renderer = twin_renderer.TwinRenderer(settings)
     errors: dict[str, list[tuple[int, bool, float]]] = {k: [] for k in pipelines}
-    rivet = render_dataset.CLASSES.index("rivet") + 1
+    rivet = twin_renderer.CLASSES.index("rivet") + 1
     try:
         for i in (2, 6):  # feeder views with rivets seen end-on beside others seen obliquely
             s, _ = renderer.sample(i)

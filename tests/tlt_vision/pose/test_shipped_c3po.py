@@ -16,7 +16,8 @@ from collections import defaultdict
 
 import pytest
 from tlt_tools.vision_training.dataset import ImageSet, instance_model
-from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
+from tlt_tools.vision_training.render_dataset import render_set
+from tlt_tools.vision_training.twin_renderer import RenderSettings
 
 from tlt_common.mission.schema import load_mission
 from tlt_vision.node_config import load_config

@@ -27,7 +27,8 @@ import numpy as np
 import pytest
 import torch
 from tlt_tools.vision_training.dataset import ImageSet
-from tlt_tools.vision_training.render_dataset import RenderSettings, render_set
+from tlt_tools.vision_training.render_dataset import render_set
+from tlt_tools.vision_training.twin_renderer import RenderSettings
 
 from tlt_vision.cad.models import thin_part_radii
 from tlt_vision.camera_frame import CameraFrame
