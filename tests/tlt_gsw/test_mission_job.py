@@ -32,6 +32,7 @@ from tlt_common.ros.isolation import isolate
 from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli, mission_job
 from tlt_gsw.archive import query
+from tlt_gsw.mission_progress import Progress
 from tlt_gsw.summary import load_records, summarize_file
 
 REPO = Path(__file__).resolve().parents[2]
@@ -435,8 +436,8 @@ def test_progress_names_the_running_node_with_a_tree_definition_and_counts_witho
     shape = TreeShape.of(root)
     definition = load_tree_definition(write_tree_definition(shape, tmp_path / "crs.json", "crs"))
     out = io.StringIO()
-    named = mission_job.Progress(out, definition)
-    counted = mission_job.Progress(io.StringIO(), None, tree_every_s=10.0)
+    named = Progress(out, definition)
+    counted = Progress(io.StringIO(), None, tree_every_s=10.0)
     for tick, running in ((1, 0), (2, 0), (3, 1)):
         root.status = bay.status = Status.RUNNING
         steps[0].status = Status.RUNNING if running == 0 else Status.SUCCESS
@@ -459,7 +460,7 @@ def test_progress_names_the_running_node_with_a_tree_definition_and_counts_witho
     last = counted.out.getvalue().splitlines()[-1]
     assert last == "  tree crs tick 20: running 3, success 1, failure 0 of 5 nodes"
     other = TreeShape.of(py_trees.composites.Sequence("Other", memory=False, children=[]))
-    stranger = mission_job.Progress(io.StringIO(), other)
+    stranger = Progress(io.StringIO(), other)
     for packet in _tree_packets(shape, 4) + _tree_packets(shape, 5):
         stranger.packet(packet, now=5.0)
     (line,) = stranger.out.getvalue().splitlines()  # said once
