@@ -40,7 +40,7 @@ from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_drivers.controllers import executed_trajectories
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
-from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
+from tlt_drivers.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, LifterConfig, load_lifter_config
 from .protocol import FirmwareState

@@ -12,9 +12,9 @@ from tlt_interfaces.msg import GripperState
 
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
+from tlt_drivers.node_main import Driver, chain_driver, run_driver
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
 from tlt_drivers.nodes.gripper_state import gripper_state
-from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class GripperGroupNode(DynamixelDriverNode):

@@ -12,8 +12,8 @@ from sensor_msgs.msg import JointState
 
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
+from tlt_drivers.node_main import Driver, chain_driver, run_driver
 from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
-from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class CameraMountsNode(DynamixelDriverNode):

@@ -9,7 +9,7 @@ of its one-driver executable (``tlt-<KIND>``)::
 
 The ROS arguments apply to every node. Every driver's arguments are checked before any node
 starts; a bad one is named and the process exits with code 2. The nodes share the process's DDS
-participant but each spins on a thread of its own (:mod:`tlt_drivers.nodes.node_main`), so a
+participant but each spins on a thread of its own (:mod:`tlt_drivers.node_main`), so a
 device that stops answering holds only its own driver's loop.
 """
 
@@ -18,8 +18,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from tlt_drivers.lifter import node as lifter
+from tlt_drivers.node_main import Driver, DriverStartError, run_drivers
 from tlt_drivers.nodes import active_grippers, camera_mounts, ee, top_grippers
-from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_drivers
 from tlt_drivers.ur import node as ur
 
 PROG = "tlt-drivers"

@@ -29,14 +29,14 @@ from tlt_drivers.dynamixel.config import load_chain
 from tlt_drivers.dynamixel.ee_calibration import WidthCalibration
 from tlt_drivers.gpio.lines import open_gpio
 from tlt_drivers.hardware_interface import Lifecycle
-from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
-from tlt_drivers.nodes.node_main import (
+from tlt_drivers.node_main import (
     HARDWARE_CONFIG_DIR,
     Driver,
     DriverStartError,
     chain_driver,
     run_driver,
 )
+from tlt_drivers.nodes.dynamixel_node import DynamixelDriverNode
 
 
 class DigitalIO(Protocol):

@@ -16,9 +16,9 @@ from tlt_common import ros_names
 from tlt_common.ros.lean_node import LeanNode
 from tlt_drivers.mightyzap.chain_interface import MightyZapChainInterface
 from tlt_drivers.mightyzap.config import load_mightyzap
+from tlt_drivers.node_main import Driver, chain_driver, run_driver
 from tlt_drivers.nodes.driver_loop import DriverLoop
 from tlt_drivers.nodes.gripper_state import gripper_state
-from tlt_drivers.nodes.node_main import Driver, chain_driver, run_driver
 
 
 class TopGrippersNode(LeanNode):

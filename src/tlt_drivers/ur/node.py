@@ -41,7 +41,7 @@ from tlt_drivers.controllers.ros_adapters import TrajectoryActionServer
 from tlt_drivers.controllers.trajectory import JointTrajectoryController
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.loop_time import loop_clock
-from tlt_drivers.nodes.node_main import Driver, DriverStartError, run_driver
+from tlt_drivers.node_main import Driver, DriverStartError, run_driver
 
 from .config import DEFAULT_CONFIG, URConfig, load_ur_config, with_link_timeout, with_rtde_frequency
 from .hardware import URHardware

@@ -23,8 +23,8 @@ from tlt_sim.emulators.lifter_pty import PtyFirmwareServer
 from tlt_sim.emulators.mightyzap_chain import MightyZapChain
 
 from tlt_drivers.lifter.config import DEFAULT_CONFIG as LIFTER_CONFIG
+from tlt_drivers.node_main import DriverStartError
 from tlt_drivers.nodes.composed import main, parse_drivers
-from tlt_drivers.nodes.node_main import DriverStartError
 
 TIMEOUT_S = 30.0
 
@@ -35,7 +35,7 @@ PROBE = textwrap.dedent("""
     from pathlib import Path
     from rclpy.node import Node
     from std_msgs.msg import String
-    from tlt_drivers.nodes.node_main import Driver, spin_drivers
+    from tlt_drivers.node_main import Driver, spin_drivers
 
     out = Path(sys.argv[1])
 

@@ -36,7 +36,7 @@ from tlt_common.config_schema import ConfigError
 from tlt_common.ros.direct_executor import DirectExecutor
 from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 
-HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[3] / "config" / "hardware"
+HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[2] / "config" / "hardware"
 
 #: How long the nodes' shutdowns may take together. ur-rtde's disconnect from a controller that has
 #: gone waits on its own reconnect attempts; the controller stops the arm by itself when the

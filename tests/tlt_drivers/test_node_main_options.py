@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tlt_drivers.nodes import node_main
+from tlt_drivers import node_main
 
 
 def test_latency_override_applies_to_dynamixel_chains_only():
