@@ -156,6 +156,30 @@ def test_no_modules_import_each_other():
     assert not found, "import cycles:\n" + "\n".join(" <-> ".join(c) for c in found)
 
 
+def package_graph(src: Path = SRC) -> dict[str, set[str]]:
+    """Package -> the packages its modules import, between sibling packages only (neither holds
+    the other): a package's own modules and its sub-packages' may use each other, as a package's
+    ``__init__`` and configuration are used by its parts."""
+    known = modules(src)
+
+    def package(module: str) -> str:
+        return module if known[module].name == "__init__.py" else module.rpartition(".")[0]
+
+    graph: dict[str, set[str]] = {package(m): set() for m in known}
+    for module, targets in import_graph(src).items():
+        a = package(module)
+        for target in targets:
+            b = package(target)
+            if not (a == b or a.startswith(b + ".") or b.startswith(a + ".")):
+                graph[a].add(b)
+    return graph
+
+
+def test_no_sibling_packages_import_each_other():
+    found = cycles(package_graph())
+    assert not found, "package cycles:\n" + "\n".join(" <-> ".join(c) for c in found)
+
+
 # The checks themselves, on made-up modules: each rule and a cycle are caught, and a clean tree passes.
 @pytest.mark.parametrize(
     ("module", "source", "caught"),
@@ -180,6 +204,22 @@ def test_a_wrong_import_is_named_with_its_file_and_line(tmp_path, module, source
     violations = layer_violations(src)
     assert len(violations) == 1
     assert violations[0].startswith(f"src/{module}:") and caught in violations[0]
+
+
+def test_a_cycle_between_sibling_packages_is_found_and_one_with_the_parent_is_not(tmp_path):
+    pkg = tmp_path / "tlt_demo"
+    for sub in ("a", "b"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "config.py").write_text("from tlt_demo.a import one\n")
+    (pkg / "a" / "one.py").write_text("from tlt_demo import config\n")
+    assert cycles(package_graph(tmp_path)) == []
+    (pkg / "a" / "two.py").write_text("from tlt_demo.b import three\n")
+    (pkg / "b" / "three.py").write_text("x = 1\n")
+    assert cycles(package_graph(tmp_path)) == []
+    (pkg / "b" / "four.py").write_text("from tlt_demo.a import one\n")
+    assert cycles(package_graph(tmp_path)) == [["tlt_demo.a", "tlt_demo.b"]]
 
 
 def test_a_cycle_is_found_also_through_relative_imports(tmp_path):
