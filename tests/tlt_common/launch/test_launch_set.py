@@ -208,3 +208,23 @@ def test_a_missing_file_is_named():
 @pytest.mark.parametrize("path", sorted(CONFIG.glob("*.yaml")), ids=lambda p: p.name)
 def test_every_shipped_launch_set_is_valid(path):
     assert load_launch_set(path).processes
+
+
+@pytest.mark.parametrize("camera_model", ["exact", "realistic"])
+def test_the_twin_and_vision_are_given_one_camera_model(camera_model):
+    """A launch set that runs the twin and vision tells both the same TLT_CAMERA_MODEL: vision
+    taking a realistic camera's depth for exact (or the reverse) would certify what it should not."""
+    checked = 0
+    for path in sorted(CONFIG.glob("*.yaml")):
+        processes = {
+            p.name: p.argv for p in load_launch_set(path, {"TLT_CAMERA_MODEL": camera_model}).processes
+        }
+        models = {
+            name: argv[argv.index("--camera-model") + 1]
+            for name, argv in processes.items()
+            if name in ("twin", "vision") and "--camera-model" in argv
+        }
+        if "twin" in processes and "vision" in processes:
+            assert models == {"twin": camera_model, "vision": camera_model}, path.name
+            checked += 1
+    assert checked >= 3
