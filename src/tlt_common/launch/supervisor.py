@@ -4,7 +4,9 @@ Every process runs in its own process group, so a signal reaches it and anything
 also asks the kernel to send it SIGTERM if the launcher dies, so even a SIGKILLed launcher leaves
 no orphan. Output lines are prefixed with the process name. Shutdown (Ctrl-C, SIGTERM, or a
 required process that died for good) sends SIGINT, then SIGTERM, then SIGKILL, each after the set's
-grace period; a second Ctrl-C skips the waiting.
+grace period; a second Ctrl-C skips the waiting. The exit status is 0 after a clean stop, 1 when a
+required process died, and a process's own when it ends the set (``on_exit: shutdown``), also
+when a signal stopped it along with the rest: a mission job interrupted during a build says so.
 
 A set that declares hosts gets its emulated network (``hosts.HostNetwork``) before any process
 starts and loses it after every process has stopped; a process with a host is moved into that
@@ -144,6 +146,9 @@ class Supervisor:
                     self._say("every process has ended")
                     return 1 if failed else self._exit_code
                 self._shutdown.wait(_POLL_S)
+            if self._signals:
+                self._stop_all()
+                self._exit_code = self._exit_code or self._decided_on_stop()
             return self._exit_code
         finally:
             self._stop_all()
@@ -151,6 +156,17 @@ class Supervisor:
             if installed:
                 for sig, handler in installed.items():
                     signal.signal(sig, handler)
+
+    def _decided_on_stop(self) -> int:
+        """The exit code of a process that ends the set (``on_exit: shutdown``: a mission job, a
+        bring-up check) and ended badly while a signal stopped the set, else 0: a build stopped
+        halfway is not a success, and the launcher's status says what that process said."""
+        for proc in self._procs:
+            rc = proc.returncode
+            if proc.spec.on_exit == "shutdown" and rc not in (None, 0):
+                assert rc is not None
+                return rc if rc >= 0 else 128 - rc
+        return 0
 
     def request_shutdown(self) -> None:
         """Stop every process (callable from any thread; a signal handler uses _on_signal)."""

@@ -221,6 +221,34 @@ def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_
     assert [pid for pid in pids if alive(pid)] == []
 
 
+def test_ctrl_c_during_a_job_that_ends_the_set_exits_with_the_jobs_status(tmp_path, launcher):
+    """A mission job interrupted during a build exits 130 (not built): so does the launcher, and so
+    scripts/main.sh; a plain set stopped by Ctrl-C still exits 0 (the tests above)."""
+    job = tmp_path / "job.py"
+    job.write_text(
+        textwrap.dedent("""
+        import signal, sys, time
+        signal.signal(signal.SIGINT, lambda *_: sys.exit(130))
+        print("building", flush=True)
+        time.sleep(120)
+    """)
+    )
+    path = write_set(
+        tmp_path,
+        f"""
+        processes:
+          - name: job
+            executable: python
+            args: ["{job}"]
+            on_exit: shutdown
+    """,
+    )
+    run = launcher(path)
+    run.wait_for(r"^\[job\] building$")
+    run.proc.send_signal(signal.SIGINT)
+    assert run.finish() == 130
+
+
 def test_children_die_with_a_killed_launcher(tmp_path, launcher):
     run = launcher(pair_set(tmp_path))
     server, client = run.pid_of("server"), run.pid_of("client")
