@@ -5,7 +5,7 @@ starts, so a typo never leaves half a system running. Example::
 
     name: lifter_on_emulator
     grace_period_s: 5.0          # SIGINT, then SIGTERM, then SIGKILL, each after this long
-    env: {TLT_LOG_LEVEL: info}   # for every process
+    env: {PYTHONUNBUFFERED: "1"}   # for every process
     processes:
       - name: lifter
         executable: tlt-lifter   # looked up in the venv's bin/, then PATH; "python" is this interpreter
