@@ -81,8 +81,9 @@ class RemoteCall(Action):
             self._bb.register_key(key=answer_key, access=py_trees.common.Access.WRITE)
 
     def send(self, message: Any) -> None:
-        """Send ``message`` to the server (asynchronously: a behaviour never waits)."""
-        raise NotImplementedError
+        """Send ``message`` to the server (asynchronously: a behaviour never waits). Each kind of
+        call sends its own way: :class:`ActionGoal` a goal, :class:`ServiceCall` a request."""
+        raise NotImplementedError(f"{type(self).__name__} does not say how it sends")
 
     def send_when_ready(self, now: float) -> Status:
         """Wait for the server; once a fresh answer says it is up, build the message and
