@@ -118,8 +118,8 @@ def test_figures_and_wrong_decisions(bench, capsys):
 def test_mask_rcnn_segments_a_presented_strut_as_the_node_does_with_the_frames_depth(bench):
     """The node's frames carry their depth, and its segmenter cuts and joins the thin parts' regions
     on it (node.yaml ``segmentation.depth_split``): the bench's detections are those, not the RGB
-    alone's (before 2026-12-04 the bench gave the segmenter no depth, and judged a held diagonal
-    whose tube the jaws cross by two pieces the node would have joined)."""
+    alone's (without the depth, a held diagonal whose tube the jaws cross is judged by two pieces
+    the node would have joined)."""
     scene_mod = pytest.importorskip("tlt_sim.model.scene")
     from tlt_vision.camera_frame import CameraFrame
 

@@ -1,8 +1,8 @@
 """Scenario 1 (issue "whole system"): the nominal one-bay build, end to end, from the ground's
 authenticated Start to ``tower_built``, at the twin's fastest real-time factor (``TLT_TWIN_RTF`` 0:
-no limit; 1.6 times real time in a one-bay main job on 2 cores, 2026-11-26). Sim time then runs on
-while vision and planning take wall time; the sim-time bounds leave room for it (vision answered
-in 2-6 s of wall time in that run, the CRS waits 60 s of sim time), and on the twin a UR driver
+no limit; faster than real time on 2 cores). Sim time then runs on while vision and planning take
+wall time; the sim-time bounds leave room for it (vision answers in seconds of wall time, the CRS
+waits 60 s of sim time), and on the twin a UR driver
 calls its link down only after 2 s of sim time without controller data (config/launch/twin.yaml).
 
 The whole system runs on the twin (config/launch/system_twin.yaml, the one-bay mission,

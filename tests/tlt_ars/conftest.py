@@ -291,8 +291,7 @@ class Stack:
 
     def __init__(self) -> None:
         # RTDE at 125 Hz, as the twin streams it (a CB3's rate): the driver's own tests run the
-        # e-Series' 500 Hz, and here the quarter rate took test_ars_requests.py from 343 to 294 CPU
-        # seconds (2026-12-06), which the other test workers get.
+        # e-Series' 500 Hz; here the quarter rate leaves CPU to the other test workers.
         self.emulator = URControllerProcess(
             URControllerConfig(host=HOST, unlock_delay_s=0.0, tick_hz=RTDE_HZ)
         ).start()

@@ -408,8 +408,8 @@ def test_a_time_budget_trains_the_epochs_that_fit(tmp_path, capsys):
 
 
 def test_an_epoch_longer_than_the_budget_decays_the_learning_rate_over_itself(tmp_path, capsys):
-    # Judged only after the first epoch, an epoch longer than the budget ran at the peak rate and
-    # ended there (a lent H200's first 3.6-minute epoch of 2026-12-04); early in it, it decays.
+    # Judged only after the first epoch, an epoch longer than the budget would run at the peak rate
+    # and end there (as a lent GPU's first epoch can); judged early in it, it decays.
     assert pace_probe_step(375) == 20 and pace_probe_step(1000) == 50 and pace_probe_step(8) == 7
     assert pace_probe_step(1) == 0  # a one-step epoch is judged at its end, as before
     assert epochs_at_pace(360.0, 219.0, 0, 40) == 1  # that run: one epoch fits
