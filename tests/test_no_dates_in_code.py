@@ -1,4 +1,4 @@
-"""No date in a comment or docstring under src/ or sim/.
+"""No date in a comment or docstring of the code: src/, sim/, tools/, bench/ and tests/.
 
 Comments and docstrings say what the code does and why; when a figure was measured, and how it
 moved from run to run, belongs to git and the records (models/vision/history.md, docs/). Strings
@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SCANNED = ("src", "sim")
+SCANNED = ("src", "sim", "tools", "bench", "tests")
 # YYYY-MM or YYYY-MM-DD of this century, a real month; not inside a longer number or name. Older
 # dates are references, not history (the CCSDS time code's 1958-01-01 epoch).
 DATE = re.compile(r"(?<![\w-])(?<!\w\.)20\d\d-(?:0[1-9]|1[0-2])(?:-(?:0[1-9]|[12]\d|3[01]))?(?!\w|\.\w)")
@@ -66,7 +66,7 @@ class C:
     assert dates_in_comments(source) == [(1, "2026-11-28"), (2, "2026-12"), (13, "2025-12-31")]
 
 
-def test_no_date_in_a_comment_or_docstring_under_src_or_sim() -> None:
+def test_no_date_in_a_comment_or_docstring_of_the_code() -> None:
     found = [
         f"{path.relative_to(ROOT)}:{line}: {date}"
         for top in SCANNED
