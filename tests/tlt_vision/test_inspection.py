@@ -382,6 +382,35 @@ def test_a_missing_fitting_is_a_verdict_though_the_other_cannot_be_judged():
     assert any(r.startswith("cannot judge the end fitting") for r in rep.reasons), rep.reasons
 
 
+def _one_end_hidden(o: Observation) -> Observation:
+    e = _refused(o, "degenerate view: 1 of 2 required keypoint groups visible").estimate
+    cert = dataclasses.replace(e.certificate, keypoint_groups_visible=1, keypoint_groups_required=2)
+    return dataclasses.replace(o, estimate=dataclasses.replace(e, certificate=cert))
+
+
+def test_a_tube_seen_too_little_to_place_is_a_doubt_not_a_missing_fitting():
+    # One end hidden (the other arm passing, the gripper): the tube is not certified for a
+    # degenerate view, and the fitting at the hidden end is not found.
+    obs = _strut(np.random.default_rng(8), missing="b")
+    obs[0] = _one_end_hidden(obs[0])
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and rep.cannot_judge, rep.reasons
+    assert rep.reasons[0] == (
+        "cannot judge the strut_tube: pose not certified "
+        "(degenerate view: 1 of 2 required keypoint groups visible)"
+    )
+    assert rep.reasons[1] == "cannot judge the end fittings: 1 of 2 certified, the tube not placed"
+
+
+def test_a_tube_in_doubt_does_not_hide_what_is_wrong():
+    # Fittings that are not coaxial are a bent strut whatever the tube's certificate says.
+    obs = _strut(np.random.default_rng(9), bend_deg=8.0)
+    obs[0] = _one_end_hidden(obs[0])
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    assert not rep.passed and not rep.cannot_judge
+    assert any("not coaxial" in r for r in rep.reasons), rep.reasons
+
+
 def test_an_uncertified_fitting_away_from_both_ends_is_not_taken_for_either():
     obs = _strut(np.random.default_rng(7), missing="b")
     fitting = next(i for i, o in enumerate(obs) if o.object_class == "end_fitting")

@@ -55,6 +55,8 @@ def inspect_strut(
 ) -> InspectionReport:
     """A strut (``kind`` vertical or diagonal, ``length`` m): one straight tube, two end fittings.
 
+    Cannot judge (``cannot_judge``, not passed) when nothing is wrong but something could not be
+    settled: the tube or a fitting seen but not certified (:func:`_fittings_on_tube`).
     Straightness is judged two ways: the tube must fit the straight-tube model (its certificate),
     and the two end fittings must share one axis (a kink turns one end, and its fitting, away).
     """
@@ -72,12 +74,19 @@ def inspect_strut(
                 f"bent tube: the tube does not fit a straight tube ({c.chamfer_p90 * 1000:.1f} mm "
                 f"> {c.chamfer_threshold * 1000:.1f} mm at the 90th percentile)"
             )
-    reasons.extend(r for r in tube_bad if not (reasons and "not observably correct" in r))
+    unsure: list[str] = []
+    # A tube posed but not certified, and not for a shape that is wrong, was seen too little to
+    # place (one end hidden by the gripper or the other arm, or out of the frame) or through depth
+    # too noisy: a doubt. Without its pose, where the fittings should be is not known either.
+    tube_in_doubt = not tubes and not reasons and all(o.estimate is not None for o in tube_obs)
+    if tube_in_doubt:
+        unsure.extend(f"cannot judge the {r}" for r in tube_bad)
+    else:
+        reasons.extend(r for r in tube_bad if not (reasons and "not observably correct" in r))
     if len(tubes) > 1:
         reasons.append(f"expected one strut tube, found {len(tubes)}: a broken or bent tube")
     fittings, fitting_bad = split_certified(observations, "end_fitting")
     fittings = one_per_place(fittings, tol.position)
-    unsure: list[str] = []
     if len(fittings) == 2:
         between, to_chord = _coaxial(*fittings)
         if between > tol.angle or to_chord > tol.angle:
@@ -102,6 +111,12 @@ def inspect_strut(
             for o, r in zip(uncertified(observations, "end_fitting"), fitting_bad, strict=True)
             if id(o) not in taken
         ]
+    elif tube_in_doubt:
+        if len(fittings) < 2:
+            found = len(fittings)
+            unsure.append(f"cannot judge the end fittings: {found} of 2 certified, the tube not placed")
+        unsure.extend(f"cannot judge the {r}" for r in fitting_bad)
+        fitting_bad = []
     elif len(fittings) < 2:
         reasons.append(f"missing end fitting: {len(fittings)} of 2 found")
     reasons.extend(fitting_bad)
