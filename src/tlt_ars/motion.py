@@ -91,9 +91,11 @@ class PlanMotion(Action):
                 waiting = ("waiting for the arm to stop", "the arm did not stop")
             elif width is None:
                 # Gripper b and its gun ride the width slide: where they are is part of the plan. A
-                # servo rebooted after a fault reads a wrong width until the EE recalibrates it.
+                # servo rebooted after a fault reads a wrong width until the EE recalibrates it,
+                # which runs the slide to its limit switch: as long as a width move, not a plan.
                 waiting = ("waiting for a calibrated end-effector width",
                            f"no calibrated end-effector width on '{self.ctx.ee_topic}'")  # fmt: skip
+                limit += self.ctx.config.timeouts["width_s"]
             elif self._sweep_blocked and not np.isscalar(width):
                 waiting = ("waiting for the end-effector width to stand",
                            f"the end-effector width did not reach {width[1]:.4f} m")  # fmt: skip

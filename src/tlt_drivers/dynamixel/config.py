@@ -80,6 +80,13 @@ CALIBRATION_SCHEMA = {
     "max_travel": opt("float", 0.3, minimum=1e-6, doc="give up after this much travel"),
     "timeout_s": opt("float", 60.0, minimum=0.1),
     "on_start": opt("bool", True, doc="calibrate as soon as the driver is active"),
+    "keep_within": opt(
+        "float",
+        0.002,
+        minimum=0.0,
+        doc="after a fault, the calibration holds while the width reads within this of its last reading "
+        "(joint units; a servo that lost its multi-turn count reads whole turns off)",
+    ),
 }
 
 EE_SCHEMA = {

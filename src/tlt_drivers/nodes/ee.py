@@ -70,6 +70,7 @@ class EndEffectorNode(DynamixelDriverNode):
         self.loop.override = self._override
         self.rivet_outputs = [False] * len(self.ee["rivet_gun_outputs"])
         self._activations_seen = 0
+        self._width_read: float | None = None  # the width joint's last reading while active
         component = config["component"]
         self.state_pub = self.create_publisher(EndEffectorState, ros_names.state_topic(component), 10)
         self.create_service(Trigger, ros_names.ee_calibrate_service(component), self._on_calibrate)
@@ -98,14 +99,38 @@ class EndEffectorNode(DynamixelDriverNode):
             self.loop.group.reset_hold(self.hw.position)
 
     def _override(self, now: float) -> dict[str, float]:
+        width = self.ee["width_joint"]
         if self.loop.activations != self._activations_seen:
             if self._activations_seen:
-                # Re-activated after a fault: the servos may have rebooted and lost their multi-turn count.
-                self.calibration.invalidate("hardware was re-activated after a fault")
+                self._check_count_after_fault(width)
             self._activations_seen = self.loop.activations
-            if self.ee["calibration"]["on_start"]:
+            if self.ee["calibration"]["on_start"] and not self.calibration.calibrated:
                 self.calibration.start(now)
+        self._width_read = self.hw.position[width]
         return self.calibration.update(now)
+
+    def _check_count_after_fault(self, width: str) -> None:
+        """Re-activated after a fault: a width servo that rebooted or lost power lost its
+        multi-turn count (its encoder covers one turn), and its position then reads off by whole
+        turns from the last one read before the fault. Only then is the calibration lost: a seek
+        to the limit switch drags whatever part the grippers hold along the slide, so a fault of
+        the link alone must not start one."""
+        before, after = self._width_read, self.hw.position[width]
+        if before is None or not self.calibration.calibrated:
+            return
+        keep = self.ee["calibration"]["keep_within"]
+        if abs(after - before) > keep:
+            self.calibration.invalidate(
+                f"the width read {after:.4f} after a fault, {before:.4f} before: its servo lost its "
+                "multi-turn count"
+            )
+            component = self.config["component"]
+            self.get_logger().warning(f"{component}: {self.calibration.reason}; calibrating again")
+        else:
+            self.get_logger().info(
+                f"{self.config['component']}: width calibration kept after the fault (it reads "
+                f"{abs(after - before) * 1000:.1f} mm from where it stood)"
+            )
 
     def _on_calibrate(self, _request, response):
         problem = self.calibration.start(self.loop.now())

@@ -447,6 +447,49 @@ def test_ee_refuses_motion_until_calibrated_then_moves(harness):
         chain.stop()
 
 
+def test_ee_keeps_its_calibration_through_a_link_fault_and_seeks_again_after_a_lost_count(harness):
+    """A dropped link recovers without a seek (a seek would drag a held part along the slide); a
+    width servo rebooted more than a turn from its power-up position lost its multi-turn count
+    and refuses motion until calibrated again."""
+    chain = DynamixelChain([1, 2, 3])
+    chain.start()
+    switch_ticks = 2048 - 0.002 / 0.01 * 4096
+    try:
+        gpio = LimitSwitchFromServo(chain, 3, switch_ticks)
+        node = harness.add(EndEffectorNode(ee_config(chain.port), gpio, context=harness.context))
+        states: list[EndEffectorState] = []
+        harness.client.create_subscription(EndEffectorState, "/ee_x/state", states.append, 50)
+        commands = harness.client.create_publisher(Float64MultiArray, "/ee_x/position_command", 10)
+        calibrate = harness.client.create_client(Trigger, "/ee_x/calibrate")
+        harness.spin()
+        harness.wait(calibrate.service_is_ready, "calibrate service")
+        assert harness.result(calibrate.call_async(Trigger.Request()), "calibrate reply").success
+        harness.wait(lambda: node.calibration.calibrated, "calibrated")
+        commands.publish(Float64MultiArray(data=[0.015]))  # a turn and a half from the switch
+        harness.wait(lambda: abs(node.hw.position["width"] - 0.015) < 0.0005, "width at 15 mm")
+
+        activations, seen = node.loop.activations, len(states)
+        chain.drop_link(True)
+        harness.wait(lambda: node.hw.state.name == "ERROR", "the link fault")
+        chain.drop_link(False)
+        harness.wait(lambda: node.loop.activations > activations, "recovery")
+        time.sleep(0.3)
+        assert node.calibration.calibrated and all(m.calibrated for m in states[seen:])
+        assert node.hw.position["width"] == pytest.approx(0.015, abs=0.0005)
+
+        activations, seen = node.loop.activations, len(states)
+        chain.servo(3).inject_hardware_error(HW_OVERLOAD)  # the driver reboots it to clear the error
+        harness.wait(lambda: node.loop.activations > activations, "recovery through a reboot")
+        harness.wait(lambda: any(not m.calibrated for m in states[seen:]), "the calibration lost")
+        assert "lost its multi-turn count" in node.calibration.refusal()
+        assert harness.result(calibrate.call_async(Trigger.Request()), "calibrate reply").success
+        harness.wait(lambda: node.calibration.calibrated, "calibrated again")
+        assert node.hw.position["width"] == pytest.approx(0.0, abs=0.001)  # the seek ended on the switch
+    finally:
+        harness.close()
+        chain.stop()
+
+
 def test_ee_calibration_fails_with_reason_when_switch_never_closes(harness):
     chain = DynamixelChain([1, 2, 3])
     chain.start()
