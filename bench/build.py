@@ -304,10 +304,17 @@ def report(run_dir: Path, job_wall_s: float | None = None, mission: str | None =
     return 0 if rows else 1
 
 
-def run_job(mission: str, run_dir: Path, rtf: float, arm_speed: float) -> tuple[int, float]:
+def run_job(
+    mission: str, run_dir: Path, rtf: float, arm_speed: float, cameras: str, segmentation: str
+) -> tuple[int, float]:
     """Run the main job on ``mission`` into ``run_dir``, its output shown as it comes."""
     env = dict(
-        os.environ, TLT_RUN_DIR=str(run_dir), TLT_TWIN_RTF=f"{rtf:g}", TLT_ARM_VELOCITY_SCALE=f"{arm_speed:g}"
+        os.environ,
+        TLT_RUN_DIR=str(run_dir),
+        TLT_TWIN_RTF=f"{rtf:g}",
+        TLT_ARM_VELOCITY_SCALE=f"{arm_speed:g}",
+        TLT_CAMERA_MODEL=cameras,
+        TLT_SEGMENTATION=segmentation,
     )
     started = time.monotonic()
     status = subprocess.call(["bash", str(ROOT / "scripts" / "main.sh"), "--mission", mission], env=env)
@@ -330,12 +337,29 @@ def main(argv: list[str] | None = None) -> int:
         default=1.0,
         help="the arms' speed as a fraction of their limits (default 1; the ARS files': 0.5)",
     )
+    parser.add_argument(
+        "--camera-model",
+        choices=("exact", "realistic"),
+        default="exact",
+        help="the twin's cameras (TLT_CAMERA_MODEL; default exact, as the main job's)",
+    )
+    parser.add_argument(
+        "--segmentation",
+        choices=("", "twin_labels", "mask_rcnn"),
+        default="",
+        help="where vision's masks come from (TLT_SEGMENTATION; default: config/vision/node.yaml's)",
+    )
     args = parser.parse_args(argv)
     if args.run_dir is not None:
         return report(args.run_dir, mission=args.mission)
     run_dir = Path(tempfile.mkdtemp(prefix="tlt-bench-build."))
-    status, wall = run_job(args.mission, run_dir, args.rtf, args.arm_speed)
-    described = f"twin real-time factor {args.rtf:g}, arms at {args.arm_speed:g} of their speed limits"
+    status, wall = run_job(
+        args.mission, run_dir, args.rtf, args.arm_speed, args.camera_model, args.segmentation
+    )
+    described = (
+        f"twin real-time factor {args.rtf:g}, arms at {args.arm_speed:g} of their speed limits, "
+        f"{args.camera_model} cameras, masks from {args.segmentation or 'node.yaml'}"
+    )
     print(f"\nbuild bench: main job on {args.mission} ({described}) exited {status} after {wall:.0f} s\n")
     return report(run_dir, wall, args.mission) or status
 

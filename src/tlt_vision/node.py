@@ -58,6 +58,7 @@ from tlt_vision.apriltag import TagConfig, TagLocator
 from tlt_vision.camera_frames import FrameGrabber, SegmentationLabels
 from tlt_vision.frames import CameraRig
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config
+from tlt_vision.node_config_schema import SEGMENTATION_SOURCES
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter
@@ -209,7 +210,7 @@ CAMERA_MODELS = ("realistic", "exact")
 
 def main(argv: list[str] | None = None) -> int:
     """``tlt-vision [--config node.yaml] [--mission M.yaml] [--camera-model realistic|exact]
-    [--ros-args ...]``; 2 when refused."""
+    [--segmentation twin_labels|mask_rcnn] [--ros-args ...]``; 2 when refused."""
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args: list[str] = []
     if "--ros-args" in argv:
@@ -225,12 +226,22 @@ def main(argv: list[str] | None = None) -> int:
         help="exact: the depth is the twin's exact render (tlt twin run --camera-model "
         "exact), for diagnosis; realistic: each camera's noise as node.yaml gives it",
     )
+    parser.add_argument(
+        "--segmentation",
+        type=lambda text: text.strip() or None,  # a launch set passes an unset variable as ""
+        metavar="|".join(SEGMENTATION_SOURCES),
+        help="where the masks come from (overrides segmentation.source; empty: the file's)",
+    )
     args = parser.parse_args(argv)
+    if args.segmentation not in (None, *SEGMENTATION_SOURCES):
+        parser.error(f"--segmentation: {args.segmentation!r} is not one of {', '.join(SEGMENTATION_SOURCES)}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         config = load_config(args.config, args.mission)
         if args.camera_model == "exact":
             config = config.with_exact_depth()
+        if args.segmentation is not None:
+            config = config.with_segmentation(args.segmentation)
         mission = load_mission(config.mission_path)
     except ConfigError as exc:
         print(f"tlt-vision: refused: {exc}", file=sys.stderr)

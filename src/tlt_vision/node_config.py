@@ -71,6 +71,14 @@ class VisionConfig:
         raw["depth_noise"].update(fraction=0.0, cameras={})
         return VisionConfig(raw, self.source)
 
+    def with_segmentation(self, source: str) -> VisionConfig:
+        """This configuration with masks from ``source`` (``segmentation.source``), checked as a
+        file's value would be (``mask_rcnn`` needs ``segmentation.weights``)."""
+        raw = copy.deepcopy(self.raw)
+        raw["segmentation"]["source"] = source
+        check_across_keys(raw, f"{self.source} with --segmentation {source}")
+        return VisionConfig(raw, self.source)
+
     def depth_noise_of(self, camera: str, fx: float | None = None) -> DepthNoise:
         """The noise of the configured ``camera``'s depth; given the frame's focal length ``fx``
         (pixels), with the share of it that neighbouring pixels' sharing leaves after the filter."""

@@ -42,12 +42,12 @@ from tlt_ars.planning.reachability import TargetUnreachable, reach_target
 from tlt_ars.planning.targets import dispenser_targets, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common import ros_names
-from tlt_common.config_schema import load_yaml
+from tlt_common.config_schema import ConfigError, load_yaml
 from tlt_common.geometry.transforms import pose_error, pose_matrix
 from tlt_common.ros.spin_loop import spin
 from tlt_vision.frames import FrameUnavailable, arm_joint_names, grasp_joint_names, width_joint_name
 from tlt_vision.node import VisionNode, main
-from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict
+from tlt_vision.node_config import DEFAULT_CONFIG, config_from_dict, load_config
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "config" / "twin" / "scenarios" / "defective_parts.yaml"
@@ -579,6 +579,25 @@ def test_no_frame_in_time_answers_with_the_reason(rig):
         InspectPart.Request(member_id="x", part_kind="vertical", camera="zed_9"),
     ).report
     assert not report.passed and report.reasons[0].startswith("unknown camera 'zed_9'")
+
+
+def test_segmentation_is_chosen_on_the_command_line_and_checked_as_the_file_would_be(tmp_path, capsys):
+    """``--segmentation`` (a launch set's TLT_SEGMENTATION) overrides the file's source; empty
+    keeps it; an unknown source, or Mask R-CNN without weights, is refused naming what is wrong."""
+    config = load_config(DEFAULT_CONFIG)
+    assert config.with_segmentation("mask_rcnn").raw["segmentation"]["source"] == "mask_rcnn"
+    assert config.raw["segmentation"]["source"] == load_config(DEFAULT_CONFIG).raw["segmentation"]["source"]
+    no_weights = vision_config()
+    no_weights["segmentation"].update(source="twin_labels", weights="")
+    path = tmp_path / "node.yaml"
+    path.write_text(__import__("yaml").safe_dump(no_weights))
+    with pytest.raises(ConfigError, match="segmentation.weights: mask_rcnn needs a weights file"):
+        load_config(path).with_segmentation("mask_rcnn")
+    assert main(["--config", str(path), "--segmentation", "mask_rcnn"]) == 2
+    assert "--segmentation mask_rcnn" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--segmentation", "labels"])
+    assert "'labels' is not one of twin_labels, mask_rcnn" in capsys.readouterr().err
 
 
 def test_bad_configuration_and_weights_are_refused_naming_file_and_key(tmp_path, capsys):

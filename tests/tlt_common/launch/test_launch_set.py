@@ -228,3 +228,15 @@ def test_the_twin_and_vision_are_given_one_camera_model(camera_model):
             assert models == {"twin": camera_model, "vision": camera_model}, path.name
             checked += 1
     assert checked >= 3
+
+
+@pytest.mark.parametrize("source", ["", "mask_rcnn"])
+def test_tlt_segmentation_reaches_the_vision_node_of_the_twin_launch_sets(source):
+    """TLT_SEGMENTATION picks vision's masks for a build on the twin (bench/build.py
+    --segmentation); unset, the vision node's file decides."""
+    argv = {
+        p.name: p.argv
+        for p in load_launch_set(CONFIG / "system_twin.yaml", {"TLT_SEGMENTATION": source}).processes
+    }
+    vision = argv["vision"]
+    assert vision[vision.index("--segmentation") + 1] == source
