@@ -24,6 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "mission-check": ("tlt_common.mission.check:main", "validate mission files"),
     "ars-state": ("tlt_ars.state_cli:main", "an ARS's state file: show, resolve a step in doubt, clear"),
     "mission-generate": ("tlt_common.mission.generate:main", "write a mission file for N bays"),
+    "record": ("tlt_common.recording.record_command:main", "a recording (MCAP): info, play, export to CSV"),
 }
 
 

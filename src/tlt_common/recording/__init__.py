@@ -6,5 +6,7 @@ interface files. ``message_types``: message classes from type names. ``qos_profi
 subscribe with and to store. ``header_stamp``: a message's stamp from its CDR bytes.
 ``topic_filter``: which topics are taken. ``reading``: decoded messages of a recording.
 ``recovery``: the messages of a recording cut short by a crash (``tlt-mcap-recover``).
-See docs/recording.md.
+``record_command``: the ``tlt record`` command over ``summary`` (topics, counts, times, rates),
+``player`` (the recorded messages published again at their timing, with ``/clock``) and
+``csv_export`` (chosen topics as CSV). See docs/recording.md.
 """

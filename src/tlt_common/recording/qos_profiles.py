@@ -7,7 +7,8 @@ delivered to a recorder that starts late; a transient-local reader cannot match 
 
 Each MCAP channel stores the offered profiles under ``offered_qos_profiles`` as a YAML list in the
 format of rosbag2 on Jazzy (metadata version 9: policy names as strings, durations as
-``{sec, nsec}``), which is what ``ros2 bag play`` reads to re-create latched publishers.
+``{sec, nsec}``), which is what ``ros2 bag play`` reads to re-create latched publishers, and what
+:func:`playback_qos` (``tlt record play``) reads back the same way.
 """
 
 from __future__ import annotations
@@ -64,3 +65,31 @@ def subscription_qos(offered: Sequence[QoSProfile]) -> QoSProfile:
 def is_latched(profile: QoSProfile) -> bool:
     """Whether a subscription was made to receive publishers' stored (latched) samples."""
     return profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+
+
+PLAYBACK_DEPTH = 10  # the least history a replaying publisher keeps
+
+
+def playback_qos(offered_qos_profiles: str) -> QoSProfile:
+    """The QoS to replay a channel with, from its stored ``offered_qos_profiles`` YAML.
+
+    As ``ros2 bag play`` adapts to recorded offers: reliable only if every recorded publisher was,
+    transient local only if every one was (a latched topic is latched again), keep-last with the
+    deepest recorded history (at least :data:`PLAYBACK_DEPTH`). Metadata that is missing or
+    unreadable gives reliable, volatile.
+    """
+    try:
+        entries = yaml.safe_load(offered_qos_profiles) if offered_qos_profiles else None
+    except yaml.YAMLError:
+        entries = None
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries) or not entries:
+        return QoSProfile(depth=PLAYBACK_DEPTH)
+    reliable = all(e.get("reliability") == ReliabilityPolicy.RELIABLE.short_key for e in entries)
+    latched = all(e.get("durability") == DurabilityPolicy.TRANSIENT_LOCAL.short_key for e in entries)
+    depths = [e.get("depth") for e in entries if isinstance(e.get("depth"), int)]
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=max([PLAYBACK_DEPTH, *depths]),
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )

@@ -7,9 +7,11 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from tlt_common.recording.qos_profiles import (
+    PLAYBACK_DEPTH,
     SUBSCRIPTION_DEPTH,
     is_latched,
     offered_qos_yaml,
+    playback_qos,
     subscription_qos,
 )
 
@@ -49,3 +51,25 @@ def test_offered_profiles_yaml_has_rosbag2_version_9_fields():
         "avoid_ros_namespace_conventions": False,
     }
     assert loaded[1]["reliability"] == "best_effort"
+
+
+def test_a_replay_publishes_latched_topics_latched_again():
+    qos = playback_qos(offered_qos_yaml([LATCHED, LATCHED]))
+    assert qos.reliability == ReliabilityPolicy.RELIABLE
+    assert qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert qos.depth == PLAYBACK_DEPTH
+
+
+def test_a_replay_offers_no_more_than_every_recorded_publisher_did():
+    qos = playback_qos(offered_qos_yaml([LATCHED, BEST_EFFORT, QoSProfile(depth=50)]))
+    assert qos.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert qos.durability == DurabilityPolicy.VOLATILE
+    assert qos.depth == 50  # the deepest recorded history
+
+
+def test_missing_or_unreadable_stored_qos_replays_reliable_volatile():
+    for text in ("", "[", "just text", "- 3\n", "[]"):
+        qos = playback_qos(text)
+        assert qos.reliability == ReliabilityPolicy.RELIABLE, text
+        assert qos.durability == DurabilityPolicy.VOLATILE, text
+        assert qos.depth == PLAYBACK_DEPTH, text
