@@ -18,6 +18,7 @@ from tlt_vision.camera_frames import NoFrame
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
+from tlt_vision.pipeline import Detection
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.services.detector import Detector
 from tlt_vision.services.frame_poser import FramePoser
@@ -34,7 +35,8 @@ class InspectPartHandler:
     second look's score), and the arms' joint states to take their end effectors out of the depth;
     :meth:`PartInspector.inspect` decides. A rivet: reads one frame of the EE camera beside gun
     ``<ars>/<gun>`` (the asked camera must be on that arm) and passes on a certified rivet at the
-    gun's muzzle (node.yaml ``rivet_in_gun_radius``). Answers an InspectionReport in the camera's
+    gun's muzzle (node.yaml ``rivet_in_gun_radius``); with none, the detections of any score at
+    the muzzle joined into one (:meth:`_at_the_muzzle`). Answers an InspectionReport in the camera's
     frame, with every reason when it fails; an unknown kind or camera, no frame in time, a failed
     segmentation or an unexpected error is a failed report with that reason.
     """
@@ -140,19 +142,23 @@ class InspectPartHandler:
             if asked not in self.rig.ee or self.rig.ee[asked].arm != ars:
                 raise NoFrame(f"camera {camera_name!r} is not on {ars}'s end effector")
             frame = self.frames.grab(cam.name, self.detector.streams(), deadline)
-            detections = [d for d in self.detector.detect(frame) if d.object_class == "rivet"]
+            every = [d for d in self.detector.detect(frame, doubtful=True) if d.object_class == "rivet"]
         except NoFrame as exc:
             return failed_report(member_id, "rivet", str(exc), self.clock())
         muzzle = cam.gun_in_camera()
         radius = self.config.raw["rivet_in_gun_radius"]
         # Only a rivet near the muzzle can pass: the others in view (a feeder's, one already set
         # in the structure) would cost a pose each for nothing.
-        seen = detections
+        seen = [d for d in every if d.score >= self.detector.min_score]
         detections = self.poser.within(seen, frame, np.eye(4), muzzle, "rivet", radius)
         elsewhere = len(seen) - len(detections)
         obs = self.poser.observe("rivet", detections, frame)
         certified = [o.estimate for o in obs if o.estimate is not None and o.estimate.certified]
         near = [e for e in certified if np.linalg.norm(e.translation - muzzle) <= radius]
+        if not near:
+            obs += self._at_the_muzzle(every, frame, muzzle, radius)
+            certified = [o.estimate for o in obs if o.estimate is not None and o.estimate.certified]
+            near = [e for e in certified if np.linalg.norm(e.translation - muzzle) <= radius]
         used = tuple(o.estimate for o in obs if o.estimate is not None)
         if near:
             report = inspection.InspectionReport(member_id, "rivet", True, (), used)
@@ -164,3 +170,20 @@ class InspectPartHandler:
             why += [f"rivet: pose not certified ({e.certificate.reason})" for e in used if not e.certified]
             report = inspection.InspectionReport(member_id, "rivet", False, tuple(why), used)
         return report_msg(report, frame.stamp, frame.frame_id, {})
+
+    def _at_the_muzzle(
+        self, detections: list[Detection], frame: CameraFrame, muzzle: np.ndarray, radius: float
+    ) -> list[inspection.Observation]:
+        """The rivet detections at the muzzle at any score, joined into one and posed.
+
+        A rivet in the gun sits at the edge of the D405's view, cut by the frame's border: Mask
+        R-CNN scores what it sees of it low, or splits it. Where it must be is known and the gun
+        holds one rivet, so the detections there are fragments of it; the certificate decides
+        whether their cloud is a rivet at the muzzle.
+        """
+        there = self.poser.within(detections, frame, np.eye(4), muzzle, "rivet", radius)
+        if not there:
+            return []
+        mask = np.logical_or.reduce([d.mask for d in there])
+        joined = Detection("rivet", mask, max(d.score for d in there))
+        return self.poser.observe("rivet", [joined], frame)
