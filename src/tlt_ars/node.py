@@ -73,6 +73,7 @@ from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.ros.lean_node import LeanNode
 from tlt_common.ros.node_teardown import destroy_node
 from tlt_common.ros.periodic_timer import create_periodic_timer
+from tlt_common.ros.rosout_logging import forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.sim_clock_watch import watch_sim_clock
 from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
@@ -433,7 +434,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     share_the_interpreter_quickly()  # the planner works beside the tick and the executor's threads
     stop = stop_on_signals()
-    rclpy.init(args=["ars", *full], signal_handler_options=SignalHandlerOptions.NO)
+    init_rclpy(["ars", *full], signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = ArsNode(config, check_reach=False if args.no_reach_check else None)
@@ -441,6 +442,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ars: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    logs = forward_logging_to_rosout(node)
     executor = DirectMultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     clock_watch = watch_sim_clock(node)
@@ -464,6 +466,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         node.close()
         for exc in stop_executor(executor, 2.0):  # before the node's handles go
             node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
+        logs.remove()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from tlt_common.config_schema import ConfigError
@@ -30,6 +31,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 
 def launch_main(argv: list[str]) -> int:
     from tlt_common.launch import Supervisor, load_launch_set
+    from tlt_common.launch.supervisor import default_log_dir
 
     parser = argparse.ArgumentParser(prog="tlt launch", description="Start the processes of a launch set.")
     parser.add_argument("launch_set", help="launch set YAML, e.g. config/launch/hardware_emulated.yaml")
@@ -38,10 +40,22 @@ def launch_main(argv: list[str]) -> int:
         action="store_true",
         help="claim a ROS domain no other run here holds; localhost discovery only",
     )
+    parser.add_argument(
+        "--log-dir",
+        help="folder of the processes' log files, <name>.log (default: $TLT_RUN_DIR/logs, "
+        "TLT_RUN_DIR defaulting to /tmp/tlt-run)",
+    )
+    parser.add_argument("--no-log-files", action="store_true", help="the console only, no log files")
     args = parser.parse_args(argv)
-    if args.isolated:
-        import os
+    if os.environ.get("TLT_LOG_LEVEL", "").strip():  # refused before anything starts, not by each process
+        from tlt_common.ros.rosout_logging import LogLevelError, env_log_level
 
+        try:
+            env_log_level()
+        except LogLevelError as exc:
+            print(f"tlt launch: {exc}", file=sys.stderr)
+            return 2
+    if args.isolated:
         from tlt_common.ros.isolation import isolate
 
         print(f"[launch] isolated: ROS_DOMAIN_ID={isolate(os.environ)}, localhost discovery", flush=True)
@@ -50,7 +64,8 @@ def launch_main(argv: list[str]) -> int:
     except ConfigError as exc:
         print(f"tlt launch: {exc}", file=sys.stderr)
         return 2
-    return Supervisor(launch_set).run()
+    log_dir = None if args.no_log_files else (args.log_dir or default_log_dir(os.environ))
+    return Supervisor(launch_set, log_dir=log_dir).run()
 
 
 def check_main(argv: list[str]) -> int:

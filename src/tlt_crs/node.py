@@ -51,6 +51,7 @@ from tlt_common.ros.executor_stop import stop_executor
 from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.ros.lean_node import LeanNode
 from tlt_common.ros.periodic_timer import create_periodic_timer
+from tlt_common.ros.rosout_logging import forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.sim_clock_watch import watch_sim_clock
 from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
@@ -278,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     share_the_interpreter_quickly()  # the tick, the executor's threads and the ground link share it
     stop = stop_on_signals()
-    rclpy.init(args=["tlt-crs", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+    init_rclpy(["tlt-crs", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     py_trees.blackboard.Blackboard.clear()
     try:
         try:
@@ -286,6 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, TowerModelError, OSError) as exc:
             print(f"tlt-crs: refused: {exc}", file=sys.stderr)
             return 2
+        logs = forward_logging_to_rosout(node)
         bridge = None
         if args.ground_link is not None:
             from tlt_common.ccsds.auth import KeyFileError, ReplayStateError
@@ -296,6 +298,7 @@ def main(argv: list[str] | None = None) -> int:
                 bridge = GroundBridge(node, load_link_config(args.ground_link))
             except (ConfigError, KeyFileError, ReplayStateError, OSError) as exc:
                 print(f"tlt-crs: refused: ground link: {exc}", file=sys.stderr)
+                logs.remove()
                 node.destroy_node()
                 return 2
             bridge.start()
@@ -330,6 +333,7 @@ def main(argv: list[str] | None = None) -> int:
             # time to return first (the context is still valid: tlt_common.ros.stop_signals).
             for error in stop_executor(executor, 5.0):
                 node.get_logger().warning(f"a callback ended with {error!r} at shutdown")
+            logs.remove()
             node.destroy_node()
         return 0
     finally:

@@ -33,6 +33,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from tlt_common import ros_names
 from tlt_common.ros.action_client import SerialisedActionClient
 from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.rosout_logging import forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.stamps import set_stamp
 
 COMPONENTS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
@@ -403,8 +404,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown component(s) {', '.join(unknown)}")
 
-    rclpy.init(args=["prog", *argv])
+    init_rclpy(["prog", *argv])
     node = BringupCheck(args.timeout, args.startup_timeout)
+    logs = forward_logging_to_rosout(node)
     executor = MultiThreadedExecutor()
     executor.add_node(node)
     spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
@@ -423,6 +425,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     finally:
         # Shutting the context down wakes the executor; the node goes once nothing spins it.
+        logs.remove()
         rclpy.try_shutdown()
         spinner.join(timeout=5.0)
         node.destroy_node()

@@ -35,6 +35,7 @@ from rclpy.node import Node
 from tlt_common.config_schema import ConfigError
 from tlt_common.ros.direct_executor import DirectExecutor
 from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
+from tlt_common.ros.rosout_logging import RosoutHandler, forward_logging_to_rosout, init_rclpy
 
 HARDWARE_CONFIG_DIR = Path(__file__).resolve().parents[2] / "config" / "hardware"
 
@@ -134,22 +135,27 @@ def spin_drivers(prog: str, drivers: Sequence[Driver], argv: Sequence[str]) -> i
     own until SIGINT/SIGTERM or a callback raises; then shut every node down.
 
     ``argv`` carries the ROS arguments (``--ros-args -p use_sim_time:=true`` applies to every node).
+    The process's Python log records go to ``/rosout`` through the first node
+    (``tlt_common.ros.rosout_logging``; the record's logger name says which module logged it).
     Returns 0 after a clean shutdown, 1 when a node's callback raised, 2 when a node cannot start.
     """
     share_the_interpreter_quickly()  # each node's serial reader and executor thread share it
-    rclpy.init(args=[prog, *argv])
+    init_rclpy([prog, *argv])
     nodes: list[tuple[str, Node]] = []
+    logs: RosoutHandler | None = None
     code = 0
     try:
         for driver in drivers:
             nodes.append((driver.name, driver.build()))
+            if logs is None:
+                logs = forward_logging_to_rosout(nodes[0][1])
     except (ConfigError, DriverStartError) as exc:  # a file or device the node opens while building
         print(f"{prog}: {exc}", file=sys.stderr)
         code = 2
     else:
         code = 1 if _spin_each(nodes) else 0
     finally:
-        _shut_down(prog, nodes, code)
+        _shut_down(prog, nodes, code, logs)
     return code
 
 
@@ -196,9 +202,10 @@ def _spin_each(nodes: list[tuple[str, Node]]) -> list[str]:
     return failed
 
 
-def _shut_down(prog: str, nodes: list[tuple[str, Node]], code: int) -> None:
+def _shut_down(prog: str, nodes: list[tuple[str, Node]], code: int, logs: RosoutHandler | None) -> None:
     """Each node's ``shutdown`` (stop its loop, release its link), at once on threads of their own,
-    then destroy the nodes; exits the process with ``code`` if one is still hanging after the bound."""
+    then stop publishing the log records and destroy the nodes; exits the process with ``code`` if
+    one is still hanging after the bound."""
     pending = {name for name, _ in nodes}
 
     def shut(name: str, node: Node) -> None:
@@ -225,6 +232,8 @@ def _shut_down(prog: str, nodes: list[tuple[str, Node]], code: int) -> None:
             flush=True,
         )
         os._exit(code)
+    if logs is not None:
+        logs.remove()
     for _, node in nodes:
         node.destroy_node()
     _end_context()

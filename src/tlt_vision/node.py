@@ -52,6 +52,7 @@ from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor, QuickCal
 from tlt_common.ros.executor_stop import stop_executor
 from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.rosout_logging import RosoutHandler, forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.spin_loop import spin
 from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_vision.apriltag import TagConfig, TagLocator
@@ -250,14 +251,16 @@ def main(argv: list[str] | None = None) -> int:
     # rclpy's own handler would shut the context down under a pose being computed on an executor
     # thread: a signal asks the spin loop to end instead (tlt_common/ros/stop_signals.py).
     stop = stop_on_signals()
-    rclpy.init(args=["tlt-vision", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
+    init_rclpy(["tlt-vision", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     node = None
+    logs: RosoutHandler | None = None
     try:
         try:
             node = VisionNode(config, mission)
         except (ConfigError, WeightsError, KeyError) as exc:
             print(f"tlt-vision: refused: {exc}", file=sys.stderr)
             return 2
+        logs = forward_logging_to_rosout(node)
         executor = DirectMultiThreadedExecutor(num_threads=8)
         executor.add_node(node)
         try:
@@ -268,6 +271,8 @@ def main(argv: list[str] | None = None) -> int:
             for exc in stop_executor(executor, 2.0):  # before the node's handles go
                 node.get_logger().warning(f"a callback ended with {exc!r} at shutdown")
     finally:
+        if logs is not None:
+            logs.remove()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

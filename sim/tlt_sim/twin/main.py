@@ -164,11 +164,14 @@ def main(argv: list[str] | None = None) -> int:
     # rclpy's own handler would invalidate the context under a publish in the loop: the loop stops
     # on a flag instead.
     stop = stop_on_signals()
-    rclpy.init(args=["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     from tlt_common.ros.lean_node import LeanNode
+    from tlt_common.ros.rosout_logging import forward_logging_to_rosout, init_rclpy
+
+    init_rclpy(["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
 
     node = LeanNode("twin")
+    logs = forward_logging_to_rosout(node)
     ready = Path(run_dir) / READY_FILE
     try:
         clock = ClockPublisher(node)
@@ -222,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
             view.close()
         twin.close()
         scene.close()
+        logs.remove()
         node.destroy_node()
         if rclpy.ok():
             rclpy.try_shutdown()

@@ -2,11 +2,14 @@
 
 Every process runs in its own process group, so a signal reaches it and anything it started; each
 also asks the kernel to send it SIGTERM if the launcher dies, so even a SIGKILLed launcher leaves
-no orphan. Output lines are prefixed with the process name. Shutdown (Ctrl-C, SIGTERM, or a
-required process that died for good) sends SIGINT, then SIGTERM, then SIGKILL, each after the set's
-grace period; a second Ctrl-C skips the waiting. The exit status is 0 after a clean stop, 1 when a
-required process died, and a process's own when it ends the set (``on_exit: shutdown``), also
-when a signal stopped it along with the rest: a mission job interrupted during a build says so.
+no orphan. Output lines are prefixed with the process name; with a log folder, each process's
+output also goes, unprefixed, to ``<folder>/<name>.log`` (with the launcher's lines about it, each
+starting ``[launch]``), which restarts append to and a new launcher run starts afresh. Shutdown
+(Ctrl-C, SIGTERM, or a required process that died for good) sends SIGINT, then SIGTERM, then
+SIGKILL, each after the set's grace period; a second Ctrl-C skips the waiting. The exit status is
+0 after a clean stop, 1 when a required process died, and a process's own when it ends the set
+(``on_exit: shutdown``), also when a signal stopped it along with the rest: a mission job
+interrupted during a build says so.
 
 A set that declares hosts gets its emulated network (``hosts.HostNetwork``) before any process
 starts and loses it after every process has stopped; a process with a host is moved into that
@@ -24,8 +27,9 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import FrameType
 from typing import Any, TextIO
 
@@ -77,6 +81,12 @@ def _preexec(namespace: str | None, nice: int) -> Callable[[], None]:
     return preexec
 
 
+def default_log_dir(environ: Mapping[str, str]) -> Path:
+    """The run folder's ``logs``: ``$TLT_RUN_DIR/logs``, the run folder being ``/tmp/tlt-run`` when
+    ``TLT_RUN_DIR`` is unset, as in every launch set of ``config/launch``."""
+    return Path(environ.get("TLT_RUN_DIR") or "/tmp/tlt-run") / "logs"
+
+
 def describe_exit(returncode: int) -> str:
     """'exit code 3' or 'signal SIGKILL'."""
     if returncode < 0:
@@ -97,6 +107,7 @@ class _Proc:
     waiting_since: float | None = None
     returncode: int | None = None
     reader: threading.Thread | None = None
+    log: TextIO | None = None  # <log folder>/<name>.log, open from its first start to the launcher's end
     last_lines: collections.deque[str] = field(default_factory=lambda: collections.deque(maxlen=_LAST_LINES))
 
     @property
@@ -107,10 +118,18 @@ class _Proc:
 class Supervisor:
     """Runs one launch set until it ends, is stopped, or a required process dies."""
 
-    def __init__(self, launch_set: LaunchSet, out: TextIO | None = None, run_name: str | None = None) -> None:
+    def __init__(
+        self,
+        launch_set: LaunchSet,
+        out: TextIO | None = None,
+        run_name: str | None = None,
+        log_dir: str | Path | None = None,
+    ) -> None:
+        """``log_dir``: the folder of the per-process log files (created when needed); None: none."""
         self.launch_set = launch_set
         self.out = out or sys.stdout
         self.run_name = run_name or default_run_name(os.environ)
+        self.log_dir = Path(log_dir) if log_dir is not None else None
         self.network: HostNetwork | None = None
         self._profile: str | None = None
         self._procs = [_Proc(spec) for spec in launch_set.processes]
@@ -129,6 +148,7 @@ class Supervisor:
                 f"launch set '{self.launch_set.name}' ({self.launch_set.source}): "
                 f"{len(self._procs)} process(es)"
             )
+            self._open_log_dir()
             if self.launch_set.hosts and not self._create_hosts():
                 return 1
             for proc in self._procs:
@@ -153,6 +173,7 @@ class Supervisor:
         finally:
             self._stop_all()
             self._remove_hosts()
+            self._close_logs()
             if installed:
                 for sig, handler in installed.items():
                     signal.signal(sig, handler)
@@ -220,6 +241,36 @@ class Supervisor:
             with contextlib.suppress(OSError):
                 os.unlink(self._profile)
 
+    # --- log files -----------------------------------------------------------------------------------
+    def _open_log_dir(self) -> None:
+        if self.log_dir is None:
+            return
+        try:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            self._say(f"no log files: cannot create {self.log_dir}: {exc}")
+            self.log_dir = None
+            return
+        self._say(f"each process's output also goes to {self.log_dir}/<name>.log")
+
+    def _open_log(self, proc: _Proc) -> None:
+        """Open the process's log file at its first start (a restart appends to it)."""
+        if self.log_dir is None or proc.log is not None:
+            return
+        path = self.log_dir / f"{proc.spec.name}.log"
+        try:
+            proc.log = open(path, "w", encoding="utf-8", buffering=1)  # noqa: SIM115 (open until the end)
+        except OSError as exc:
+            self._say(f"no log file for {proc.spec.name}: {exc}")
+
+    def _close_logs(self) -> None:
+        with self._out_lock:
+            for proc in self._procs:
+                if proc.log is not None:
+                    with contextlib.suppress(OSError):
+                        proc.log.close()
+                    proc.log = None
+
     # --- starting and watching ----------------------------------------------------------------------
     def _start(self, proc: _Proc) -> None:
         spec = proc.spec
@@ -238,6 +289,7 @@ class Supervisor:
         proc.restart_at = None
         proc.returncode = None
         proc.last_lines.clear()
+        self._open_log(proc)
         try:
             proc.popen = subprocess.Popen(
                 spec.argv,
@@ -254,13 +306,13 @@ class Supervisor:
             proc.returncode = 127
             reason = getattr(exc, "strerror", None) or exc
             where = f" in host {spec.host}" if spec.host else ""
-            self._say(f"{spec.name} cannot start{where}: {' '.join(spec.argv)}: {reason}")
+            self._say(f"{spec.name} cannot start{where}: {' '.join(spec.argv)}: {reason}", proc)
             self._after_exit(proc, early=True)
             return
         proc.started_at = time.monotonic()
         where = f" on host {spec.host}" if spec.host else ""
         # Said before its output is relayed, so that no line of the process comes before it.
-        self._say(f"started {spec.name} (pid {proc.popen.pid}){where}")
+        self._say(f"started {spec.name} (pid {proc.popen.pid}){where}", proc)
         proc.reader = threading.Thread(
             target=self._pump, args=(proc, proc.popen), daemon=True, name=f"launch-{spec.name}"
         )
@@ -272,7 +324,7 @@ class Supervisor:
         for raw in popen.stdout:
             line = raw.decode("utf-8", errors="replace").rstrip("\n")
             proc.last_lines.append(line)
-            self._write(prefix + line)
+            self._write(prefix + line, proc, line)
         popen.stdout.close()
 
     def _watch(self) -> None:
@@ -282,7 +334,7 @@ class Supervisor:
                 self._check_wait(proc, now)
             elif proc.restart_at is not None and now >= proc.restart_at:
                 proc.restarts += 1
-                self._say(f"restarting {proc.spec.name} ({proc.restarts} of {proc.spec.max_restarts})")
+                self._say(f"restarting {proc.spec.name} ({proc.restarts} of {proc.spec.max_restarts})", proc)
                 self._start(proc)
             elif proc.running:
                 assert proc.popen is not None
@@ -316,13 +368,13 @@ class Supervisor:
         failed = rc != 0
         if failed or early:
             when = " during start-up" if early else ""
-            self._say(f"{spec.name} exited with {describe_exit(rc)}{when}")
+            self._say(f"{spec.name} exited with {describe_exit(rc)}{when}", proc)
             if proc.last_lines:
                 self._say(f"last output of {spec.name}:")
                 for line in proc.last_lines:
                     self._write(f"    | {line}")
         else:
-            self._say(f"{spec.name} exited with {describe_exit(rc)}")
+            self._say(f"{spec.name} exited with {describe_exit(rc)}", proc)
         if spec.on_exit == "shutdown":
             self._say(f"{spec.name} ended the launch set ({describe_exit(rc)})")
             self._exit_code = rc if rc >= 0 else 128 - rc
@@ -369,7 +421,7 @@ class Supervisor:
             for proc in procs:
                 if proc.running and proc.popen and proc.popen.poll() is not None:
                     proc.returncode = proc.popen.returncode
-                    self._say(f"{proc.spec.name} stopped ({describe_exit(proc.returncode)})")
+                    self._say(f"{proc.spec.name} stopped ({describe_exit(proc.returncode)})", proc)
             if not any(p.running for p in procs):
                 return
             time.sleep(_POLL_S)
@@ -398,13 +450,22 @@ class Supervisor:
         # launcher would then sit through SIGINT and SIGTERM without a word until SIGKILL).
         self._signals += 1
 
-    def _say(self, text: str) -> None:
-        self._write(f"[launch] {text}")
+    def _say(self, text: str, proc: _Proc | None = None) -> None:
+        """A launcher line on the console, and in ``proc``'s log file when it is about one."""
+        line = f"[launch] {text}"
+        self._write(line, proc, line)
 
-    def _write(self, line: str) -> None:
+    def _write(self, line: str, proc: _Proc | None = None, logged: str | None = None) -> None:
+        """``line`` to the console and ``logged`` (if given) to ``proc``'s log file."""
         with self._out_lock:
             try:
                 self.out.write(line + "\n")
                 self.out.flush()
             except (OSError, ValueError):
                 pass  # our own stdout is gone (a closed pipe); the processes still get stopped
+            if proc is not None and proc.log is not None and logged is not None:
+                try:
+                    proc.log.write(logged + "\n")
+                except (OSError, ValueError) as exc:  # a full disk: the console still has it
+                    proc.log = None
+                    self.out.write(f"[launch] {proc.spec.name}'s log file stopped: {exc}\n")

@@ -29,6 +29,7 @@ from tlt_common.recording.mcap_writer import McapRecordingWriter, available_comp
 from tlt_common.recording.recorder import RecorderTiming, TopicRecorder
 from tlt_common.recording.topic_filter import IMAGE_PATTERN, TopicFilter
 from tlt_common.ros.direct_executor import DirectExecutor
+from tlt_common.ros.rosout_logging import RosoutHandler, forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.stop_signals import stop_on_signals
 
 SIGNAL_CHECK_S = 0.1  # longest wait for traffic before the loop looks at the stop flag again
@@ -150,14 +151,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tlt-record: kept the previous {out.name} as {moved}", file=sys.stderr)
 
     node = None
+    logs: RosoutHandler | None = None
     status = 0
     try:
-        rclpy.init(args=["tlt-record", *argv], signal_handler_options=SignalHandlerOptions.NO)
+        init_rclpy(["tlt-record", *argv], signal_handler_options=SignalHandlerOptions.NO)
         node = TopicRecorder(
             writer,
             topic_filter,
             RecorderTiming(args.discovery_period, args.flush_period, args.progress_period),
         )
+        logs = forward_logging_to_rosout(node)
         executor = DirectExecutor()
         executor.add_node(node)
         while not stop and rclpy.ok():
@@ -169,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
         status = 1
     finally:
         status = max(status, _finish(node, writer, out))
+        if logs is not None:
+            logs.remove()
         if node is not None:
             node.destroy_node()
         if rclpy.ok():

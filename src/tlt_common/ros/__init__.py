@@ -16,6 +16,8 @@ Process life:
 ``executor_stop``: stop an executor once the callbacks it is running have ended.
 ``node_teardown``: destroy a node with its action servers and clients.
 ``isolation``: a ROS domain of its own for each run on one machine.
+``rosout_logging``: the process's Python ``logging`` on ``/rosout``, at its ``--log-level`` or
+``TLT_LOG_LEVEL``.
 
 Watches on the wall clock, outside the executor (``watch_thread`` is their thread):
 ``sim_clock_watch``: ``/clock`` has stopped.

@@ -20,11 +20,12 @@ TLT = Path(sys.executable).with_name("tlt")
 
 
 class Launcher:
-    """``tlt launch`` as a subprocess, with its output collected line by line."""
+    """``tlt launch`` as a subprocess, with its output collected line by line and the processes'
+    log files in ``log_dir``."""
 
-    def __init__(self, launch_file: Path) -> None:
+    def __init__(self, launch_file: Path, log_dir: Path) -> None:
         self.proc = subprocess.Popen(
-            [str(TLT), "launch", str(launch_file)],
+            [str(TLT), "launch", "--log-dir", str(log_dir), str(launch_file)],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -86,11 +87,11 @@ def write_set(tmp_path: Path, body: str, name: str = "set.yaml") -> Path:
 
 
 @pytest.fixture
-def launcher():
+def launcher(tmp_path):
     started: list[Launcher] = []
 
     def start(path: Path) -> Launcher:
-        started.append(Launcher(path))
+        started.append(Launcher(path, tmp_path / "logs"))
         return started[-1]
 
     yield start
@@ -127,6 +128,9 @@ def test_two_nodes_exchange_an_action_and_ctrl_c_stops_everything(tmp_path, laun
     assert run.finish() == 0
     assert not alive(server) and not alive(client)
     assert any("stopped" in line for line in run.lines)
+    server_log = (tmp_path / "logs" / "server.log").read_text().splitlines()
+    assert server_log[0] == f"[launch] started server (pid {server})"
+    assert "server up" in server_log and server_log[-1].startswith("[launch] server stopped (")
 
 
 def test_a_killed_process_with_a_restart_policy_comes_back(tmp_path, launcher):
