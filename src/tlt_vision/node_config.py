@@ -21,6 +21,7 @@ from tlt_common.geometry.transforms import pose_matrix, rpy_matrix
 from tlt_vision.depth_noise import DepthNoise
 from tlt_vision.node_config_schema import MODEL_NAMES, SCHEMA, SEGMENTATION_SOURCES, check_across_keys
 from tlt_vision.pointcloud import Detached
+from tlt_vision.pose.axial_ends import AxialEnds
 from tlt_vision.pose.axial_slide import AxialSlide
 from tlt_vision.pose.free_space import FreeSpace
 from tlt_vision.pose.parting import Parting
@@ -104,6 +105,13 @@ class VisionConfig:
         return AxialSlide(**{**raw, "classes": tuple(raw["classes"])}) if raw["classes"] else None
 
     @property
+    def axial_ends(self) -> AxialEnds | None:
+        raw = self.raw["axial_ends"]
+        if not raw["classes"]:
+            return None
+        return AxialEnds(**{**raw, "classes": tuple(raw["classes"]), "offsets_px": tuple(raw["offsets_px"])})
+
+    @property
     def pipeline_options(self) -> dict[str, Any]:
         """The keyword arguments of :class:`tlt_vision.pipeline.PartPipeline` this file sets."""
         raw = self.raw
@@ -113,6 +121,7 @@ class VisionConfig:
             "free_space": self.free_space,
             "detached": self.detached,
             "axial_slide": self.axial_slide,
+            "axial_ends": self.axial_ends,
             "depth_noise": self.depth_noise,
             "parting": self.parting,
         }

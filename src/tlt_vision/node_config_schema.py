@@ -12,6 +12,7 @@ from tlt_common.config_schema import ConfigError, Field, opt
 from tlt_common.mission.tag_mounts import TAG_MOUNT_SCHEMA
 from tlt_vision.depth_noise import EXACT
 from tlt_vision.pointcloud import DEFAULT_DETACHED as DETACHED
+from tlt_vision.pose.axial_ends import DEFAULT as AXIAL_ENDS
 from tlt_vision.pose.axial_slide import DEFAULT as AXIAL_SLIDE
 from tlt_vision.pose.free_space import DEFAULT as FREE_SPACE
 from tlt_vision.pose.parting import DEFAULT as PARTING
@@ -249,6 +250,27 @@ SCHEMA = {
             "step": opt("float", AXIAL_SLIDE.step, minimum=0.0001, maximum=0.01),
             "hidden_margin": opt("float", AXIAL_SLIDE.hidden_margin, minimum=0.0, maximum=0.05),
             "min_gain": opt("float", AXIAL_SLIDE.min_gain, minimum=0.0, maximum=1.0),
+        },
+    ),
+    "axial_ends": opt(
+        "dict",
+        {
+            "classes": [],
+            "offsets_px": list(AXIAL_ENDS.offsets_px),
+            "on_surface": AXIAL_ENDS.on_surface,
+            "jump": AXIAL_ENDS.jump,
+        },
+        schema={
+            # Cylinders whose model lies along its z axis, with dims radius and half_length.
+            "classes": opt("list", [], item=Field("str", choices=("end_fitting", "rivet"))),
+            "offsets_px": opt(
+                "list",
+                list(AXIAL_ENDS.offsets_px),
+                item=Field("float", minimum=1.0, maximum=30.0),
+                min_items=1,
+            ),
+            "on_surface": opt("float", AXIAL_ENDS.on_surface, minimum=0.0, maximum=0.05),
+            "jump": opt("float", AXIAL_ENDS.jump, minimum=0.0, maximum=0.05),
         },
     ),
     "parting": opt(

@@ -62,6 +62,7 @@ from tlt_vision.pointcloud import (
     detached_pieces,
     masked_point_cloud,
 )
+from tlt_vision.pose.axial_ends import AxialEnds, ends_seen, slide_to_an_end
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together, refined_together
@@ -176,6 +177,7 @@ class PartPipeline:
         free_space: FreeSpace | None = DEFAULT_FREE_SPACE,
         detached: Detached | None = DEFAULT_DETACHED,
         axial_slide: AxialSlide | None = None,
+        axial_ends: AxialEnds | None = None,
         depth_noise: DepthNoise = EXACT,
         parting: Parting | None = None,
     ) -> None:
@@ -185,6 +187,7 @@ class PartPipeline:
         self.free_space = free_space
         self.detached = detached
         self.axial_slide = axial_slide
+        self.axial_ends = axial_ends
         self._surfaces: dict[str, np.ndarray] = {}
         self._slide_surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.keep_border_below = keep_border_below
@@ -313,7 +316,10 @@ class PartPipeline:
             certificate = self._certificate(cls, points, estimate.rotation, estimate.translation, noise)
             estimate = replace(estimate, certificate=certificate)
         if depth is not None:
-            estimate = self._slid(estimate, points, mask, depth, intrinsics, noise)
+            slid = self._slid(estimate, points, mask, depth, intrinsics, noise)
+            estimate = self._placed_along_axis(
+                [slid, estimate] if slid is not estimate else [slid], points, depth, intrinsics, noise
+            )
         if near is not None:
             estimate = checked(estimate, near, intrinsics, self._surface(cls), self.free_space)
         return estimate
@@ -431,6 +437,60 @@ class PartPipeline:
             return estimate
         certificate = self._certificate(cls, points, moved.rotation, moved.translation, noise)
         return replace(moved, certificate=certificate) if certificate.certified else estimate
+
+    def _placed_along_axis(
+        self,
+        candidates: list[PoseEstimate],
+        points: np.ndarray,
+        depth: np.ndarray,
+        intrinsics: PinholeIntrinsics,
+        noise: DepthNoise,
+    ) -> PoseEstimate:
+        """The first of ``candidates`` (the pose slid by its mask, then as fitted) whose ends the
+        depth shows where its axis leaves its place open (:mod:`tlt_vision.pose.axial_ends`);
+        when none, the first slid to where the depth shows an end and certified again on
+        ``points``; when none either, the first, not certified: its place along its axis is not
+        seen."""
+        first = candidates[0]
+        ends, cls = self.axial_ends, first.object_class
+        if ends is None or cls not in ends.classes or not first.certified:
+            return first
+        dims = self.estimators[cls].model.dims
+        margin = 2.0 * noise.allowance(float(first.translation[2])) if not noise.exact else 0.0
+        for e in candidates:
+            if not e.certified:
+                continue
+            seen = ends_seen(
+                e.rotation,
+                e.translation,
+                dims["radius"],
+                dims["half_length"],
+                depth,
+                intrinsics,
+                ends,
+                margin,
+            )
+            if seen is None or seen:
+                return e
+        r = dims["radius"], dims["half_length"]
+        by = slide_to_an_end(first.rotation, first.translation, *r, depth, intrinsics, ends, margin)
+        if by is not None:
+            moved = by * np.asarray(first.rotation)[:, 2]
+            slid = replace(
+                first,
+                translation=np.asarray(first.translation) + moved,
+                keypoints=np.asarray(first.keypoints) + moved,
+            )
+            certificate = self._certificate(cls, points, slid.rotation, slid.translation, noise)
+            if certificate.certified:
+                return replace(slid, certificate=certificate)
+        why = "degenerate view: neither end of the part seen in the depth (its place along its axis is open)"
+        certificate = replace(
+            first.certificate,
+            certified=False,
+            reason="; ".join(r for r in (first.certificate.reason, why) if r),
+        )
+        return replace(first, certificate=certificate)
 
     def _certificate(
         self,
