@@ -160,6 +160,7 @@ def _link(
             recorder=recorder,
             close_recorder=True,
             sequencer=sequencer,
+            tm_key_overlap_s=gsw["tm_key_overlap_s"],
         )
     except BaseException:
         if recorder is not None:
@@ -226,7 +227,8 @@ def _cmd_watch(args: argparse.Namespace, out) -> int:
         stats = link.stats
         print(
             f"received {stats.packets_rx} packet(s), {stats.bytes_rx} B, gaps {stats.gaps} "
-            f"(missing {stats.missing}), CRC errors {stats.crc_errors}, rejected {stats.rejections}",
+            f"(missing {stats.missing}), CRC errors {stats.crc_errors}, rejected {stats.rejections} "
+            f"(failed authentication {stats.auth_rejections})",
             file=out,
         )
     return EXIT_OK
@@ -297,10 +299,12 @@ def _cmd_keygen(args: argparse.Namespace, out) -> int:
         raise UsageError(
             f"{path} exists; add --force to replace it (every CRS and GSW using it needs the new key)"
         )
-    write_key_file(path, {args.key_id: os.urandom(32)})
+    tm_ids = args.tm_key_ids
+    write_key_file(path, {args.key_id: os.urandom(32)}, {k: os.urandom(32) for k in tm_ids})
     print(
-        f"wrote a 32-byte key with id {args.key_id} to {path} (mode 0600); copy it to the CRS over a "
-        "secure channel and point key_file (or $TLT_GROUND_KEY_FILE) at it on both ends",
+        f"wrote a 32-byte command key with id {args.key_id} and telemetry keys with ids "
+        f"{', '.join(map(str, tm_ids))} to {path} (mode 0600); copy it to the CRS over a secure "
+        "channel and point key_file (or $TLT_GROUND_KEY_FILE) at it on both ends",
         file=out,
     )
     return EXIT_OK
@@ -354,7 +358,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     k = sub.add_parser("keygen", help="create a shared key file (outside the repository)")
     k.add_argument("path", help="key file to write, e.g. ~/.config/tlt/ground.key")
-    k.add_argument("--key-id", type=int, default=1)
+    k.add_argument("--key-id", type=int, default=1, help="command key id")
+    k.add_argument(
+        "--tm-key-ids",
+        type=lambda text: sorted({int(part) for part in text.split(",")}),
+        default=[1, 2],
+        help="telemetry key ids, comma separated (the CRS starts on link.yaml tm_key_id and "
+        "switch_tm_key moves it to the next)",
+    )
     k.add_argument("--force", action="store_true", help="replace an existing file")
 
     e = sub.add_parser("export", help="export one packet kind's fields to CSV")

@@ -1,8 +1,11 @@
 """The GSW end of the CCSDS ground link over UDP (paper §V.A, Fig. 3 and Fig. 6).
 
 Sends authenticated commands to the CRS (:meth:`GswLink.send_command`), receives telemetry
-(:meth:`GswLink.poll`), counts it (:class:`LinkStats`: gaps per APID, CRC errors, rejections) and
-hands every datagram sent or received to the archive :class:`Recorder`. Acknowledgements are
+(:meth:`GswLink.poll`), authenticates it with the telemetry keys of the key ring
+(:class:`TelemetryVerifier`: MAC, replay window, key retirement), counts it (:class:`LinkStats`:
+gaps per APID, CRC errors, rejections per reason) and hands every datagram sent or received to the
+archive :class:`Recorder`. A telemetry packet that fails authentication is archived as rejected
+with its reason, logged, and never decoded or handed on as telemetry. Acknowledgements are
 matched to the command they answer by its security sequence number; :meth:`GswLink.wait_ack` waits
 for a stage with a bounded timeout. Nothing here blocks without a timeout.
 """
@@ -10,6 +13,8 @@ for a stage with a bounded timeout. Nothing here blocks without a timeout.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import logging
 import socket
 import time
 from collections.abc import Callable, Mapping
@@ -17,14 +22,18 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tlt_common.ccsds.auth import CommandSequencer, KeyRing
-from tlt_common.ccsds.codec import Packet, ParseResult, encode_command, parse_datagram
+from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, encode_command, parse_datagram
 from tlt_common.ccsds.definitions import Definitions
 from tlt_common.ccsds.reasons import AckStage, Reason
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.stats import LinkStats
+from tlt_common.ccsds.tm_security import TelemetryVerifier
 from tlt_gsw.archive.recorder import Recorder
 
+_log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
+# Rejected telemetry is logged at most this often per second (each one is archived regardless).
+REJECTION_LOGS_PER_S = 5
 MAX_TRACKED_COMMANDS = 1000
 
 
@@ -87,6 +96,7 @@ class GswLink:
         close_recorder: bool = False,
         clock: Callable[[], float] = time.time,
         recv_buffer_bytes: int | None = None,
+        tm_key_overlap_s: float = 30.0,
     ) -> None:
         key = keyring.get(key_id)
         if key is None:
@@ -102,6 +112,10 @@ class GswLink:
         self.on_packet = on_packet
         self.clock = clock
         self.stats = LinkStats()
+        self.tm_verifier = TelemetryVerifier(keyring.telemetry, overlap_s=tm_key_overlap_s)
+        if not self.tm_verifier.key_ids:
+            _log.warning("no telemetry keys in the key ring: every telemetry packet will be rejected")
+        self._log_window = (0.0, 0)
         self._counters = SequenceCounters()
         self._sent: dict[int, SentCommand] = {}
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -209,7 +223,10 @@ class GswLink:
 
     def _handle(self, data: bytes) -> ParseResult:
         now = self.clock()
-        result = parse_datagram(data, self.defs, expect="tm")
+        verifier = self.tm_verifier
+        result = parse_datagram(data, self.defs, expect="tm", keyring=verifier, replay=verifier)
+        if isinstance(result, Rejection):
+            result = self._rejected(result)
         self.stats.record_rx(len(data), result)
         if self.recorder is not None:
             self.recorder.record("rx", data, result, recorded_at=now)
@@ -230,6 +247,29 @@ class GswLink:
         if self.on_packet is not None:
             self.on_packet(result)
         return result
+
+    def _rejected(self, rejection: Rejection) -> Rejection:
+        """Name a retired key as such, and log the rejection (rate limited)."""
+        key_id = rejection.key_id
+        if rejection.reason is Reason.UNKNOWN_KEY and key_id is not None and self.tm_verifier.retired(key_id):
+            rejection = dataclasses.replace(
+                rejection, detail=f"telemetry key id {key_id} is retired (superseded by a newer key)"
+            )
+        second = time.monotonic() // 1
+        start, logged = self._log_window
+        if second != start:
+            start, logged = second, 0
+        if logged < REJECTION_LOGS_PER_S:
+            _log.warning(
+                "telemetry rejected (APID %s, key id %s): %s: %s",
+                rejection.apid,
+                key_id,
+                rejection.reason.label,
+                rejection.detail,
+            )
+            logged += 1
+        self._log_window = (start, logged)
+        return rejection
 
 
 __all__ = ["Ack", "GswLink", "SentCommand"]

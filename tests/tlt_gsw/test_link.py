@@ -7,18 +7,19 @@ import socket
 import time
 
 from tlt_common.ccsds.auth import KeyRing
-from tlt_common.ccsds.codec import encode_telemetry
 from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.ccsds.tm_security import TelemetrySigner
 from tlt_gsw.archive import Recorder
 from tlt_gsw.archive import query as q
 from tlt_gsw.link import GswLink
 
 DEFS = load_definitions()
-RING = KeyRing({1: os.urandom(32)})
+RING = KeyRing({1: os.urandom(32)}, {1: os.urandom(32)})
+SIGNER = TelemetrySigner(RING.telemetry, 1)
 
 
 def tower(seq: int) -> bytes:
-    return encode_telemetry(DEFS, "hk_tower", {"member_count": seq, "member_states": b""}, seq_count=seq)
+    return SIGNER.encode(DEFS, "hk_tower", {"member_count": seq, "member_states": b""}, seq_count=seq)
 
 
 def drain(link: GswLink, expected: int, timeout: float = 5.0) -> list:

@@ -11,7 +11,8 @@ Reads command datagrams on a UDP socket, and for each one:
   :attr:`GroundLink.commands` queue. The CRS reports the outcome later with
   :meth:`GroundLink.complete` (stage *completed* or *failed*).
 
-Writes telemetry packets the caller gives (:meth:`send_telemetry`) and periodic ``link_stats``.
+Writes telemetry packets the caller gives (:meth:`send_telemetry`) and periodic ``link_stats``,
+each signed with the current telemetry key (:class:`TelemetrySigner`, never a command key).
 Telemetry goes to the configured GSW address, else to the source of the last *authenticated*
 command; acks of an authenticated command also go back to its sender. An unauthenticated sender
 never receives anything. Nothing a datagram contains can stop the receive thread: every failure
@@ -31,12 +32,13 @@ from pathlib import Path
 from typing import Any
 
 from tlt_common.ccsds.auth import KeyRing, ReplayGuard
-from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, encode_telemetry, parse_datagram
+from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, parse_datagram
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.stats import LinkStats
+from tlt_common.ccsds.tm_security import TelemetrySigner
 
 _log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
@@ -91,7 +93,9 @@ class GroundLink:
     ``replay_state`` is the file holding the last accepted security sequence per key; a new
     instance on the same file refuses everything the old one accepted. ``validator`` lets the CRS
     refuse a well-formed command (e.g. a blackboard key that is not ground-writable) with a reason
-    before it is acknowledged as accepted.
+    before it is acknowledged as accepted. ``tm_key_id`` is the telemetry key to sign with first
+    (default: the lowest telemetry key id of ``keyring``); a ring without telemetry keys raises
+    :class:`KeyFileError`.
     """
 
     def __init__(
@@ -108,9 +112,14 @@ class GroundLink:
         max_rejection_events_per_s: float = 20.0,
         stats_period_s: float | None = None,
         clock: Callable[[], float] = time.time,
+        tm_key_id: int | None = None,
     ) -> None:
         self.defs = definitions
         self.keyring = keyring
+        tm_keys = keyring.telemetry
+        self.tm_signer = TelemetrySigner(
+            tm_keys, tm_key_id if tm_key_id is not None else min(tm_keys.key_ids, default=0)
+        )
         self.replay = ReplayGuard(replay_state)
         self.on_command = on_command
         self.validator = validator
@@ -163,6 +172,7 @@ class GroundLink:
             expand_path(crs["replay_state"]),
             bind=(crs["bind_host"], crs["bind_port"]),
             gsw_address=gsw,
+            tm_key_id=conf["tm_key_id"],
             **options,
         )
 
@@ -412,7 +422,7 @@ class GroundLink:
             if not targets:
                 self.telemetry_dropped += 1
                 return None
-            raw = encode_telemetry(
+            raw = self.tm_signer.encode(
                 self.defs,
                 kind,
                 values,

@@ -26,7 +26,7 @@ WAIT = 5.0
 
 @pytest.fixture
 def keyring():
-    return KeyRing({1: os.urandom(32)})
+    return KeyRing({1: os.urandom(32)}, {1: os.urandom(32)})
 
 
 @pytest.fixture
