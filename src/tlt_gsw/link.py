@@ -6,8 +6,9 @@ Sends authenticated commands to the CRS (:meth:`GswLink.send_command`), receives
 gaps per APID, CRC errors, rejections per reason) and hands every datagram sent or received to the
 archive :class:`Recorder`. A telemetry packet that fails authentication is archived as rejected
 with its reason, logged, and never decoded or handed on as telemetry. Acknowledgements are
-matched to the command they answer by its security sequence number; :meth:`GswLink.wait_ack` waits
-for a stage with a bounded timeout. Nothing here blocks without a timeout.
+matched to the command they answer by its security sequence number (a ``replay`` rejection of a
+command already acknowledged answers a replayed copy, not the command, and is not matched);
+:meth:`GswLink.wait_ack` waits for a stage with a bounded timeout. Nothing here blocks without a timeout.
 """
 
 from __future__ import annotations
@@ -233,7 +234,8 @@ class GswLink:
         if isinstance(result, Packet) and result.kind == "ack":
             fields = result.fields
             sent = self._sent.get(fields["security_seq"])
-            if sent is not None:
+            # A replay rejection of an already answered command answers someone's copy of it.
+            if sent is not None and not (sent.acks and fields["reason"] == Reason.REPLAY.label):
                 sent.acks.append(
                     Ack(
                         AckStage[fields["stage"].upper()],
