@@ -295,6 +295,19 @@ def _cmd_export(args: argparse.Namespace, out) -> int:
 
 def _cmd_keygen(args: argparse.Namespace, out) -> int:
     path = expand_path(args.path)
+    if args.add_tm_key:
+        ring = KeyRing.load(path)
+        tm = ring.telemetry
+        new_id = max(tm.key_ids, default=0) + 1
+        tm_keys = {k: key for k in tm.key_ids if (key := tm.get(k)) is not None}
+        commands = {k: key for k in ring.key_ids if (key := ring.get(k)) is not None}
+        write_key_file(path, commands, {**tm_keys, new_id: os.urandom(32)})
+        print(
+            f"added telemetry key id {new_id} to {path}; copy the file to the CRS over a secure channel, "
+            "then send switch_tm_key (docs/ground-link.md, key rotation)",
+            file=out,
+        )
+        return EXIT_OK
     if path.exists() and not args.force:
         raise UsageError(
             f"{path} exists; add --force to replace it (every CRS and GSW using it needs the new key)"
@@ -367,6 +380,11 @@ def build_parser() -> argparse.ArgumentParser:
         "switch_tm_key moves it to the next)",
     )
     k.add_argument("--force", action="store_true", help="replace an existing file")
+    k.add_argument(
+        "--add-tm-key",
+        action="store_true",
+        help="add a telemetry key with the next id to an existing file (key rotation), keeping its keys",
+    )
 
     e = sub.add_parser("export", help="export one packet kind's fields to CSV")
     archive_options(e)

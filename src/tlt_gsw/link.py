@@ -152,6 +152,11 @@ class GswLink:
     ) -> SentCommand:
         """Build, record and send one command; raise FieldError/KeyError on bad parameters."""
         params = dict(params or {})
+        if name == "switch_tm_key":
+            # Read the key file again first: the next telemetry key may have been added for this
+            # rotation, and the CRS's answer comes under it.
+            self.keyring = self.keyring.reload()
+            self.tm_verifier.add_keys(self.keyring.telemetry)
         security_seq = self.sequencer.next()
         seq_count = self._counters.next(self.defs.command_apid)
         raw = encode_command(

@@ -463,9 +463,9 @@ def format_summary(s: MissionSummary) -> str:
         if c.replays_rejected:
             replayed[c.name] = replayed.get(c.name, 0) + c.replays_rejected
     if replayed:
-        names = ", ".join(f"{name} {count}" for name, count in replayed.items())
+        per_command = ", ".join(f"{name} {count}" for name, count in replayed.items())
         lines.append(
-            f"  replayed copies:  {sum(replayed.values())} rejected by the CRS as replays ({names}); "
+            f"  replayed copies:  {sum(replayed.values())} rejected by the CRS as replays ({per_command}); "
             "their commands' outcomes stand"
         )
     return "\n".join(lines)

@@ -91,7 +91,7 @@ def test_pause_and_resume_then_bad_commands_then_stop(tmp_path):
         # 1. Unauthenticated: the right key id, the wrong key. The sender hears nothing; the
         # ground station (the CRS's telemetry address) gets the rejection and the event.
         mark = len(run.packets)
-        intruder = GswLink(run.defs, KeyRing({1: os.urandom(32)}, {1: os.urandom(32)}), 1, ("127.0.0.1", run.crs_port))
+        intruder = GswLink(run.defs, KeyRing({1: os.urandom(32)}), 1, ("127.0.0.1", run.crs_port))
         where = f"{intruder.address[0]}:{intruder.address[1]}"
         try:
             forged = intruder.send_command("pause")

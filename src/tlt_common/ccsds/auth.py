@@ -62,6 +62,7 @@ class KeyRing:
                 raise KeyFileError(f"key {key_id} is {len(key)} bytes, at least {MIN_KEY_BYTES} are needed")
         self._keys = dict(keys)
         self._telemetry = KeyRing(tm_keys) if tm_keys else None
+        self.path: Path | None = None  # the key file it was loaded from, if any (see :meth:`reload`)
 
     @property
     def telemetry(self) -> KeyRing:
@@ -111,9 +112,16 @@ class KeyRing:
         if not keys:
             raise KeyFileError(f"{file}: no keys in key file")
         try:
-            return cls(keys, tm_keys)
+            ring = cls(keys, tm_keys)
+            ring.path = file
+            return ring
         except KeyFileError as exc:
             raise KeyFileError(f"{file}: {exc}") from None
+
+    def reload(self) -> KeyRing:
+        """The key file read again (keys added for a rotation); this ring if it came from no file.
+        Raises :class:`KeyFileError` like :meth:`load`."""
+        return KeyRing.load(self.path) if self.path is not None else self
 
 
 def write_key_file(path: str | Path, keys: dict[int, bytes], tm_keys: dict[int, bytes] | None = None) -> Path:

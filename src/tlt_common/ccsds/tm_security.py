@@ -84,9 +84,13 @@ class TelemetrySigner:
             self._next += 1
             return raw
 
-    def switch_to_next(self) -> int:
-        """Sign with the next higher key id from now on; return it. Raise KeyFileError if none."""
+    def switch_to_next(self, keyring: KeyRing | None = None) -> int:
+        """Sign with the next higher key id from now on; return it. ``keyring`` replaces the
+        telemetry keys first (the key file read again, with a key added for this rotation).
+        Raise KeyFileError if there is no higher id (nothing changes then)."""
         with self._lock:
+            if keyring is not None and keyring.get(self._key_id) is not None:
+                self.keyring = keyring
             later = [k for k in self.keyring.key_ids if k > self._key_id]
             if not later:
                 raise KeyFileError(
@@ -128,6 +132,10 @@ class TelemetryVerifier:
     @property
     def key_ids(self) -> list[int]:
         return self.keyring.key_ids
+
+    def add_keys(self, keyring: KeyRing) -> None:
+        """Take the telemetry keys of ``keyring`` (the key file read again before a rotation)."""
+        self.keyring = keyring
 
     def retired(self, key_id: int) -> bool:
         """True once ``key_id`` was superseded more than ``overlap_s`` seconds ago."""

@@ -6,7 +6,10 @@ Reads command datagrams on a UDP socket, and for each one:
   :class:`LinkStats`;
 * a refused datagram is reported as an ``event`` packet and, when it carries a command header, an
   ``ack`` packet at stage *rejected* with the reason code; it is never acted on;
-* an accepted command is acknowledged at stage *accepted* first and then handed to the
+* ``switch_tm_key`` (link management) is carried out by the link itself: acknowledged *accepted*
+  under the current telemetry key, then *completed* under the next one (or *failed* if the key
+  file has no next one);
+* any other accepted command is acknowledged at stage *accepted* first and then handed to the
   ``on_command`` callback (called on the receive thread), or, without one, put on the
   :attr:`GroundLink.commands` queue. The CRS reports the outcome later with
   :meth:`GroundLink.complete` (stage *completed* or *failed*).
@@ -31,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tlt_common.ccsds.auth import KeyRing, ReplayGuard
+from tlt_common.ccsds.auth import KeyFileError, KeyRing, ReplayGuard
 from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, parse_datagram
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
@@ -42,6 +45,7 @@ from tlt_common.ccsds.tm_security import TelemetrySigner
 
 _log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
+SWITCH_TM_KEY = "switch_tm_key"
 
 
 @dataclass(frozen=True)
@@ -262,6 +266,9 @@ class GroundLink:
         )
         if source is not None:
             self._learned_gsw = source
+        if command.name == SWITCH_TM_KEY:
+            self._switch_tm_key(command)
+            return result
         if self.validator is not None:
             try:
                 refusal = self.validator(command)
@@ -304,6 +311,32 @@ class GroundLink:
                 _log.exception("command handler failed on %s", command.name)
                 self.complete(command, False, Reason.INTERNAL_ERROR, f"handler failed: {exc}")
         return result
+
+    def _switch_tm_key(self, command: GroundCommand) -> None:
+        """Move telemetry to the next key id: the accepted ack still under the old key, the
+        completed ack (and everything after it) under the new one."""
+        self.stats.record_accepted()
+        self._ack(
+            command.seq_count,
+            command.security_seq,
+            command.command_id,
+            AckStage.ACCEPTED,
+            Reason.NONE,
+            "",
+            command.source,
+        )
+        old = self.tm_signer.key_id
+        try:
+            # The key file is read again, so a key added to it for this rotation is found.
+            self.keyring = self.keyring.reload()
+            new = self.tm_signer.switch_to_next(self.keyring.telemetry)
+        except KeyFileError as exc:
+            self.complete(command, False, Reason.EXECUTION_FAILED, str(exc))
+            return
+        _log.info("telemetry key id %d -> %d on ground command", old, new)
+        self.complete(command, True, detail=f"telemetry key id {old} -> {new}")
+        text = f"telemetry now signed with key id {new} (was {old})"
+        self._safe_event(Severity.INFO, "TM_KEY_SWITCHED", Reason.NONE, text)
 
     def _reject(self, rejection: Rejection, source: tuple[str, int] | None) -> None:
         # Unauthenticated junk is rate limited; an authenticated command is always answered.

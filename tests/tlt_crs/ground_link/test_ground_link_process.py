@@ -109,7 +109,8 @@ def test_cli_commands_a_crs_process(crs_process):
 
 
 def test_wrong_key_gets_no_answer_and_no_action(crs_process):
-    other = write_key_file(crs_process["tmp"] / "keys" / "other.key", {1: os.urandom(32)}, {1: os.urandom(32)})
+    keys = crs_process["tmp"] / "keys"
+    other = write_key_file(keys / "other.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     config = write_config(crs_process["tmp"], other, "intruder.yaml")
     refused = gsw(config, crs_process["port"], "send", "start", "--wait-ack", "--timeout", "0.5")
     assert refused.returncode == 3 and "no acknowledgement" in refused.stdout
