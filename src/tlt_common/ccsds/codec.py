@@ -365,12 +365,21 @@ def _parse(
     try:
         values, end = _layout(pdef).decode(data[:stop], start)
     except FieldError as exc:
-        return Rejection(exc.reason, f"{pdef.name}.{exc.field}: {exc.detail}", data, **info)
+        detail = f"{pdef.name}.{exc.field}: {exc.detail}"
+        return Rejection(exc.reason, detail, data, **_signed(info, key_id, security_seq))
     if end != stop:
-        return Rejection(Reason.MALFORMED, f"{stop - end} unexpected byte(s) after {pdef.name}", data, **info)
+        detail = f"{stop - end} unexpected byte(s) after {pdef.name}"
+        return Rejection(Reason.MALFORMED, detail, data, **_signed(info, key_id, security_seq))
     return Packet(
         pdef.name, apid, "tm", seq_count, stamp, values, data, key_id=key_id, security_seq=security_seq
     )
+
+
+def _signed(info: dict[str, Any], key_id: int | None, security_seq: int | None) -> dict[str, Any]:
+    """``info`` with the security header of an authenticated packet, if it had one."""
+    if key_id is None:
+        return info
+    return {**info, "key_id": key_id, "security_seq": security_seq, "authenticated": True}
 
 
 def _authenticate(
@@ -383,25 +392,37 @@ def _authenticate(
 ) -> tuple[int, int] | Rejection:
     """Check the security header and MAC that end at ``mac_start``, then freshness against ``replay``.
 
-    Returns (key id, security sequence), or a Rejection; ``info`` gains the header's fields, and
+    Returns (key id, security sequence), or a Rejection carrying ``info``, the header's fields and,
     once the MAC verified, ``authenticated`` and the items of ``verified`` (what the MAC vouches for).
     """
     sec_start = PRIMARY_HEADER_LEN + TIME_LEN
     if mac_start < sec_start + SECURITY_HEADER_LEN:
         return Rejection(Reason.TRUNCATED, "too short for security header and MAC", data, **info)
     key_id, security_seq = _SECURITY.unpack_from(data, sec_start)
-    info.update(key_id=key_id, security_seq=security_seq)
+    # The rejections' fields are put together only on failure: this runs per received packet.
     key = keyring.get(key_id)
     if key is None:
-        return Rejection(Reason.UNKNOWN_KEY, f"no key with id {key_id}", data, **info)
-    if not verify_mac(key, data[:mac_start], data[mac_start : len(data) - CRC_LEN]):
-        return Rejection(Reason.BAD_AUTH, "MAC does not verify", data, **info)
-    info["authenticated"] = True
-    info.update(verified or {})
-    if replay is not None and not replay.accept(key_id, security_seq):
-        last = replay.last(key_id)
         return Rejection(
-            Reason.REPLAY, f"sequence {security_seq} is not above the last accepted {last}", data, **info
+            Reason.UNKNOWN_KEY,
+            f"no key with id {key_id}",
+            data,
+            key_id=key_id,
+            security_seq=security_seq,
+            **info,
+        )
+    if not verify_mac(key, data[:mac_start], data[mac_start : len(data) - CRC_LEN]):
+        return Rejection(
+            Reason.BAD_AUTH, "MAC does not verify", data, key_id=key_id, security_seq=security_seq, **info
+        )
+    if replay is not None and not replay.accept(key_id, security_seq):
+        return Rejection(
+            Reason.REPLAY,
+            f"sequence {security_seq} is not above the last accepted {replay.last(key_id)}",
+            data,
+            key_id=key_id,
+            security_seq=security_seq,
+            authenticated=True,
+            **{**info, **(verified or {})},
         )
     return key_id, security_seq
 
@@ -435,6 +456,7 @@ def _parse_command(
     if isinstance(authenticated, Rejection):
         return authenticated
     key_id, security_seq = authenticated
+    info.update(key_id=key_id, security_seq=security_seq, command_id=data[cmd_pos], authenticated=True)
     cmd = defs.commands_by_id.get(data[cmd_pos])
     if cmd is None:
         return Rejection(Reason.UNKNOWN_COMMAND, f"no command has id {data[cmd_pos]}", data, **info)
