@@ -17,6 +17,7 @@ import argparse
 import dataclasses
 import logging
 import socket
+import sqlite3
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -117,6 +118,7 @@ class GswLink:
         if not self.tm_verifier.key_ids:
             _log.warning("no telemetry keys in the key ring: every telemetry packet will be rejected")
         self._log_window = (0.0, 0)
+        self._seed_replay_window()
         self._counters = SequenceCounters()
         self._sent: dict[int, SentCommand] = {}
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -254,6 +256,32 @@ class GswLink:
         if self.on_packet is not None:
             self.on_packet(result)
         return result
+
+    def _seed_replay_window(self, newest: int = 256) -> None:
+        """After a GSW restart, refuse telemetry the archive already holds as accepted: the
+        ``newest`` accepted packets are verified again with this link's telemetry keys (rows of
+        other keys or runs do not verify and are skipped) and set each key id's floor."""
+        if self.recorder is None or not self.recorder.path.exists():
+            return
+        try:
+            conn = sqlite3.connect(f"file:{self.recorder.path}?mode=ro", uri=True)
+            try:
+                newest_first = (
+                    "SELECT raw FROM packets WHERE direction = 'rx' AND status = 'ok' ORDER BY id DESC"
+                )
+                rows = conn.execute(f"{newest_first} LIMIT ?", (newest,)).fetchall()
+            finally:
+                conn.close()
+        except sqlite3.Error as exc:
+            _log.warning("cannot read %s for the telemetry replay window: %s", self.recorder.path, exc)
+            return
+        floors: dict[int, int] = {}
+        for (raw,) in rows:
+            result = parse_datagram(raw, self.defs, expect="tm", keyring=self.tm_verifier)
+            if isinstance(result, Packet) and result.key_id is not None and result.security_seq is not None:
+                floors[result.key_id] = max(floors.get(result.key_id, 0), result.security_seq)
+        for key_id, last in floors.items():
+            self.tm_verifier.seed(key_id, last)
 
     def _rejected(self, rejection: Rejection) -> Rejection:
         """Name a retired key as such, and log the rejection (rate limited)."""

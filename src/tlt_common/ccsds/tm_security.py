@@ -152,6 +152,14 @@ class TelemetryVerifier:
         state = self._state.get(key_id)
         return state.last if state else None
 
+    def seed(self, key_id: int, last: int) -> None:
+        """Treat every number up to ``last`` under ``key_id`` as accepted already (what an archive
+        kept across a GSW restart holds), so none of it is taken again."""
+        with self._lock:
+            state = self._state.get(key_id)
+            if state is None or last > state.last:
+                self._state[key_id] = _KeyState(last, _WINDOW_MASK)
+
     def accept(self, key_id: int, seq: int) -> bool:
         """Record ``seq`` under ``key_id`` if it was never accepted and is inside the window."""
         with self._lock:
