@@ -285,3 +285,17 @@ def test_telemetry_that_fails_authentication_is_counted_apart(writer):
     figures = model.link_figures()
     assert (figures.packets_rx, figures.rejections, figures.auth_rejections) == (3, 2, 2)
     assert figures.by_reason == {"replay": 1, "bad_auth": 1}
+
+
+def test_a_replayed_commands_rejection_does_not_change_its_outcome(writer):
+    seq = writer.tc("start")
+    writer.ack("start", seq, "accepted")
+    writer.ack("start", seq, "completed")
+    for _ in range(3):  # the CRS rejects copies of it that someone replayed
+        writer.ack("start", seq, "rejected", "replay", "sequence is not above the last accepted")
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    model.advance()
+    record = model.commands[seq]
+    assert (record.last_stage, [a.stage for a in record.acks]) == ("completed", ["accepted", "completed"])
+    assert record.replays_rejected == 3
