@@ -26,11 +26,11 @@ from tlt_crs.ground_link import GroundLink
 from tlt_gsw.link import GswLink
 
 
-def serve_crs(key_hex: str, state: str) -> int:
+def serve_crs(key_hex: str, tm_key_hex: str, state: str) -> int:
     """The CRS process: print the bound port, serve until standard input closes."""
     link = GroundLink(
         load_definitions(),
-        KeyRing({1: bytes.fromhex(key_hex)}),
+        KeyRing({1: bytes.fromhex(key_hex)}, {1: bytes.fromhex(tm_key_hex)}),
         state,
         on_command=lambda command: None,  # the bench has no tree to hand commands to
         stats_period_s=0,
@@ -51,15 +51,24 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--commands", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=20)
-    parser.add_argument("--serve-crs", nargs=2, metavar=("KEY_HEX", "STATE"), help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--serve-crs", nargs=3, metavar=("KEY_HEX", "TM_KEY_HEX", "STATE"), help=argparse.SUPPRESS
+    )
     args = parser.parse_args(argv)
     if args.serve_crs:
         return serve_crs(*args.serve_crs)
     defs = load_definitions()
-    key = os.urandom(32)
+    key, tm_key = os.urandom(32), os.urandom(32)
     with tempfile.TemporaryDirectory() as tmp:
         crs = subprocess.Popen(
-            [sys.executable, __file__, "--serve-crs", key.hex(), str(Path(tmp) / "replay.json")],
+            [
+                sys.executable,
+                __file__,
+                "--serve-crs",
+                key.hex(),
+                tm_key.hex(),
+                str(Path(tmp) / "replay.json"),
+            ],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
@@ -67,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             address = ("127.0.0.1", int(crs.stdout.readline()))
             latencies, lost = [], 0
-            with GswLink(defs, KeyRing({1: key}), 1, address) as gsw:
+            with GswLink(defs, KeyRing({1: key}, {1: tm_key}), 1, address) as gsw:
                 for i in range(args.warmup + args.commands):
                     start = time.perf_counter()
                     sent = gsw.send_command("pause" if i % 2 else "resume")

@@ -31,9 +31,10 @@ import time
 from pathlib import Path
 
 from tlt_common.bt.status_codec import TreeShape, encode
-from tlt_common.ccsds.codec import encode_telemetry
+from tlt_common.ccsds.auth import KeyRing, write_key_file
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.sequence import SequenceCounters
+from tlt_common.ccsds.tm_security import TelemetrySigner
 from tlt_gsw.gui.demo_archive import demo_tree, set_demo_statuses
 from tlt_gsw.gui.tower_layout import pack_member_states
 
@@ -78,11 +79,12 @@ def packet_mix(defs) -> list[tuple[str, dict]]:
     return mix
 
 
-def sender(address: tuple[str, int], rate: float, seconds: float, sent_count) -> None:
+def sender(address: tuple[str, int], key_file: str, rate: float, seconds: float, sent_count) -> None:
     """The CRS stand-in: real telemetry datagrams at ``rate`` per second, in 10 ms bursts."""
     defs = load_definitions()
     mix = packet_mix(defs)
     counters = SequenceCounters()
+    signer = TelemetrySigner(KeyRing.load(key_file).telemetry, 1)  # signed as the CRS signs
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     start = time.monotonic()
     sent = 0
@@ -97,7 +99,7 @@ def sender(address: tuple[str, int], rate: float, seconds: float, sent_count) ->
             i += 1
             if kind == "tree_status":  # the CRS sends each tick's status once, ticks counting up
                 values = {**values, "tick": i}
-            raw = encode_telemetry(
+            raw = signer.encode(
                 defs, kind, values, seq_count=counters.next(defs.packet(kind).apid), timestamp=time.time()
             )
             sock.sendto(raw, address)
@@ -138,10 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     conf = load_gui_config(None, defs).with_options(refresh_hz=args.refresh_hz)
     folder = Path(tempfile.mkdtemp(prefix="gsw-gui-bench-"))
     archive = folder / "archive.sqlite"
+    key_file = write_key_file(folder / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     link = LinkProcess(
         LinkSettings(
-            definitions=None, key_file=None, key_id=1, crs_address=("127.0.0.1", 9), bind=("127.0.0.1", 0),
-            archive=str(archive), command_state=None, flush_interval_s=conf.recorder_flush_s,
+            definitions=None, key_file=str(key_file), key_id=1, crs_address=("127.0.0.1", 9),
+            bind=("127.0.0.1", 0), archive=str(archive), command_state=None,
+            flush_interval_s=conf.recorder_flush_s,
         )
     ).start()  # fmt: skip
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(["bench"])
@@ -177,7 +181,9 @@ def main(argv: list[str] | None = None) -> int:
 
     window.timer.timeout.connect(sample)
     sent_count = multiprocessing.Value("q", 0)
-    proc = multiprocessing.Process(target=sender, args=(link.address, args.rate, args.seconds, sent_count))
+    proc = multiprocessing.Process(
+        target=sender, args=(link.address, str(key_file), args.rate, args.seconds, sent_count)
+    )
     proc.start()
     window.start()
     QtCore.QTimer.singleShot(int((args.seconds + 1.5) * 1000), app.quit)
@@ -187,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     time.sleep(0.5)  # the link process commits its last batch
     link.close()
     window.refresh()
-    archived = probe.execute("SELECT COUNT(*) FROM packets").fetchone()[0]
+    archived = probe.execute("SELECT COUNT(*) FROM packets WHERE status = 'ok'").fetchone()[0]
 
     print(f"GUI refresh at {args.refresh_hz:g} Hz, ingesting {args.rate:g} packets/s for {args.seconds:g} s")
     print(

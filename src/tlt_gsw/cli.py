@@ -160,6 +160,7 @@ def _link(
             recorder=recorder,
             close_recorder=True,
             sequencer=sequencer,
+            tm_key_overlap_s=gsw["tm_key_overlap_s"],
         )
     except BaseException:
         if recorder is not None:
@@ -226,7 +227,8 @@ def _cmd_watch(args: argparse.Namespace, out) -> int:
         stats = link.stats
         print(
             f"received {stats.packets_rx} packet(s), {stats.bytes_rx} B, gaps {stats.gaps} "
-            f"(missing {stats.missing}), CRC errors {stats.crc_errors}, rejected {stats.rejections}",
+            f"(missing {stats.missing}), CRC errors {stats.crc_errors}, rejected {stats.rejections} "
+            f"(failed authentication {stats.auth_rejections})",
             file=out,
         )
     return EXIT_OK
@@ -293,14 +295,29 @@ def _cmd_export(args: argparse.Namespace, out) -> int:
 
 def _cmd_keygen(args: argparse.Namespace, out) -> int:
     path = expand_path(args.path)
+    if args.add_tm_key:
+        ring = KeyRing.load(path)
+        tm = ring.telemetry
+        new_id = max(tm.key_ids, default=0) + 1
+        tm_keys = {k: key for k in tm.key_ids if (key := tm.get(k)) is not None}
+        commands = {k: key for k in ring.key_ids if (key := ring.get(k)) is not None}
+        write_key_file(path, commands, {**tm_keys, new_id: os.urandom(32)})
+        print(
+            f"added telemetry key id {new_id} to {path}; copy the file to the CRS over a secure channel, "
+            "then send switch_tm_key (docs/ground-link.md, key rotation)",
+            file=out,
+        )
+        return EXIT_OK
     if path.exists() and not args.force:
         raise UsageError(
             f"{path} exists; add --force to replace it (every CRS and GSW using it needs the new key)"
         )
-    write_key_file(path, {args.key_id: os.urandom(32)})
+    tm_ids = args.tm_key_ids
+    write_key_file(path, {args.key_id: os.urandom(32)}, {k: os.urandom(32) for k in tm_ids})
     print(
-        f"wrote a 32-byte key with id {args.key_id} to {path} (mode 0600); copy it to the CRS over a "
-        "secure channel and point key_file (or $TLT_GROUND_KEY_FILE) at it on both ends",
+        f"wrote a 32-byte command key with id {args.key_id} and telemetry keys with ids "
+        f"{', '.join(map(str, tm_ids))} to {path} (mode 0600); copy it to the CRS over a secure "
+        "channel and point key_file (or $TLT_GROUND_KEY_FILE) at it on both ends",
         file=out,
     )
     return EXIT_OK
@@ -354,8 +371,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     k = sub.add_parser("keygen", help="create a shared key file (outside the repository)")
     k.add_argument("path", help="key file to write, e.g. ~/.config/tlt/ground.key")
-    k.add_argument("--key-id", type=int, default=1)
+    k.add_argument("--key-id", type=int, default=1, help="command key id")
+    k.add_argument(
+        "--tm-key-ids",
+        type=lambda text: sorted({int(part) for part in text.split(",")}),
+        default=[1, 2],
+        help="telemetry key ids, comma separated (the CRS starts on link.yaml tm_key_id and "
+        "switch_tm_key moves it to the next)",
+    )
     k.add_argument("--force", action="store_true", help="replace an existing file")
+    k.add_argument(
+        "--add-tm-key",
+        action="store_true",
+        help="add a telemetry key with the next id to an existing file (key rotation), keeping its keys",
+    )
 
     e = sub.add_parser("export", help="export one packet kind's fields to CSV")
     archive_options(e)

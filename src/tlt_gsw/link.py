@@ -1,30 +1,41 @@
 """The GSW end of the CCSDS ground link over UDP (paper §V.A, Fig. 3 and Fig. 6).
 
 Sends authenticated commands to the CRS (:meth:`GswLink.send_command`), receives telemetry
-(:meth:`GswLink.poll`), counts it (:class:`LinkStats`: gaps per APID, CRC errors, rejections) and
-hands every datagram sent or received to the archive :class:`Recorder`. Acknowledgements are
-matched to the command they answer by its security sequence number; :meth:`GswLink.wait_ack` waits
-for a stage with a bounded timeout. Nothing here blocks without a timeout.
+(:meth:`GswLink.poll`), authenticates it with the telemetry keys of the key ring
+(:class:`TelemetryVerifier`: MAC, replay window, key retirement), counts it (:class:`LinkStats`:
+gaps per APID, CRC errors, rejections per reason) and hands every datagram sent or received to the
+archive :class:`Recorder`. A telemetry packet that fails authentication is archived as rejected
+with its reason, logged, and never decoded or handed on as telemetry. Acknowledgements are
+matched to the command they answer by its security sequence number (a ``replay`` rejection of a
+command already acknowledged answers a replayed copy, not the command, and is not matched);
+:meth:`GswLink.wait_ack` waits for a stage with a bounded timeout. Nothing here blocks without a timeout.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import logging
 import socket
+import sqlite3
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from tlt_common.ccsds.auth import CommandSequencer, KeyRing
-from tlt_common.ccsds.codec import Packet, ParseResult, encode_command, parse_datagram
+from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, encode_command, parse_datagram
 from tlt_common.ccsds.definitions import Definitions
 from tlt_common.ccsds.reasons import AckStage, Reason
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.stats import LinkStats
+from tlt_common.ccsds.tm_security import TelemetryVerifier
 from tlt_gsw.archive.recorder import Recorder
 
+_log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
+# Rejected telemetry is logged at most this often per second (each one is archived regardless).
+REJECTION_LOGS_PER_S = 5
 MAX_TRACKED_COMMANDS = 1000
 
 
@@ -87,6 +98,7 @@ class GswLink:
         close_recorder: bool = False,
         clock: Callable[[], float] = time.time,
         recv_buffer_bytes: int | None = None,
+        tm_key_overlap_s: float = 30.0,
     ) -> None:
         key = keyring.get(key_id)
         if key is None:
@@ -102,6 +114,11 @@ class GswLink:
         self.on_packet = on_packet
         self.clock = clock
         self.stats = LinkStats()
+        self.tm_verifier = TelemetryVerifier(keyring.telemetry, overlap_s=tm_key_overlap_s)
+        if not self.tm_verifier.key_ids:
+            _log.warning("no telemetry keys in the key ring: every telemetry packet will be rejected")
+        self._log_window = (0.0, 0)
+        self._seed_replay_window()
         self._counters = SequenceCounters()
         self._sent: dict[int, SentCommand] = {}
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -137,6 +154,11 @@ class GswLink:
     ) -> SentCommand:
         """Build, record and send one command; raise FieldError/KeyError on bad parameters."""
         params = dict(params or {})
+        if name == "switch_tm_key":
+            # Read the key file again first: the next telemetry key may have been added for this
+            # rotation, and the CRS's answer comes under it.
+            self.keyring = self.keyring.reload()
+            self.tm_verifier.add_keys(self.keyring.telemetry)
         security_seq = self.sequencer.next()
         seq_count = self._counters.next(self.defs.command_apid)
         raw = encode_command(
@@ -209,14 +231,18 @@ class GswLink:
 
     def _handle(self, data: bytes) -> ParseResult:
         now = self.clock()
-        result = parse_datagram(data, self.defs, expect="tm")
+        verifier = self.tm_verifier
+        result = parse_datagram(data, self.defs, expect="tm", keyring=verifier, replay=verifier)
+        if isinstance(result, Rejection):
+            result = self._rejected(result)
         self.stats.record_rx(len(data), result)
         if self.recorder is not None:
             self.recorder.record("rx", data, result, recorded_at=now)
         if isinstance(result, Packet) and result.kind == "ack":
             fields = result.fields
             sent = self._sent.get(fields["security_seq"])
-            if sent is not None:
+            # A replay rejection of an already answered command answers someone's copy of it.
+            if sent is not None and not (sent.acks and fields["reason"] == Reason.REPLAY.label):
                 sent.acks.append(
                     Ack(
                         AckStage[fields["stage"].upper()],
@@ -230,6 +256,55 @@ class GswLink:
         if self.on_packet is not None:
             self.on_packet(result)
         return result
+
+    def _seed_replay_window(self, newest: int = 256) -> None:
+        """After a GSW restart, refuse telemetry the archive already holds as accepted: the
+        ``newest`` accepted packets are verified again with this link's telemetry keys (rows of
+        other keys or runs do not verify and are skipped) and set each key id's floor."""
+        if self.recorder is None or not self.recorder.path.exists():
+            return
+        try:
+            conn = sqlite3.connect(f"file:{self.recorder.path}?mode=ro", uri=True)
+            try:
+                newest_first = (
+                    "SELECT raw FROM packets WHERE direction = 'rx' AND status = 'ok' ORDER BY id DESC"
+                )
+                rows = conn.execute(f"{newest_first} LIMIT ?", (newest,)).fetchall()
+            finally:
+                conn.close()
+        except sqlite3.Error as exc:
+            _log.warning("cannot read %s for the telemetry replay window: %s", self.recorder.path, exc)
+            return
+        floors: dict[int, int] = {}
+        for (raw,) in rows:
+            result = parse_datagram(raw, self.defs, expect="tm", keyring=self.tm_verifier)
+            if isinstance(result, Packet) and result.key_id is not None and result.security_seq is not None:
+                floors[result.key_id] = max(floors.get(result.key_id, 0), result.security_seq)
+        for key_id, last in floors.items():
+            self.tm_verifier.seed(key_id, last)
+
+    def _rejected(self, rejection: Rejection) -> Rejection:
+        """Name a retired key as such, and log the rejection (rate limited)."""
+        key_id = rejection.key_id
+        if rejection.reason is Reason.UNKNOWN_KEY and key_id is not None and self.tm_verifier.retired(key_id):
+            rejection = dataclasses.replace(
+                rejection, detail=f"telemetry key id {key_id} is retired (superseded by a newer key)"
+            )
+        second = time.monotonic() // 1
+        start, logged = self._log_window
+        if second != start:
+            start, logged = second, 0
+        if logged < REJECTION_LOGS_PER_S:
+            _log.warning(
+                "telemetry rejected (APID %s, key id %s): %s: %s",
+                rejection.apid,
+                key_id,
+                rejection.reason.label,
+                rejection.detail,
+            )
+            logged += 1
+        self._log_window = (start, logged)
+        return rejection
 
 
 __all__ = ["Ack", "GswLink", "SentCommand"]

@@ -255,6 +255,7 @@ def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
             close_recorder=True,
             sequencer=CommandSequencer(expand_path(gsw["command_state"])),
             recv_buffer_bytes=4 << 20,
+            tm_key_overlap_s=gsw["tm_key_overlap_s"],
         )
     except BaseException:
         recorder.close()

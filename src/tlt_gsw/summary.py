@@ -12,6 +12,12 @@ printed at its end by the mission job or afterwards from any archive file. It re
   ``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``, ``CRS_FAULT``, ``FAULT_CLEARED``, ``CRS_UP``;
 * commands sent (``tx``) and their ``ack`` packets: what the operator did about a fault.
 
+An ack is matched to the command it answers by the security sequence number. A ``replay``
+rejection of a number whose command was already acknowledged answers a copy of that packet that
+someone replayed to the CRS, not the command: it is counted apart (``replays_rejected``) and never
+changes the command's outcome. Likewise an ack that arrives after a command's final stage does not
+move it back.
+
 A step's span runs from its ``mission_step`` packet to the next one. A bay's time runs from its
 first step to the first packet saying it is built. An event's simulated time is that of the step
 in progress when it arrived.
@@ -120,6 +126,7 @@ class CommandRecord:
     stage: str = "sent"  # the latest ack stage
     reason: str = ""
     detail: str = ""
+    replays_rejected: int = 0  # replayed copies of this command the CRS rejected
 
 
 @dataclass
@@ -207,6 +214,7 @@ def _clearing_action(command: CommandRecord) -> str | None:
 
 
 _BAY_NUMBER = re.compile(r"bay (\d+)")
+_FINAL_STAGES = ("rejected", "completed", "failed")
 
 
 def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> MissionSummary:
@@ -259,7 +267,11 @@ def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> Mi
             continue
         if record.kind == "ack":
             acked = by_security_seq.get(int(f.get("security_seq", -1)))
-            if acked is not None:
+            if acked is None:
+                continue
+            if f["reason"] == "replay" and acked.stage != "sent":
+                acked.replays_rejected += 1
+            elif acked.stage not in _FINAL_STAGES:
                 acked.stage, acked.reason, acked.detail = f["stage"], f["reason"], f["detail"]
             continue
         if record.kind == "mission_step":
@@ -446,6 +458,16 @@ def format_summary(s: MissionSummary) -> str:
         c, times = same[-1], f" {len(same)} times" if len(same) > 1 else ""
         last = "last: " if len(same) > 1 else ""
         lines.append(f"    {c.name} {c.stage}{times}: {c.reason} {last}{c.detail}".rstrip())
+    replayed: dict[str, int] = {}
+    for c in s.commands:
+        if c.replays_rejected:
+            replayed[c.name] = replayed.get(c.name, 0) + c.replays_rejected
+    if replayed:
+        per_command = ", ".join(f"{name} {count}" for name, count in replayed.items())
+        lines.append(
+            f"  replayed copies:  {sum(replayed.values())} rejected by the CRS as replays ({per_command}); "
+            "their commands' outcomes stand"
+        )
     return "\n".join(lines)
 
 

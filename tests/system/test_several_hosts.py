@@ -129,7 +129,7 @@ def test_a_build_crosses_hosts_and_a_cut_ars_link_faults_and_recovers(tmp_path):
     crs_ip, ground_ip = hosts["crs"].split("/")[0], hosts["ground"].split("/")[0]
     state = tmp_path / "state" / "tower.json"
     record = tmp_path / "requests.jsonl"
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     link_yaml = tmp_path / "link.yaml"
     link_yaml.write_text(
         yaml.safe_dump(

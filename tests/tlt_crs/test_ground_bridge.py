@@ -37,7 +37,7 @@ def ground(rig, crs, tmp_path):
     crs.wait_for(
         lambda: node.ctx.board.get("tower_built") is not None, timeout=10.0, what="the blackboard initialised"
     )
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     link_yaml = tmp_path / "link.yaml"
     link_yaml.write_text(
         yaml.safe_dump(

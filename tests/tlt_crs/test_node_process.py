@@ -288,7 +288,7 @@ def test_ground_commands_over_ccsds_reach_the_tree(rig_process, crs, tmp_path):
     from tlt_gsw.link import GswLink
 
     rig_process("--hold-s", "3.0")  # each ARS request takes a while: the build is mid-way throughout
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     port = free_udp_port()
     link_yaml = tmp_path / "link.yaml"
     link_yaml.write_text(

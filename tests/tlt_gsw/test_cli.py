@@ -23,7 +23,7 @@ DEFS = load_definitions()
 
 @pytest.fixture
 def setup(tmp_path):
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {3: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {3: os.urandom(32)}, {1: os.urandom(32)})
     handled = []
     crs_holder = {}
 

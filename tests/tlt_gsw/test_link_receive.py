@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from tlt_common.ccsds.auth import KeyRing
-from tlt_common.ccsds.codec import encode_telemetry
 from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.ccsds.tm_security import TelemetrySigner
 from tlt_gsw.archive.recorder import Recorder
 from tlt_gsw.link import GswLink
 
@@ -18,9 +18,9 @@ DEFS = load_definitions()
 
 def test_a_quiet_poll_commits_what_was_buffered(tmp_path):
     recorder = Recorder(tmp_path / "a.sqlite", flush_interval_s=0.2)
-    keyring = KeyRing({1: os.urandom(32)})
+    keyring = KeyRing({1: os.urandom(32)}, {1: os.urandom(32)})
     with GswLink(DEFS, keyring, 1, ("127.0.0.1", 9), recorder=recorder, close_recorder=True) as link:
-        raw = encode_telemetry(DEFS, "event", {
+        raw = TelemetrySigner(keyring.telemetry, 1).encode(DEFS, "event", {
             "severity": "info", "source": "t", "code": "C", "reason": "none", "text": "x",
         }, seq_count=0)  # fmt: skip
         link._sock.sendto(raw, link.address)
@@ -34,7 +34,7 @@ def test_a_quiet_poll_commits_what_was_buffered(tmp_path):
 
 
 def test_a_larger_receive_buffer_is_requested():
-    keyring = KeyRing({1: os.urandom(32)})
+    keyring = KeyRing({1: os.urandom(32)}, {1: os.urandom(32)})
     wanted = 1 << 20
     cap = (
         int(Path("/proc/sys/net/core/rmem_max").read_text())

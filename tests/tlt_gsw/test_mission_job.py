@@ -58,7 +58,7 @@ def link_yaml(tmp_path: Path, key_file: Path, crs_port: int, gsw_port: int, name
 
 @pytest.fixture
 def keys(tmp_path):
-    return write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    return write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
 
 
 def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM) -> None:
@@ -213,7 +213,10 @@ def test_start_with_a_wrong_key_exits_1_with_the_reason(tmp_path, keys):
     gsw_port = free_udp_port()
     crs = FakeCrs(tmp_path, keys, gsw_port)
     try:
-        intruder = write_key_file(tmp_path / "keys" / "other.key", {1: os.urandom(32)})
+        # A wrong command key; the telemetry keys are the CRS's, so the GSW can read the rejection.
+        tm = KeyRing.load(keys).telemetry
+        tm_keys = {k: tm.get(k) for k in tm.key_ids}
+        intruder = write_key_file(tmp_path / "keys" / "other.key", {1: os.urandom(32)}, tm_keys)
         link = link_yaml(tmp_path, intruder, crs.port, gsw_port)
         code, out = _job(link, "--start-timeout", "20")
     finally:

@@ -285,3 +285,61 @@ def test_like_refusals_in_a_row_are_one_line_with_their_count(tmp_path):
     assert "  commands sent:    5 (4 rejected or failed)" in text
     assert "    start rejected 3 times: refused last: not ready: vision not up" in text
     assert "    pause rejected: refused not started" in text
+
+
+def test_rejected_replays_are_not_counted_against_the_original_command(tmp_path):
+    a = Archive(tmp_path / "run.sqlite")
+    for i in range(10):
+        a.command(100.0 + i, "start", {}, 10 + i, ("accepted", "none", ""), ("completed", "none", ""))
+    for i in range(10):  # each captured Start replayed to the CRS, which rejects the copy
+        a.tm(120.0 + i, "ack", {
+            "command_apid": DEFS.command_apid, "command_seq_count": 0, "security_seq": 10 + i,
+            "command": "start", "stage": "rejected", "reason": "replay", "detail": "not above the last",
+        })  # fmt: skip
+    # A command whose own first answer is a replay rejection (the GSW reused a number) was refused.
+    a.command(130.0, "pause", {}, 5, ("rejected", "replay", "sequence 5 is not above the last accepted 19"))
+    a.close()
+    summary = summarize_file(tmp_path / "run.sqlite")
+    assert [c.stage for c in summary.commands] == ["completed"] * 10 + ["rejected"]
+    text = format_summary(summary)
+    assert "  commands sent:    11 (1 rejected or failed)" in text
+    assert "start rejected" not in text and "    pause rejected: replay" in text
+    assert "  replayed copies:  10 rejected by the CRS as replays (start 10)" in text
+
+
+def test_replayed_commands_over_a_real_link_leave_the_summary_right(tmp_path):
+    import socket
+    import time
+
+    from tlt_common.ccsds.reasons import AckStage
+    from tlt_crs.ground_link import GroundLink
+    from tlt_gsw.link import GswLink
+
+    ring = KeyRing({1: KEY}, {1: os.urandom(32)})
+    crs = GroundLink(DEFS, ring, tmp_path / "replay.json", stats_period_s=0)
+    crs.on_command = lambda command: crs.complete(command)
+    crs.start()
+    archive = tmp_path / "live.sqlite"
+    attacker = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        with GswLink(DEFS, ring, 1, crs.address, recorder=Recorder(archive), close_recorder=True) as gsw:
+            sent = [gsw.send_command("start") for _ in range(10)]
+            for command in sent:
+                ack = gsw.wait_ack(command, final=True, timeout=5.0)
+                assert ack is not None and ack.stage is AckStage.COMPLETED
+            for command in sent:  # the captured Starts, replayed by someone else
+                attacker.sendto(command.raw, crs.address)
+            deadline = time.monotonic() + 5.0
+            while crs.stats.by_reason["replay"] < 10 and time.monotonic() < deadline:
+                gsw.poll(0.05)
+            gsw.poll(0.2)
+            assert crs.stats.by_reason["replay"] == 10
+            assert all(command.final.stage is AckStage.COMPLETED for command in sent)
+            assert all(len(command.acks) == 2 for command in sent)  # the rejections are not theirs
+    finally:
+        attacker.close()
+        crs.close()
+    text = format_summary(summarize_file(archive))
+    assert "  commands sent:    10 (0 rejected or failed)" in text
+    assert "start rejected" not in text
+    assert "  replayed copies:  10 rejected by the CRS as replays (start 10)" in text

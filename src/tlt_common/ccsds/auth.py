@@ -1,18 +1,21 @@
-"""Command authentication in the spirit of CCSDS SDLS (355.0-B): keys, MACs and anti-replay.
+"""Ground link authentication in the spirit of CCSDS SDLS (355.0-B): keys, MACs and anti-replay.
 
 Every command carries a security header (key id, 64-bit sequence number) and an HMAC-SHA256
 trailer over everything before it. The CRS verifies the trailer in constant time and accepts a
 sequence number only if it is above the last one accepted for that key; that last number is
 persisted atomically so a restarted CRS still refuses old commands.
 
+Telemetry is authenticated the same way in the other direction with keys of its own
+(:mod:`tlt_common.ccsds.tm_security`); this module holds the MAC primitives both directions use.
+
 Key files live outside the repository (path from configuration or ``$TLT_GROUND_KEY_FILE``). Each
-non-comment line is ``<key id> <hex key>`` with a key of at least 16 bytes; the file must not be
-readable by group or others.
+non-comment line is ``<key id> <hex key>`` (a command key) or ``tm <key id> <hex key>`` (a
+telemetry key), with keys of at least 16 bytes; the file must not be readable by group or others.
+One file holds both kinds so both ends read one secret, but a command key never signs telemetry.
 """
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import json
 import os
@@ -36,7 +39,7 @@ class ReplayStateError(RuntimeError):
 
 def compute_mac(key: bytes, data: bytes, size: int = 32) -> bytes:
     """HMAC-SHA256 of ``data`` truncated to ``size`` bytes."""
-    return hmac.new(key, data, hashlib.sha256).digest()[:size]
+    return hmac.digest(key, data, "sha256")[:size]  # the one-shot C path: no HMAC object per packet
 
 
 def verify_mac(key: bytes, data: bytes, mac: bytes) -> bool:
@@ -45,15 +48,25 @@ def verify_mac(key: bytes, data: bytes, mac: bytes) -> bool:
 
 
 class KeyRing:
-    """Shared keys by key id. ``get`` returns None for an unknown id."""
+    """Shared command keys by key id, and the telemetry keys (:attr:`telemetry`, a ring of its own).
 
-    def __init__(self, keys: dict[int, bytes]) -> None:
-        for key_id, key in keys.items():
+    ``get`` returns None for an unknown id.
+    """
+
+    def __init__(self, keys: dict[int, bytes], tm_keys: dict[int, bytes] | None = None) -> None:
+        for key_id, key in (*keys.items(), *(tm_keys or {}).items()):
             if not 0 <= key_id <= 0xFFFF:
                 raise KeyFileError(f"key id {key_id} does not fit 16 bits")
             if len(key) < MIN_KEY_BYTES:
                 raise KeyFileError(f"key {key_id} is {len(key)} bytes, at least {MIN_KEY_BYTES} are needed")
         self._keys = dict(keys)
+        self._telemetry = KeyRing(tm_keys) if tm_keys else None
+        self.path: Path | None = None  # the key file it was loaded from, if any (see :meth:`reload`)
+
+    @property
+    def telemetry(self) -> KeyRing:
+        """The telemetry keys (an empty ring if the key file has none)."""
+        return self._telemetry if self._telemetry is not None else KeyRing({})
 
     def get(self, key_id: int) -> bytes | None:
         return self._keys.get(key_id)
@@ -77,37 +90,51 @@ class KeyRing:
         if mode & (stat.S_IRWXG | stat.S_IRWXO):
             raise KeyFileError(f"{file}: key file is accessible by group or others; run chmod 600 {file}")
         keys: dict[int, bytes] = {}
+        tm_keys: dict[int, bytes] = {}
         for number, line in enumerate(text.splitlines(), start=1):
             line = line.strip()
             if not line or line.startswith("#"):
                 continue
             parts = line.split()
+            target = keys
+            if parts[0] == "tm":
+                target, parts = tm_keys, parts[1:]
             try:
                 if len(parts) != 2:
-                    raise ValueError("expected '<key id> <hex key>'")
+                    raise ValueError("expected '<key id> <hex key>' or 'tm <key id> <hex key>'")
                 key_id, key = int(parts[0], 0), bytes.fromhex(parts[1])
             except ValueError as exc:
                 raise KeyFileError(f"{file}: line {number}: {exc}") from None
-            if key_id in keys:
+            if key_id in target:
                 raise KeyFileError(f"{file}: line {number}: key id {key_id} appears twice")
-            keys[key_id] = key
+            target[key_id] = key
         if not keys:
             raise KeyFileError(f"{file}: no keys in key file")
         try:
-            return cls(keys)
+            ring = cls(keys, tm_keys)
+            ring.path = file
+            return ring
         except KeyFileError as exc:
             raise KeyFileError(f"{file}: {exc}") from None
 
+    def reload(self) -> KeyRing:
+        """The key file read again (keys added for a rotation); this ring if it came from no file.
+        Raises :class:`KeyFileError` like :meth:`load`."""
+        return KeyRing.load(self.path) if self.path is not None else self
 
-def write_key_file(path: str | Path, keys: dict[int, bytes]) -> Path:
-    """Create a key file readable by its owner only (for set-up tools and tests)."""
+
+def write_key_file(path: str | Path, keys: dict[int, bytes], tm_keys: dict[int, bytes] | None = None) -> Path:
+    """Create a key file readable by its owner only (for set-up tools and tests): command keys
+    ``keys`` and telemetry keys ``tm_keys``."""
     file = Path(path)
     file.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
     fd = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w", encoding="ascii") as out:
-        out.write("# TLT ground link keys: <key id> <hex key>\n")
+        out.write("# TLT ground link keys: commands '<id> <hex key>', telemetry 'tm <id> <hex key>'\n")
         for key_id, key in sorted(keys.items()):
             out.write(f"{key_id} {key.hex()}\n")
+        for key_id, key in sorted((tm_keys or {}).items()):
+            out.write(f"tm {key_id} {key.hex()}\n")
     os.chmod(file, 0o600)
     return file
 

@@ -2,9 +2,15 @@
 
 Every packet has the secondary-header flag set and this layout::
 
-    telemetry: | primary header 6 | CDS short time 7 | fields ...                           | CRC 2 |
+    telemetry: | primary header 6 | CDS short time 7 | key id 2 | security seq 8 | fields ... |
+               | HMAC-SHA256 trailer (mac_bytes) | CRC 2 |
     command:   | primary header 6 | CDS short time 7 | key id 2 | security seq 8 | cmd id 1 |
                | parameters ... | HMAC-SHA256 trailer (mac_bytes) | CRC 2 |
+
+Telemetry is signed with a telemetry key and commands with a command key
+(:mod:`tlt_common.ccsds.tm_security`). Without a key, :func:`encode_telemetry` builds and
+:func:`parse_datagram` reads telemetry without security header and trailer; only offline tools
+(benches, demo archives, archive tests) use that form, the link ends never do.
 
 The primary header and the packet are built with ``spacepackets`` (``SpacePacketHeader``,
 ``SpacePacket``, ``CdsShortTimestamp``); the receive side reads the three header words with one
@@ -15,8 +21,9 @@ included), so a changed APID, count, time, key id, sequence number, command or p
 authentication.
 
 :func:`parse_datagram` is the receive side: it never raises and returns either a :class:`Packet`
-or a :class:`Rejection` with a :class:`Reason`. A command is authenticated (and its sequence
-number checked and recorded against replay) before its command id or parameters are looked at.
+or a :class:`Rejection` with a :class:`Reason`. A packet is authenticated (and its sequence
+number checked and recorded against replay) before its command id, parameters or fields are
+looked at.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ import struct
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from spacepackets.ccsds import PacketType, SequenceFlags, SpacePacket, SpacePacketHeader
 from spacepackets.ccsds.time import CdsShortTimestamp
@@ -35,8 +42,6 @@ from spacepackets.ccsds.time.common import convert_ccsds_days_to_unix_days
 
 from tlt_common.ccsds.auth import (
     MAX_SECURITY_SEQ,
-    KeyRing,
-    ReplayGuard,
     ReplayStateError,
     compute_mac,
     verify_mac,
@@ -72,6 +77,20 @@ def _read_time(raw: bytes) -> float:
     if ms_of_day >= _MS_PER_DAY + 1000:  # one leap second is legal
         raise ValueError(f"millisecond of day {ms_of_day} out of range")
     return convert_ccsds_days_to_unix_days(days) * 86400.0 + ms_of_day / 1000.0
+
+
+class KeyLookup(Protocol):
+    """Keys by key id (:class:`tlt_common.ccsds.auth.KeyRing`, or the GSW's telemetry verifier)."""
+
+    def get(self, key_id: int) -> bytes | None: ...
+
+
+class ReplayCheck(Protocol):
+    """Accepts a security sequence number once per key id (:class:`tlt_common.ccsds.auth.ReplayGuard`)."""
+
+    def accept(self, key_id: int, seq: int) -> bool: ...
+
+    def last(self, key_id: int) -> int | None: ...
 
 
 _LAYOUTS: dict[int, tuple[PacketDef, FieldLayout]] = {}
@@ -162,14 +181,30 @@ def encode_telemetry(
     *,
     seq_count: int,
     timestamp: float | None = None,
+    key_id: int | None = None,
+    key: bytes | None = None,
+    security_seq: int | None = None,
 ) -> bytes:
-    """Build a telemetry packet of ``kind``; raise ValueError/KeyError/FieldError on bad input."""
+    """Build a telemetry packet of ``kind``; raise ValueError/KeyError/FieldError on bad input.
+
+    With ``key`` (and its ``key_id`` and the packet's ``security_seq``) the packet carries the
+    security header and MAC trailer; without, it is the unauthenticated form.
+    """
     pdef = defs.packet(kind)
     payload = encode_fields(pdef.fields, values)
     stamp = cds_time(time.time() if timestamp is None else timestamp)
-    body_len = len(payload)
-    header = _space_packet(PacketType.TM, pdef.apid, seq_count, body_len)
-    return _finish(header, stamp, payload, defs.max_packet_bytes)
+    if key is None:
+        header = _space_packet(PacketType.TM, pdef.apid, seq_count, len(payload))
+        return _finish(header, stamp, payload, defs.max_packet_bytes)
+    if key_id is None or security_seq is None:
+        raise ValueError("a signed telemetry packet needs key_id and security_seq")
+    if not 0 <= security_seq <= MAX_SECURITY_SEQ:
+        raise ValueError(f"security sequence {security_seq} does not fit 64 bits")
+    user = _SECURITY.pack(key_id, security_seq) + payload
+    header = _space_packet(PacketType.TM, pdef.apid, seq_count, len(user) + defs.mac_bytes)
+    signed = SpacePacket(header, sec_header=stamp, user_data=user).pack()
+    mac = compute_mac(key, bytes(signed), defs.mac_bytes)
+    return _finish(header, stamp, user + mac, defs.max_packet_bytes)
 
 
 def check_command(defs: Definitions, cmd: CommandDef, params: Mapping[str, Any]) -> FieldError | None:
@@ -251,13 +286,15 @@ def parse_datagram(
     defs: Definitions,
     *,
     expect: str = "tm",
-    keyring: KeyRing | None = None,
-    replay: ReplayGuard | None = None,
+    keyring: KeyLookup | None = None,
+    replay: ReplayCheck | None = None,
 ) -> ParseResult:
     """Parse one received datagram; never raises.
 
     ``expect`` is ``"tc"`` on the CRS (commands only, authenticated with ``keyring``, fresh against
-    ``replay`` which records the accepted number) or ``"tm"`` on the GSW (telemetry APIDs only).
+    ``replay`` which records the accepted number) or ``"tm"`` on the GSW (telemetry APIDs only;
+    with ``keyring``, the telemetry keys, authenticated and checked against ``replay`` the same
+    way; without, the unauthenticated form).
     """
     if not isinstance(data, bytes | bytearray | memoryview):
         return Rejection(Reason.MALFORMED, f"not bytes but {type(data).__name__}", b"")
@@ -271,7 +308,7 @@ def parse_datagram(
 
 
 def _parse(
-    data: bytes, defs: Definitions, expect: str, keyring: KeyRing | None, replay: ReplayGuard | None
+    data: bytes, defs: Definitions, expect: str, keyring: KeyLookup | None, replay: ReplayCheck | None
 ) -> ParseResult:
     size = len(data)
     if size > defs.max_packet_bytes:
@@ -316,15 +353,78 @@ def _parse(
     if pdef is None:
         return Rejection(Reason.UNKNOWN_APID, f"no telemetry packet has APID {apid:#05x}", data, **info)
     start = PRIMARY_HEADER_LEN + TIME_LEN
+    stop = size - CRC_LEN
+    key_id = security_seq = None
+    if keyring is not None:
+        stop -= defs.mac_bytes
+        authenticated = _authenticate(data, stop, keyring, replay, info)
+        if isinstance(authenticated, Rejection):
+            return authenticated
+        key_id, security_seq = authenticated
+        start += SECURITY_HEADER_LEN
     try:
-        values, end = _layout(pdef).decode(data[: size - CRC_LEN], start)
+        values, end = _layout(pdef).decode(data[:stop], start)
     except FieldError as exc:
-        return Rejection(exc.reason, f"{pdef.name}.{exc.field}: {exc.detail}", data, **info)
-    if end != size - CRC_LEN:
+        detail = f"{pdef.name}.{exc.field}: {exc.detail}"
+        return Rejection(exc.reason, detail, data, **_signed(info, key_id, security_seq))
+    if end != stop:
+        detail = f"{stop - end} unexpected byte(s) after {pdef.name}"
+        return Rejection(Reason.MALFORMED, detail, data, **_signed(info, key_id, security_seq))
+    return Packet(
+        pdef.name, apid, "tm", seq_count, stamp, values, data, key_id=key_id, security_seq=security_seq
+    )
+
+
+def _signed(info: dict[str, Any], key_id: int | None, security_seq: int | None) -> dict[str, Any]:
+    """``info`` with the security header of an authenticated packet, if it had one."""
+    if key_id is None:
+        return info
+    return {**info, "key_id": key_id, "security_seq": security_seq, "authenticated": True}
+
+
+def _authenticate(
+    data: bytes,
+    mac_start: int,
+    keyring: KeyLookup,
+    replay: ReplayCheck | None,
+    info: dict[str, Any],
+    verified: Mapping[str, Any] | None = None,
+) -> tuple[int, int] | Rejection:
+    """Check the security header and MAC that end at ``mac_start``, then freshness against ``replay``.
+
+    Returns (key id, security sequence), or a Rejection carrying ``info``, the header's fields and,
+    once the MAC verified, ``authenticated`` and the items of ``verified`` (what the MAC vouches for).
+    """
+    sec_start = PRIMARY_HEADER_LEN + TIME_LEN
+    if mac_start < sec_start + SECURITY_HEADER_LEN:
+        return Rejection(Reason.TRUNCATED, "too short for security header and MAC", data, **info)
+    key_id, security_seq = _SECURITY.unpack_from(data, sec_start)
+    # The rejections' fields are put together only on failure: this runs per received packet.
+    key = keyring.get(key_id)
+    if key is None:
         return Rejection(
-            Reason.MALFORMED, f"{size - CRC_LEN - end} unexpected byte(s) after {pdef.name}", data, **info
+            Reason.UNKNOWN_KEY,
+            f"no key with id {key_id}",
+            data,
+            key_id=key_id,
+            security_seq=security_seq,
+            **info,
         )
-    return Packet(pdef.name, apid, "tm", seq_count, stamp, values, data)
+    if not verify_mac(key, data[:mac_start], data[mac_start : len(data) - CRC_LEN]):
+        return Rejection(
+            Reason.BAD_AUTH, "MAC does not verify", data, key_id=key_id, security_seq=security_seq, **info
+        )
+    if replay is not None and not replay.accept(key_id, security_seq):
+        return Rejection(
+            Reason.REPLAY,
+            f"sequence {security_seq} is not above the last accepted {replay.last(key_id)}",
+            data,
+            key_id=key_id,
+            security_seq=security_seq,
+            authenticated=True,
+            **{**info, **(verified or {})},
+        )
+    return key_id, security_seq
 
 
 def _parse_command(
@@ -332,8 +432,8 @@ def _parse_command(
     defs: Definitions,
     stamp: float,
     info: dict[str, Any],
-    keyring: KeyRing | None,
-    replay: ReplayGuard | None,
+    keyring: KeyLookup | None,
+    replay: ReplayCheck | None,
 ) -> ParseResult:
     if info["packet_type"] != "tc":
         return Rejection(Reason.WRONG_PACKET_TYPE, "telemetry where a command was expected", data, **info)
@@ -346,21 +446,17 @@ def _parse_command(
     mac_start = size - CRC_LEN - defs.mac_bytes
     if mac_start < sec_start + SECURITY_HEADER_LEN + 1:
         return Rejection(Reason.TRUNCATED, "too short for security header, command id and MAC", data, **info)
-    key_id, security_seq = _SECURITY.unpack_from(data, sec_start)
-    info = {**info, "key_id": key_id, "security_seq": security_seq}
-    key = keyring.get(key_id) if keyring is not None else None
-    if key is None:
-        return Rejection(Reason.UNKNOWN_KEY, f"no key with id {key_id}", data, **info)
-    if not verify_mac(key, data[:mac_start], data[mac_start : size - CRC_LEN]):
-        return Rejection(Reason.BAD_AUTH, "MAC does not verify", data, **info)
     cmd_pos = sec_start + SECURITY_HEADER_LEN
-    info["command_id"] = data[cmd_pos]
-    info["authenticated"] = True
-    if replay is not None and not replay.accept(key_id, security_seq):
-        last = replay.last(key_id)
-        return Rejection(
-            Reason.REPLAY, f"sequence {security_seq} is not above the last accepted {last}", data, **info
-        )
+    info = dict(info)
+    if keyring is None:
+        key_id, security_seq = _SECURITY.unpack_from(data, sec_start)
+        info.update(key_id=key_id, security_seq=security_seq)
+        return Rejection(Reason.UNKNOWN_KEY, f"no key with id {key_id}", data, **info)
+    authenticated = _authenticate(data, mac_start, keyring, replay, info, {"command_id": data[cmd_pos]})
+    if isinstance(authenticated, Rejection):
+        return authenticated
+    key_id, security_seq = authenticated
+    info.update(key_id=key_id, security_seq=security_seq, command_id=data[cmd_pos], authenticated=True)
     cmd = defs.commands_by_id.get(data[cmd_pos])
     if cmd is None:
         return Rejection(Reason.UNKNOWN_COMMAND, f"no command has id {data[cmd_pos]}", data, **info)
@@ -393,9 +489,11 @@ __all__ = [
     "CRC_LEN",
     "PRIMARY_HEADER_LEN",
     "TIME_LEN",
+    "KeyLookup",
     "Packet",
     "ParseResult",
     "Rejection",
+    "ReplayCheck",
     "cds_time",
     "check_command",
     "crc16_ccitt_false",

@@ -26,6 +26,8 @@ _PORT: _Range = {"minimum": 0, "maximum": 65535}
 SCHEMA = {
     "key_file": opt("str", ""),
     "key_id": Field("int", minimum=0, maximum=0xFFFF),
+    # The telemetry key id the CRS signs with when it starts (a `tm` line of the key file).
+    "tm_key_id": opt("int", 1, minimum=0, maximum=0xFFFF),
     "crs": Field(
         "dict",
         schema={
@@ -47,6 +49,8 @@ SCHEMA = {
             "archive": Field("str"),
             "command_state": Field("str"),
             "ack_timeout_s": opt("float", 2.0, minimum=0.01, maximum=600.0),
+            # After the first telemetry under a newer key id, older ids stay accepted this long.
+            "tm_key_overlap_s": opt("float", 30.0, minimum=0.0, maximum=86400.0),
         },
     ),
 }

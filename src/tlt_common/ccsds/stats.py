@@ -10,6 +10,10 @@ from tlt_common.ccsds.codec import ParseResult, Rejection
 from tlt_common.ccsds.reasons import Reason
 from tlt_common.ccsds.sequence import GapTracker
 
+# Rejections that say a packet is not the other end's word: forged, altered, replayed or under a
+# key that is unknown or retired.
+AUTH_REASONS = frozenset({Reason.BAD_AUTH, Reason.UNKNOWN_KEY, Reason.REPLAY})
+
 
 @dataclass
 class LinkStats:
@@ -21,6 +25,7 @@ class LinkStats:
     bytes_tx: int = 0
     crc_errors: int = 0
     rejections: int = 0
+    auth_rejections: int = 0
     commands_accepted: int = 0
     by_reason: Counter = field(default_factory=Counter)
     sequence: GapTracker = field(default_factory=GapTracker)
@@ -36,6 +41,8 @@ class LinkStats:
                 self.by_reason[result.reason.label] += 1
                 if result.reason is Reason.BAD_CRC:
                     self.crc_errors += 1
+                elif result.reason in AUTH_REASONS:
+                    self.auth_rejections += 1
                 return 0
             return self.sequence.observe(result.apid, result.seq_count).missing
 
@@ -79,4 +86,4 @@ class LinkStats:
             }
 
 
-__all__ = ["LinkStats"]
+__all__ = ["AUTH_REASONS", "LinkStats"]

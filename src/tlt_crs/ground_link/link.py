@@ -6,12 +6,16 @@ Reads command datagrams on a UDP socket, and for each one:
   :class:`LinkStats`;
 * a refused datagram is reported as an ``event`` packet and, when it carries a command header, an
   ``ack`` packet at stage *rejected* with the reason code; it is never acted on;
-* an accepted command is acknowledged at stage *accepted* first and then handed to the
+* ``switch_tm_key`` (link management) is carried out by the link itself: acknowledged *accepted*
+  under the current telemetry key, then *completed* under the next one (or *failed* if the key
+  file has no next one);
+* any other accepted command is acknowledged at stage *accepted* first and then handed to the
   ``on_command`` callback (called on the receive thread), or, without one, put on the
   :attr:`GroundLink.commands` queue. The CRS reports the outcome later with
   :meth:`GroundLink.complete` (stage *completed* or *failed*).
 
-Writes telemetry packets the caller gives (:meth:`send_telemetry`) and periodic ``link_stats``.
+Writes telemetry packets the caller gives (:meth:`send_telemetry`) and periodic ``link_stats``,
+each signed with the current telemetry key (:class:`TelemetrySigner`, never a command key).
 Telemetry goes to the configured GSW address, else to the source of the last *authenticated*
 command; acks of an authenticated command also go back to its sender. An unauthenticated sender
 never receives anything. Nothing a datagram contains can stop the receive thread: every failure
@@ -30,16 +34,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tlt_common.ccsds.auth import KeyRing, ReplayGuard
-from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, encode_telemetry, parse_datagram
+from tlt_common.ccsds.auth import KeyFileError, KeyRing, ReplayGuard
+from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, parse_datagram
 from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.stats import LinkStats
+from tlt_common.ccsds.tm_security import TelemetrySigner
 
 _log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
+SWITCH_TM_KEY = "switch_tm_key"
 
 
 @dataclass(frozen=True)
@@ -91,7 +97,9 @@ class GroundLink:
     ``replay_state`` is the file holding the last accepted security sequence per key; a new
     instance on the same file refuses everything the old one accepted. ``validator`` lets the CRS
     refuse a well-formed command (e.g. a blackboard key that is not ground-writable) with a reason
-    before it is acknowledged as accepted.
+    before it is acknowledged as accepted. ``tm_key_id`` is the telemetry key to sign with first
+    (default: the lowest telemetry key id of ``keyring``); a ring without telemetry keys raises
+    :class:`KeyFileError`.
     """
 
     def __init__(
@@ -108,9 +116,14 @@ class GroundLink:
         max_rejection_events_per_s: float = 20.0,
         stats_period_s: float | None = None,
         clock: Callable[[], float] = time.time,
+        tm_key_id: int | None = None,
     ) -> None:
         self.defs = definitions
         self.keyring = keyring
+        tm_keys = keyring.telemetry
+        self.tm_signer = TelemetrySigner(
+            tm_keys, tm_key_id if tm_key_id is not None else min(tm_keys.key_ids, default=0)
+        )
         self.replay = ReplayGuard(replay_state)
         self.on_command = on_command
         self.validator = validator
@@ -163,6 +176,7 @@ class GroundLink:
             expand_path(crs["replay_state"]),
             bind=(crs["bind_host"], crs["bind_port"]),
             gsw_address=gsw,
+            tm_key_id=conf["tm_key_id"],
             **options,
         )
 
@@ -252,6 +266,9 @@ class GroundLink:
         )
         if source is not None:
             self._learned_gsw = source
+        if command.name == SWITCH_TM_KEY:
+            self._switch_tm_key(command)
+            return result
         if self.validator is not None:
             try:
                 refusal = self.validator(command)
@@ -294,6 +311,32 @@ class GroundLink:
                 _log.exception("command handler failed on %s", command.name)
                 self.complete(command, False, Reason.INTERNAL_ERROR, f"handler failed: {exc}")
         return result
+
+    def _switch_tm_key(self, command: GroundCommand) -> None:
+        """Move telemetry to the next key id: the accepted ack still under the old key, the
+        completed ack (and everything after it) under the new one."""
+        self.stats.record_accepted()
+        self._ack(
+            command.seq_count,
+            command.security_seq,
+            command.command_id,
+            AckStage.ACCEPTED,
+            Reason.NONE,
+            "",
+            command.source,
+        )
+        old = self.tm_signer.key_id
+        try:
+            # The key file is read again, so a key added to it for this rotation is found.
+            self.keyring = self.keyring.reload()
+            new = self.tm_signer.switch_to_next(self.keyring.telemetry)
+        except KeyFileError as exc:
+            self.complete(command, False, Reason.EXECUTION_FAILED, str(exc))
+            return
+        _log.info("telemetry key id %d -> %d on ground command", old, new)
+        self.complete(command, True, detail=f"telemetry key id {old} -> {new}")
+        text = f"telemetry now signed with key id {new} (was {old})"
+        self._safe_event(Severity.INFO, "TM_KEY_SWITCHED", Reason.NONE, text)
 
     def _reject(self, rejection: Rejection, source: tuple[str, int] | None) -> None:
         # Unauthenticated junk is rate limited; an authenticated command is always answered.
@@ -412,7 +455,7 @@ class GroundLink:
             if not targets:
                 self.telemetry_dropped += 1
                 return None
-            raw = encode_telemetry(
+            raw = self.tm_signer.encode(
                 self.defs,
                 kind,
                 values,

@@ -182,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
                     archive=str(archive),
                     command_state=str(expand_path(gsw["command_state"])),
                     flush_interval_s=conf.recorder_flush_s,
+                    tm_key_overlap_s=gsw["tm_key_overlap_s"],
                 )
             ).start()
             conn = open_archive(archive)

@@ -17,8 +17,10 @@ two ways to move it:
 State kept: the link figures (:mod:`~tlt_gsw.gui.link_counter`), the newest fields of every
 housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets and the datagrams
 the GSW itself rejected), commands sent with each acknowledgement stage matched by security
-sequence number, each agent's tree status (:mod:`~tlt_gsw.gui.agent_trees`), and the series of
-plotted fields. The records it builds are in :mod:`~tlt_gsw.gui.archive_records`.
+sequence number (a ``replay`` rejection of an already answered command answers a replayed copy:
+counted on the command, not taken as its stage), each agent's tree status
+(:mod:`~tlt_gsw.gui.agent_trees`), and the series of plotted fields. The records it builds are in
+:mod:`~tlt_gsw.gui.archive_records`.
 """
 
 from __future__ import annotations
@@ -450,6 +452,10 @@ class ArchiveModel:
             if record is None:
                 record = CommandRecord(seq, str(f.get("command", "?")), {}, None, None)
                 self.commands[seq] = record
+            if f.get("reason") == "replay" and record.acks:
+                record.replays_rejected += 1  # someone replayed the command; its outcome stands
+                changes.commands.add(seq)
+                continue
             time_row = self.conn.execute("SELECT recorded_at FROM packets WHERE id = ?", (pid,)).fetchone()
             record.acks.append(
                 AckRecord(

@@ -47,6 +47,8 @@ class CommandRecord:
     sent_at: float | None  # None: an ack for a command that is not in the archive (another GSW)
     packet_id: int | None
     acks: list[AckRecord] = field(default_factory=list)
+    # Replayed copies of this command the CRS rejected: their acks answer the copies, not it.
+    replays_rejected: int = 0
 
     @property
     def last_stage(self) -> str:

@@ -22,7 +22,10 @@ def stage_chain(record: CommandRecord) -> str:
     stages = (["sent"] if record.sent_at is not None else ["(not in archive)"]) + [
         a.stage for a in record.acks
     ]
-    return " → ".join(stages)
+    chain = " → ".join(stages)
+    if record.replays_rejected:
+        chain += f" ({record.replays_rejected} replayed copies rejected)"
+    return chain
 
 
 class CommandHistory(QtWidgets.QTableWidget):

@@ -1,5 +1,6 @@
-"""The link figures of the GSW end (packets, bytes, gaps, CRC errors, rejections, rates), counted
-packet by packet as the archive model applies the archived packets."""
+"""The link figures of the GSW end (packets, bytes, gaps, CRC errors, rejections, telemetry that
+failed authentication, rates), counted packet by packet as the archive model applies the archived
+packets."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 from tlt_common.ccsds.sequence import GapTracker
+from tlt_common.ccsds.stats import AUTH_REASONS
+
+_AUTH_STATUSES = frozenset(reason.label for reason in AUTH_REASONS)
 
 
 @dataclass
@@ -19,6 +23,8 @@ class LinkFigures:
     bytes_tx: int = 0
     crc_errors: int = 0
     rejections: int = 0
+    # Received packets refused as forged, altered, replayed or under an unknown or retired key.
+    auth_rejections: int = 0
     by_reason: Counter = field(default_factory=Counter)
     last_rx_at: float | None = None
     gaps: int = 0
@@ -66,6 +72,8 @@ class LinkCounter:
                 f.by_reason[status] += 1
                 if status == "bad_crc":
                     f.crc_errors += 1
+                elif status in _AUTH_STATUSES:
+                    f.auth_rejections += 1
             elif apid is not None and seq is not None:
                 self._gaps.observe(apid, seq)
         else:

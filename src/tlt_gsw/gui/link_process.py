@@ -42,7 +42,9 @@ class LinkSettings:
     """Everything the child needs to build the link; plain data, so it crosses to the child."""
 
     definitions: str | None
-    key_file: str | None  # None: monitor only, a throwaway key that never signs anything sent
+    # None: monitor only, a throwaway command key that never signs anything sent, and no telemetry
+    # key, so every telemetry packet is archived as rejected (nothing unverified is shown).
+    key_file: str | None
     key_id: int
     crs_address: tuple[str, int]
     bind: tuple[str, int]
@@ -50,6 +52,7 @@ class LinkSettings:
     command_state: str | None
     flush_interval_s: float = 0.1
     recv_buffer_bytes: int = 4 << 20  # rides out the GUI host being busy for a while at 2,000 packets/s
+    tm_key_overlap_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,7 @@ def _build_link(settings: LinkSettings):
             close_recorder=True,
             sequencer=CommandSequencer(settings.command_state) if settings.command_state else None,
             recv_buffer_bytes=settings.recv_buffer_bytes,
+            tm_key_overlap_s=settings.tm_key_overlap_s,
         )
     except BaseException:
         recorder.close()

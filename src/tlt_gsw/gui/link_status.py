@@ -1,4 +1,5 @@
-"""Link status strip: connected, packet and byte rates, gaps, CRC errors, rejections, last packet age.
+"""Link status strip: connected, packet and byte rates, gaps, CRC errors, rejections, telemetry that
+failed authentication, last packet age.
 
 Reads :class:`LinkFigures` of the archive model (what the archive holds up to the position) and,
 in live mode, the archive writer's health. "Connected" means a packet arrived within
@@ -19,6 +20,7 @@ _ITEMS = (
     ("gaps", "Gaps (missing)"),
     ("crc", "CRC errors"),
     ("rejections", "Rejected"),
+    ("auth", "Failed authentication"),
     ("age", "Last packet"),
     ("archive", "Archive"),
 )
@@ -77,6 +79,7 @@ class LinkStatusPanel(QtWidgets.QFrame):
             f"{figures.rejections}" + (f" ({reasons})" if reasons else ""),
             LIMIT_COLOURS["yellow"] if figures.rejections else None,
         )
+        self._set("auth", str(figures.auth_rejections), BAD_COLOUR if figures.auth_rejections else None)
         self._set("age", "never" if age is None else f"{age:.1f} s ago", None if connected else BAD_COLOUR)
         self._set("archive", archive_text, None if archive_ok else BAD_COLOUR)
 

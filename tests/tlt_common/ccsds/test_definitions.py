@@ -27,8 +27,9 @@ def test_project_file_has_table_1_commands_and_telemetry():
         "resume",
         "set_blackboard_value",
         "set_actuator_state",
+        "switch_tm_key",  # link management: telemetry key rotation
     ]
-    assert {c.id for c in defs.commands.values()} == {1, 2, 3, 4, 5, 6}
+    assert {c.id for c in defs.commands.values()} == {1, 2, 3, 4, 5, 6, 7}
     assert defs.commands["stop"].hazardous and defs.commands["set_actuator_state"].hazardous
     assert not defs.commands["start"].hazardous
     for kind in (

@@ -62,7 +62,7 @@ def write_config(tmp_path, key_file, name: str) -> str:
 
 @pytest.fixture
 def crs_process(tmp_path):
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     config = write_config(tmp_path, key_file, "link.yaml")
     proc = subprocess.Popen(
         [sys.executable, "-c", CRS, config], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
@@ -109,7 +109,8 @@ def test_cli_commands_a_crs_process(crs_process):
 
 
 def test_wrong_key_gets_no_answer_and_no_action(crs_process):
-    other = write_key_file(crs_process["tmp"] / "keys" / "other.key", {1: os.urandom(32)})
+    keys = crs_process["tmp"] / "keys"
+    other = write_key_file(keys / "other.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     config = write_config(crs_process["tmp"], other, "intruder.yaml")
     refused = gsw(config, crs_process["port"], "send", "start", "--wait-ack", "--timeout", "0.5")
     assert refused.returncode == 3 and "no acknowledgement" in refused.stdout

@@ -23,7 +23,7 @@ from tlt_crs.ground_link import GroundLink
 
 DEFS = load_definitions()
 KEY = os.urandom(32)
-RING = KeyRing({1: KEY})
+RING = KeyRing({1: KEY}, {1: bytes(range(32))})
 FUZZ = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 VALID = [

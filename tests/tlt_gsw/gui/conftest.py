@@ -82,7 +82,7 @@ def link_pair(tmp_path):
     from tlt_gsw.gui.link_worker import LinkWorker
     from tlt_gsw.link import GswLink
 
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     crs = CrsEnd(tmp_path, key_file)
     archive = tmp_path / "archive.sqlite"
     link = GswLink(

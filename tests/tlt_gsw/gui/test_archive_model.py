@@ -9,7 +9,7 @@ from py_trees.common import Status
 
 from tlt_common.bt.status_codec import TreeShape, encode
 from tlt_common.ccsds.auth import KeyRing
-from tlt_common.ccsds.codec import encode_command, encode_telemetry, parse_datagram
+from tlt_common.ccsds.codec import crc16_ccitt_false, encode_command, encode_telemetry, parse_datagram
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_gsw.archive.query import open_archive
@@ -33,7 +33,7 @@ class ArchiveWriter:
         self.recorder = Recorder(path, batch_size=10_000, flush_interval_s=3600)
         self.counters = SequenceCounters()
         self.t = t0
-        self.keyring = KeyRing({1: os.urandom(32)})
+        self.keyring = KeyRing({1: os.urandom(32)}, {1: os.urandom(32)})
         self.seq = 1000
 
     def tm(self, kind: str, values: dict, *, seq_count: int | None = None, dt: float = 0.01) -> bytes:
@@ -265,3 +265,37 @@ def test_an_agent_that_rebuilds_its_tree_is_decoded_with_its_new_definition(writ
     model.advance()
     state = model.trees["ars_x"]
     assert state.error is None and [p for p, _ in state.decoded.nodes] == [n.path for n in second.nodes]
+
+
+def test_telemetry_that_fails_authentication_is_counted_apart(writer):
+    from tlt_common.ccsds.tm_security import TelemetrySigner, TelemetryVerifier
+
+    signer = TelemetrySigner(writer.keyring.telemetry, 1)
+    verifier = TelemetryVerifier(writer.keyring.telemetry)
+    genuine = signer.encode(DEFS, "hk_lifter", LIFTER, seq_count=0, timestamp=writer.t)
+    altered = bytearray(signer.encode(DEFS, "hk_lifter", LIFTER, seq_count=1, timestamp=writer.t))
+    altered[20] ^= 1
+    altered[-2:] = crc16_ccitt_false(bytes(altered[:-2])).to_bytes(2, "big")
+    for raw in (genuine, genuine, bytes(altered)):  # good, replayed, altered with its CRC recomputed
+        result = parse_datagram(raw, DEFS, keyring=verifier, replay=verifier)
+        writer.recorder.record("rx", raw, result, recorded_at=writer.t)
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    model.advance()
+    figures = model.link_figures()
+    assert (figures.packets_rx, figures.rejections, figures.auth_rejections) == (3, 2, 2)
+    assert figures.by_reason == {"replay": 1, "bad_auth": 1}
+
+
+def test_a_replayed_commands_rejection_does_not_change_its_outcome(writer):
+    seq = writer.tc("start")
+    writer.ack("start", seq, "accepted")
+    writer.ack("start", seq, "completed")
+    for _ in range(3):  # the CRS rejects copies of it that someone replayed
+        writer.ack("start", seq, "rejected", "replay", "sequence is not above the last accepted")
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    model.advance()
+    record = model.commands[seq]
+    assert (record.last_stage, [a.stage for a in record.acks]) == ("completed", ["accepted", "completed"])
+    assert record.replays_rejected == 3

@@ -25,7 +25,7 @@ def settings(tmp_path, crs_address, key_file, bind=("127.0.0.1", 0)) -> LinkSett
 
 
 def test_commands_and_acks_through_the_link_process(tmp_path, wait_for, make_crs):
-    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     crs = make_crs(key_file)
     link = LinkProcess(settings(tmp_path, crs.link.address, key_file)).start()
     try:
@@ -54,7 +54,7 @@ def test_commands_and_acks_through_the_link_process(tmp_path, wait_for, make_crs
 
 
 def test_a_port_in_use_is_a_start_error_with_the_reason(tmp_path):
-    key_file = write_key_file(tmp_path / "ground.key", {1: os.urandom(32)})
+    key_file = write_key_file(tmp_path / "ground.key", {1: os.urandom(32)}, {1: os.urandom(32)})
     taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     taken.bind(("127.0.0.1", 0))
     try:
