@@ -56,11 +56,14 @@ from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand
 
 from tlt_ars.command_line import build_parser, config_from_args
-from tlt_ars.config import ArsConfig, check_against_mission
+from tlt_ars.config import ArsConfig
 from tlt_ars.context import ArsContext
 from tlt_ars.goals import ACTION_TYPES, ActiveGoal, request_of
+from tlt_ars.mission_checks import check_reach as check_reach_of_mission
+from tlt_ars.mission_checks import prepare_for_mission
 from tlt_ars.mission_state import Request
 from tlt_ars.motion_planner import MotionPlanner
+from tlt_ars.planning.reachability import UnreachableMember
 from tlt_ars.request_data import RequestFile, RequestFileError
 from tlt_ars.tree import ArsTree, Job
 from tlt_common import ros_names
@@ -83,19 +86,6 @@ from tlt_common.ros.topic_silence_watch import TopicSilenceWatch
 FRESH_PROGRESS_WAIT_S = 2.0
 
 
-def _coarse_poses_for_mission(config: ArsConfig, scene: Any) -> ArsConfig:
-    """The configured coarse dispenser poses moved with their tags to this mission's racks
-    (:mod:`tlt_ars.planning.coarse_pose_transfer`); ConfigError naming the pose when one cannot."""
-    from tlt_ars.planning.coarse_pose_transfer import NoCoarsePose, follow_tags
-
-    joints = {n: p.joints for n, p in config.dispenser_poses.items() if p.joints is not None}
-    try:
-        moved = follow_tags(joints, config.ars, config.dispensers_mission_path, config.mission_path, scene)
-    except NoCoarsePose as exc:
-        raise ConfigError(config.source, "poses.dispensers", str(exc)) from exc
-    return config.with_dispenser_joints(moved)
-
-
 class ArsNode(LeanNode):
     """One ARS; see the module docstring."""
 
@@ -113,16 +103,15 @@ class ArsNode(LeanNode):
         self.config = config
         self.ars = config.ars
         mission = load_mission(config.mission_path)
-        check_against_mission(config, mission)
         from tlt_ars.planning.world import load_scene_config
 
         scene = load_scene_config(config.scene_path)
-        config = self.config = _coarse_poses_for_mission(config, scene)
+        config = self.config = prepare_for_mission(config, mission, scene)
         if config.raw["check_reach"] if check_reach is None else check_reach:
             # A member out of this arm's reach is found now, not mid-build (§V.D).
-            from tlt_ars.planning.reachability import require_reachable
-
-            require_reachable(scene, mission, [self.ars], config.ee["width"])
+            report = check_reach_of_mission(config, mission, scene)
+            if not report.ok:
+                raise UnreachableMember(mission.name, report.issues)
         state = config.state_path
         self.ctx = ArsContext(
             self,

@@ -22,7 +22,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "gsw": ("tlt_gsw.cli:main", "ground station: gui, mission, summary, send, watch, query, export, keygen"),
     "twin": ("tlt_sim.cli:main", "the digital twin: run it behind the drivers' links, render a PNG"),
     "hosts": ("tlt_common.launch.hosts_cli:main", "emulated hosts: check, list, cut, heal, remove"),
-    "mission-check": ("tlt_common.mission.check:main", "validate mission files"),
+    "mission-check": (
+        "tlt_ars.mission_check_cli:main",
+        "validate mission files; check that each ARS can build them, reach included",
+    ),
     "ars-state": ("tlt_ars.state_cli:main", "an ARS's state file: show, resolve a step in doubt, clear"),
     "mission-generate": ("tlt_common.mission.generate:main", "write a mission file for N bays"),
     "record": ("tlt_common.recording.record_command:main", "a recording (MCAP): info, play, export to CSV"),

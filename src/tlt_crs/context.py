@@ -167,6 +167,12 @@ class CrsContext:
             self.cache.watch(ros_names.hardware_status_topic(ur), HardwareStatus)
         self._arm_active = HardwareStatus.LIFECYCLE_ACTIVE
         self._servers = self._build_server_checks()
+        from diagnostic_msgs.msg import DiagnosticStatus
+
+        from tlt_common.ros.readiness import LATCHED
+
+        # Vision's services may be up before it has heard the joint states that place its cameras.
+        self.cache.watch(ros_names.VISION_STATUS, DiagnosticStatus, LATCHED)
 
     def device_topics(self) -> list[str]:
         """The state topics of the lifter and the grippers, which the tree cannot build without."""
@@ -205,11 +211,30 @@ class CrsContext:
     def not_ready(self) -> str:
         """Why a build cannot start now ('' when it can): a CRS driver whose state is missing or
         older than ``timeouts.sensor_max_age_s``, a lifter whose link is down, an ARS's end
-        effector or arm not ready (:meth:`ars_hardware_not_ready`), or an ARS or vision server not
-        up yet. Start is refused while this says anything."""
+        effector or arm not ready (:meth:`ars_hardware_not_ready`), an ARS or vision server not
+        up yet, or vision not ready (:meth:`vision_not_ready`). Start is refused while this says
+        anything."""
         return "; ".join(
-            filter(None, (self.hardware_not_ready(), self.ars_hardware_not_ready(), self._servers_not_up()))
+            filter(
+                None,
+                (
+                    self.hardware_not_ready(),
+                    self.ars_hardware_not_ready(),
+                    self._servers_not_up(),
+                    self.vision_not_ready(),
+                ),
+            )
         )
+
+    def vision_not_ready(self) -> str:
+        """Why vision cannot answer yet ('' when it can), as its latched status says: it cannot
+        place a camera before it has heard that camera's joint states, which the CRS may have heard
+        already (each subscription is matched to the drivers on its own)."""
+        from tlt_common.ros.readiness import not_ready_reason
+
+        entry = self.cache.latest(ros_names.VISION_STATUS)
+        why = not_ready_reason(None if entry is None else entry[0])
+        return f"vision: {why}" if why else ""
 
     def ars_hardware_not_ready(self) -> str:
         """Why an ARS's end effector or arm cannot be trusted to build now ('' when they can): a

@@ -97,6 +97,11 @@ class JointStates:
         with self._lock:
             return [self._at(n, at, max_age) for n in names]
 
+    def unheard(self, names: Sequence[str]) -> list[str]:
+        """Those of ``names`` no state has been heard of yet, in their order."""
+        with self._lock:
+            return [n for n in names if n not in self._values]
+
     def latest(self, names: Sequence[str]) -> list[float]:
         """The newest position of each of ``names``; FrameUnavailable for one never heard of."""
         with self._lock:
@@ -188,6 +193,24 @@ class CameraRig:
             return [self.lifter[camera].joint]
         cam = self.ee[camera]
         return arm_joint_names(cam.arm) + ([width_joint_name(cam.arm)] if cam.on_width_slide else [])
+
+    def needed_joints(self) -> list[str]:
+        """Every joint a request may need: those placing each camera, and each arm's end effector
+        (width and jaws, :meth:`end_effector`)."""
+        names = [n for camera in (*self.lifter, *self.ee) for n in self.joint_names(camera)]
+        for arm in self.arms:
+            names += [width_joint_name(arm), *grasp_joint_names(arm).values()]
+        return list(dict.fromkeys(names))
+
+    def not_ready(self) -> str:
+        """Why a request could meet a joint never heard of ('' when it cannot): a driver not up,
+        or this node's subscription not matched to it yet, though the drivers' other listeners
+        (the CRS) may hear it already."""
+        unheard = self.joints.unheard(self.needed_joints())
+        if not unheard:
+            return ""
+        more = f" and {len(unheard) - 3} more" if len(unheard) > 3 else ""
+        return f"no joint state yet for {', '.join(unheard[:3])}{more}"
 
     def pose_from_joints(self, camera: str, positions: Mapping[str, float]) -> np.ndarray:
         """Pose (4x4, world) of ``camera`` for the given joint positions (driver names)."""

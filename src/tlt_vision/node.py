@@ -14,6 +14,11 @@ Services (names from :mod:`tlt_common.ros_names`; paper §V.E), each answered by
 * ``VISION_LOCATE_TAG`` (``LocateTag``): the dispenser's AprilTag (cv2.aruco, IPPE square) in the
   named camera's RGB; the answered pose is the dispenser's frame in the world (the tag marks it).
 
+And publishes ``VISION_STATUS`` (``diagnostic_msgs/DiagnosticStatus``, latched:
+:mod:`tlt_common.ros.readiness`): why a request could not place its camera yet (``no joint state
+yet for ur_x_shoulder_pan_joint ...``) until every joint the cameras and end effectors need has
+been heard of, then ``ready``; the CRS refuses Start until then.
+
 Each request takes one fresh frame of its camera (:mod:`tlt_vision.services.frame_source`: subscribed
 only while it waits, at most ``timeouts.frame_s``), segments it (``segmentation.source``: the
 twin's labels or Mask R-CNN), turns the part's instances into point clouds and certified C-3PO
@@ -52,6 +57,7 @@ from tlt_common.ros.direct_executor import DirectMultiThreadedExecutor, QuickCal
 from tlt_common.ros.executor_stop import stop_executor
 from tlt_common.ros.interpreter_lock import share_the_interpreter_quickly
 from tlt_common.ros.lean_node import LeanNode
+from tlt_common.ros.readiness import ReadinessPublisher
 from tlt_common.ros.rosout_logging import RosoutHandler, forward_logging_to_rosout, init_rclpy
 from tlt_common.ros.spin_loop import spin
 from tlt_common.ros.stop_signals import stop_on_signals
@@ -101,6 +107,9 @@ class VisionNode(LeanNode):
             segmenter = TwinLabels(lambda: self.labels.wait(0.0))
         self.frames = FrameSource(FrameGrabber(self, raw["topics"]["image"]), config, self._now)
         self.detector = Detector(segmenter, config)
+        # Latched for the CRS, which refuses Start until every camera can be placed.
+        self.readiness = ReadinessPublisher(self, ros_names.VISION_STATUS, "vision")
+        self.readiness.say(self.rig.not_ready())
         self._subscribe_joint_states(sensors)
 
         logger = self.get_logger()
@@ -174,9 +183,13 @@ class VisionNode(LeanNode):
     def _subscribe_joint_states(self, group: Any) -> None:
         def on_joints(msg: JointState) -> None:
             self.rig.joints.update(list(msg.name), list(msg.position), self._msg_time(msg))
+            if not self.readiness.ready:
+                self.readiness.say(self.rig.not_ready())
 
         def on_ee(msg: EndEffectorState) -> None:
             self.rig.joints.update(list(msg.joint_names), list(msg.position), self._msg_time(msg))
+            if not self.readiness.ready:
+                self.readiness.say(self.rig.not_ready())
 
         components = {ros_names.CAMERA_MOUNTS} if self.rig.lifter else set()
         arms = set(self.rig.arms)

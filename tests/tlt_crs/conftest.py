@@ -37,6 +37,7 @@ from rclpy.node import Node
 from tlt_common import ros_names
 from tlt_common.ros.executor_stop import stop_executor
 from tlt_common.ros.node_teardown import destroy_node
+from tlt_common.ros.readiness import ReadinessPublisher
 
 REPO = Path(__file__).resolve().parents[2]
 ONE_BAY = REPO / "missions" / "one_bay.yaml"
@@ -241,11 +242,14 @@ class VisionStandIn:
         self.mounts_at_bay_calls: list[tuple[list[float], list[float]]] = []
         self._node, self._group = node, group
         self._services: list[Any] = []
+        self.readiness = ReadinessPublisher(node, ros_names.VISION_STATUS, "vision")
         self.serve()
 
     def serve(self) -> None:
+        """Offer the services, and say ready (as vision does once it has heard every joint state)."""
         from tlt_interfaces.srv import InspectBay, InspectPart
 
+        self.readiness.say("")
         self._services = [
             self._node.create_service(srv_type, name, handler, callback_group=self._group)
             for srv_type, name, handler in (

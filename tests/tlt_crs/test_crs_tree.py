@@ -315,6 +315,20 @@ def test_actuator_command_when_idle_drives_the_actuator(rig, crs, crs_node):
     assert acks.final == (AckStage.COMPLETED, "") and rig.cameras.positions == [0.3, 0.3]
 
 
+def test_start_is_refused_until_vision_says_it_can_place_its_cameras(rig, crs, crs_node):
+    """Vision's services can be up before it has heard an arm's joint states (its subscription is
+    matched on its own, after the CRS's): Start waits for vision's latched word, not the graph."""
+    reason = "no joint state yet for ur_x_shoulder_pan_joint, ur_x_shoulder_lift_joint, ur_x_elbow_joint"
+    rig.vision.readiness.say(reason)
+    crs.wait_for(lambda: crs_node.ctx.not_ready() == f"vision: {reason}", what="vision not ready")
+    refused = _submit(crs_node, crs, "start")
+    assert refused.rejected and refused.stages[0][1] == f"not ready: vision: {reason}"
+    rig.vision.readiness.say("")
+    crs.wait_for(lambda: not crs_node.ctx.not_ready(), what="vision ready")
+    final = _start(crs_node, crs).final
+    assert final[0] == AckStage.COMPLETED, final[1]
+
+
 def test_start_twice_is_refused(rig, crs, crs_node):
     _start(crs_node, crs)
     acks = _submit(crs_node, crs, "start")

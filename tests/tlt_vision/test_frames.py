@@ -5,7 +5,14 @@ import pytest
 from tlt_sim.model import names
 from tlt_sim.model.scene import Scene
 
-from tlt_vision.frames import CameraRig, FrameUnavailable, JointStates, arm_joint_names, width_joint_name
+from tlt_vision.frames import (
+    CameraRig,
+    FrameUnavailable,
+    JointStates,
+    arm_joint_names,
+    grasp_joint_names,
+    width_joint_name,
+)
 from tlt_vision.node_config import load_config
 
 
@@ -53,6 +60,26 @@ def test_camera_pose_needs_fresh_joint_states():
     assert rig.camera_pose("zed_1", at=5.5).shape == (4, 4)
     with pytest.raises(FrameUnavailable, match="unknown camera"):
         rig.camera_pose("zed_9", at=5.0)
+
+
+def test_the_rig_is_ready_once_every_joint_its_cameras_and_end_effectors_need_was_heard():
+    """Vision says ready (the CRS refuses Start until it does) only when no request can meet "no
+    joint state for ur_x_shoulder_pan_joint yet": every camera's joints and each end effector's."""
+    joints = JointStates()
+    rig = CameraRig(load_config(), joints)
+    needed = rig.needed_joints()
+    assert rig.arms == ["ars_x", "ars_y"]
+    for arm in rig.arms:
+        end_effector = {width_joint_name(arm), *grasp_joint_names(arm).values()}
+        assert set(arm_joint_names(arm)) | end_effector <= set(needed)
+    assert {camera.joint for camera in rig.lifter.values()} <= set(needed)
+    assert rig.not_ready() == f"no joint state yet for {', '.join(needed[:3])} and {len(needed) - 3} more"
+    heard = [n for n in needed if not n.startswith("ur_y_")]
+    joints.update(heard, [0.0] * len(heard), stamp=1.0)
+    ur_y = arm_joint_names("ars_y")
+    assert rig.not_ready() == f"no joint state yet for {', '.join(ur_y[:3])} and 3 more"
+    joints.update(ur_y, [0.0] * 6, stamp=1.0)
+    assert rig.not_ready() == ""
 
 
 def test_a_camera_is_placed_where_it_was_when_its_frame_was_taken():

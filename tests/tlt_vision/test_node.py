@@ -227,6 +227,40 @@ def _show(rig: Rig, part: str, camera: str = "zed_1", distance: float = 0.9) -> 
     rig.twin.do(stage)
 
 
+def test_vision_says_ready_once_it_has_heard_every_arm(rig):
+    """The latched status the CRS waits for before Start: this rig's twin publishes ARS X's arm and
+    end effector and the camera mounts; ARS Y's arm and end effector are missing until sent here."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from tlt_common.ros.readiness import LATCHED
+
+    said: list[DiagnosticStatus] = []
+    rig.client.create_subscription(DiagnosticStatus, ros_names.VISION_STATUS, said.append, LATCHED)
+
+    def last_word(predicate, what: str) -> DiagnosticStatus:
+        deadline = time.monotonic() + 20.0
+        while not (said and predicate(said[-1])):
+            assert time.monotonic() < deadline, f"{what}: {said[-1:]}"
+            time.sleep(0.05)
+        return said[-1]
+
+    # ARS Y's six arm joints, its width and two jaws: everything else has been heard of.
+    ars_y = f"no joint state yet for {', '.join(arm_joint_names('ars_y')[:3])} and 6 more"
+    waiting = last_word(lambda m: m.message == ars_y, "waiting for ARS Y only")
+    assert waiting.level == DiagnosticStatus.WARN and waiting.name == "vision"
+
+    arm = rig.client.create_publisher(JointState, ros_names.joint_states_topic("ur_y"), 10)
+    ee = rig.client.create_publisher(EndEffectorState, ros_names.state_topic("ee_y"), 10)
+    ee_joints = [width_joint_name("ars_y"), *grasp_joint_names("ars_y").values()]
+    deadline = time.monotonic() + 20.0
+    while not (said and said[-1].level == DiagnosticStatus.OK):
+        assert time.monotonic() < deadline, f"never ready: {said[-1:]}"
+        arm.publish(JointState(name=arm_joint_names("ars_y"), position=[0.0] * 6))
+        ee.publish(EndEffectorState(ars="ars_y", joint_names=ee_joints, position=[0.0] * len(ee_joints)))
+        time.sleep(0.1)
+    assert said[-1].message == "ready"
+
+
 def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     with _exact_cameras(rig):
         _a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig)
@@ -614,7 +648,7 @@ def test_segmentation_is_chosen_on_the_command_line_and_checked_as_the_file_woul
     no_weights["segmentation"].update(source="twin_labels", weights="")
     path = tmp_path / "node.yaml"
     path.write_text(__import__("yaml").safe_dump(no_weights))
-    with pytest.raises(ConfigError, match="segmentation.weights: mask_rcnn needs a weights file"):
+    with pytest.raises(ConfigError, match=r"segmentation\.weights: mask_rcnn needs a weights file"):
         load_config(path).with_segmentation("mask_rcnn")
     assert main(["--config", str(path), "--segmentation", "mask_rcnn"]) == 2
     assert "--segmentation mask_rcnn" in capsys.readouterr().err

@@ -23,6 +23,14 @@ starts, so a typo never leaves half a system running. Example::
         args: [-m, some.job]
         on_exit: shutdown        # when it ends, stop the set and exit with its exit code
 
+A process that exits with status 2 has *refused* to run: the project's processes (the CRS, the
+ARSs, vision, the drivers, the twin) exit 2 when they reject their configuration or input (a
+mission they cannot build, a file that does not validate), and start again only to refuse again.
+``on_refusal: shutdown`` marks a process the set cannot do without: its refusal is not restarted,
+and the whole set stops at once with status 2, its reason (the last line it wrote) repeated once
+everything has stopped. By default (``continue``) a refusal is a failure like any other, which the
+restart policy may restart (a driver whose device was not there yet).
+
 A set may declare emulated hosts (network namespaces on one machine, ``tlt_common.launch.hosts``)
 and place processes into them, by ``host:`` or, for processes of included sets, ``placement:``::
 
@@ -57,6 +65,9 @@ from tlt_common.launch.hosts import HostsError, HostSpec, check_addresses, check
 
 RESTART_POLICIES = ("never", "on-failure", "always")
 ON_EXIT = ("continue", "shutdown")
+ON_REFUSAL = ("continue", "shutdown")
+# The exit status of a process that refuses its configuration or input (and of a set it stopped).
+REFUSED = 2
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
 
@@ -111,6 +122,12 @@ PROCESS_SCHEMA: dict[str, Field] = {
     "restart_delay_s": opt("float", 1.0, minimum=0.0),
     "required": opt("bool", False),
     "on_exit": opt("str", "continue", choices=ON_EXIT),
+    "on_refusal": opt(
+        "str",
+        "continue",
+        choices=ON_REFUSAL,
+        doc=f"what an exit with status {REFUSED} (the process refused its configuration) does to the set",
+    ),
     "wait_for_path": opt("str", None, doc="start once this path exists (e.g. a device link)"),
     "wait_timeout_s": opt("float", 30.0, minimum=0.0),
     "startup_s": opt(
@@ -168,6 +185,7 @@ class ProcessSpec:
     required: bool
     on_exit: str
     startup_s: float
+    on_refusal: str = "continue"
     wait_for_path: str | None = None
     wait_timeout_s: float = 30.0
     host: str | None = None
@@ -293,6 +311,7 @@ def load_launch_set(
                 restart_delay_s=proc["restart_delay_s"],
                 required=proc["required"],
                 on_exit=proc["on_exit"],
+                on_refusal=proc["on_refusal"],
                 wait_for_path=proc["wait_for_path"]
                 and _expand(proc["wait_for_path"], variables, source, f"{key}.wait_for_path"),
                 wait_timeout_s=proc["wait_timeout_s"],

@@ -7,9 +7,12 @@ output also goes, unprefixed, to ``<folder>/<name>.log`` (with the launcher's li
 starting ``[launch]``), which restarts append to and a new launcher run starts afresh. Shutdown
 (Ctrl-C, SIGTERM, or a required process that died for good) sends SIGINT, then SIGTERM, then
 SIGKILL, each after the set's grace period; a second Ctrl-C skips the waiting. The exit status is
-0 after a clean stop, 1 when a required process died, and a process's own when it ends the set
-(``on_exit: shutdown``), also when a signal stopped it along with the rest: a mission job
-interrupted during a build says so.
+0 after a clean stop, 1 when a required process died, 2 when a process marked ``on_refusal:
+shutdown`` refused to run (exited 2: a mission its arm cannot reach, say), and a process's own when
+it ends the set (``on_exit: shutdown``), also when a signal stopped it along with the rest: a
+mission job interrupted during a build says so. A refusal's reason, the last line the process
+wrote, is said again once every process has stopped, so that it is the set's last word and not
+lost above the others' output.
 
 A set that declares hosts gets its emulated network (``hosts.HostNetwork``) before any process
 starts and loses it after every process has stopped; a process with a host is moved into that
@@ -35,7 +38,7 @@ from typing import Any, TextIO
 
 from tlt_common.launch.dds_profile import host_environment, render_profile
 from tlt_common.launch.hosts import HostNetwork, HostsError, default_run_name, enter_namespace, namespace_name
-from tlt_common.launch.launch_set import LaunchSet, ProcessSpec
+from tlt_common.launch.launch_set import REFUSED, LaunchSet, ProcessSpec
 
 _POLL_S = 0.05
 _LAST_LINES = 15
@@ -138,6 +141,7 @@ class Supervisor:
         self._hurry = threading.Event()
         self._signals = 0  # SIGINT/SIGTERM received (see _on_signal)
         self._exit_code = 0
+        self._refusals: list[tuple[str, str]] = []  # (process, its reason) that stopped the set
 
     # --- public -----------------------------------------------------------------------------------
     def run(self) -> int:
@@ -159,6 +163,8 @@ class Supervisor:
                     self._start(proc)
             while not self._shutdown.is_set() and not self._signals:
                 self._watch()
+                if self._refusals:
+                    break
                 if not any(
                     p.running or p.restart_at is not None or p.waiting_since is not None for p in self._procs
                 ):
@@ -169,6 +175,10 @@ class Supervisor:
             if self._signals:
                 self._stop_all()
                 self._exit_code = self._exit_code or self._decided_on_stop()
+            if self._refusals:
+                self._stop_all()
+                for name, reason in self._refusals:
+                    self._say(f"the launch set stopped because {name} refused to run: {reason}")
             return self._exit_code
         finally:
             self._stop_all()
@@ -378,6 +388,15 @@ class Supervisor:
         if spec.on_exit == "shutdown":
             self._say(f"{spec.name} ended the launch set ({describe_exit(rc)})")
             self._exit_code = rc if rc >= 0 else 128 - rc
+            self._shutdown.set()
+            return
+        if rc == REFUSED and spec.on_refusal == "shutdown":
+            # Started again it would refuse again (the same configuration, the same mission).
+            reason = next((line.strip() for line in reversed(proc.last_lines) if line.strip()), "no output")
+            self._say(f"{spec.name} refused to run: stopping the launch set")
+            self._refusals.append((spec.name, reason))
+            if not self._shutdown.is_set():
+                self._exit_code = REFUSED
             self._shutdown.set()
             return
         wants_restart = spec.restart == "always" or (spec.restart == "on-failure" and failed)

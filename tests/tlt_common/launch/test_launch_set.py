@@ -100,6 +100,7 @@ def test_defaults(tmp_path):
     (proc,) = launch_set.processes
     assert launch_set.name == "set"
     assert (proc.restart, proc.required, proc.argv, proc.nice) == ("never", False, (sys.executable,), 0)
+    assert proc.on_refusal == "continue"
 
 
 @pytest.mark.parametrize(
@@ -158,6 +159,10 @@ def test_defaults(tmp_path):
         (
             "processes:\n  - {name: a, executable: python, nice: -5}",
             "processes[0].nice: expected at least 0, got -5",
+        ),
+        (
+            "processes:\n  - {name: a, executable: python, on_refusal: restart}",
+            "processes[0].on_refusal: expected one of 'continue', 'shutdown', got 'restart'",
         ),
         ("processes: [a", "invalid YAML: line 1, column 14: "),
     ],
@@ -240,3 +245,20 @@ def test_tlt_segmentation_reaches_the_vision_node_of_the_twin_launch_sets(source
     }
     vision = argv["vision"]
     assert vision[vision.index("--segmentation") + 1] == source
+
+
+@pytest.mark.parametrize(
+    ("path", "agents"),
+    [
+        ("system_twin.yaml", ("crs", "ars_x", "ars_y", "vision")),
+        ("host_crs.yaml", ("crs", "vision")),
+        ("host_ars_x.yaml", ("ars_x",)),
+        ("host_ars_y.yaml", ("ars_y",)),
+    ],
+)
+def test_an_agent_that_refuses_its_mission_stops_the_set(path, agents):
+    """The CRS, an ARS or vision refusing its configuration (exit 2: a mission its arm cannot
+    reach) would refuse again when restarted: the set stops with its reason instead of running on
+    without it (the mission job would ask for Start for hours)."""
+    processes = {p.name: p for p in load_launch_set(CONFIG / path).processes}
+    assert {name: processes[name].on_refusal for name in agents} == dict.fromkeys(agents, "shutdown")

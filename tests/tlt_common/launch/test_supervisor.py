@@ -188,6 +188,86 @@ def test_a_process_that_cannot_start_is_named_with_its_last_output(tmp_path, lau
     assert not alive(bystander)
 
 
+def test_a_process_that_refuses_to_run_stops_the_set_at_once_with_its_reason(tmp_path, launcher):
+    """An ARS refuses a mission its arm cannot reach (exit 2) and would refuse it again when
+    restarted: the set stops at once with status 2, the job that ends it (the ground's mission
+    job) says its last word, and the refusal's reason is the set's own last word."""
+    job = tmp_path / "job.py"
+    job.write_text(
+        textwrap.dedent("""
+        import signal, sys, time
+        def stop(*_):
+            print("summary: nothing built", flush=True)
+            sys.exit(130)
+        signal.signal(signal.SIGINT, stop)
+        print("asking for Start", flush=True)
+        open(sys.argv[1], "w").close()
+        time.sleep(120)
+    """)
+    )
+    asking = tmp_path / "asking"
+    reason = "ars: mission 'narrow': 2 unreachable step(s): bay1/diagonal/face_y0: ars_x cannot place"
+    refuse = tmp_path / "refuse.py"
+    refuse.write_text(
+        "import sys\nprint('loading the mission', flush=True)\n"
+        f"print({reason!r}, file=sys.stderr, flush=True)\nsys.exit(2)\n"
+    )
+    path = write_set(
+        tmp_path,
+        f"""
+        grace_period_s: 2
+        processes:
+          - name: ars_x
+            executable: python
+            args: ["{refuse}"]
+            wait_for_path: {asking}
+            restart: on-failure
+            restart_delay_s: 0.1
+            on_refusal: shutdown
+          - name: bystander
+            executable: python
+            args: ["-c", "import time; time.sleep(60)"]
+            restart: on-failure
+          - name: job
+            executable: python
+            args: ["{job}", "{asking}"]
+            on_exit: shutdown
+    """,
+    )
+    began = time.monotonic()
+    run = launcher(path)
+    bystander = run.pid_of("bystander")
+    run.wait_for(r"^\[job\] asking for Start$")
+    assert run.finish(timeout=20) == 2
+    assert time.monotonic() - began < 15
+    run.wait_for(r"\[launch\] ars_x exited with exit code 2")
+    assert f"    | {reason}" in run.lines  # its last output, as for any failure
+    assert not [line for line in run.lines if "restarting ars_x" in line]
+    run.wait_for(r"the launch set stopped because")
+    assert run.lines[-1] == f"[launch] the launch set stopped because ars_x refused to run: {reason}"
+    assert run.lines.index("[job] summary: nothing built") < len(run.lines) - 1
+    assert not alive(bystander)
+
+
+def test_by_default_a_refusal_is_a_failure_the_restart_policy_restarts(tmp_path, launcher):
+    path = write_set(
+        tmp_path,
+        """
+        processes:
+          - name: driver
+            executable: python
+            args: ["-c", "import sys; print('no device yet', file=sys.stderr); sys.exit(2)"]
+            restart: on-failure
+            max_restarts: 1
+            restart_delay_s: 0.1
+    """,
+    )
+    run = launcher(path)
+    assert run.finish(timeout=20) == 1  # every process has ended, one of them failed
+    run.wait_for(r"\[launch\] restarting driver \(1 of 1\)")
+    assert not [line for line in run.lines if "refused to run" in line]
+
+
 def test_shutdown_escalates_to_sigterm_and_sigkill_and_leaves_no_grandchild(tmp_path, launcher):
     stubborn = tmp_path / "stubborn.py"
     stubborn.write_text(
