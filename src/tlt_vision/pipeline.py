@@ -62,7 +62,7 @@ from tlt_vision.pointcloud import (
     detached_pieces,
     masked_point_cloud,
 )
-from tlt_vision.pose.axial_ends import AxialEnds, ends_seen, slide_to_an_end
+from tlt_vision.pose.axial_ends import AxialEnds, end_face_seen, ends_seen, slide_to_an_end
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together, refined_together
@@ -447,7 +447,8 @@ class PartPipeline:
         noise: DepthNoise,
     ) -> PoseEstimate:
         """The first of ``candidates`` (the pose slid by its mask, then as fitted) whose ends the
-        depth shows where its axis leaves its place open (:mod:`tlt_vision.pose.axial_ends`);
+        depth shows where its axis leaves its place open, or, seen end-on, whose cloud holds an
+        end face (:mod:`tlt_vision.pose.axial_ends`);
         when none, the first slid to where the depth shows an end and certified again on
         ``points``; when none either, the first, not certified: its place along its axis is not
         seen."""
@@ -457,23 +458,17 @@ class PartPipeline:
             return first
         dims = self.estimators[cls].model.dims
         margin = 2.0 * noise.allowance(float(first.translation[2])) if not noise.exact else 0.0
+        radius, half = dims["radius"], dims["half_length"]
         for e in candidates:
             if not e.certified:
                 continue
-            seen = ends_seen(
-                e.rotation,
-                e.translation,
-                dims["radius"],
-                dims["half_length"],
-                depth,
-                intrinsics,
-                ends,
-                margin,
-            )
-            if seen is None or seen:
+            seen = ends_seen(e.rotation, e.translation, radius, half, depth, intrinsics, ends, margin)
+            face = ends.on_surface + margin
+            if seen or (
+                seen is None and end_face_seen(e.rotation, e.translation, radius, half, points, face)
+            ):
                 return e
-        r = dims["radius"], dims["half_length"]
-        by = slide_to_an_end(first.rotation, first.translation, *r, depth, intrinsics, ends, margin)
+        by = slide_to_an_end(first.rotation, first.translation, radius, half, depth, intrinsics, ends, margin)
         if by is not None:
             moved = by * np.asarray(first.rotation)[:, 2]
             slid = replace(

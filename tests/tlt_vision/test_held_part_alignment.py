@@ -25,11 +25,12 @@ from tlt_ars.planning.targets import part_in_tool, placement_targets
 from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
+from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.inspection import corner_joint_prior, expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
 from tlt_vision.pipeline import detections_near
-from tlt_vision.segmentation_source import TwinLabels
+from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")
 names = pytest.importorskip("tlt_sim.model.names")
@@ -87,17 +88,32 @@ def _corners_seen(
 
 
 def _pieces_seen(
-    scene, inspector, piece: str, pipeline: str, places: np.ndarray, prior: bool = False
+    scene, inspector, piece: str, pipeline: str, places: np.ndarray, prior: bool = False, segmenter=None
 ) -> list[np.ndarray]:
     """Certified ``piece`` poses (world) in both D405 frames, as CheckAlignment takes them: only
     the pieces within the gate's reach of ``places`` get a pose, a corner joint's fit also
-    started from its place (``prior``)."""
+    started from its place (``prior``). Segmented by ``segmenter`` (a MaskRcnnSegmenter, the
+    node's score floor applied) or the twin's labels."""
     seen = []
     size = RUN["cameras"]["d405"]
-    radius = load_config().raw["held_piece_gate"] + inspector.estimators[piece].model.diameter / 2
+    config = load_config()
+    radius = config.raw["held_piece_gate"] + inspector.estimators[piece].model.diameter / 2
     for camera in CAMERAS:
         f = scene.render(camera, size["width"], size["height"], antialias=RUN["cameras"]["antialias"])
-        found = [d for d in TwinLabels.detect_render(f, camera) if d.object_class == piece]
+        if segmenter is None:
+            found = TwinLabels.detect_render(f, camera)
+        else:
+            frame = CameraFrame(
+                camera,
+                0.0,
+                f"{camera}_optical",
+                f.intrinsics,
+                f.intrinsics.matrix,
+                {"rgb": f.rgb, "depth": f.depth},
+            )
+            floor = config.raw["segmentation"]["min_score"]
+            found = [d for d in segmenter.detect(frame) if d.score >= floor]
+        found = [d for d in found if d.object_class == piece]
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = f.rotation, f.position
         found = detections_near(found, f.depth, f.intrinsics, pose, places, radius)
@@ -158,10 +174,9 @@ def _perpendiculars(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, np.cross(u, a)
 
 
-@pytest.mark.parametrize("member_id", ["bay1/vertical/x0_y1", "bay1/diagonal/face_x0"])
-def test_a_held_strut_is_aligned_from_the_end_fittings_each_d405_sees(inspector, tmp_path, member_id):
-    """A diagonal is held off its middle, the EE widened (config/ars/ars_x.yaml): D405 b, on the
-    width slide, still sees the fitting at the far end."""
+def _held_strut(inspector, tmp_path, member_id: str, off: float = 0.0, segmenter=None):
+    """ARS X holding ``member_id``'s strut at its placement, ``off`` (m) across its axis: the
+    alignment CheckAlignment measures, and the strut's middle where the arm holds it."""
     member = MISSION.member(member_id)
     width = ARS_X["end_effector"]["width"][member.kind]
     cfg = load_scene_config()
@@ -193,14 +208,34 @@ def test_a_held_strut_is_aligned_from_the_end_fittings_each_d405_sees(inspector,
         along /= np.linalg.norm(along)
         onto = np.column_stack([axis, *_perpendiculars(axis)])
         seated = onto @ np.column_stack([along, *_perpendiculars(along)]).T
+        middle = middle + off * _perpendiculars(axis)[0]
         scene.place_part(part.name, middle - seated @ ((part.ends["a"] + part.ends["b"]) / 2), seated)
         site = load_config().raw["site"]
         level = site["build_level"] + MISSION.bay_height
         origin = np.asarray(site["base_origin"]) + np.array([0.0, 0.0, level])
         joints = [origin + np.asarray(p) for _, p in member.joints]
         pieces = expected_pieces(member.kind, joints, inspector.parts)
-        seen = _pieces_seen(scene, inspector, "end_fitting", member.kind, pieces)
-    result = held_part_alignment(member.kind, pieces, seen, tool, inspector.tol, gate=0.1)
-    assert result.aligned and result.matched == 2, (result, seen, pieces)
+        seen = _pieces_seen(scene, inspector, "end_fitting", member.kind, pieces, segmenter=segmenter)
+    return held_part_alignment(member.kind, pieces, seen, tool, inspector.tol, gate=0.1), middle
+
+
+@pytest.mark.parametrize("member_id", ["bay1/vertical/x0_y1", "bay1/diagonal/face_x0"])
+def test_a_held_strut_is_aligned_from_the_end_fittings_each_d405_sees(inspector, tmp_path, member_id):
+    """A diagonal is held off its middle, the EE widened (config/ars/ars_x.yaml): D405 b, on the
+    width slide, still sees the fitting at the far end."""
+    result, middle = _held_strut(inspector, tmp_path, member_id)
+    assert result.aligned and result.matched == 2, result
     assert result.position_error < 0.002
     assert np.linalg.norm(result.held[:3, 3] - middle) < 0.002
+
+
+@pytest.mark.parametrize("off", [0.0, 0.008])
+def test_a_held_vertical_is_measured_through_mask_rcnn_as_through_the_labels(inspector, tmp_path, off):
+    """The shipped Mask R-CNN's fitting masks stop short where a fitting meets its tube; the
+    depth's view of the fitting's end places it along its axis (tlt_vision.pose.axial_ends), so
+    the part is measured where it is: in place, and 8 mm off it."""
+    segmenter = MaskRcnnSegmenter.from_config(load_config())
+    result, _ = _held_strut(inspector, tmp_path, "bay1/vertical/x0_y1", off, segmenter)
+    assert result.matched == 2, result
+    assert abs(result.position_error - off) < 0.002, result
+    assert result.aligned == (off == 0.0)

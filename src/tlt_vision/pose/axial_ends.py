@@ -14,7 +14,8 @@ behind it). Neither fixes the axial place, and the pose is not certified for it.
 each end, a few pixels inside and beyond the end along the axis's image, and calls an end seen
 when most of the samples that can be read show the surface inside and something farther beyond.
 Seen end-on (the axis within ``end_on`` of the line of sight), the depth of the end face itself
-places the part along its axis, and the check does not apply.
+places the part along its axis, and the check does not apply: :func:`end_face_seen` asks instead
+whether the cloud holds that face.
 """
 
 from __future__ import annotations
@@ -76,6 +77,29 @@ def ends_seen(
     if votes is None:
         return None
     return tuple(name for name, (ends, read) in votes.items() if read and ends * 2 > read)
+
+
+def end_face_seen(
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    radius: float,
+    half_length: float,
+    points: np.ndarray,
+    tolerance: float,
+    share: float = 0.1,
+) -> bool:
+    """Whether at least ``share`` of the cloud ``points`` (N, 3, camera frame) lie on an end face
+    of the posed cylinder (within ``tolerance`` of its plane, inside its rim): seen end-on, the
+    face places the part along its axis only if the cloud holds it, not a band of the side alone
+    (a mask cut by the frame's border)."""
+    rot, t = np.asarray(rotation, float), np.asarray(translation, float)
+    local = (np.asarray(points, float) - t) @ rot
+    if not len(local):
+        return False
+    on_face = (np.abs(np.abs(local[:, 2]) - half_length) <= tolerance) & (
+        np.linalg.norm(local[:, :2], axis=1) <= radius + tolerance
+    )
+    return int(on_face.sum()) >= max(10, share * len(local))
 
 
 def slide_to_an_end(
@@ -213,4 +237,4 @@ def end_votes(
     return out
 
 
-__all__ = ["DEFAULT", "AxialEnds", "end_votes", "ends_seen", "slide_to_an_end"]
+__all__ = ["DEFAULT", "AxialEnds", "end_face_seen", "end_votes", "ends_seen", "slide_to_an_end"]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tlt_vision.pointcloud import Intrinsics
-from tlt_vision.pose.axial_ends import ends_seen, slide_to_an_end
+from tlt_vision.pose.axial_ends import end_face_seen, ends_seen, slide_to_an_end
 
 K = Intrinsics(300.0, 300.0, 160.0, 120.0)
 W, H = 320, 240
@@ -61,3 +61,14 @@ def test_nothing_behind_the_end_but_the_same_surface_is_no_end():
 def test_seen_end_on_the_check_does_not_apply(depth):
     facing = np.eye(3)  # the model's z along the line of sight
     assert ends_seen(facing, np.array([0.0, 0.0, Z0]), RADIUS, HALF, depth, K) is None
+
+
+def test_seen_end_on_the_cloud_must_hold_an_end_face():
+    rng = np.random.default_rng(0)
+    angle = rng.uniform(0.0, 2 * np.pi, 400)
+    side = np.column_stack([RADIUS * np.cos(angle), RADIUS * np.sin(angle), rng.uniform(-HALF, HALF, 400)])
+    r = RADIUS * np.sqrt(rng.uniform(0.0, 1.0, 100))
+    face = np.column_stack([r * np.cos(angle[:100]), r * np.sin(angle[:100]), np.full(100, -HALF)])
+    at = np.array([0.0, 0.0, Z0])
+    assert end_face_seen(np.eye(3), at, RADIUS, HALF, np.vstack([side, face]) + at, 0.002)
+    assert not end_face_seen(np.eye(3), at, RADIUS, HALF, side[np.abs(side[:, 2]) < 0.015] + at, 0.002)
