@@ -26,9 +26,12 @@ from tlt_common.ros.rosout_logging import (
 
 @pytest.fixture
 def root_logger() -> Iterator[logging.Logger]:
-    """The root logger, its level and handlers put back after the test."""
+    """The root logger without the handlers earlier tests left on it (a ``basicConfig`` of a
+    ``main()`` run under capture writes to a stream since closed), its level and handlers put
+    back after the test."""
     root = logging.getLogger()
     level, handlers = root.level, list(root.handlers)
+    root.handlers[:] = []
     yield root
     root.setLevel(level)
     root.handlers[:] = handlers
