@@ -33,7 +33,7 @@ from tlt_common.ccsds.reasons import AckStage
 from tlt_common.config_schema import ConfigError
 from tlt_gsw.archive import query as archive_query
 from tlt_gsw.archive.recorder import Recorder
-from tlt_gsw.link import GswLink, host_port
+from tlt_gsw.link import GswLink, accepted_sources, host_port
 from tlt_gsw.mission_job import ACTIONS as MISSION_ACTIONS
 from tlt_gsw.mission_job import add_mission_parser, add_summary_parser
 from tlt_gsw.mission_job import run as run_mission_action
@@ -161,6 +161,7 @@ def _link(
             close_recorder=True,
             sequencer=sequencer,
             tm_key_overlap_s=gsw["tm_key_overlap_s"],
+            accept_from=accepted_sources(gsw, args.crs),
         )
     except BaseException:
         if recorder is not None:
@@ -228,7 +229,8 @@ def _cmd_watch(args: argparse.Namespace, out) -> int:
         print(
             f"received {stats.packets_rx} packet(s), {stats.bytes_rx} B, gaps {stats.gaps} "
             f"(missing {stats.missing}), CRC errors {stats.crc_errors}, rejected {stats.rejections} "
-            f"(failed authentication {stats.auth_rejections})",
+            f"(failed authentication {stats.auth_rejections}, not a configured source "
+            f"{stats.source_rejections})",
             file=out,
         )
     return EXIT_OK

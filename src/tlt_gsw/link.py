@@ -1,7 +1,9 @@
 """The GSW end of the CCSDS ground link over UDP (paper §V.A, Fig. 3 and Fig. 6).
 
 Sends authenticated commands to the CRS (:meth:`GswLink.send_command`), receives telemetry
-(:meth:`GswLink.poll`), authenticates it with the telemetry keys of the key ring
+(:meth:`GswLink.poll`), drops unparsed any datagram whose source is not an accepted one
+(``gsw.accept_from``: archived as rejected with reason ``source``, counted per source, logged at a
+bounded rate), authenticates the rest with the telemetry keys of the key ring
 (:class:`TelemetryVerifier`: MAC, replay window, key retirement), counts it (:class:`LinkStats`:
 gaps per APID, CRC errors, rejections per reason) and hands every datagram sent or received to the
 archive :class:`Recorder`. A telemetry packet that fails authentication is archived as rejected
@@ -28,6 +30,7 @@ from tlt_common.ccsds.codec import Packet, ParseResult, Rejection, encode_comman
 from tlt_common.ccsds.definitions import Definitions
 from tlt_common.ccsds.reasons import AckStage, Reason
 from tlt_common.ccsds.sequence import SequenceCounters
+from tlt_common.ccsds.sources import Source, SourceFilter, parse_sources
 from tlt_common.ccsds.stats import LinkStats
 from tlt_common.ccsds.tm_security import TelemetryVerifier
 from tlt_gsw.archive.recorder import Recorder
@@ -45,6 +48,22 @@ def host_port(text: str) -> tuple[str, int]:
     if not host or not port.isdigit():
         raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}")
     return host, int(port)
+
+
+def accepted_sources(
+    gsw_config: Mapping[str, Any], crs_override: tuple[str, int] | None = None
+) -> list[Source] | None:
+    """The sources telemetry is taken from: ``gsw.accept_from`` of a loaded link configuration,
+    plus the CRS address given on the command line (``--crs``), which answers from there."""
+    accepted = parse_sources(gsw_config["accept_from"])
+    if accepted is not None and crs_override is not None:
+        host, port = crs_override
+        try:
+            address = socket.gethostbyname(host)
+        except OSError:
+            address = host  # sending to it fails with its own message
+        accepted.append((address, port))
+    return accepted
 
 
 @dataclass(frozen=True)
@@ -82,7 +101,11 @@ class SentCommand:
 
 
 class GswLink:
-    """Command sender and telemetry receiver of the ground station."""
+    """Command sender and telemetry receiver of the ground station.
+
+    ``accept_from`` lists the (address, port or None for any port) sources telemetry is taken
+    from; None takes it from any source.
+    """
 
     def __init__(
         self,
@@ -99,6 +122,7 @@ class GswLink:
         clock: Callable[[], float] = time.time,
         recv_buffer_bytes: int | None = None,
         tm_key_overlap_s: float = 30.0,
+        accept_from: list[Source] | None = None,
     ) -> None:
         key = keyring.get(key_id)
         if key is None:
@@ -114,6 +138,7 @@ class GswLink:
         self.on_packet = on_packet
         self.clock = clock
         self.stats = LinkStats()
+        self.sources = SourceFilter(accept_from, _log)
         self.tm_verifier = TelemetryVerifier(keyring.telemetry, overlap_s=tm_key_overlap_s)
         if not self.tm_verifier.key_ids:
             _log.warning("no telemetry keys in the key ring: every telemetry packet will be rejected")
@@ -211,26 +236,35 @@ class GswLink:
         results: list[ParseResult] = []
         self._sock.settimeout(max(timeout, 1e-4))
         try:
-            data, _ = self._sock.recvfrom(RECV_BUFFER)
+            data, source = self._sock.recvfrom(RECV_BUFFER)
         except (TimeoutError, BlockingIOError):
             # A quiet link must still commit what was buffered before it went quiet.
             if self.recorder is not None:
                 self.recorder.maybe_flush()
             return results
-        results.append(self._handle(data))
+        results.append(self._handle(data, source))
         self._sock.setblocking(False)
         try:
             while len(results) < max_packets:
-                data, _ = self._sock.recvfrom(RECV_BUFFER)
-                results.append(self._handle(data))
+                data, source = self._sock.recvfrom(RECV_BUFFER)
+                results.append(self._handle(data, source))
         except (BlockingIOError, InterruptedError):
             pass
         if self.recorder is not None:
             self.recorder.maybe_flush()
         return results
 
-    def _handle(self, data: bytes) -> ParseResult:
+    def _handle(self, data: bytes, source: tuple[str, int]) -> ParseResult:
         now = self.clock()
+        if not self.sources.allows(source):
+            # Not parsed at all: kept as evidence, counted, logged, never handed on as telemetry.
+            rejection = Rejection(Reason.SOURCE, self.sources.note_drop(source), bytes(data))
+            self.stats.record_foreign(len(data), source)
+            if self.recorder is not None:
+                self.recorder.record("rx", data, rejection, recorded_at=now)
+            if self.on_packet is not None:
+                self.on_packet(rejection)
+            return rejection
         verifier = self.tm_verifier
         result = parse_datagram(data, self.defs, expect="tm", keyring=verifier, replay=verifier)
         if isinstance(result, Rejection):
@@ -307,4 +341,4 @@ class GswLink:
         return rejection
 
 
-__all__ = ["Ack", "GswLink", "SentCommand"]
+__all__ = ["Ack", "GswLink", "SentCommand", "accepted_sources"]

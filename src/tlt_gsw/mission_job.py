@@ -42,7 +42,7 @@ from tlt_common.ccsds.reasons import AckStage
 from tlt_common.config_schema import ConfigError
 from tlt_gsw.archive import query as archive_query
 from tlt_gsw.archive.recorder import Recorder
-from tlt_gsw.link import GswLink, SentCommand, host_port
+from tlt_gsw.link import GswLink, SentCommand, accepted_sources, host_port
 from tlt_gsw.mission_progress import Progress
 from tlt_gsw.summary import format_summary, summarize_file
 
@@ -256,6 +256,7 @@ def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
             sequencer=CommandSequencer(expand_path(gsw["command_state"])),
             recv_buffer_bytes=4 << 20,
             tm_key_overlap_s=gsw["tm_key_overlap_s"],
+            accept_from=accepted_sources(gsw, args.crs),
         )
     except BaseException:
         recorder.close()

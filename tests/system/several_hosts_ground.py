@@ -1,24 +1,25 @@
 """The ground station's part of the several-hosts system test, run inside the ground host:
 ``several_hosts_ground.py LINK_YAML COMMAND [KEY VALUE]`` sends one authenticated ground command
 to the CRS over CCSDS/UDP (tlt_gsw.link) and prints its final acknowledgement as
-``ack <stage> <reason> <detail>``. Exit 0 when the command completed, 1 when it was refused or failed, 2 when
+``ack <stage> <reason> <detail>``. Telemetry is taken only from the CRS address of LINK_YAML
+(``gsw.accept_from`` as loaded). Exit 0 when the command completed, 1 when it was refused or failed, 2 when
 no final acknowledgement came within 20 s (the command is sent again every 2 s until one does)."""
 
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import yaml
 
 from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.definitions import load_definitions
-from tlt_gsw.link import GswLink
+from tlt_common.ccsds.link_config import load_link_config
+from tlt_gsw.link import GswLink, accepted_sources
 
 
 def main() -> int:
-    link = yaml.safe_load(Path(sys.argv[1]).read_text())
+    link = load_link_config(sys.argv[1])
     command = sys.argv[2]
     params = {"key": sys.argv[3], "value": yaml.safe_load(sys.argv[4])} if len(sys.argv) > 4 else None
     gsw_conf = link["gsw"]
@@ -28,6 +29,7 @@ def main() -> int:
         link["key_id"],
         (gsw_conf["crs_host"], gsw_conf["crs_port"]),
         bind=(gsw_conf["bind_host"], 0),
+        accept_from=accepted_sources(gsw_conf),
     ) as gsw:
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline:

@@ -213,6 +213,8 @@ class SystemRun:
                 (self.crs_host, self.crs_port),
                 bind=(self.gsw_host, self.gsw_port),
                 on_packet=self._keep,
+                # As config/ccsds/link_twin.yaml's default gsw.accept_from: the CRS's own socket.
+                accept_from=[(self.crs_host, self.crs_port)],
             )
 
         if self.hosts_run is None:

@@ -87,6 +87,9 @@ def link_processes(tmp_path):
                     "bind_port": gsw_port,
                     "archive": str(tmp_path / "archive.sqlite"),
                     "command_state": str(tmp_path / "seq.json"),
+                    # The attacker relays from the CRS's host (a spoofed source address passes a
+                    # source check): here only authentication tells the CRS's word from a forgery.
+                    "accept_from": ["127.0.0.1"],
                 },
             }
         )
@@ -229,7 +232,7 @@ def test_forged_replayed_altered_and_rekeyed_telemetry_is_archived_as_rejected(l
     assert watch.returncode == 0, err
     lines = out.splitlines()
     assert sum(line.startswith("REJECTED") for line in lines) == len(attacks), out
-    assert f"rejected {len(attacks)} (failed authentication {len(attacks)})" in lines[-1]
+    assert f"rejected {len(attacks)} (failed authentication {len(attacks)}, " in lines[-1]
     assert "telemetry rejected" in err  # the GSW's log line
 
     conn = sqlite3.connect(setup["archive"])

@@ -30,6 +30,8 @@ class Reason(enum.IntEnum):
     REFUSED = 14
     EXECUTION_FAILED = 15
     INTERNAL_ERROR = 16
+    # Dropped unparsed: the datagram came from an address the receiver's accept_from does not name.
+    SOURCE = 17
 
     @property
     def label(self) -> str:

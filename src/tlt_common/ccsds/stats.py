@@ -13,6 +13,9 @@ from tlt_common.ccsds.sequence import GapTracker
 # Rejections that say a packet is not the other end's word: forged, altered, replayed or under a
 # key that is unknown or retired.
 AUTH_REASONS = frozenset({Reason.BAD_AUTH, Reason.UNKNOWN_KEY, Reason.REPLAY})
+# Distinct foreign sources counted by name; any further ones are counted together as "other", so a
+# flood from many addresses cannot grow the counters without bound.
+MAX_TRACKED_SOURCES = 64
 
 
 @dataclass
@@ -27,7 +30,9 @@ class LinkStats:
     rejections: int = 0
     auth_rejections: int = 0
     commands_accepted: int = 0
+    source_rejections: int = 0
     by_reason: Counter = field(default_factory=Counter)
+    by_source: Counter = field(default_factory=Counter)
     sequence: GapTracker = field(default_factory=GapTracker)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
@@ -45,6 +50,19 @@ class LinkStats:
                     self.auth_rejections += 1
                 return 0
             return self.sequence.observe(result.apid, result.seq_count).missing
+
+    def record_foreign(self, size: int, source: tuple[str, int]) -> None:
+        """Count one datagram dropped unparsed because ``source`` is not an accepted peer."""
+        with self._lock:
+            self.packets_rx += 1
+            self.bytes_rx += size
+            self.rejections += 1
+            self.source_rejections += 1
+            self.by_reason[Reason.SOURCE.label] += 1
+            name = f"{source[0]}:{source[1]}"
+            if name not in self.by_source and len(self.by_source) >= MAX_TRACKED_SOURCES:
+                name = "other"
+            self.by_source[name] += 1
 
     def record_accepted(self) -> None:
         with self._lock:
@@ -83,7 +101,8 @@ class LinkStats:
                 "crc_errors": min(self.crc_errors, u32),
                 "rejections": min(self.rejections, u32),
                 "commands_accepted": min(self.commands_accepted, u32),
+                "source_rejections": min(self.source_rejections, u32),
             }
 
 
-__all__ = ["AUTH_REASONS", "LinkStats"]
+__all__ = ["AUTH_REASONS", "MAX_TRACKED_SOURCES", "LinkStats"]

@@ -2,6 +2,9 @@
 
 Reads command datagrams on a UDP socket, and for each one:
 
+* drops it unparsed if its source is not one the configuration accepts (``crs.accept_from``,
+  :class:`SourceFilter`): counted per source, logged and reported as an ``event`` (both rate
+  limited), never acknowledged;
 * parses, authenticates and checks it against replay (:func:`parse_datagram`), counting it in
   :class:`LinkStats`;
 * a refused datagram is reported as an ``event`` packet and, when it carries a command header, an
@@ -40,6 +43,7 @@ from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.ccsds.sequence import SequenceCounters
+from tlt_common.ccsds.sources import Source, SourceFilter, parse_sources
 from tlt_common.ccsds.stats import LinkStats
 from tlt_common.ccsds.tm_security import TelemetrySigner
 
@@ -99,7 +103,8 @@ class GroundLink:
     refuse a well-formed command (e.g. a blackboard key that is not ground-writable) with a reason
     before it is acknowledged as accepted. ``tm_key_id`` is the telemetry key to sign with first
     (default: the lowest telemetry key id of ``keyring``); a ring without telemetry keys raises
-    :class:`KeyFileError`.
+    :class:`KeyFileError`. ``accept_from`` lists the (address, port or None for any port) sources
+    commands are taken from; None takes them from any source.
     """
 
     def __init__(
@@ -117,8 +122,10 @@ class GroundLink:
         stats_period_s: float | None = None,
         clock: Callable[[], float] = time.time,
         tm_key_id: int | None = None,
+        accept_from: list[Source] | None = None,
     ) -> None:
         self.defs = definitions
+        self.sources = SourceFilter(accept_from, _log)
         self.keyring = keyring
         tm_keys = keyring.telemetry
         self.tm_signer = TelemetrySigner(
@@ -170,6 +177,7 @@ class GroundLink:
         key_file = conf["key_file"]
         gsw = (crs["gsw_host"], crs["gsw_port"]) if crs["gsw_host"] else None
         options.setdefault("max_rejection_events_per_s", crs["max_rejection_events_per_s"])
+        options.setdefault("accept_from", parse_sources(crs["accept_from"]))
         return cls(
             definitions or load_definitions(),
             KeyRing.load(expand_path(key_file) if key_file else None),
@@ -246,7 +254,10 @@ class GroundLink:
 
     # -- receive ----------------------------------------------------------------------------
     def handle_datagram(self, data: bytes, source: tuple[str, int] | None = None) -> ParseResult:
-        """Process one datagram as the receive thread does; return what the parser made of it."""
+        """Process one datagram as the receive thread does; return what the parser made of it (a
+        datagram from a source not accepted is a ``source`` rejection, never parsed)."""
+        if source is not None and not self.sources.allows(source):
+            return self._drop_foreign(data, source)
         result = parse_datagram(data, self.defs, expect="tc", keyring=self.keyring, replay=self.replay)
         self.stats.record_rx(len(data), result)
         if isinstance(result, Rejection):
@@ -311,6 +322,18 @@ class GroundLink:
                 _log.exception("command handler failed on %s", command.name)
                 self.complete(command, False, Reason.INTERNAL_ERROR, f"handler failed: {exc}")
         return result
+
+    def _drop_foreign(self, data: bytes, source: tuple[str, int]) -> Rejection:
+        text = self.sources.note_drop(source)
+        self.stats.record_foreign(len(data), source)
+        rejection = Rejection(Reason.SOURCE, text, bytes(data))
+        # Reported like other unauthenticated junk: an event, rate limited, nothing sent to the source.
+        if self._limiter.allow():
+            suppressed, self._limiter.suppressed = self._limiter.suppressed, 0
+            if suppressed:
+                text += f" ({suppressed} earlier rejection report(s) suppressed)"
+            self._safe_event(Severity.WARNING, "DATAGRAM_REJECTED", Reason.SOURCE, text)
+        return rejection
 
     def _switch_tm_key(self, command: GroundCommand) -> None:
         """Move telemetry to the next key id: the accepted ack still under the old key, the

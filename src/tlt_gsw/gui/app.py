@@ -31,7 +31,7 @@ from tlt_gsw.gui.link_process import LinkProcess, LinkSettings, LinkStartError
 from tlt_gsw.gui.main_window import TABS, MainWindow
 from tlt_gsw.gui.tower_layout import load_layout_mission
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
-from tlt_gsw.link import host_port
+from tlt_gsw.link import accepted_sources, host_port
 
 EXIT_OK, EXIT_USAGE = 0, 2
 
@@ -183,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                     command_state=str(expand_path(gsw["command_state"])),
                     flush_interval_s=conf.recorder_flush_s,
                     tm_key_overlap_s=gsw["tm_key_overlap_s"],
+                    accept_from=accepted_sources(gsw, args.crs),
                 )
             ).start()
             conn = open_archive(archive)

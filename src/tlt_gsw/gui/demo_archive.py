@@ -275,6 +275,7 @@ def write_demo_archive(
                     "packets_rx": 6 + i // 100, "bytes_rx": 300 + 50 * (i // 100), "packets_tx": w.count,
                     "bytes_tx": 60 * w.count, "gaps": 0, "missing": 0, "crc_errors": 0,
                     "rejections": 1 if s > 24 else 0, "commands_accepted": min(4, 1 + i // 120),
+                    "source_rejections": 0,
                 }, t)  # fmt: skip
             if abs(s - 8.0) < 0.05:
                 w.event("info", "BAY_BUILT", "bay 1 built and inspected", t)

@@ -53,6 +53,8 @@ class LinkSettings:
     flush_interval_s: float = 0.1
     recv_buffer_bytes: int = 4 << 20  # rides out the GUI host being busy for a while at 2,000 packets/s
     tm_key_overlap_s: float = 30.0
+    # The (address, port or None) sources telemetry is taken from; None: any source.
+    accept_from: list[tuple[str, int | None]] | None = None
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,7 @@ def _build_link(settings: LinkSettings):
             sequencer=CommandSequencer(settings.command_state) if settings.command_state else None,
             recv_buffer_bytes=settings.recv_buffer_bytes,
             tm_key_overlap_s=settings.tm_key_overlap_s,
+            accept_from=settings.accept_from,
         )
     except BaseException:
         recorder.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import yaml
 
 from tlt_common.ccsds.link_config import DEFAULT_PATH, expand_path, load_link_config
 from tlt_common.config_schema import ConfigError
@@ -56,3 +57,47 @@ def test_address_overrides_put_each_end_on_its_own_host(monkeypatch):
     monkeypatch.setenv("TLT_GROUND_GSW_HOST", "ground-laptop")
     with pytest.raises(ConfigError, match=r"\$TLT_GROUND_GSW_HOST: 'ground-laptop' is not an IP address"):
         load_link_config()
+
+
+def test_each_end_accepts_by_default_the_peer_its_file_names():
+    conf = load_link_config()
+    assert conf["crs"]["accept_from"] == [conf["crs"]["gsw_host"]]  # any port: `send` has its own
+    assert conf["gsw"]["accept_from"] == [f"{conf['gsw']['crs_host']}:{conf['gsw']['crs_port']}"]
+
+
+def test_accepted_peers_follow_the_emulated_hosts_of_the_launch_set(monkeypatch):
+    launch = DEFAULT_PATH.parents[1] / "launch" / "system_hosts_twin.yaml"
+    env = yaml.safe_load(launch.read_text())["env"]
+    hosts = {h["name"]: h["address"].split("/")[0] for h in yaml.safe_load(launch.read_text())["hosts"]}
+    assert (env["TLT_GROUND_CRS_HOST"], env["TLT_GROUND_GSW_HOST"]) == (hosts["crs"], hosts["ground"])
+    for var in ("TLT_GROUND_CRS_HOST", "TLT_GROUND_GSW_HOST"):
+        monkeypatch.setenv(var, env[var])
+    conf = load_link_config(DEFAULT_PATH.with_name("link_twin.yaml"))
+    assert conf["crs"]["accept_from"] == [hosts["ground"]]
+    assert conf["gsw"]["accept_from"] == [f"{hosts['crs']}:{conf['crs']['bind_port']}"]
+
+
+def test_a_crs_that_sends_to_its_last_commander_accepts_any_source(tmp_path):
+    text = DEFAULT_PATH.read_text().replace("  gsw_host: 127.0.0.1\n", '  gsw_host: ""\n')
+    (tmp_path / "link.yaml").write_text(text)
+    assert load_link_config(tmp_path / "link.yaml")["crs"]["accept_from"] is None
+
+
+@pytest.mark.parametrize(
+    ("accept_from", "reason"),
+    [
+        ("[127.0.0.1, 10.0.0.300]", "item 1: '10.0.0.300' is not an IPv4 address"),
+        ("['10.0.0.1:']", "item 0: '' is not a UDP port (1 ... 65535)"),
+        ("[]", "expected at least 1 item(s), got 0"),
+        ("10.0.0.1", "expected a list, got str '10.0.0.1'"),
+    ],
+)
+def test_a_bad_accepted_source_is_refused_naming_file_and_key(tmp_path, accept_from, reason):
+    text = DEFAULT_PATH.read_text().replace(
+        "  tm_key_overlap_s: 30.0\n", f"  tm_key_overlap_s: 30.0\n  accept_from: {accept_from}\n"
+    )
+    bad = tmp_path / "link.yaml"
+    bad.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_link_config(bad)
+    assert (info.value.source, info.value.key, info.value.reason) == (str(bad), "gsw.accept_from", reason)

@@ -6,7 +6,7 @@ from tlt_common.ccsds.codec import Rejection, encode_telemetry, parse_datagram
 from tlt_common.ccsds.definitions import load_definitions
 from tlt_common.ccsds.reasons import Reason
 from tlt_common.ccsds.sequence import SEQ_MODULO, GapTracker, SequenceCounters
-from tlt_common.ccsds.stats import LinkStats
+from tlt_common.ccsds.stats import MAX_TRACKED_SOURCES, LinkStats
 
 
 def test_counters_are_per_apid_and_wrap():
@@ -71,3 +71,15 @@ def test_link_stats_count_packets_gaps_crc_errors_and_rejections():
     assert fields["packets_rx"] == 4 and fields["bytes_rx"] == sum(map(len, raws)) + len(corrupted)
     assert (fields["gaps"], fields["missing"], fields["crc_errors"], fields["rejections"]) == (1, 2, 1, 1)
     assert stats.by_reason == {"bad_crc": 1}
+
+
+def test_drops_from_foreign_sources_are_counted_per_source_within_a_bound():
+    stats = LinkStats()
+    for port in range(MAX_TRACKED_SOURCES + 10):
+        stats.record_foreign(10, ("10.0.0.9", 4000 + port))
+    stats.record_foreign(10, ("10.0.0.9", 4000))
+    assert stats.by_source["10.0.0.9:4000"] == 2 and stats.by_source["other"] == 10
+    assert len(stats.by_source) == MAX_TRACKED_SOURCES + 1
+    fields = stats.as_fields()
+    assert (fields["source_rejections"], fields["rejections"], fields["packets_rx"]) == (75, 75, 75)
+    assert stats.by_reason == {"source": 75} and stats.auth_rejections == 0
