@@ -250,8 +250,9 @@ def test_the_zeds_real_depth_certifies_the_held_struts_end_fittings(held_strut, 
     """Through the ZED 2i's model (config/twin/cameras.yaml, one seeded frame) and with the node
     told its noise (node.yaml depth_noise.cameras), the held strut's end fittings are near enough
     for a certificate (the ZED's reach for an end fitting, docs/vision.md): vision does not answer
-    that it cannot judge them, as it did with the strut 0.85 m away. (Whether the strut then passes
-    is the fittings' axes' matter: docs/cameras.md Limits.)"""
+    that it cannot place them, as it did with the strut 0.85 m away. Their axes come out a few
+    degrees off through that noise, within what the noise allows of the angle tolerance: the good
+    strut is a doubt or a pass, never failed as bent."""
     _, camera, kind, _, _, frame = held_strut
     sensors = camera_sensor.load_camera_sensors()
     rgb, depth = sensors.for_camera(camera).apply(
@@ -265,7 +266,8 @@ def test_the_zeds_real_depth_certifies_the_held_struts_end_fittings(held_strut, 
     assert len(fittings) == 2 and all(o.estimate is not None and o.estimate.certified for o in fittings), [
         o.estimate.certificate.reason for o in fittings if o.estimate is not None
     ]
-    assert not report.cannot_judge, report.reasons
+    assert report.passed or report.cannot_judge, report.reasons
+    assert not any(r.startswith("cannot judge the end fitting") for r in report.reasons), report.reasons
 
 
 def test_a_held_tube_seen_as_two_detections_is_posed_as_one(held_strut, inspector):

@@ -411,6 +411,31 @@ def test_a_tube_in_doubt_does_not_hide_what_is_wrong():
     assert any("not coaxial" in r for r in rep.reasons), rep.reasons
 
 
+def _tilted(o: Observation, deg: float, allowance: float) -> Observation:
+    """``o``'s fitting turned ``deg`` about its x axis, its certificate allowing ``allowance`` (m)
+    for the depth's noise."""
+    e = o.estimate
+    cert = dataclasses.replace(e.certificate, allowance=allowance)
+    turned = np.asarray(e.rotation) @ _rx(math.radians(deg))
+    return dataclasses.replace(o, estimate=dataclasses.replace(e, rotation=turned, certificate=cert))
+
+
+@pytest.mark.parametrize(
+    ("deg", "allowance", "verdict"),
+    [(3.0, 0.0, "fail"), (3.0, 0.0012, "cannot judge"), (8.0, 0.0012, "fail"), (1.0, 0.0012, "pass")],
+)
+def test_a_fittings_angle_within_the_noises_reach_of_the_tolerance_is_a_doubt(deg, allowance, verdict):
+    # A 50 mm fitting through a depth noise of 1.2 mm may read 2.75 deg off: over the 2 deg
+    # tolerance by less than that is no verdict; a real bend or a misaligned fitting goes beyond.
+    obs = _strut(np.random.default_rng(10))
+    fittings = [i for i, o in enumerate(obs) if o.object_class == "end_fitting"]
+    obs[fittings[1]] = _tilted(obs[fittings[1]], deg, allowance)
+    obs[fittings[0]] = _tilted(obs[fittings[0]], 0.0, allowance)
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    got = "pass" if rep.passed else "cannot judge" if rep.cannot_judge else "fail"
+    assert got == verdict, rep.reasons
+
+
 def test_an_uncertified_fitting_away_from_both_ends_is_not_taken_for_either():
     obs = _strut(np.random.default_rng(7), missing="b")
     fitting = next(i for i, o in enumerate(obs) if o.object_class == "end_fitting")

@@ -32,6 +32,26 @@ TUBE_AXIAL_UNCERTAINTY = 0.015
 FITTING_SEEN_WITHIN = 0.03
 
 
+def _axis_doubt(e: PoseEstimate, parts: Mapping[str, Any]) -> float:
+    """How far (rad) a fitting's posed axis may be off for the depth's noise: its ends each that
+    much (the certificate's allowance) across its length. 0 on exact depth."""
+    return math.atan2(2.0 * e.certificate.allowance, float(parts["fitting_length"]))
+
+
+def _angle_verdict(angle: float, doubt: float, tol: Tolerances, what: str) -> tuple[str | None, str | None]:
+    """A reason against ``what`` when ``angle`` (rad) is over the tolerance by more than the
+    noise's ``doubt``; a doubt when it is over the tolerance within it (neither when within)."""
+    if angle <= tol.angle:
+        return None, None
+    text = f"{what} by {math.degrees(angle):.1f} deg"
+    if angle > tol.angle + doubt:
+        return text, None
+    return None, (
+        f"cannot judge: {text}, within the depth noise's {math.degrees(doubt):.1f} deg of the "
+        f"{math.degrees(tol.angle):.1f} deg tolerance"
+    )
+
+
 def _coaxial(f1: PoseEstimate, f2: PoseEstimate) -> tuple[float, float]:
     """Angle (rad) between two fittings' axes, and the larger angle of either axis from the line
     joining their centres: a straight strut's end fittings share one axis, the line between them.
@@ -89,11 +109,15 @@ def inspect_strut(
     fittings = one_per_place(fittings, tol.position)
     if len(fittings) == 2:
         between, to_chord = _coaxial(*fittings)
-        if between > tol.angle or to_chord > tol.angle:
+        doubt = _axis_doubt(fittings[0], parts) + _axis_doubt(fittings[1], parts)
+        bent, unsure_bent = _angle_verdict(max(between, to_chord), doubt, tol, "end fittings off coaxial")
+        if bent is not None:
             reasons.append(
                 f"bent tube: the end fittings are not coaxial ({math.degrees(between):.1f} deg between "
                 f"their axes, {math.degrees(to_chord):.1f} deg from the line joining them)"
             )
+        elif unsure_bent is not None:
+            unsure.append(unsure_bent)
     elif len(fittings) > 2:
         reasons.append(f"expected two end fittings, found {len(fittings)}")
     if len(tubes) == 1:
@@ -137,8 +161,7 @@ def _fittings_on_tube(
     to it; for an end without one where an uncertified fitting of ``seen`` stands within
     :data:`FITTING_SEEN_WITHIN` of its place, why it cannot be judged instead (the fitting is
     there; the view cannot place it well enough to check it); and the observations so taken."""
-    reasons, missing = _on_tube(tube, fittings, length, parts, tol)
-    unsure: list[str] = []
+    reasons, unsure, missing = _on_tube(tube, fittings, length, parts, tol)
     accounted: list[Observation] = []
     for where in missing.values():
         # A tube is the same end for end: "a" and "b" follow the estimated axis, so the reason
@@ -165,10 +188,12 @@ def _fittings_on_tube(
 
 def _on_tube(
     tube: PoseEstimate, fittings: list[PoseEstimate], length: float, parts: Mapping[str, Any], tol: Tolerances
-) -> tuple[list[str], dict[str, np.ndarray]]:
+) -> tuple[list[str], list[str], dict[str, np.ndarray]]:
     """The fittings matched to the ends of ``tube``: the reasons against those out of place,
-    doubled or misaligned, and where (camera frame) each end that has none should have one."""
-    reasons = []
+    doubled or misaligned, the doubts on those whose misalignment is within the depth noise's
+    reach of the tolerance, and where (camera frame) each end that has none should have one."""
+    reasons: list[str] = []
+    doubts: list[str] = []
     axis = axis_of(tube)
     lay = strut_layout(length, parts)
     offset = lay["fitting_b"] - lay["tube_centre"]  # fittings at -offset (end a) and +offset (end b)
@@ -203,12 +228,17 @@ def _on_tube(
             reasons.append(f"two end fittings at end {end}")
             continue
         angle = angle_between_axes(axis_of(f), axis)
-        if angle > tol.angle:
-            reasons.append(f"end fitting at end {end} misaligned by {math.degrees(angle):.1f} deg")
+        wrong, doubt = _angle_verdict(
+            angle, _axis_doubt(f, parts), tol, f"end fitting at end {end} misaligned"
+        )
+        if wrong is not None:
+            reasons.append(wrong)
+        elif doubt is not None:
+            doubts.append(doubt)
         found[end] = f
     ends = (("a", -1.0), ("b", 1.0))
     missing = {end: centre + sign * offset * axis for end, sign in ends if end not in found}
-    return reasons, missing
+    return reasons, doubts, missing
 
 
 def missing_fitting_places(
@@ -221,5 +251,5 @@ def missing_fitting_places(
     if len(tubes) != 1:
         return np.zeros((0, 3))
     fittings = one_per_place(split_certified(observations, "end_fitting")[0], tol.position)
-    _, missing = _on_tube(tubes[0], fittings, length, parts, tol)
+    _, _, missing = _on_tube(tubes[0], fittings, length, parts, tol)
     return np.array(list(missing.values()), dtype=float).reshape(-1, 3)

@@ -34,6 +34,7 @@ class Certificate:
     keypoint_groups_required: int
     visible_groups: tuple[str, ...]
     reason: str  # empty when certified
+    allowance: float = 0.0  # m, the depth noise's share of the threshold (0 on exact depth)
 
     @property
     def observably_correct(self) -> bool:
@@ -98,6 +99,7 @@ def certify(
         keypoint_groups_required=visibility.groups_required,
         visible_groups=groups,
         reason="; ".join(reasons),
+        allowance=allowance,
     )
 
 
