@@ -62,7 +62,7 @@ from tlt_vision.pointcloud import (
     detached_pieces,
     masked_point_cloud,
 )
-from tlt_vision.pose.axial_ends import AxialEnds, end_face_seen, ends_seen, slide_to_an_end
+from tlt_vision.pose.axial_ends import AxialEnds, PosedCylinder, end_face_seen, ends_seen, slide_to_an_end
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together, refined_together
@@ -458,19 +458,18 @@ class PartPipeline:
             return first
         dims = self.estimators[cls].model.dims
         margin = 2.0 * noise.allowance(float(first.translation[2])) if not noise.exact else 0.0
-        radius, half = dims["radius"], dims["half_length"]
+        face = ends.on_surface + margin
         for e in candidates:
             if not e.certified:
                 continue
-            seen = ends_seen(e.rotation, e.translation, radius, half, depth, intrinsics, ends, margin)
-            face = ends.on_surface + margin
-            if seen or (
-                seen is None and end_face_seen(e.rotation, e.translation, radius, half, points, face)
-            ):
+            posed = PosedCylinder(e.rotation, e.translation, dims["radius"], dims["half_length"])
+            seen = ends_seen(posed, depth, intrinsics, ends, margin)
+            if seen or (seen is None and end_face_seen(posed, points, face)):
                 return e
-        by = slide_to_an_end(first.rotation, first.translation, radius, half, depth, intrinsics, ends, margin)
+        posed = PosedCylinder(first.rotation, first.translation, dims["radius"], dims["half_length"])
+        by = slide_to_an_end(posed, depth, intrinsics, ends, margin)
         if by is not None:
-            moved = by * np.asarray(first.rotation)[:, 2]
+            moved = by * posed.axis
             slid = replace(
                 first,
                 translation=np.asarray(first.translation) + moved,

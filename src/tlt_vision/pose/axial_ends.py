@@ -21,7 +21,7 @@ whether the cloud holds that face.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,6 +43,58 @@ class AxialEnds:
 DEFAULT = AxialEnds()
 
 
+@dataclass(frozen=True)
+class PosedCylinder:
+    """A cylinder of ``radius`` and ``half_length`` along its model's z axis, posed in the camera
+    frame; end ``"a"`` at the model's -z, ``"b"`` at +z."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    radius: float
+    half_length: float
+
+    @property
+    def axis(self) -> np.ndarray:
+        return np.asarray(self.rotation, float)[:, 2]
+
+    def slid(self, by: float) -> PosedCylinder:
+        """This cylinder moved ``by`` (m) along its axis."""
+        return replace(self, translation=np.asarray(self.translation, float) + by * self.axis)
+
+    def end_on(self, settings: AxialEnds) -> bool:
+        """Whether its axis lies within ``settings.end_on_deg`` of the line of sight."""
+        centre = np.asarray(self.translation, float)
+        sight = centre / max(float(np.linalg.norm(centre)), 1e-9)
+        return abs(float(self.axis @ sight)) > math.cos(math.radians(settings.end_on_deg))
+
+    def rims(
+        self, end: str, settings: AxialEnds, intrinsics: PinholeIntrinsics
+    ) -> list[tuple[np.ndarray, float]]:
+        """The rim points at ``end`` on the generator lines of its camera-facing side
+        (``settings.generators_deg``) in front of the camera, each with the pixels a metre along
+        the axis there spans in the image."""
+        axis = self.axis
+        sign = 1.0 if end == "b" else -1.0
+        centre = np.asarray(self.translation, float) + sign * self.half_length * axis
+        towards = -(centre - (centre @ axis) * axis)  # from the axis towards the camera, across it
+        towards /= max(float(np.linalg.norm(towards)), 1e-9)
+        across = np.cross(axis, towards)
+        rims = []
+        for deg in settings.generators_deg:
+            a = math.radians(deg)
+            rim = centre + self.radius * (math.cos(a) * towards + math.sin(a) * across)
+            if rim[2] <= 0:
+                continue
+            step = _project(rim + 0.01 * sign * axis, intrinsics) - _project(rim, intrinsics)
+            px_per_m = float(np.linalg.norm(step)) / 0.01
+            if px_per_m > 1e-4:
+                rims.append((rim, px_per_m))
+        return rims
+
+    def outward(self, end: str) -> np.ndarray:
+        return self.axis if end == "b" else -self.axis
+
+
 def _depth_at(depth: np.ndarray, uv: np.ndarray, window: int = 1) -> float:
     """The median valid depth of the pixels within ``window`` of ``uv`` (3 x 3 by default); nan
     outside the image or where none."""
@@ -59,68 +111,85 @@ def _project(p: np.ndarray, k: PinholeIntrinsics) -> np.ndarray:
     return np.array([k.fx * p[0] / p[2] + k.cx, k.fy * p[1] / p[2] + k.cy])
 
 
+def end_votes(
+    cylinder: PosedCylinder,
+    depth: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    settings: AxialEnds = DEFAULT,
+    margin: float = 0.0,
+) -> dict[str, tuple[int, int]] | None:
+    """For each end, how many of its samples show an end and how many could be read (module
+    docstring); ``margin`` (m) widens both tolerances for the depth's noise. None when the axis
+    faces the camera and the check does not apply."""
+    if cylinder.end_on(settings):
+        return None
+    out: dict[str, tuple[int, int]] = {}
+    for end in ("a", "b"):
+        outward = cylinder.outward(end)
+        ends = read = 0
+        for rim, px_per_m in cylinder.rims(end, settings, intrinsics):
+            for offset in settings.offsets_px:
+                step = offset / px_per_m * outward
+                inside, beyond = rim - step, rim + step
+                d_in = _depth_at(depth, _project(inside, intrinsics))
+                d_out = _depth_at(depth, _project(beyond, intrinsics))
+                if math.isnan(d_in) or abs(d_in - inside[2]) > settings.on_surface + margin:
+                    continue  # the surface is not seen there: this sample says nothing
+                if math.isnan(d_out):
+                    continue
+                read += 1
+                if d_out > beyond[2] + settings.jump + margin:
+                    ends += 1
+        out[end] = (ends, read)
+    return out
+
+
 def ends_seen(
-    rotation: np.ndarray,
-    translation: np.ndarray,
-    radius: float,
-    half_length: float,
+    cylinder: PosedCylinder,
     depth: np.ndarray,
     intrinsics: PinholeIntrinsics,
     settings: AxialEnds = DEFAULT,
     margin: float = 0.0,
 ) -> tuple[str, ...] | None:
-    """The ends (``"a"`` at the model's -z, ``"b"`` at +z) of a cylinder of ``radius`` and
-    ``half_length`` posed at ``rotation``, ``translation`` (camera frame) that ``depth`` shows as
-    its ends (module docstring); ``margin`` (m) widens both tolerances for the depth's noise. None
-    when the axis faces the camera and the check does not apply."""
-    votes = end_votes(rotation, translation, radius, half_length, depth, intrinsics, settings, margin)
+    """The ends of ``cylinder`` that ``depth`` shows as its ends: those most of whose samples that
+    could be read do (:func:`end_votes`). None when the axis faces the camera."""
+    votes = end_votes(cylinder, depth, intrinsics, settings, margin)
     if votes is None:
         return None
-    return tuple(name for name, (ends, read) in votes.items() if read and ends * 2 > read)
+    return tuple(end for end, (ends, read) in votes.items() if read and ends * 2 > read)
 
 
-def end_face_seen(
-    rotation: np.ndarray,
-    translation: np.ndarray,
-    radius: float,
-    half_length: float,
-    points: np.ndarray,
-    tolerance: float,
-    share: float = 0.1,
-) -> bool:
+def end_face_seen(cylinder: PosedCylinder, points: np.ndarray, tolerance: float, share: float = 0.1) -> bool:
     """Whether at least ``share`` of the cloud ``points`` (N, 3, camera frame) lie on an end face
-    of the posed cylinder (within ``tolerance`` of its plane, inside its rim): seen end-on, the
-    face places the part along its axis only if the cloud holds it, not a band of the side alone
-    (a mask cut by the frame's border)."""
-    rot, t = np.asarray(rotation, float), np.asarray(translation, float)
+    of ``cylinder`` (within ``tolerance`` of its plane, inside its rim): seen end-on, the face
+    places the part along its axis only if the cloud holds it, not a band of the side alone (a
+    mask cut by the frame's border)."""
+    rot, t = np.asarray(cylinder.rotation, float), np.asarray(cylinder.translation, float)
     local = (np.asarray(points, float) - t) @ rot
     if not len(local):
         return False
-    on_face = (np.abs(np.abs(local[:, 2]) - half_length) <= tolerance) & (
-        np.linalg.norm(local[:, :2], axis=1) <= radius + tolerance
+    on_face = (np.abs(np.abs(local[:, 2]) - cylinder.half_length) <= tolerance) & (
+        np.linalg.norm(local[:, :2], axis=1) <= cylinder.radius + tolerance
     )
     return int(on_face.sum()) >= max(10, share * len(local))
 
 
 def slide_to_an_end(
-    rotation: np.ndarray,
-    translation: np.ndarray,
-    radius: float,
-    half_length: float,
+    cylinder: PosedCylinder,
     depth: np.ndarray,
     intrinsics: PinholeIntrinsics,
     settings: AxialEnds = DEFAULT,
     margin: float = 0.0,
     step: float = 0.001,
 ) -> float | None:
-    """The slide (m, along the model's z axis, within a half length either way) that puts an end
-    of the posed cylinder where the depth shows one: of the slides at which an end is seen, those
-    where the most of its samples agree, their middle. None when no slide shows an end."""
-    rot, t = np.asarray(rotation, float), np.asarray(translation, float)
-    axis = rot[:, 2]
+    """The slide (m, along the axis, within a half length either way) that puts an end of
+    ``cylinder`` where the depth shows one: of the slides at which an end is seen, those where
+    the most of its samples agree, their middle, then to the pixel where the surface stops
+    (:func:`_edge`). None when no slide shows an end."""
     scored = []
-    for by in np.arange(-half_length, half_length + step / 2, step):
-        votes = end_votes(rot, t + by * axis, radius, half_length, depth, intrinsics, settings, margin)
+    h = cylinder.half_length
+    for by in np.arange(-h, h + step / 2, step):
+        votes = end_votes(cylinder.slid(float(by)), depth, intrinsics, settings, margin)
         if votes is None:
             return None
         best = max((ends / read for ends, read in votes.values() if read and ends * 2 > read), default=0.0)
@@ -133,43 +202,28 @@ def slide_to_an_end(
     by = slides[len(slides) // 2]
     # The votes place the end to a few of their sample offsets; where the surface stops along
     # the generator lines places it to a pixel.
-    votes = end_votes(rot, t + by * axis, radius, half_length, depth, intrinsics, settings, margin) or {}
-    name = max(votes, key=lambda n: votes[n][0] / max(votes[n][1], 1))
-    edge = _edge(rot, t + by * axis, radius, half_length, name, depth, intrinsics, settings, margin)
-    return by if edge is None else by + (edge if name == "b" else -edge)
+    there = cylinder.slid(by)
+    votes = end_votes(there, depth, intrinsics, settings, margin) or {}
+    end = max(votes, key=lambda n: votes[n][0] / max(votes[n][1], 1))
+    edge = _edge(there, end, depth, intrinsics, settings, margin)
+    return by if edge is None else by + (edge if end == "b" else -edge)
 
 
 def _edge(
-    rotation: np.ndarray,
-    translation: np.ndarray,
-    radius: float,
-    half_length: float,
-    name: str,
+    cylinder: PosedCylinder,
+    end: str,
     depth: np.ndarray,
     intrinsics: PinholeIntrinsics,
     settings: AxialEnds,
     margin: float,
 ) -> float | None:
-    """How far (m, outward along the axis) from the posed end ``name`` the surface stops in the
-    depth: on each generator line, half a pixel's walk from the largest sample offset inside to
-    as far beyond, the middle of the last step on the surface before the first farther than it;
-    their median. None when no line shows such a step."""
-    axis, centre = rotation[:, 2], translation
-    sign = 1.0 if name == "b" else -1.0
-    end, outward = centre + sign * half_length * axis, sign * axis
-    towards = -(end - (end @ axis) * axis)
-    towards /= max(float(np.linalg.norm(towards)), 1e-9)
-    across = np.cross(axis, towards)
+    """How far (m, outward along the axis) from ``end`` the surface stops in the depth: on each
+    generator line, half a pixel's walk from the largest sample offset inside to as far beyond,
+    the middle of the last step on the surface before the first farther than it; their median.
+    None when no line shows such a step."""
+    outward = cylinder.outward(end)
     edges = []
-    for deg in settings.generators_deg:
-        a = math.radians(deg)
-        rim = end + radius * (math.cos(a) * towards + math.sin(a) * across)
-        px_per_m = (
-            float(np.linalg.norm(_project(rim + 0.01 * outward, intrinsics) - _project(rim, intrinsics)))
-            / 0.01
-        )
-        if rim[2] <= 0 or px_per_m < 1e-4:
-            continue
+    for rim, px_per_m in cylinder.rims(end, settings, intrinsics):
         reach = max(settings.offsets_px) / px_per_m
         last_on = None
         for s in np.arange(-reach, reach, 0.5 / px_per_m):
@@ -185,56 +239,12 @@ def _edge(
     return float(np.median(edges)) if edges else None
 
 
-def end_votes(
-    rotation: np.ndarray,
-    translation: np.ndarray,
-    radius: float,
-    half_length: float,
-    depth: np.ndarray,
-    intrinsics: PinholeIntrinsics,
-    settings: AxialEnds = DEFAULT,
-    margin: float = 0.0,
-) -> dict[str, tuple[int, int]] | None:
-    """For each end, how many of its samples show an end and how many could be read
-    (:func:`ends_seen`); None when the axis faces the camera."""
-    rot, centre = np.asarray(rotation, float), np.asarray(translation, float)
-    axis = rot[:, 2]
-    sight = centre / max(float(np.linalg.norm(centre)), 1e-9)
-    if abs(float(axis @ sight)) > math.cos(math.radians(settings.end_on_deg)):
-        return None
-    out: dict[str, tuple[int, int]] = {}
-    for name, sign in (("a", -1.0), ("b", 1.0)):
-        end = centre + sign * half_length * axis
-        towards = -(end - (end @ axis) * axis)  # from the axis towards the camera, across it
-        towards /= max(float(np.linalg.norm(towards)), 1e-9)
-        across = np.cross(axis, towards)
-        outward = sign * axis
-        votes = [0, 0]  # samples showing an end; samples read
-        for deg in settings.generators_deg:
-            a = math.radians(deg)
-            rim = end + radius * (math.cos(a) * towards + math.sin(a) * across)
-            if rim[2] <= 0:
-                continue
-            px_per_m = float(
-                np.linalg.norm(_project(rim + 0.01 * outward, intrinsics) - _project(rim, intrinsics))
-            )
-            if px_per_m < 1e-6:
-                continue
-            px_per_m /= 0.01
-            for offset in settings.offsets_px:
-                step = offset / px_per_m * outward
-                inside, beyond = rim - step, rim + step
-                d_in = _depth_at(depth, _project(inside, intrinsics))
-                d_out = _depth_at(depth, _project(beyond, intrinsics))
-                if math.isnan(d_in) or abs(d_in - inside[2]) > settings.on_surface + margin:
-                    continue  # the surface is not seen there: this sample says nothing
-                if math.isnan(d_out):
-                    continue
-                votes[1] += 1
-                if d_out > beyond[2] + settings.jump + margin:
-                    votes[0] += 1
-        out[name] = (votes[0], votes[1])
-    return out
-
-
-__all__ = ["DEFAULT", "AxialEnds", "end_face_seen", "end_votes", "ends_seen", "slide_to_an_end"]
+__all__ = [
+    "DEFAULT",
+    "AxialEnds",
+    "PosedCylinder",
+    "end_face_seen",
+    "end_votes",
+    "ends_seen",
+    "slide_to_an_end",
+]

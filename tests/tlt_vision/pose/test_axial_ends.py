@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tlt_vision.pointcloud import Intrinsics
-from tlt_vision.pose.axial_ends import end_face_seen, ends_seen, slide_to_an_end
+from tlt_vision.pose.axial_ends import PosedCylinder, end_face_seen, ends_seen, slide_to_an_end
 
 K = Intrinsics(300.0, 300.0, 160.0, 120.0)
 W, H = 320, 240
@@ -35,32 +35,37 @@ def _render() -> np.ndarray:
     return depth
 
 
+def _fitting(rotation: np.ndarray, along_y: float) -> PosedCylinder:
+    """The fitting posed ``along_y`` (m) down the image from where it is."""
+    return PosedCylinder(rotation, np.array([0.0, along_y, Z0]), RADIUS, HALF)
+
+
 @pytest.fixture(scope="module")
 def depth() -> np.ndarray:
     return _render()
 
 
 def test_the_fitting_where_it_is_shows_the_end_on_its_tube_and_not_the_one_in_its_joint(depth):
-    assert ends_seen(ALONG_Y, np.array([0.0, 0.0, Z0]), RADIUS, HALF, depth, K) == ("b",)
+    assert ends_seen(_fitting(ALONG_Y, 0.0), depth, K) == ("b",)
 
 
 @pytest.mark.parametrize("slide", [-0.015, 0.015])
 def test_a_fitting_posed_along_its_axis_shows_no_end_and_the_slide_finds_its_place(depth, slide):
-    posed = np.array([0.0, slide, Z0])
-    assert ends_seen(ALONG_Y, posed, RADIUS, HALF, depth, K) == ()
-    back = slide_to_an_end(ALONG_Y, posed, RADIUS, HALF, depth, K)
+    posed = _fitting(ALONG_Y, slide)
+    assert ends_seen(posed, depth, K) == ()
+    back = slide_to_an_end(posed, depth, K)
     assert back is not None and abs(slide + back) <= 0.001, back
 
 
 def test_nothing_behind_the_end_but_the_same_surface_is_no_end():
     flat = np.full((H, W), Z0 - RADIUS)  # a wall where the fitting's near side is: no end anywhere
-    assert ends_seen(ALONG_Y, np.array([0.0, 0.0, Z0]), RADIUS, HALF, flat, K) == ()
-    assert slide_to_an_end(ALONG_Y, np.array([0.0, 0.0, Z0]), RADIUS, HALF, flat, K) is None
+    assert ends_seen(_fitting(ALONG_Y, 0.0), flat, K) == ()
+    assert slide_to_an_end(_fitting(ALONG_Y, 0.0), flat, K) is None
 
 
 def test_seen_end_on_the_check_does_not_apply(depth):
     facing = np.eye(3)  # the model's z along the line of sight
-    assert ends_seen(facing, np.array([0.0, 0.0, Z0]), RADIUS, HALF, depth, K) is None
+    assert ends_seen(_fitting(facing, 0.0), depth, K) is None
 
 
 def test_seen_end_on_the_cloud_must_hold_an_end_face():
@@ -70,5 +75,5 @@ def test_seen_end_on_the_cloud_must_hold_an_end_face():
     r = RADIUS * np.sqrt(rng.uniform(0.0, 1.0, 100))
     face = np.column_stack([r * np.cos(angle[:100]), r * np.sin(angle[:100]), np.full(100, -HALF)])
     at = np.array([0.0, 0.0, Z0])
-    assert end_face_seen(np.eye(3), at, RADIUS, HALF, np.vstack([side, face]) + at, 0.002)
-    assert not end_face_seen(np.eye(3), at, RADIUS, HALF, side[np.abs(side[:, 2]) < 0.015] + at, 0.002)
+    assert end_face_seen(_fitting(np.eye(3), 0.0), np.vstack([side, face]) + at, 0.002)
+    assert not end_face_seen(_fitting(np.eye(3), 0.0), side[np.abs(side[:, 2]) < 0.015] + at, 0.002)
