@@ -303,6 +303,19 @@ class GroundLink:
                 self.stats.record_refusal(reason)
                 self._reject(rejection, source)
                 return rejection
+        self._accept(command)
+        if self.on_command is None:
+            self.commands.put(command)
+        else:
+            try:
+                self.on_command(command)
+            except Exception as exc:
+                _log.exception("command handler failed on %s", command.name)
+                self.complete(command, False, Reason.INTERNAL_ERROR, f"handler failed: {exc}")
+        return result
+
+    def _accept(self, command: GroundCommand) -> None:
+        """Count ``command`` accepted and acknowledge it so."""
         self.stats.record_accepted()
         self._ack(
             command.seq_count,
@@ -313,15 +326,6 @@ class GroundLink:
             "",
             command.source,
         )
-        if self.on_command is None:
-            self.commands.put(command)
-        else:
-            try:
-                self.on_command(command)
-            except Exception as exc:
-                _log.exception("command handler failed on %s", command.name)
-                self.complete(command, False, Reason.INTERNAL_ERROR, f"handler failed: {exc}")
-        return result
 
     def _drop_foreign(self, data: bytes, source: tuple[str, int]) -> Rejection:
         text = self.sources.note_drop(source)
@@ -338,16 +342,7 @@ class GroundLink:
     def _switch_tm_key(self, command: GroundCommand) -> None:
         """Move telemetry to the next key id: the accepted ack still under the old key, the
         completed ack (and everything after it) under the new one."""
-        self.stats.record_accepted()
-        self._ack(
-            command.seq_count,
-            command.security_seq,
-            command.command_id,
-            AckStage.ACCEPTED,
-            Reason.NONE,
-            "",
-            command.source,
-        )
+        self._accept(command)
         old = self.tm_signer.key_id
         try:
             # The key file is read again, so a key added to it for this rotation is found.
