@@ -1,6 +1,8 @@
 """What the headless mission job prints as a build goes (:mod:`tlt_gsw.mission_job`): a line when
-the CRS's bay or step changes, the CRS tree's running node when it changes (or its status counts),
-every event of severity warning or above, and each fault as it is raised or cleared."""
+the CRS's bay or step changes (with the time left once a member is placed: the wall time per
+member so far, times the members left), the CRS tree's running node when it changes (or its
+status counts), every event of severity warning or above, and each fault as it is raised or
+cleared."""
 
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ class Progress:
         self.last_mission: dict[str, Any] = {}
         self.crs_up = 0  # CRS_UP events seen: the CRS (re)started
         self.tower_reports = 0  # hk_tower packets seen
+        self._first_step_at: float | None = None  # wall time of the first step line
 
     def say(self, text: str) -> None:
         print(text, file=self.out, flush=True)
@@ -57,10 +60,13 @@ class Progress:
             step = (f["member"], f["step"])
             if step != self._step and f["step"]:
                 self._step = step
+                if self._first_step_at is None:
+                    self._first_step_at = now
                 member = f" {f['member']}:" if f["member"] and f["member"] not in f["step"] else ""
                 self.say(
                     f"{self._sim(f)}   {f['run_state']:<7}{member} {f['step']}  "
-                    f"(placed {f['members_placed']}, discarded {f['parts_discarded']})"
+                    f"(placed {f['members_placed']}, discarded {f['parts_discarded']}"
+                    f"{self._time_left(int(f['members_placed']), now)})"
                 )
         elif kind == "hk_mission":
             self.last_mission = dict(f)
@@ -83,6 +89,15 @@ class Progress:
             self.tower_reports += 1
         elif kind == "tree_status" and f["agent"] == "crs":
             self._tree_status(f, now)
+
+    def _time_left(self, placed: int, now: float) -> str:
+        """ ", about N min left" from the wall time per member placed so far ("" before the
+        first member, or before the CRS has said how many there are)."""
+        total = int(self.last_mission.get("members_total", 0))
+        if not placed or placed >= total or self._first_step_at is None:
+            return ""
+        left = (now - self._first_step_at) / placed * (total - placed)
+        return f", about {left / 60:.0f} min left" if left >= 90 else f", about {left:.0f} s left"
 
     def _fault_state(self, fault: str, now: float) -> None:
         if fault and not self.fault:

@@ -492,3 +492,26 @@ def test_progress_times_are_from_the_first_step_and_say_where_that_is_on_the_crs
         "[sim     0.00 s]   running Add Cross Frame  (placed 0, discarded 0)",
         "[sim    10.50 s]   running Index Payload 2  (placed 0, discarded 0)",
     ]
+
+
+def test_progress_says_the_time_left_from_the_members_placed_so_far():
+    from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
+
+    defs = load_definitions()
+
+    def step(name: str, placed: int):
+        raw = encode_telemetry(defs, "mission_step", {
+            "sim_time": 10.0 * placed, "run_state": "running", "bay": 1, "member": name, "step": name,
+            "bays_built": 0, "members_placed": placed, "parts_discarded": 0,
+        }, seq_count=1)  # fmt: skip
+        return parse_datagram(raw, defs, expect="tm")
+
+    progress = mission_job.Progress(io.StringIO())
+    progress.packet(step("Add Cross Frame", 0), now=100.0)
+    progress.last_mission = {"members_total": 13}  # as an hk_mission packet leaves it
+    progress.packet(step("Add Vertical 1", 1), now=160.0)  # 60 s for one member, 12 to go
+    progress.packet(step("Add Vertical 2", 12), now=220.0)  # 10 s each, one to go
+    lines = progress.out.getvalue().splitlines()
+    assert lines[-3].endswith("(placed 0, discarded 0)")
+    assert lines[-2].endswith("(placed 1, discarded 0, about 12 min left)")
+    assert lines[-1].endswith("(placed 12, discarded 0, about 10 s left)")
