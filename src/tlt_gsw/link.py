@@ -33,6 +33,7 @@ from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.sources import Source, SourceFilter, parse_sources
 from tlt_common.ccsds.stats import LinkStats
 from tlt_common.ccsds.tm_security import TelemetryVerifier
+from tlt_common.rate_limit import TokenBucket
 from tlt_gsw.archive.recorder import Recorder
 
 _log = logging.getLogger(__name__)
@@ -142,7 +143,7 @@ class GswLink:
         self.tm_verifier = TelemetryVerifier(keyring.telemetry, overlap_s=tm_key_overlap_s)
         if not self.tm_verifier.key_ids:
             _log.warning("no telemetry keys in the key ring: every telemetry packet will be rejected")
-        self._log_window = (0.0, 0)
+        self._rejection_logs = TokenBucket(REJECTION_LOGS_PER_S, REJECTION_LOGS_PER_S)
         self._seed_replay_window()
         self._counters = SequenceCounters()
         self._sent: dict[int, SentCommand] = {}
@@ -324,11 +325,7 @@ class GswLink:
             rejection = dataclasses.replace(
                 rejection, detail=f"telemetry key id {key_id} is retired (superseded by a newer key)"
             )
-        second = time.monotonic() // 1
-        start, logged = self._log_window
-        if second != start:
-            start, logged = second, 0
-        if logged < REJECTION_LOGS_PER_S:
+        if self._rejection_logs.allow():
             _log.warning(
                 "telemetry rejected (APID %s, key id %s): %s: %s",
                 rejection.apid,
@@ -336,8 +333,6 @@ class GswLink:
                 rejection.reason.label,
                 rejection.detail,
             )
-            logged += 1
-        self._log_window = (start, logged)
         return rejection
 
 

@@ -23,10 +23,25 @@ import stat
 import threading
 import time
 from pathlib import Path
+from typing import Protocol
 
 KEY_FILE_ENV = "TLT_GROUND_KEY_FILE"
 MIN_KEY_BYTES = 16
 MAX_SECURITY_SEQ = 2**64 - 1
+
+
+class KeyLookup(Protocol):
+    """Keys by key id (:class:`KeyRing`, or the GSW's telemetry verifier)."""
+
+    def get(self, key_id: int) -> bytes | None: ...
+
+
+class ReplayCheck(Protocol):
+    """Accepts a security sequence number once per key id (:class:`ReplayGuard`)."""
+
+    def accept(self, key_id: int, seq: int) -> bool: ...
+
+    def last(self, key_id: int) -> int | None: ...
 
 
 class KeyFileError(ValueError):

@@ -34,7 +34,7 @@ import struct
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 from spacepackets.ccsds import PacketType, SequenceFlags, SpacePacket, SpacePacketHeader
 from spacepackets.ccsds.time import CdsShortTimestamp
@@ -42,6 +42,8 @@ from spacepackets.ccsds.time.common import convert_ccsds_days_to_unix_days
 
 from tlt_common.ccsds.auth import (
     MAX_SECURITY_SEQ,
+    KeyLookup,
+    ReplayCheck,
     ReplayStateError,
     compute_mac,
     verify_mac,
@@ -77,20 +79,6 @@ def _read_time(raw: bytes) -> float:
     if ms_of_day >= _MS_PER_DAY + 1000:  # one leap second is legal
         raise ValueError(f"millisecond of day {ms_of_day} out of range")
     return convert_ccsds_days_to_unix_days(days) * 86400.0 + ms_of_day / 1000.0
-
-
-class KeyLookup(Protocol):
-    """Keys by key id (:class:`tlt_common.ccsds.auth.KeyRing`, or the GSW's telemetry verifier)."""
-
-    def get(self, key_id: int) -> bytes | None: ...
-
-
-class ReplayCheck(Protocol):
-    """Accepts a security sequence number once per key id (:class:`tlt_common.ccsds.auth.ReplayGuard`)."""
-
-    def accept(self, key_id: int, seq: int) -> bool: ...
-
-    def last(self, key_id: int) -> int | None: ...
 
 
 _LAYOUTS: dict[int, tuple[PacketDef, FieldLayout]] = {}
@@ -489,11 +477,9 @@ __all__ = [
     "CRC_LEN",
     "PRIMARY_HEADER_LEN",
     "TIME_LEN",
-    "KeyLookup",
     "Packet",
     "ParseResult",
     "Rejection",
-    "ReplayCheck",
     "cds_time",
     "check_command",
     "crc16_ccitt_false",

@@ -14,6 +14,8 @@ import logging
 import time
 from collections.abc import Callable, Iterable
 
+from tlt_common.rate_limit import TokenBucket
+
 Source = tuple[str, int | None]
 # Drops from foreign sources are logged at most this often per second (each is counted regardless).
 DROP_LOGS_PER_S = 5
@@ -69,8 +71,7 @@ class SourceFilter:
     ) -> None:
         self.accepted = None if accepted is None else frozenset(accepted)
         self._log = logger
-        self._clock = clock
-        self._window = (0.0, 0)
+        self._logs = TokenBucket(DROP_LOGS_PER_S, DROP_LOGS_PER_S, clock)
 
     def allows(self, source: tuple[str, int]) -> bool:
         if self.accepted is None:
@@ -81,14 +82,8 @@ class SourceFilter:
     def note_drop(self, source: tuple[str, int]) -> str:
         """Log one dropped datagram (rate limited); return the sentence that says why."""
         text = f"datagram from {describe(source)} dropped: not a configured source"
-        second = self._clock() // 1
-        start, logged = self._window
-        if second != start:
-            start, logged = second, 0
-        if logged < DROP_LOGS_PER_S:
+        if self._logs.allow():
             self._log.warning("%s", text)
-            logged += 1
-        self._window = (start, logged)
         return text
 
 

@@ -33,7 +33,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,7 @@ from tlt_common.ccsds.sequence import SequenceCounters
 from tlt_common.ccsds.sources import Source, SourceFilter, parse_sources
 from tlt_common.ccsds.stats import LinkStats
 from tlt_common.ccsds.tm_security import TelemetrySigner
+from tlt_common.rate_limit import TokenBucket
 
 _log = logging.getLogger(__name__)
 RECV_BUFFER = 65535
@@ -68,31 +69,6 @@ class GroundCommand:
 
 
 Validator = Callable[[GroundCommand], "tuple[Reason, str] | None"]
-
-
-@dataclass
-class _RateLimiter:
-    """Token bucket for rejection reports, so a flood of junk cannot flood the downlink."""
-
-    rate: float
-    burst: float
-    clock: Callable[[], float]
-    tokens: float = 0.0
-    stamp: float = 0.0
-    suppressed: int = 0
-    _init: bool = field(default=False, repr=False)
-
-    def allow(self) -> bool:
-        now = self.clock()
-        if not self._init:
-            self.tokens, self.stamp, self._init = self.burst, now, True
-        self.tokens = min(self.burst, self.tokens + (now - self.stamp) * self.rate)
-        self.stamp = now
-        if self.tokens >= 1.0:
-            self.tokens -= 1.0
-            return True
-        self.suppressed += 1
-        return False
 
 
 class GroundLink:
@@ -143,9 +119,7 @@ class GroundLink:
         self._learned_gsw: tuple[str, int] | None = None
         self._counters = SequenceCounters()
         self._send_lock = threading.Lock()
-        self._limiter = _RateLimiter(
-            max_rejection_events_per_s, max(1.0, max_rejection_events_per_s), time.monotonic
-        )
+        self._limiter = TokenBucket(max_rejection_events_per_s, max(1.0, max_rejection_events_per_s))
         rate = definitions.packet("link_stats").rate_hz
         self._stats_period = stats_period_s if stats_period_s is not None else (1.0 / rate if rate else None)
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -333,7 +307,7 @@ class GroundLink:
         rejection = Rejection(Reason.SOURCE, text, bytes(data))
         # Reported like other unauthenticated junk: an event, rate limited, nothing sent to the source.
         if self._limiter.allow():
-            suppressed, self._limiter.suppressed = self._limiter.suppressed, 0
+            suppressed = self._limiter.take_suppressed()
             if suppressed:
                 text += f" ({suppressed} earlier rejection report(s) suppressed)"
             self._safe_event(Severity.WARNING, "DATAGRAM_REJECTED", Reason.SOURCE, text)
@@ -360,7 +334,7 @@ class GroundLink:
         # Unauthenticated junk is rate limited; an authenticated command is always answered.
         if not rejection.authenticated and not self._limiter.allow():
             return
-        suppressed, self._limiter.suppressed = self._limiter.suppressed, 0
+        suppressed = self._limiter.take_suppressed()
         is_command = rejection.packet_type == "tc" and rejection.apid == self.defs.command_apid
         label = self._command_label(rejection.command_id) if rejection.authenticated else "unverified"
         where = f"{source[0]}:{source[1]}" if source else "unknown source"
