@@ -40,7 +40,7 @@ from tlt_gsw.gui.agent_trees import AgentTrees, TreeState, status_part
 from tlt_gsw.gui.archive_records import (
     AckRecord,
     Changes,
-    CommandRecord,
+    CommandLog,
     EventRecord,
     HousekeepingSnapshot,
     PacketSummary,
@@ -115,7 +115,7 @@ class ArchiveModel:
         self.packets: deque[PacketSummary] = deque(maxlen=self.packet_rows)
         self.housekeeping: dict[tuple[str, str], HousekeepingSnapshot] = {}  # (kind, instance)
         self.events: deque[EventRecord] = deque(maxlen=self.event_rows)
-        self.commands: dict[int, CommandRecord] = {}
+        self.commands = CommandLog(self.command_rows)
         self.agent_trees.reset()
         for key in self.series:
             self.series[key] = {}
@@ -431,47 +431,24 @@ class ArchiveModel:
             if seq_bytes is None or len(seq_bytes) != 8:
                 continue
             (seq,) = _U64.unpack(bytes(seq_bytes))
-            record = self.commands.get(seq)
-            if record is None:
-                record = CommandRecord(seq, kind, params.get(pid, {}), recorded, pid)
-                self.commands[seq] = record
-            else:  # its ack was seen first (the recorder commits in arrival order; rare)
-                record.name, record.params, record.sent_at, record.packet_id = (
-                    kind, params.get(pid, {}), recorded, pid,
-                )  # fmt: skip
+            self.commands.sent(seq, kind, params.get(pid, {}), recorded, pid)
             changes.commands.add(seq)
-        self._trim_commands()
 
     def _apply_acks(self, ids: list[int], changes: Changes) -> None:
         for pid, f in sorted(self._kind_fields("ack", ids).items()):
             seq = f.get("security_seq")
             if seq is None:
                 continue
-            seq = int(seq)
-            record = self.commands.get(seq)
-            if record is None:
-                record = CommandRecord(seq, str(f.get("command", "?")), {}, None, None)
-                self.commands[seq] = record
-            if f.get("reason") == "replay" and record.acks:
-                record.replays_rejected += 1  # someone replayed the command; its outcome stands
-                changes.commands.add(seq)
-                continue
             time_row = self.conn.execute("SELECT recorded_at FROM packets WHERE id = ?", (pid,)).fetchone()
-            record.acks.append(
-                AckRecord(
-                    str(f.get("stage", "?")),
-                    str(f.get("reason", "")),
-                    str(f.get("detail", "")),
-                    time_row[0] if time_row else 0.0,
-                    pid,
-                )
+            ack = AckRecord(
+                str(f.get("stage", "?")),
+                str(f.get("reason", "")),
+                str(f.get("detail", "")),
+                time_row[0] if time_row else 0.0,
+                pid,
             )
-            changes.commands.add(seq)
-        self._trim_commands()
-
-    def _trim_commands(self) -> None:
-        while len(self.commands) > self.command_rows:
-            self.commands.pop(next(iter(self.commands)))
+            self.commands.acked(int(seq), str(f.get("command", "?")), ack)
+            changes.commands.add(int(seq))
 
     def _events(self, ids: list[int]) -> list[EventRecord]:
         fields = self._kind_fields("event", ids)

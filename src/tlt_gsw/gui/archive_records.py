@@ -55,6 +55,40 @@ class CommandRecord:
         return self.acks[-1].stage if self.acks else "sent"
 
 
+class CommandLog(dict[int, CommandRecord]):
+    """The commands sent and their acknowledgements, by security sequence number, the newest
+    ``rows`` kept (in the order first seen)."""
+
+    def __init__(self, rows: int) -> None:
+        super().__init__()
+        self.rows = rows
+
+    def record(self, seq: int, name: str) -> CommandRecord:
+        """The record of command ``seq``, new if none yet (its ack may come before it)."""
+        if seq not in self:
+            self[seq] = CommandRecord(seq, name, {}, None, None)
+        return self[seq]
+
+    def sent(self, seq: int, name: str, params: dict[str, Any], sent_at: float, packet_id: int) -> None:
+        record = self.record(seq, name)
+        record.name, record.params, record.sent_at, record.packet_id = name, params, sent_at, packet_id
+        self._trim()
+
+    def acked(self, seq: int, name: str, ack: AckRecord) -> None:
+        """``ack`` for command ``seq``; a ``replay`` rejection of a command already answered answers
+        a replayed copy: counted on the command, not taken as its stage."""
+        record = self.record(seq, name)
+        if ack.reason == "replay" and record.acks:
+            record.replays_rejected += 1
+        else:
+            record.acks.append(ack)
+        self._trim()
+
+    def _trim(self) -> None:
+        while len(self) > self.rows:
+            self.pop(next(iter(self)))
+
+
 @dataclass(frozen=True)
 class EventRecord:
     """An event for operators: a CRS ``event`` packet, or a datagram the GSW rejected."""
@@ -120,6 +154,7 @@ def typed_value(fd: FieldDef | None, value: Any) -> Any:
 __all__ = [
     "AckRecord",
     "Changes",
+    "CommandLog",
     "CommandRecord",
     "EventRecord",
     "HousekeepingSnapshot",
