@@ -58,9 +58,10 @@ from tlt_tools.vision_training.twin_renderer import CLASSES, RenderSettings, Twi
 from tlt_common.mission.schema import load_mission
 from tlt_vision.cad.models import CadModel
 from tlt_vision.depth_noise import EXACT, DepthNoise
+from tlt_vision.detections import Detection
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
-from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import Intrinsics, MaskedCloud, PinholeIntrinsics
 from tlt_vision.pose.errors import add_s, non_degenerate_at
 

@@ -50,8 +50,9 @@ from tlt_common.mission.schema import Mission
 from tlt_vision import inspection
 from tlt_vision.cad.models import load_parts, models_for_mission
 from tlt_vision.depth_noise import DepthNoise
+from tlt_vision.detections import Detection, detections_near
 from tlt_vision.node_config import VisionConfig
-from tlt_vision.pipeline import Detection, PartPipeline, detections_near
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import PinholeIntrinsics, masked_point_cloud
 from tlt_vision.pose.corrector import CorrectorConfig
 from tlt_vision.pose.detector_weights import load_detector

@@ -45,13 +45,13 @@ read the floor a metre behind it).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import cv2
 import numpy as np
-import torch
 
 from tlt_vision.depth_noise import EXACT, DepthNoise
+from tlt_vision.detections import Detection, merge_instances
 from tlt_vision.inspection import Observation
 from tlt_vision.pointcloud import (
     DEFAULT_DETACHED,
@@ -62,7 +62,7 @@ from tlt_vision.pointcloud import (
     detached_pieces,
     masked_point_cloud,
 )
-from tlt_vision.pose.axial_ends import AxialEnds, PosedCylinder, end_face_seen, ends_seen, slide_to_an_end
+from tlt_vision.pose.axial_ends import AxialEnds, placed_along_axis
 from tlt_vision.pose.axial_slide import AxialSlide, slid_along_axis
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_together, refined_together
@@ -85,82 +85,6 @@ def border_kept(mask: np.ndarray, depth: np.ndarray | None) -> np.ndarray:
             return core
         near, far = float(inner.min()) - BORDER_DEPTH_MARGIN, float(inner.max()) + BORDER_DEPTH_MARGIN
         return core | (sel & (depth >= near) & (depth <= far))
-
-
-@dataclass(frozen=True)
-class Detection:
-    object_class: str
-    mask: np.ndarray  # (H, W) bool
-    score: float = 1.0
-    object_id: str = ""
-    # The part of ``mask`` the segmentation is surest of, whose pose stands in for the whole
-    # mask's when that is refused; None: no such part, or the whole mask.
-    core: np.ndarray | None = None
-
-
-def detection_of(result: Mapping[str, torch.Tensor], classes: Sequence[str], k: int) -> Detection:
-    """The ``k``-th detection of one image's Mask R-CNN output (labels are 1-based indices into
-    ``classes``), with its core where ``core_masks`` gives one smaller than its mask."""
-    mask = result["masks"][k].numpy().astype(bool)
-    core = None
-    if "core_masks" in result:
-        core = result["core_masks"][k].numpy().astype(bool)
-        if not core.any() or np.array_equal(core, mask):
-            core = None
-    return Detection(classes[int(result["labels"][k]) - 1], mask, float(result["scores"][k]), core=core)
-
-
-def detections_from_mask_rcnn(
-    result: Mapping[str, torch.Tensor], classes: Sequence[str], min_score: float = 0.5
-) -> list[Detection]:
-    """Detections of one image's Mask R-CNN output scoring at least ``min_score``."""
-    return [
-        detection_of(result, classes, k)
-        for k, score in enumerate(result["scores"].tolist())
-        if score >= min_score
-    ]
-
-
-def merge_instances(detections: Sequence[Detection], classes: Sequence[str]) -> list[Detection]:
-    """Detections with every instance of each class in ``classes`` joined into one."""
-    out = [d for d in detections if d.object_class not in classes]
-    for cls in classes:
-        parts = [d for d in detections if d.object_class == cls]
-        if parts:
-            mask = np.logical_or.reduce([d.mask for d in parts])
-            out.append(
-                Detection(cls, mask, min(d.score for d in parts), "+".join(d.object_id for d in parts))
-            )
-    return out
-
-
-def detections_near(
-    detections: Sequence[Detection],
-    depth: np.ndarray | None,
-    intrinsics: PinholeIntrinsics,
-    camera_pose: np.ndarray,
-    places: np.ndarray,
-    radius: float,
-) -> list[Detection]:
-    """The detections whose seen surface has its median point (in the frame ``camera_pose`` maps
-    the camera into) within ``radius`` of one of ``places`` (n, 3).
-
-    A pose costs seconds of corrector work, a point cloud's median microseconds: a check that
-    counts only pieces near where they should be (within a gate) estimates those alone. The
-    median of a piece's visible surface lies within half the piece's size of its centre, so with
-    ``radius`` = gate + that no piece the check could count is dropped. A detection with no valid
-    depth is kept, for the pipeline to give its reason."""
-    places = np.asarray(places, dtype=float).reshape(-1, 3)
-    kept = []
-    for d in detections:
-        cloud = masked_point_cloud(d.mask, depth, intrinsics, min_points=1, erode=0)
-        if cloud.points.shape[0] == 0:
-            kept.append(d)
-            continue
-        centre = camera_pose[:3, :3] @ np.median(cloud.points, axis=0) + camera_pose[:3, 3]
-        if places.size and np.linalg.norm(places - centre, axis=1).min() <= radius:
-            kept.append(d)
-    return kept
 
 
 class PartPipeline:
@@ -458,33 +382,17 @@ class PartPipeline:
             return first
         dims = self.estimators[cls].model.dims
         margin = 2.0 * noise.allowance(float(first.translation[2])) if not noise.exact else 0.0
-        face = ends.on_surface + margin
-        for e in candidates:
-            if not e.certified:
-                continue
-            posed = PosedCylinder(e.rotation, e.translation, dims["radius"], dims["half_length"])
-            seen = ends_seen(posed, depth, intrinsics, ends, margin)
-            if seen or (seen is None and end_face_seen(posed, points, face)):
-                return e
-        posed = PosedCylinder(first.rotation, first.translation, dims["radius"], dims["half_length"])
-        by = slide_to_an_end(posed, depth, intrinsics, ends, margin)
-        if by is not None:
-            moved = by * posed.axis
-            slid = replace(
-                first,
-                translation=np.asarray(first.translation) + moved,
-                keypoints=np.asarray(first.keypoints) + moved,
-            )
-            certificate = self._certificate(cls, points, slid.rotation, slid.translation, noise)
-            if certificate.certified:
-                return replace(slid, certificate=certificate)
-        why = "degenerate view: neither end of the part seen in the depth (its place along its axis is open)"
-        certificate = replace(
-            first.certificate,
-            certified=False,
-            reason="; ".join(r for r in (first.certificate.reason, why) if r),
+        return placed_along_axis(
+            candidates,
+            points,
+            dims["radius"],
+            dims["half_length"],
+            depth,
+            intrinsics,
+            lambda rotation, translation: self._certificate(cls, points, rotation, translation, noise),
+            ends,
+            margin,
         )
-        return replace(first, certificate=certificate)
 
     def _certificate(
         self,
@@ -524,12 +432,4 @@ class PartPipeline:
         return self._surfaces[object_class]
 
 
-__all__ = [
-    "BORDER_DEPTH_MARGIN",
-    "Detection",
-    "PartPipeline",
-    "border_kept",
-    "detection_of",
-    "detections_from_mask_rcnn",
-    "merge_instances",
-]
+__all__ = ["BORDER_DEPTH_MARGIN", "PartPipeline", "border_kept"]

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from tlt_vision.cad.models import CadModel
+from tlt_vision.detections import Detection
 from tlt_vision.inspection import Observation
-from tlt_vision.pipeline import Detection
 
 CERTIFIED, REFUSED = (0.2, 0.9, 0.2), (0.95, 0.1, 0.1)
 # The classes' tints, without the poses' green and red.

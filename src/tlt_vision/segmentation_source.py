@@ -39,7 +39,7 @@ import numpy as np
 from tlt_vision.cad.models import CLASSES
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.depth_noise import DepthNoise
-from tlt_vision.pipeline import Detection, detections_from_mask_rcnn
+from tlt_vision.detections import Detection, detections_from_mask_rcnn
 from tlt_vision.segmentation.depth_split import DepthSplit, radii_by_label, split_by_depth
 from tlt_vision.segmentation.overlap import ExclusiveOverlaps, resolve_overlaps
 from tlt_vision.segmentation.semantic_trim import SemanticTrim, semantic_cores, trim_by_semantic

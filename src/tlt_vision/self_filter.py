@@ -26,7 +26,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from tlt_common.geometry.transforms import rot_x
-from tlt_vision.pipeline import Detection
+from tlt_vision.detections import Detection
 from tlt_vision.pointcloud import PinholeIntrinsics, back_project
 
 

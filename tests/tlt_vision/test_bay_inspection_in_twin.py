@@ -20,11 +20,11 @@ import pytest
 
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
+from tlt_vision.detections import detections_near
 from tlt_vision.frames import CameraRig
 from tlt_vision.inspection import Observation, bay_joints, corner_joint_prior, inspect_bay
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
-from tlt_vision.pipeline import detections_near
 from tlt_vision.segmentation_source import TwinLabels
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")

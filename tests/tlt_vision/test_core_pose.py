@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import torch
 
-from tlt_vision.pipeline import Detection, PartPipeline, detection_of
+from tlt_vision.detections import Detection, detection_of
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pose.errors import add_s
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -26,10 +26,10 @@ from tlt_ars.planning.world import build_scene, load_scene_config
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frame import CameraFrame
+from tlt_vision.detections import detections_near
 from tlt_vision.inspection import corner_joint_prior, expected_pieces, held_part_alignment
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import PartInspector
-from tlt_vision.pipeline import detections_near
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 
 scene_mod = pytest.importorskip("tlt_sim.model.scene")

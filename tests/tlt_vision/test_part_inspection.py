@@ -3,8 +3,8 @@ its main class, not the biggest single instance (a bigger side of another frame 
 
 import numpy as np
 
+from tlt_vision.detections import Detection
 from tlt_vision.part_inspection import select_part
-from tlt_vision.pipeline import Detection
 from tlt_vision.pointcloud import Intrinsics
 
 K = Intrinsics(100.0, 100.0, 49.5, 49.5)

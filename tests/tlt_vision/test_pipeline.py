@@ -6,13 +6,8 @@ import numpy as np
 import torch
 
 from tlt_vision.cad.models import build_models
-from tlt_vision.pipeline import (
-    Detection,
-    PartPipeline,
-    detections_from_mask_rcnn,
-    detections_near,
-    merge_instances,
-)
+from tlt_vision.detections import Detection, detections_from_mask_rcnn, detections_near, merge_instances
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.detector import KeypointDetector
 from tlt_vision.pose.estimator import PoseEstimator

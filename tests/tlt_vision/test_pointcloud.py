@@ -195,9 +195,10 @@ def test_a_rivet_whose_mask_took_in_its_neighbour_in_the_feeder_is_posed_from_it
     common 2 cm link the neighbour's points stay and pull the fit off."""
     twin_renderer = pytest.importorskip("tlt_tools.vision_training.twin_renderer")
     from tlt_common.mission.schema import load_mission
+    from tlt_vision.detections import Detection
     from tlt_vision.node_config import load_config
     from tlt_vision.part_inspection import load_estimators
-    from tlt_vision.pipeline import Detection, PartPipeline
+    from tlt_vision.pipeline import PartPipeline
     from tlt_vision.pose.errors import add_s
 
     root = Path(__file__).resolve().parents[2]

@@ -3,8 +3,8 @@ import pytest
 from PIL import Image
 
 from tlt_vision.cad.models import build_models
+from tlt_vision.detections import Detection
 from tlt_vision.inspection import Observation
-from tlt_vision.pipeline import Detection
 from tlt_vision.pose.certificate import Certificate
 from tlt_vision.pose.estimator import PoseEstimate
 from tlt_vision.pose_picture import CERTIFIED, REFUSED, PosedFrame, projected, write_pose_picture

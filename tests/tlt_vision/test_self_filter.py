@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from tlt_common.geometry.transforms import pose_matrix
+from tlt_vision.detections import Detection
 from tlt_vision.node_config import load_config
-from tlt_vision.pipeline import Detection
 from tlt_vision.pointcloud import Intrinsics, back_project
 from tlt_vision.self_filter import (
     EeBox,

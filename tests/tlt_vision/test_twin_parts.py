@@ -14,9 +14,9 @@ import pytest
 import torch
 
 from tlt_vision.cad.models import load_parts, models_for_mission, strut_layout
+from tlt_vision.detections import Detection, merge_instances
 from tlt_vision.inspection import Observation, Tolerances, inspect_cross_frame, inspect_strut
 from tlt_vision.ops.registration import transform
-from tlt_vision.pipeline import Detection, merge_instances
 from tlt_vision.pointcloud import masked_point_cloud
 from tlt_vision.pose.certificate import certify
 from tlt_vision.pose.corrector import correct, model_frame

@@ -21,11 +21,14 @@ whether the cloud holds that face.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from tlt_vision.pointcloud import PinholeIntrinsics
+from tlt_vision.pose.certificate import Certificate
+from tlt_vision.pose.estimator import PoseEstimate
 
 
 @dataclass(frozen=True)
@@ -207,6 +210,48 @@ def slide_to_an_end(
     end = max(votes, key=lambda n: votes[n][0] / max(votes[n][1], 1))
     edge = _edge(there, end, depth, intrinsics, settings, margin)
     return by if edge is None else by + (edge if end == "b" else -edge)
+
+
+def placed_along_axis(
+    candidates: Sequence[PoseEstimate],
+    points: np.ndarray,
+    radius: float,
+    half_length: float,
+    depth: np.ndarray,
+    intrinsics: PinholeIntrinsics,
+    certify: Callable[[np.ndarray, np.ndarray], Certificate],
+    settings: AxialEnds = DEFAULT,
+    margin: float = 0.0,
+) -> PoseEstimate:
+    """Of ``candidates`` (certified poses of one cylinder's cloud ``points``: the pose slid by its
+    mask, then as fitted), the first whose ends the depth shows, or, seen end-on, whose cloud holds
+    an end face; when none, the first slid to where the depth shows an end and certified again
+    (``certify(rotation, translation)``); when none either, the first, not certified: its place
+    along its axis is not seen."""
+    first = candidates[0]
+    face = settings.on_surface + margin
+    for e in candidates:
+        if not e.certified:
+            continue
+        posed = PosedCylinder(e.rotation, e.translation, radius, half_length)
+        seen = ends_seen(posed, depth, intrinsics, settings, margin)
+        if seen or (seen is None and end_face_seen(posed, points, face)):
+            return e
+    posed = PosedCylinder(first.rotation, first.translation, radius, half_length)
+    by = slide_to_an_end(posed, depth, intrinsics, settings, margin)
+    if by is not None:
+        moved = by * posed.axis
+        slid = replace(
+            first,
+            translation=np.asarray(first.translation) + moved,
+            keypoints=np.asarray(first.keypoints) + moved,
+        )
+        certificate = certify(slid.rotation, slid.translation)
+        if certificate.certified:
+            return replace(slid, certificate=certificate)
+    why = "degenerate view: neither end of the part seen in the depth (its place along its axis is open)"
+    reason = "; ".join(r for r in (first.certificate.reason, why) if r)
+    return replace(first, certificate=replace(first.certificate, certified=False, reason=reason))
 
 
 def _edge(

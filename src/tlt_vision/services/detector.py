@@ -7,9 +7,9 @@ from typing import Any, Protocol
 
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.camera_frames import NoFrame
+from tlt_vision.detections import Detection
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.part_inspection import LookCloser
-from tlt_vision.pipeline import Detection
 
 
 class Segmenter(Protocol):

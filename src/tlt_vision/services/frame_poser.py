@@ -9,9 +9,9 @@ import numpy as np
 
 from tlt_vision import inspection
 from tlt_vision.camera_frame import CameraFrame
+from tlt_vision.detections import Detection, detections_near
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.part_inspection import PartInspector
-from tlt_vision.pipeline import Detection, detections_near
 
 Prior = Callable[[str, np.ndarray], np.ndarray | None]
 

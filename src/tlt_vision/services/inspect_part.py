@@ -15,10 +15,10 @@ from tlt_interfaces.msg import InspectionReport
 from tlt_vision import inspection
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.camera_frames import NoFrame
+from tlt_vision.detections import Detection
 from tlt_vision.frames import CameraRig, FrameUnavailable
 from tlt_vision.node_config import VisionConfig
 from tlt_vision.part_inspection import STRUT_KINDS, PartInspector
-from tlt_vision.pipeline import Detection
 from tlt_vision.self_filter import EeSelfFilter, drop_inside, off_own_ee, own_pixels
 from tlt_vision.services.detector import Detector
 from tlt_vision.services.frame_poser import FramePoser

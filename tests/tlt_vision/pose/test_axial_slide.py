@@ -107,9 +107,10 @@ def test_overhang_counts_surface_facing_the_camera_outside_the_mask_and_not_hidd
 def test_the_pipeline_places_by_its_mask_a_fitting_posed_off_along_its_axis(fitting):
     """The shipped C-3PO on the band of a fitting whose far end is hidden (it fits the band 8 mm off
     along the axis): the pipeline with the slide puts it where the mask ends, certified there."""
+    from tlt_vision.detections import Detection
     from tlt_vision.node_config import load_config
     from tlt_vision.part_inspection import load_estimators
-    from tlt_vision.pipeline import Detection, PartPipeline
+    from tlt_vision.pipeline import PartPipeline
 
     mission = ROOT / "missions" / "one_bay.yaml"
     estimator = load_estimators(

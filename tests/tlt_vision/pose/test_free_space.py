@@ -93,9 +93,10 @@ def test_rivets_seen_end_on_in_their_feeder_are_not_certified_lying_across_their
     ``corrector.turned_starts``) some end-on rivet is fitted lying across its head, which the
     free-space check refuses; with them (the node's configuration) it is fitted right."""
     from tlt_common.mission.schema import load_mission
+    from tlt_vision.detections import Detection
     from tlt_vision.node_config import load_config
     from tlt_vision.part_inspection import load_estimators
-    from tlt_vision.pipeline import Detection, PartPipeline
+    from tlt_vision.pipeline import PartPipeline
     from tlt_vision.pose.errors import rotation_error_deg
 
     config = load_config(ROOT / "config" / "vision" / "node.yaml")

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.detections import Detection
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.errors import add_s
 from tlt_vision.pose.parting import Parting, larger_piece, visible_share_in_mask

@@ -20,9 +20,10 @@ from tlt_tools.vision_training.render_dataset import render_set
 from tlt_tools.vision_training.twin_renderer import RenderSettings
 
 from tlt_common.mission.schema import load_mission
+from tlt_vision.detections import Detection
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
-from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.errors import add_s, non_degenerate_at, rotation_error_deg
 

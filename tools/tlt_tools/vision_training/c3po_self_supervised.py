@@ -45,9 +45,10 @@ from tlt_common.config_schema import ConfigError
 from tlt_common.mission.schema import load_mission
 from tlt_tools.vision_training.dataset import DatasetError, ImageSet, ImageSets, instance_model, instance_part
 from tlt_vision.cad.models import CadModel
+from tlt_vision.detections import Detection
 from tlt_vision.node_config import load_config
 from tlt_vision.part_inspection import load_estimators
-from tlt_vision.pipeline import Detection, PartPipeline
+from tlt_vision.pipeline import PartPipeline
 from tlt_vision.pointcloud import Intrinsics
 from tlt_vision.pose.detector import KeypointDetector, symmetric_keypoint_loss
 from tlt_vision.pose.detector_weights import save_detector
