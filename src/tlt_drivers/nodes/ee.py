@@ -26,7 +26,7 @@ from tlt_interfaces.srv import SetActuatorState
 
 from tlt_common import ros_names
 from tlt_drivers.dynamixel.config import load_chain
-from tlt_drivers.dynamixel.ee_calibration import WidthCalibration
+from tlt_drivers.dynamixel.ee_calibration import CalibrationState, WidthCalibration
 from tlt_drivers.gpio.lines import open_gpio
 from tlt_drivers.hardware_interface import Lifecycle
 from tlt_drivers.node_main import (
@@ -116,6 +116,10 @@ class EndEffectorNode(DynamixelDriverNode):
         to the limit switch drags whatever part the grippers hold along the slide, so a fault of
         the link alone must not start one."""
         before, after = self._width_read, self.hw.position[width]
+        if self.calibration.state == CalibrationState.SEEKING:
+            # A seek cut by the fault starts again: its travel was counted from where it began.
+            self.calibration.invalidate("hardware was re-activated during the seek")
+            return
         if before is None or not self.calibration.calibrated:
             return
         keep = self.ee["calibration"]["keep_within"]
