@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from mcap.records import Channel, Message, Schema
+from mcap.records import Channel
 
 from tlt_common.recording.reading import LenientRos2DecoderFactory
-from tlt_common.recording.recovery import ScanResult, iter_flushed_records
+from tlt_common.recording.recovery import ScanResult, iter_flushed_messages, iter_flushed_records
 from tlt_common.recording.summary import NS_PER_S
 
 
@@ -87,12 +87,9 @@ def export_csv(path: str | Path, topics: Sequence[str], out_dir: str | Path) -> 
     """
     wanted = set(topics)
     result = ScanResult()
-    schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     for record in iter_flushed_records(path, result):
-        if isinstance(record, Schema):
-            schemas[record.id] = record
-        elif isinstance(record, Channel):
+        if isinstance(record, Channel):
             channels[record.id] = record
     missing = wanted - {c.topic for c in channels.values()}
     if missing:
@@ -109,16 +106,11 @@ def export_csv(path: str | Path, topics: Sequence[str], out_dir: str | Path) -> 
         for topic in sorted(wanted):
             target = out / csv_name(topic)
             files[topic] = _TopicFile(target, open(target, "w", newline="", encoding="utf-8"))  # noqa: SIM115
-        for record in iter_flushed_records(path):
-            if not isinstance(record, Message):
-                continue
-            channel = channels.get(record.channel_id)
-            if channel is None or channel.topic not in wanted:
+        for schema, channel, record in iter_flushed_messages(path):
+            if channel.topic not in wanted:
                 continue
             if record.channel_id not in decoders:
-                decoders[record.channel_id] = factory.decoder_for(
-                    channel.message_encoding, schemas.get(channel.schema_id)
-                )
+                decoders[record.channel_id] = factory.decoder_for(channel.message_encoding, schema)
             decoder = decoders[record.channel_id]
             if decoder is None:
                 raise ValueError(f"{channel.topic}: no decoder for encoding {channel.message_encoding!r}")
