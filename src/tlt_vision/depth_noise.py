@@ -17,12 +17,12 @@ focal length ``f`` in pixels), so ``per_m2`` is ``s / (b f)``, per metre:
   the background inside the mask does not move the points beside it.
 * The certificate's threshold grows by what is left of the noise (:meth:`DepthNoise.allowance`):
   the 90th percentile of the noise's own distances, added in quadrature, at the cloud's depth.
-  Where that allowance is over ``max_allowance`` of the part's size (2 %, the accuracy the issue
-  holds certified poses to), the depth cannot place the part that well, and no pose is certified,
-  with that reason (:meth:`DepthNoise.too_noisy`). Without that bound, a generous allowance
-  certifies wrong poses (a small part far away, a fitting turned by degrees), and more of them at
-  lower noise: the same allowance then comes at a greater depth, where a part is a few pixels
-  across and the window a large share of it.
+  A generous allowance alone would certify wrong poses (a small part far away, a fitting turned by
+  degrees), so a pose is certified only where the fit to so noisy a cloud places the part to
+  ``max_allowance`` of its size (2 %, the accuracy the issue holds certified poses to) at
+  ``precision_sigmas`` standard errors: :mod:`tlt_vision.pose.precision` predicts that error
+  from the cloud's geometry and this noise, since hundreds of points place a part far better than
+  any one of them.
 
 A stereo camera's noise is shared by neighbouring pixels (the matcher's window makes them err
 together), which the median takes down less than independent noise: ``shared`` is how much more
@@ -63,6 +63,10 @@ class DepthNoise:
     correlation_px: float = 0.0
     focal_px: float = 0.0
     shared: float = 1.0
+    frame_fx: float = 0.0  # pixels: the focal length of the frame at hand, 0 when not known
+    # How many predicted standard errors of a fitted pose (:mod:`tlt_vision.pose.precision`) must
+    # lie within ``max_allowance`` of the part's size for the pose to be certified.
+    precision_sigmas: float = 2.0
 
     @property
     def exact(self) -> bool:
@@ -72,8 +76,18 @@ class DepthNoise:
         """This noise in a frame of focal length ``fx`` (pixels): the median's share of the noise
         correlated over ``correlation_px * fx / focal_px`` of its pixels."""
         if self.correlation_px <= 0.0 or self.focal_px <= 0.0:
-            return self
-        return replace(self, shared=median_share(self.correlation_px * fx / self.focal_px, self.window))
+            return replace(self, frame_fx=fx)
+        shared = median_share(self.correlation_px * fx / self.focal_px, self.window)
+        return replace(self, shared=shared, frame_fx=fx)
+
+    @property
+    def pixels_per_draw(self) -> float:
+        """Frame pixels per independent draw of the filtered noise (:func:`draw_area`): the
+        window's and, in a frame of known focal length, the camera's own correlation's."""
+        correlation = 0.0
+        if self.correlation_px > 0.0 and self.focal_px > 0.0 and self.frame_fx > 0.0:
+            correlation = self.correlation_px * self.frame_fx / self.focal_px
+        return draw_area(correlation, self.window)
 
     def sigma(self, depth: float | np.ndarray) -> float | np.ndarray:
         """1 sigma (m) of a raw pixel's depth at ``depth`` (m; one or an array)."""
@@ -89,11 +103,6 @@ class DepthNoise:
         """What the certificate allows for the residual noise at ``depth`` (m), added to a
         threshold in quadrature."""
         return P90_OF_NORMAL * self.residual(depth)
-
-    def too_noisy(self, depth: float, size: float) -> bool:
-        """Whether the allowance at ``depth`` (m) is over ``max_allowance`` of ``size`` (m), the
-        part's."""
-        return self.allowance(depth) > self.max_allowance * size
 
 
 EXACT = DepthNoise()
@@ -113,6 +122,25 @@ def median_share(correlation_px: float, window: int) -> float:
     filtered = ndimage.median_filter(shared, window)[window:-window, window:-window]
     independent = ndimage.median_filter(white, window)[window:-window, window:-window]
     return float(np.std(filtered) / np.std(independent))
+
+
+@functools.lru_cache(maxsize=64)
+def draw_area(correlation_px: float, window: int) -> float:
+    """Pixels per independent draw of a noise correlated over ``correlation_px`` pixels once a
+    ``window`` x ``window`` median has filtered it: the variance of a 30 x 30 block's mean times
+    its pixels over one pixel's variance, measured once on drawn fields (the same draws every
+    time). A fit's precision counts its points by it (:mod:`tlt_vision.pose.precision`)."""
+    correlation_px = round(correlation_px, 2)
+    rng = np.random.default_rng(0)
+    means, variances = [], []
+    for _ in range(200):
+        field = rng.standard_normal((60, 60))
+        if correlation_px >= 0.3:
+            field = correlated_field(field, correlation_px)
+        filtered = ndimage.median_filter(field, window)[10:-10, 10:-10]
+        means.append(float(filtered[5:35, 5:35].mean()))
+        variances.append(float(filtered.var()))
+    return max(1.0, float(np.var(means)) * 900.0 / float(np.mean(variances)))
 
 
 def window_median(
@@ -139,4 +167,4 @@ def with_noise(depth: np.ndarray, fraction: float, rng: np.random.Generator) -> 
     return (d * (1 + fraction * rng.standard_normal(d.shape))).astype(d.dtype)
 
 
-__all__ = ["EXACT", "DepthNoise", "median_share", "window_median", "with_noise"]
+__all__ = ["EXACT", "DepthNoise", "draw_area", "median_share", "window_median", "with_noise"]

@@ -63,7 +63,9 @@ class VisionConfig:
     def depth_noise(self) -> DepthNoise:
         """The noise of the cameras ``depth_noise.cameras`` does not name."""
         raw = self.raw["depth_noise"]
-        return DepthNoise(raw["fraction"], raw["window"], raw["max_allowance"])
+        return DepthNoise(
+            raw["fraction"], raw["window"], raw["max_allowance"], precision_sigmas=raw["precision_sigmas"]
+        )
 
     def with_exact_depth(self) -> VisionConfig:
         """This configuration with every camera's depth taken as exact: for the twin's exact

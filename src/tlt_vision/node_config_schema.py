@@ -189,6 +189,7 @@ SCHEMA = {
             "fraction": EXACT.fraction,
             "window": EXACT.window,
             "max_allowance": EXACT.max_allowance,
+            "precision_sigmas": EXACT.precision_sigmas,
             "cameras": {},
         },
         schema={
@@ -212,7 +213,14 @@ SCHEMA = {
                 EXACT.max_allowance,
                 minimum=0.0,
                 maximum=0.5,
-                doc="the most allowed for noise, a fraction of the part's size",
+                doc="the most a certified pose may be off (ADD-S), a fraction of the part's size",
+            ),
+            "precision_sigmas": opt(
+                "float",
+                EXACT.precision_sigmas,
+                minimum=0.5,
+                maximum=6.0,
+                doc="the standard errors of a fitted pose's ADD-S that must lie within max_allowance",
             ),
             # A ZED's noise is not a D405's: a camera named here has its own, a fraction of the
             # depth or {fraction, per_m2} (a stereo camera's, growing with the depth's square).

@@ -69,6 +69,7 @@ from tlt_vision.pose.estimator import PoseEstimate, PoseEstimator, estimate_toge
 from tlt_vision.pose.free_space import DEFAULT as DEFAULT_FREE_SPACE
 from tlt_vision.pose.free_space import FreeSpace, checked, nearest_depth
 from tlt_vision.pose.parting import Parting, larger_piece, visible_share_in_mask
+from tlt_vision.pose.precision import model_motion_matrix, pose_precision
 
 BORDER_DEPTH_MARGIN = 0.01  # m
 
@@ -113,6 +114,7 @@ class PartPipeline:
         self.axial_slide = axial_slide
         self.axial_ends = axial_ends
         self._surfaces: dict[str, np.ndarray] = {}
+        self._motions: dict[str, np.ndarray] = {}
         self._slide_surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.keep_border_below = keep_border_below
         self.max_points = max_points
@@ -403,25 +405,30 @@ class PartPipeline:
         noise: DepthNoise,
     ) -> Certificate:
         """The certificate of a pose of ``object_class`` for ``points``, allowing for the depth's
-        ``noise`` at their depth; not certified where the noise left is over the bound on the
-        part's size (:mod:`tlt_vision.depth_noise`)."""
+        ``noise`` at their depth; not certified where the fit to so noisy a cloud cannot place the
+        part to ``noise.max_allowance`` of its size (:mod:`tlt_vision.pose.precision`)."""
         estimator = self.estimators[object_class]
         if noise.exact:
             return estimator.certify_at(points, rotation, translation)
         depth = float(np.median(points[:, 2]))
-        allowance = noise.allowance(depth)
-        certificate = estimator.certify_at(points, rotation, translation, allowance)
-        size = estimator.model.diameter
-        if not noise.too_noisy(depth, size):
+        certificate = estimator.certify_at(points, rotation, translation, noise.allowance(depth))
+        if not certificate.certified:
+            return certificate
+        model = estimator.model
+        if object_class not in self._motions:
+            self._motions[object_class] = model_motion_matrix(model)
+        precision = pose_precision(
+            model, self._motions[object_class], points, rotation, translation, noise, noise.frame_fx
+        )
+        bound = noise.max_allowance * model.diameter
+        if noise.precision_sigmas * precision.add_s <= bound:
             return certificate
         reason = (
-            f"depth too noisy to certify at {depth:.2f} m: the noise left in the cloud "
-            f"({allowance * 1000:.1f} mm) is over {noise.max_allowance:.0%} of the part's "
-            f"size ({noise.max_allowance * size * 1000:.1f} mm)"
+            f"depth too noisy to certify at {depth:.2f} m: the fit places the part to "
+            f"{precision.add_s * 1000:.1f} mm (1 sigma, ADD-S), over {noise.max_allowance:.0%} of "
+            f"its size ({bound * 1000:.1f} mm) at {noise.precision_sigmas:g} sigma"
         )
-        return replace(
-            certificate, certified=False, reason="; ".join(r for r in (reason, certificate.reason) if r)
-        )
+        return replace(certificate, certified=False, reason=reason)
 
     def _surface(self, object_class: str) -> np.ndarray:
         """A fixed surface sample of the class's model, of the free-space check's size."""
