@@ -19,7 +19,8 @@ housekeeping packet kind, the newest packets, events (the CRS's ``event`` packet
 the GSW itself rejected), commands sent with each acknowledgement stage matched by security
 sequence number (a ``replay`` rejection of an already answered command answers a replayed copy:
 counted on the command, not taken as its stage), each agent's tree status
-(:mod:`~tlt_gsw.gui.agent_trees`), and the series of plotted fields. The records it builds are in
+(:mod:`~tlt_gsw.gui.agent_trees`, named with the ``tree_definition`` packets the agents sent:
+:meth:`ArchiveModel.archived_shape`), and the series of plotted fields. The records it builds are in
 :mod:`~tlt_gsw.gui.archive_records`.
 """
 
@@ -32,7 +33,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from tlt_common.bt.status_codec import TreeShape
+from tlt_common.bt.shape_definition import DefinitionAssembler, DefinitionPart
+from tlt_common.bt.status_codec import StatusCodecError, TreeShape
 from tlt_common.ccsds.codec import PRIMARY_HEADER_LEN, TIME_LEN
 from tlt_common.ccsds.definitions import Definitions
 from tlt_gsw.archive import query as archive_query
@@ -50,7 +52,7 @@ from tlt_gsw.gui.archive_records import (
 from tlt_gsw.gui.link_counter import LinkCounter, LinkFigures
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
 
-NON_HOUSEKEEPING = ("ack", "event", "tree_status")
+NON_HOUSEKEEPING = ("ack", "event", "tree_status", "tree_definition")
 _SECURITY_SEQ_OFFSET = PRIMARY_HEADER_LEN + TIME_LEN + 2  # after the 16-bit key id
 _U64 = struct.Struct(">Q")
 _SUMMARY = (
@@ -58,6 +60,8 @@ _SUMMARY = (
     "FROM packets"
 )
 TREE_PARTS_PER_REFRESH = 256
+# Copies of one shape's definition parts read at most (it is resent every few seconds).
+DEFINITION_PACKETS_READ = 1024
 
 
 class ArchiveModel:
@@ -80,7 +84,8 @@ class ArchiveModel:
     ) -> None:
         self.conn = conn
         self.defs = defs
-        self.agent_trees = AgentTrees(shapes, definition_files)
+        self.agent_trees = AgentTrees(shapes, definition_files, lookup=self.archived_shape)
+        self._definition_misses: dict[int, int] = {}  # shape hash -> newest definition packet then
         self.packet_rows = packet_rows
         self.event_rows = event_rows
         self.command_rows = command_rows
@@ -194,6 +199,42 @@ class ArchiveModel:
     def link_figures(self, now: float | None = None) -> LinkFigures:
         """The counters, with rates over ``rate_window_s`` ending at ``now`` (default: the position)."""
         return self.link.figures_at(self.position_time if now is None else now)
+
+    def archived_shape(self, shape_hash: int) -> TreeShape | None:
+        """The tree shape of ``shape_hash`` from the ``tree_definition`` packets in the archive
+        (anywhere in it: a definition never changes for its hash), or None. A hash not found is
+        looked for again only once more definition packets have arrived."""
+        newest = self.conn.execute(
+            "SELECT COALESCE(MAX(id), 0) FROM packets WHERE kind = 'tree_definition'"
+        ).fetchone()[0]
+        if not newest or self._definition_misses.get(shape_hash) == newest:
+            return None
+        names = self._field_ids("tree_definition").items()
+        hash_field = next((i for i, n in names if n == "shape_hash"), None)
+        ids = []
+        if hash_field is not None:
+            ids = [
+                pid
+                for (pid,) in self.conn.execute(
+                    "SELECT packet_id FROM fields WHERE field_id = ? AND value = ? "
+                    "ORDER BY packet_id DESC LIMIT ?",
+                    (hash_field, shape_hash, DEFINITION_PACKETS_READ),
+                )
+            ]
+        assembler = DefinitionAssembler()
+        for _, fields in sorted(self._kind_fields("tree_definition", ids).items(), reverse=True):
+            part = DefinitionPart.from_fields(fields)
+            if part is None:
+                continue
+            try:
+                shape = assembler.add(part)
+            except StatusCodecError:
+                continue  # an inconsistent set; an older copy may still make the shape
+            if shape is not None:
+                self._definition_misses.pop(shape_hash, None)
+                return shape
+        self._definition_misses[shape_hash] = newest
+        return None
 
     # -- plots ------------------------------------------------------------------------------
     def add_plot_field(self, kind: str, name: str, *, load: bool = True) -> None:
