@@ -15,8 +15,10 @@ two ways to move it:
   position (the only part whose cost grows with the archive).
 
 State kept: the link figures (:mod:`~tlt_gsw.gui.link_counter`), the newest fields of every
-housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets and the datagrams
-the GSW itself rejected), commands sent with each acknowledgement stage matched by security
+housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets, the datagrams
+the GSW itself rejected and every limit crossing), the limit alarms with the operator's
+acknowledgements (:mod:`~tlt_gsw.limit_events`: every packet of a limited kind is checked, not
+only the newest one shown), commands sent with each acknowledgement stage matched by security
 sequence number (a ``replay`` rejection of an already answered command answers a replayed copy:
 counted on the command, not taken as its stage), each agent's tree status
 (:mod:`~tlt_gsw.gui.agent_trees`, named with the ``tree_definition`` packets the agents sent:
@@ -46,11 +48,13 @@ from tlt_gsw.gui.archive_records import (
     EventRecord,
     HousekeepingSnapshot,
     PacketSummary,
+    limit_event_record,
     rejection_event,
     typed_value,
 )
 from tlt_gsw.gui.link_counter import LinkCounter, LinkFigures
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
+from tlt_gsw.limit_events import LimitAlarms, LimitMonitor
 
 NON_HOUSEKEEPING = ("ack", "event", "tree_status", "tree_definition")
 _SECURITY_SEQ_OFFSET = PRIMARY_HEADER_LEN + TIME_LEN + 2  # after the 16-bit key id
@@ -86,6 +90,8 @@ class ArchiveModel:
         self.defs = defs
         self.agent_trees = AgentTrees(shapes, definition_files, lookup=self.archived_shape)
         self._definition_misses: dict[int, int] = {}  # shape hash -> newest definition packet then
+        self.limit_monitor = LimitMonitor(defs)
+        self.alarms = LimitAlarms()
         self.packet_rows = packet_rows
         self.event_rows = event_rows
         self.command_rows = command_rows
@@ -122,6 +128,8 @@ class ArchiveModel:
         self.events: deque[EventRecord] = deque(maxlen=self.event_rows)
         self.commands = CommandLog(self.command_rows)
         self.agent_trees.reset()
+        self.limit_monitor.levels.clear()
+        self.alarms.reset()
         for key in self.series:
             self.series[key] = {}
 
@@ -333,6 +341,10 @@ class ArchiveModel:
         self._apply_commands([i for name in self.defs.commands for i in by_kind.get(name, ())], changes)
         self._apply_acks(by_kind.get("ack", []), changes)
         changes.events.extend(self._events(by_kind.get("event", [])[-self.event_rows :]))
+        if any(kind in self.limit_monitor.fields for kind in by_kind):
+            limit_events = self.limit_monitor.read(self.conn, lo, hi)
+            changes.alarms = bool(self.alarms.apply(limit_events))
+            changes.events.extend(limit_event_record(e) for e in limit_events)
         changes.events.sort(key=lambda e: e.packet_id)
         self.events.extend(changes.events)
         self._apply_trees(by_kind.get("tree_status", [])[-TREE_PARTS_PER_REFRESH:], changes)
@@ -393,7 +405,10 @@ class ArchiveModel:
         self._apply_commands(sent, changes)
         oldest = self.time_of(sent[0]) if sent else t
         self._apply_acks(newest("ack", 4 * self.command_rows, since=oldest), changes)
+        limit_events = self.limit_monitor.read(self.conn, 0, target)
+        self.alarms.apply(limit_events)
         events = list(self._events(newest("event", self.event_rows))) + list(rejected)
+        events += [limit_event_record(e) for e in limit_events[-self.event_rows :]]
         events.sort(key=lambda e: e.packet_id)
         self.events.extend(events)
         changes.events = list(self.events)

@@ -228,7 +228,7 @@ def write_demo_archive(
                     "limit_switches": 0, "watchdog_tripped": False, "link_ok": True,
                 }, t)  # fmt: skip
                 w.tm("hk_grippers", {
-                    "top_engaged": 0b1111, "top_position_mean": 0.027, "top_fault": False,
+                    "top_engaged": 0b1111, "top_position_mean": 0.0265, "top_fault": False,
                     "active_engaged": 0b0011, "active_height": 0.3 + 0.25 * math.sin(s / 5.0),
                     "active_fault": False,
                 }, t)  # fmt: skip

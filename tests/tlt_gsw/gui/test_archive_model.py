@@ -247,6 +247,35 @@ def test_a_forged_or_partial_definition_names_nothing(writer):
     assert model.trees["ars_x"].decoded is not None
 
 
+def test_a_limit_crossed_between_two_refreshes_is_an_event_and_its_alarm_survives_a_seek(writer):
+    """Every packet is checked, not only the newest one shown: a red value followed by a nominal
+    one in the same refresh still raises (and clears) an alarm; a replay seek rebuilds the same
+    alarms and keeps the operator's acknowledgements."""
+    writer.tm("hk_lifter", LIFTER)
+    writer.tm("hk_lifter", LIFTER | {"position_1": 2.2})  # red
+    writer.tm("hk_lifter", LIFTER)  # back, before any refresh
+    writer.tm("hk_arm_joints", {"ars": "ars_y", **{f"q{i}": 0.0 for i in range(6)}, "protective_stop": True})
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    changes = model.advance()
+    assert changes.alarms
+    codes = [(e.code, e.text) for e in model.events]
+    assert codes == [
+        ("LIMIT_RED", "hk_lifter.position_1 = 2.2 m: outside its red limits [-0.01, 2]"),
+        ("LIMIT_OK", "hk_lifter.position_1 = 0.5 m: back within limits [-0.01, 2]"),
+        ("LIMIT_RED", "hk_arm_joints.protective_stop (ars_y) = 1: outside its red limits [0, 0]"),
+    ]
+    lifter, arm = model.alarms.shown()
+    assert not lifter.active and arm.active and arm.raised.instance == "ars_y"
+    model.alarms.acknowledge(lifter)
+    assert model.alarms.shown() == [arm]
+    model.seek(model.head())
+    assert [a.id for a in model.alarms.shown()] == [arm.id], "the acknowledgement is kept"
+    model.seek(2)  # before the lifter came back: its alarm is active again, and acknowledged
+    (alarm,) = model.alarms.shown()
+    assert alarm.active and alarm.acknowledged and alarm.raised.field == "position_1"
+
+
 def test_ack_of_a_command_not_in_the_archive_is_still_shown(writer):
     writer.ack("stop", 424242, "rejected", "bad_auth", "MAC does not verify")
     seq = writer.tc("start")

@@ -211,3 +211,47 @@ def link_severity(name: str):
     from tlt_common.ccsds.reasons import Severity
 
     return Severity[name.upper()]
+
+
+def test_a_limit_crossed_is_an_event_and_an_alarm_until_acknowledged(gui):
+    """Over the real link: a lifter position goes yellow, red, and back. Each crossing is an event
+    with its value and limit; the alarm stays listed after the value is back until acknowledged,
+    and an acknowledged alarm that gets worse asks again."""
+    window, crs, until = gui
+    link = crs.link
+    model = window.model
+
+    def lifter(position_3: float) -> None:
+        link.send_telemetry("hk_lifter", {
+            "state": "crs_control", "position_0": 0.5, "position_1": 0.5, "position_2": 0.5,
+            "position_3": position_3, "velocity": 100, "limit_switches": 0, "watchdog_tripped": False,
+            "link_ok": True,
+        })  # fmt: skip
+
+    for value in (0.5, 1.95, 1.95):
+        lifter(value)
+    until(lambda: any(e.code == "LIMIT_YELLOW" for e in model.events))
+    (row,) = window.limit_alarms.row_texts()
+    assert row[1:6] == ["hk_lifter.position_3", "YELLOW", "1.95 m", "[0, 1.9]", "1.95 m"]
+    assert row[6] == "OUT, NOT acknowledged" and "1 not acknowledged" in window.limit_alarms.title()
+    window.limit_alarms.ack_all.click()
+    assert window.limit_alarms.row_texts()[0][6] == "OUT, acknowledged"
+    lifter(2.05)  # worse than what was acknowledged
+    until(lambda: any(e.code == "LIMIT_RED" for e in model.events))
+    row = window.limit_alarms.row_texts()[0]
+    assert row[2:5] == ["RED", "2.05 m", "[-0.01, 2]"] and row[6] == "OUT, NOT acknowledged"
+    lifter(0.6)
+    until(lambda: any(e.code == "LIMIT_OK" for e in model.events))
+    assert window.limit_alarms.row_texts()[0][5:] == ["0.6 m", "back within limits, NOT acknowledged"]
+    texts = [r[3:] for r in window.event_log.row_texts() if r[3].startswith("LIMIT_")]
+    assert texts == [
+        ["LIMIT_YELLOW", "none", "hk_lifter.position_3 = 1.95 m: outside its yellow limits [0, 1.9]"],
+        ["LIMIT_RED", "none", "hk_lifter.position_3 = 2.05 m: outside its red limits [-0.01, 2]"],
+        ["LIMIT_OK", "none", "hk_lifter.position_3 = 0.6 m: back within limits [-0.01, 2]"],
+    ]
+    table = window.limit_alarms.table
+    table.selectRow(0)
+    window.limit_alarms.ack_selected.click()
+    assert window.limit_alarms.row_texts() == [], "acknowledged and back within limits: gone"
+    assert not window.limit_alarms.ack_all.isEnabled()
+
