@@ -255,3 +255,25 @@ def test_a_limit_crossed_is_an_event_and_an_alarm_until_acknowledged(gui):
     assert window.limit_alarms.row_texts() == [], "acknowledged and back within limits: gone"
     assert not window.limit_alarms.ack_all.isEnabled()
 
+
+def test_disabled_command_buttons_look_disabled(qapp):
+    """The hazardous commands' buttons (Stop, Set Actuator State's Send) are dark red when they can
+    be used and grey like every other button when they cannot (monitor only, replay)."""
+    from tlt_gsw.gui.command_panel import CommandPanel
+
+    def red_pixels(button: QtWidgets.QPushButton) -> int:
+        image = button.grab().toImage()
+        count = 0
+        for y in range(image.height()):
+            for x in range(image.width()):
+                colour = image.pixelColor(x, y)
+                count += colour.red() > 120 and colour.green() < 80 and colour.blue() < 80
+        return count
+
+    enabled = CommandPanel(DEFS, lambda name, params: None)
+    disabled = CommandPanel(DEFS, None, "monitor only")
+    for name in ("stop", "set_actuator_state"):
+        on, off = enabled.buttons[name], disabled.buttons[name]
+        assert on.isEnabled() and not off.isEnabled()
+        assert red_pixels(on) > 20, f"{name}: the enabled button is drawn dark red"
+        assert red_pixels(off) == 0, f"{name}: the disabled button is drawn in red"
