@@ -277,3 +277,37 @@ def test_disabled_command_buttons_look_disabled(qapp):
         assert on.isEnabled() and not off.isEnabled()
         assert red_pixels(on) > 20, f"{name}: the enabled button is drawn dark red"
         assert red_pixels(off) == 0, f"{name}: the disabled button is drawn in red"
+
+
+def test_an_agents_tree_is_named_from_the_definition_it_sent_with_no_configuration(gui):
+    """Live over the link: an ARS's status comes first (counts only, and why), then its definition
+    (as the CRS forwards it); the tree view then names every node."""
+    from tlt_common.bt.shape_definition import split_definition
+
+    window, crs, until = gui
+    link = crs.link
+    shape = TreeShape.of(demo_tree().children[4])
+    set_demo_statuses(shape, 2)
+
+    def send_status(tick: int) -> None:
+        for part in encode(shape, agent="ars_y", tick_count=tick, max_status_bytes=2):
+            link.send_telemetry("tree_status", {
+                "agent": part.agent, "shape_hash": part.shape_hash, "tick": part.tick_count,
+                "node_count": part.node_count, "part_index": part.part_index, "part_count": part.part_count,
+                "first_node": part.first_node, "status": part.status,
+            })  # fmt: skip
+
+    send_status(1)
+    until(lambda: "ars_y" in window.model.trees)
+    window.show_tab("tree")
+    window.tree_view.agent.setCurrentText("ars_y")
+    assert "received yet" in window.tree_view.summary.text() and window.tree_view.node_rows() == []
+    for part in split_definition(shape, "ars_y", max_chunk_bytes=100):
+        link.send_telemetry("tree_definition", part.fields())
+    send_status(2)
+    until(lambda: window.model.trees["ars_y"].decoded is not None)
+    window.show_tab("housekeeping")
+    window.show_tab("tree")
+    assert window.tree_view.node_rows() == [
+        (n.path, STATUS_NAMES[s]) for n, s in zip(shape.nodes, shape.statuses(), strict=True)
+    ]
