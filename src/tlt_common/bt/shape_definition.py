@@ -137,7 +137,7 @@ def join_definition(parts: list[DefinitionPart]) -> TreeShape:
         raise StatusCodecError(f"definition of shape {head.shape_hash:08x} is truncated or too large")
     try:
         definition = json.loads(body)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise StatusCodecError(f"definition of shape {head.shape_hash:08x} is not JSON: {exc}") from exc
     shape = shape_from_document(definition)
     if shape.hash != head.shape_hash or len(shape) != head.node_count:

@@ -8,6 +8,8 @@ import zlib
 
 import py_trees
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tlt_common.bt import shape_definition as sd
 from tlt_common.bt.status_codec import StatusCodecError, TreeShape, decode, encode
@@ -56,6 +58,7 @@ def test_a_definition_that_does_not_hash_to_the_shape_it_claims_is_refused():
         (zlib.compress(b"[1, 2"), "not JSON"),
         (zlib.compress(b"\0" * (sd.MAX_DEFINITION_BYTES + 1)), "too large"),
         (zlib.compress(b'{"definition": 3}'), "list of nodes"),
+        (zlib.compress(b"[" * 100_000), "not JSON"),
     ],
 )
 def test_a_body_that_is_not_a_definition_is_refused_with_the_reason(chunk, words):
@@ -95,3 +98,24 @@ def test_document_json_round_trip_and_refusals():
 
 def test_a_packet_field_missing_gives_no_part():
     assert sd.DefinitionPart.from_fields({"agent": "crs"}) is None
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 3), st.integers(0, 4), st.integers(1, 4), st.binary(max_size=64)),
+        max_size=12,
+    )
+)
+def test_no_sequence_of_parts_raises_anything_but_a_codec_error(parts):
+    """Whatever parts arrive (the GSW decodes what the link authenticated, but a bug or a key
+    compromise must not crash its displays), the assembler returns a shape, None, or refuses."""
+    assembler = sd.DefinitionAssembler(max_pending=3)
+    for shape_hash, index, count, chunk in parts:
+        try:
+            shape = assembler.add(
+                sd.DefinitionPart("ars_x", shape_hash, 3, index, count, zlib.compress(chunk))
+            )
+        except StatusCodecError:
+            continue
+        assert shape is None or isinstance(shape, TreeShape)
