@@ -46,13 +46,29 @@ apt_stage() {
         fi
     done < <(sed -e 's/#.*//' -e 's/[[:space:]]//g' "$ROOT/requirements/apt.txt")
     [ ${#missing[@]} -eq 0 ] && return 0
-    say "installing Debian packages: ${missing[*]}"
-    [ "$(id -u)" -eq 0 ] || fail "Debian packages missing (${missing[*]}) and not root to install them"
-    DEBIAN_FRONTEND=noninteractive apt-get update -qq >/dev/null \
-        || fail "apt-get update"
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null \
-        || fail "apt-get install ${missing[*]}"
+    # Where packages cannot be installed here, say so and go on: the later stages fail with their
+    # own message if they need one, and the rest (a GUI on an X display, MuJoCo offscreen, ...)
+    # fails where it is used. requirements/apt.txt says what needs each package.
+    local why=""
+    if ! command -v apt-get >/dev/null 2>&1; then
+        why="apt-get is not available on this system"
+    elif [ "$(id -u)" -ne 0 ]; then
+        why="not root"
+    else
+        say "installing Debian packages: ${missing[*]}"
+        if ! DEBIAN_FRONTEND=noninteractive apt-get update -qq >/dev/null; then
+            why="apt-get update failed"
+        elif ! DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+            "${missing[@]}" >/dev/null; then
+            why="apt-get install failed"
+        fi
+    fi
+    [ -z "$why" ] && return 0
+    APT_MISSING="${missing[*]}"
+    printf '[setup] WARNING: Debian packages NOT installed (%s): %s\n' "$why" "$APT_MISSING" >&2
+    printf '[setup] WARNING: install them with the system package manager; requirements/apt.txt says what needs each\n' >&2
 }
+APT_MISSING=""
 
 # --- 2. virtual environment and pinned dependencies ------------------------------------------
 venv_stage() {
@@ -153,4 +169,8 @@ venv_stage
 cmake_paths_stage
 msgs_stage
 project_stage
-say "ready: $VENV"
+if [ -n "$APT_MISSING" ]; then
+    say "ready: $VENV (but Debian packages missing: $APT_MISSING)"
+else
+    say "ready: $VENV"
+fi

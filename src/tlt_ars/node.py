@@ -33,7 +33,8 @@ Serves, for the CRS:
   the arm to stand still and shuts the process down).
 
 Subscribes to the CRS's ``MissionProgress`` to know what stands and which bay is current;
-publishes the tree's status on ``ros_names.tree_status_topic(ars)``.
+publishes the tree's status on ``ros_names.tree_status_topic(ars)`` and each shape's definition on
+``ros_names.tree_definition_topic(ars)``.
 
 Threads: a DirectMultiThreadedExecutor; the tick timer owns the tree; action callbacks hand jobs over
 under a lock and wait for their result; planning runs in the context's planning thread.
@@ -155,6 +156,7 @@ class ArsNode(LeanNode):
             self,
             self.ars,
             topic=ros_names.tree_status_topic(self.ars),
+            definition_topic=ros_names.tree_definition_topic(self.ars),
             period_s=1.0 / config.raw["status_rate_hz"],
         )
         # The request's feedback goes out before the tree's status: the CRS waits on the first one.

@@ -95,6 +95,12 @@ def tree_status_topic(agent: str) -> str:
     return f"/{agent}/tree_status"
 
 
+def tree_definition_topic(agent: str) -> str:
+    """The definition of each shape of an agent's behaviour tree (std_msgs/String, JSON document
+    of tlt_common.bt.shape_definition; transient local)."""
+    return f"/{agent}/tree_definition"
+
+
 CRS_INSPECT_PART = "/crs/inspect_part"  # served by the CRS for the ARSs (it forwards to vision)
 CRS_SET_BLACKBOARD = "/crs/set_blackboard_value"
 CRS_MISSION_PROGRESS = "/crs/mission_progress"

@@ -10,7 +10,9 @@ again against the state it finds and executes it on its next tick (Fig. 13). The
 as one *completed* or *failed* acknowledgement.
 
 Telemetry, each packet at its rate in the definitions file: the CRS tree's encoded status
-(``tree_status``, one packet per part; the ARSs' as their TreeStatus messages arrive), mission
+(``tree_status``, one packet per part; the ARSs' as their TreeStatus messages arrive), each
+agent's tree definition (``tree_definition``, when the agent moves to a shape and again at its
+rate: :mod:`tlt_crs.tree_definition_relay`; an ARS's from its ``tree_definition`` topic), mission
 progress (``hk_mission``), the tower model (``hk_tower``), and housekeeping from the mechanisms'
 state topics (``hk_lifter``, ``hk_grippers``, ``hk_ee``, ``hk_arm_joints``: a packet goes out once
 its topic has been heard).
@@ -27,6 +29,7 @@ unseen on a loaded machine).
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -37,7 +40,9 @@ from py_trees.common import Status
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from tlt_common import ros_names
-from tlt_common.bt.status_codec import TreeShape, encode
+from tlt_common.bt.ros import TreeStatusPublisher
+from tlt_common.bt.shape_definition import parse_document_json
+from tlt_common.bt.status_codec import StatusCodecError, TreeShape, encode
 from tlt_common.ccsds.reasons import AckStage, Reason, Severity
 from tlt_common.mission.member_states import pack_member_states
 from tlt_common.mission.tower_model import PLACED, RIVETED
@@ -45,6 +50,7 @@ from tlt_common.ros.periodic_timer import create_periodic_timer
 from tlt_crs.commands import CommandQueue
 from tlt_crs.context import CrsContext
 from tlt_crs.ground_link.link import GroundCommand, GroundLink
+from tlt_crs.tree_definition_relay import TreeDefinitionRelay
 
 _log = logging.getLogger("tlt_crs.ground_bridge")
 # Status bytes per tree_status packet: the definition allows 1024; 256 keeps packets small.
@@ -87,12 +93,14 @@ class GroundBridge:
         mission, model = node.ctx.mission, node.ctx.model
         built = f"{model.bays_built()}/{mission.bay_count} bay(s) built"
         self._send_event(Severity.INFO, "CRS_UP", f"mission '{mission.name}': {built}; ground link up")
+        self.tree_definitions = TreeDefinitionRelay(self._send)
         self._forward_ars_tree_statuses()
         # Telemetry has its own group: in the node's default one it waits behind the device
         # subscriptions' callbacks, and on a loaded machine the tree status may never go out.
         telemetry = MutuallyExclusiveCallbackGroup()
         for kind, send in (
             ("tree_status", self.send_tree_status),
+            ("tree_definition", self.tree_definitions.resend),
             ("hk_mission", self.send_progress),
             ("hk_tower", self.send_tower),
             ("hk_lifter", self.send_lifter),
@@ -162,16 +170,40 @@ class GroundBridge:
             _log.warning("event %s not sent to the ground: %s", code, exc)
 
     def _forward_ars_tree_statuses(self) -> None:
-        """Forward the ARSs' encoded tree statuses to the ground as they come, part by part. The
-        devices' states the housekeeping packets report come from the CRS's topic cache, which the
-        tree and the Start check read too: one subscription per topic in the process (each message
-        wakes the CRS's executor)."""
+        """Forward the ARSs' encoded tree statuses to the ground as they come, part by part, and
+        their tree definitions (transient local: one published before this CRS started arrives
+        too). The devices' states the housekeeping packets report come from the CRS's topic
+        cache, which the tree and the Start check read too: one subscription per topic in the
+        process (each message wakes the CRS's executor)."""
+        from std_msgs.msg import String
         from tlt_interfaces.msg import TreeStatus
 
         for ars in ros_names.ARS_AGENTS:
             self.node.ctx.node.create_subscription(
                 TreeStatus, ros_names.tree_status_topic(ars), self.forward_tree_status, 10
             )
+            self.node.ctx.node.create_subscription(
+                String,
+                ros_names.tree_definition_topic(ars),
+                functools.partial(self._on_tree_definition, ars),
+                TreeStatusPublisher.DEFINITION_QOS,
+            )
+
+    def _on_tree_definition(self, ars: str, msg: Any) -> None:
+        self.forward_tree_definition(ars, msg.data)
+
+    def forward_tree_definition(self, ars: str, text: str) -> None:
+        """An ARS's definition of the shape it moved to, on to the ground (a document that does
+        not parse, or names another agent, is logged and dropped)."""
+        try:
+            agent, shape = parse_document_json(text)
+        except StatusCodecError as exc:
+            _log.warning("tree definition from %s dropped: %s", ars, exc)
+            return
+        if agent != ars:
+            _log.warning("tree definition on %s's topic names agent %r: dropped", ars, agent)
+            return
+        self.tree_definitions.shape(ars, shape)
 
     def _latest(self, topic: str) -> Any:
         """The newest message on a device topic, or None before the first."""
@@ -285,9 +317,11 @@ class GroundBridge:
     def send_tree_status(self) -> None:
         node = self.node
         with node.ctx.lock:
+            shape = node.shape
             parts = encode(
-                node.shape, agent="crs", tick_count=node.tick_count, max_status_bytes=STATUS_BYTES_PER_PACKET
+                shape, agent="crs", tick_count=node.tick_count, max_status_bytes=STATUS_BYTES_PER_PACKET
             )
+        self.tree_definitions.shape("crs", shape)  # before the first status of a new shape
         for part in parts:
             self.link.send_telemetry(
                 "tree_status",

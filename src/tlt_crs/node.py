@@ -4,7 +4,8 @@
 
 * Ticks the tree at ``tick_rate_hz`` on a timer of the node's clock (ROS time, so
   ``--ros-args -p use_sim_time:=true`` runs it on the twin's ``/clock``).
-* Publishes ``/crs/tree_status`` (``TreeStatus``) at ``status_rate_hz`` (after a tick),
+* Publishes ``/crs/tree_status`` (``TreeStatus``) at ``status_rate_hz`` (after a tick), with each
+  shape's definition on ``/crs/tree_definition`` before its first status,
   ``/crs/mission_progress`` (``MissionProgress``) at ``progress_rate_hz`` and after every tower
   model change, and ``/events``.
 * Serves ``/crs/set_blackboard_value`` (the writable registry decides) and ``/crs/inspect_part``
@@ -99,7 +100,11 @@ class CrsNode(LeanNode):
         self.tick_count = 0
         self.shape = TreeShape.of(self.root)
         self.status_publisher = TreeStatusPublisher(
-            self, "crs", topic=ros_names.tree_status_topic("crs"), period_s=1.0 / config.status_rate_hz
+            self,
+            "crs",
+            topic=ros_names.tree_status_topic("crs"),
+            definition_topic=ros_names.tree_definition_topic("crs"),
+            period_s=1.0 / config.status_rate_hz,
         )
         # Called at the end of each tick, under the context's lock (the ground bridge notes steps).
         self.tick_listeners: list[Callable[[], None]] = []

@@ -36,7 +36,7 @@ from typing import IO, Any
 from tlt_common.bt.status_codec import TreeShape
 from tlt_common.ccsds.auth import CommandSequencer, KeyFileError, KeyRing, ReplayStateError
 from tlt_common.ccsds.codec import Packet, ParseResult
-from tlt_common.ccsds.definitions import load_definitions
+from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_common.ccsds.link_config import expand_path, load_link_config
 from tlt_common.ccsds.reasons import AckStage
 from tlt_common.config_schema import ConfigError
@@ -209,8 +209,10 @@ def _last_packet_id(archive: Path) -> int:
         conn.close()
 
 
-def _print_summary(archive: Path, plot: Path | None, out: IO[str], after: int = 0) -> None:
-    summary = summarize_file(archive, after)
+def _print_summary(
+    archive: Path, plot: Path | None, out: IO[str], after: int = 0, defs: Definitions | None = None
+) -> None:
+    summary = summarize_file(archive, after, defs)
     print(format_summary(summary), file=out, flush=True)
     if plot is not None:
         from tlt_gsw.timeline_plot import plot_timeline
@@ -290,7 +292,7 @@ def _cmd_mission(args: argparse.Namespace, out: IO[str]) -> int:
             pass
         link.close()
         print(f"wall time {time.monotonic() - started:.1f} s, exit status {code}", file=out, flush=True)
-    _print_summary(archive, plot, out, after=first)
+    _print_summary(archive, plot, out, after=first, defs=defs)
     return code
 
 
@@ -300,7 +302,7 @@ def _cmd_summary(args: argparse.Namespace, out: IO[str]) -> int:
     else:
         archive = expand_path(load_link_config(args.config)["gsw"]["archive"])
     plot = Path(args.plot) if args.plot else None
-    _print_summary(archive, plot, out)
+    _print_summary(archive, plot, out, defs=load_definitions(args.definitions))
     return EXIT_BUILT
 
 

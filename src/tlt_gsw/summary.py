@@ -10,7 +10,9 @@ printed at its end by the mission job or afterwards from any archive file. It re
 * ``hk_tower``: the state of every member;
 * ``event``: ``INSPECTION_PASSED`` / ``INSPECTION_FAILED`` (one per part presented),
   ``BAY_INSPECTION_PASSED`` / ``BAY_INSPECTION_FAILED``, ``CRS_FAULT``, ``FAULT_CLEARED``, ``CRS_UP``;
-* commands sent (``tx``) and their ``ack`` packets: what the operator did about a fault.
+* commands sent (``tx``) and their ``ack`` packets: what the operator did about a fault;
+* every field with limits in the definitions (:mod:`tlt_gsw.limit_events`): each time one left
+  its limits, its worst level, value and limit, and when it came back (or that it did not).
 
 An ack is matched to the command it answers by the security sequence number. A ``replay``
 rejection of a number whose command was already acknowledged answers a copy of that packet that
@@ -32,7 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tlt_common.ccsds.definitions import Definitions, load_definitions
 from tlt_gsw.archive import query as archive_query
+from tlt_gsw.limit_events import LimitAlarm, limit_alarms
 
 # Kinds the summary reads; everything else in the archive is left alone.
 KINDS = ("mission_step", "hk_mission", "hk_tower", "event", "ack")
@@ -149,6 +153,7 @@ class MissionSummary:
     phases: list[PhaseTimes] = field(default_factory=list)
     steps: list[StepSpan] = field(default_factory=list)
     commands: list[CommandRecord] = field(default_factory=list)
+    limit_alarms: list[LimitAlarm] = field(default_factory=list)  # each stay out of limits
     sim_start: float | None = None
     sim_end: float | None = None
     wall_start: float | None = None
@@ -217,10 +222,14 @@ _BAY_NUMBER = re.compile(r"bay (\d+)")
 _FINAL_STAGES = ("rejected", "completed", "failed")
 
 
-def summarize(conn: sqlite3.Connection, archive: str = "", after: int = 0) -> MissionSummary:
+def summarize(
+    conn: sqlite3.Connection, archive: str = "", after: int = 0, defs: Definitions | None = None
+) -> MissionSummary:
     """Compute the summary of the archive ``conn`` from packet id ``after`` on (0: all of it; an
-    archive kept across runs holds earlier runs' packets before a job's first)."""
+    archive kept across runs holds earlier runs' packets before a job's first); ``defs`` (default:
+    the project's definitions file) give the fields' limits."""
     summary = MissionSummary(archive=archive)
+    summary.limit_alarms = limit_alarms(conn, defs or load_definitions(), after)
     records = load_records(conn, after=after)
     summary.packets = conn.execute("SELECT COUNT(*) FROM packets WHERE id > ?", (after,)).fetchone()[0]
     if records:
@@ -399,18 +408,44 @@ def unpack_member_states(data: bytes, count: int) -> list[int]:
     return out
 
 
-def summarize_file(path: str | Path, after: int = 0) -> MissionSummary:
+def summarize_file(path: str | Path, after: int = 0, defs: Definitions | None = None) -> MissionSummary:
     """Open ``path`` read-only and summarize it from packet id ``after`` on (raises ArchiveError
     if it is not an archive)."""
     conn = archive_query.open_archive(path)
     try:
-        return summarize(conn, str(path), after)
+        return summarize(conn, str(path), after, defs)
     finally:
         conn.close()
 
 
 def _seconds(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f} s"
+
+
+def _limit_lines(s: MissionSummary) -> list[str]:
+    """One line per stay of a field outside its limits, at its wall time since the run's start."""
+    alarms = s.limit_alarms
+    if not alarms:
+        return ["  limits crossed:   none"]
+    red = sum(a.worst.level == "red" for a in alarms)
+    out = sum(a.active for a in alarms)
+    head = f"  limits crossed:   {len(alarms)} ({red} red)"
+    lines = [head + (f", {out} still out of limits at the end" if out else "")]
+    start = s.wall_start if s.wall_start is not None else alarms[0].raised.time
+    for alarm in alarms:
+        worst, first = alarm.worst, alarm.raised
+        text = (
+            f"    [+{first.time - start:.1f} s] {worst.name}: {str(worst.level).upper()} "
+            f"{worst.value_text()} outside {worst.limit_text()}"
+        )
+        if first is not worst:
+            text += f" (first {first.level} {first.value_text()} outside {first.limit_text()})"
+        if alarm.cleared is not None:
+            text += f"; back within limits after {alarm.cleared.time - first.time:.1f} s"
+        else:
+            text += "; still out of limits at the end"
+        lines.append(text)
+    return lines
 
 
 def format_summary(s: MissionSummary) -> str:
@@ -450,6 +485,7 @@ def format_summary(s: MissionSummary) -> str:
     sim_total = s.sim_end - s.sim_start if s.sim_start is not None and s.sim_end is not None else None
     wall_total = s.wall_end - s.wall_start if s.wall_start is not None and s.wall_end is not None else None
     lines.append(f"    {'whole run':<14}{_seconds(sim_total):>9}  {_seconds(wall_total):>9}")
+    lines.extend(_limit_lines(s))
     refused = [c for c in s.commands if c.stage in ("rejected", "failed")]
     lines.append(f"  commands sent:    {len(s.commands)} ({len(refused)} rejected or failed)")
     # A job asks for Start again while the system comes up: one line per run of like refusals.

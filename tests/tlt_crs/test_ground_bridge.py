@@ -138,3 +138,54 @@ def test_a_command_refused_at_execution_fails_once_after_its_one_acceptance(grou
     failed = second.acks[-1]
     assert failed.reason is Reason.EXECUTION_FAILED and "already paused" in failed.detail
     assert node.ctx.paused
+
+
+def test_every_agents_tree_definition_reaches_the_ground_and_names_its_status(ground, rig):
+    """The CRS sends its own tree's definition and forwards an ARS's (published on the ARS's
+    ``tree_definition`` topic): the ground names every node of both statuses with no file."""
+    import py_trees
+    from py_trees.common import Status
+
+    from tlt_common import ros_names
+    from tlt_common.bt.ros import TreeStatusPublisher
+    from tlt_common.bt.shape_definition import DefinitionAssembler, DefinitionPart
+    from tlt_common.bt.status_codec import Reassembler, StatusPart
+
+    node, gsw, packets = ground
+    # The CRS sends telemetry where commands come from: a ground station that starts after the
+    # CRS's first definitions went out (lost) learns them from the periodic resend.
+    assert gsw.wait_ack(gsw.send_command("resume"), final=True, timeout=WAIT) is not None
+    leaves = [py_trees.behaviours.Success("Approach Dispenser"), py_trees.behaviours.Running("Grasp Part")]
+    tree = py_trees.trees.BehaviourTree(py_trees.composites.Sequence("ARS x", memory=False, children=leaves))
+    publisher = TreeStatusPublisher(
+        rig.node,
+        "ars_x",
+        topic=ros_names.tree_status_topic("ars_x"),
+        definition_topic=ros_names.tree_definition_topic("ars_x"),
+    )
+    publisher.attach(tree)
+    assembler = DefinitionAssembler()
+    shapes: dict[str, object] = {}
+    decoded = {}
+    seen = 0
+    deadline = time.monotonic() + WAIT
+    while not {"crs", "ars_x"} <= decoded.keys():
+        assert time.monotonic() < deadline, f"definitions {sorted(shapes)}, decoded {sorted(decoded)}"
+        tree.tick()
+        gsw.poll(0.2)
+        for packet in packets[seen:]:
+            if packet.kind == "tree_definition":
+                shape = assembler.add(DefinitionPart.from_fields(packet.fields))
+                if shape is not None:
+                    shapes[packet.fields["agent"]] = shape
+            elif packet.kind == "tree_status" and packet.fields["agent"] in shapes:
+                f = packet.fields
+                part = StatusPart(f["agent"], f["shape_hash"], f["tick"], f["node_count"], f["part_index"],
+                                  f["part_count"], f["first_node"], f["status"])  # fmt: skip
+                status = Reassembler(shapes[part.agent]).add(part)
+                if status is not None:
+                    decoded[part.agent] = status
+        seen = len(packets)
+    assert shapes["crs"].hash == node.shape.hash
+    assert decoded["ars_x"].as_dict()["ARS x/Grasp Part"] is Status.RUNNING
+    assert [path for path, _ in decoded["crs"].nodes] == [n.path for n in node.shape.nodes]

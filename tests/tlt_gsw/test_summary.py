@@ -343,3 +343,49 @@ def test_replayed_commands_over_a_real_link_leave_the_summary_right(tmp_path):
     assert "  commands sent:    10 (0 rejected or failed)" in text
     assert "start rejected" not in text
     assert "  replayed copies:  10 rejected by the CRS as replays (start 10)" in text
+
+
+def test_every_stay_outside_limits_is_listed_with_its_value_limit_and_end(tmp_path):
+    """`tlt gsw summary` lists each time a limited field left its limits: worst level, value and
+    limit, the first crossing when it got worse, and when it came back or that it did not."""
+    path = tmp_path / "limits.sqlite"
+    a = Archive(path)
+    a.step(1000.0, 10.0, "running", 1, "Index Payload 1", "Move Lifter Raise", 0, 0, 0)
+
+    def lifter(wall: float, position_3: float) -> None:
+        a.tm(wall, "hk_lifter", {
+            "state": "crs_control", "position_0": 0.5, "position_1": 0.5, "position_2": 0.5,
+            "position_3": position_3, "velocity": 10, "limit_switches": 0, "watchdog_tripped": False,
+            "link_ok": True,
+        })  # fmt: skip
+
+    def end_effector(wall: float, ars: str, load: float) -> None:
+        a.tm(wall, "hk_ee", {
+            "ars": ars, "grasp_left": 0.1, "grasp_right": 0.1, "width": 0.05, "max_load": load,
+            "calibrated": True, "part_grasped": False, "rivet_guns": 0, "fault": False,
+        })  # fmt: skip
+
+    lifter(1001.0, 0.5)
+    lifter(1002.0, 1.95)  # yellow
+    lifter(1002.5, 2.05)  # red
+    lifter(1003.0, 1.0)  # back
+    end_effector(1004.0, "ars_x", 0.2)
+    end_effector(1004.0, "ars_y", 0.75)  # yellow, and stays so
+    end_effector(1005.0, "ars_x", 0.3)
+    end_effector(1005.0, "ars_y", 0.8)
+    a.close()
+    out = io.StringIO()
+    assert cli.main(["summary", "--archive", str(path)], out=out) == 0
+    lines = out.getvalue().splitlines()
+    start = lines.index("  limits crossed:   2 (1 red), 1 still out of limits at the end")
+    assert lines[start + 1 : start + 3] == [
+        "    [+2.0 s] hk_lifter.position_3: RED 2.05 m outside [-0.01, 2] "
+        "(first yellow 1.95 m outside [0, 1.9]); back within limits after 1.0 s",
+        "    [+4.0 s] hk_ee.max_load (ars_y): YELLOW 0.75 stall fraction outside [-0.7, 0.7]; "
+        "still out of limits at the end",
+    ]
+    quiet = tmp_path / "quiet.sqlite"
+    b = Archive(quiet)
+    b.step(1000.0, 10.0, "running", 1, "Index Payload 1", "Move Lifter Raise", 0, 0, 0)
+    b.close()
+    assert "  limits crossed:   none" in format_summary(summarize_file(quiet)).splitlines()

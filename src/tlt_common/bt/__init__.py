@@ -4,6 +4,7 @@
 ``ros``: non-blocking behaviours for ROS action goals, service calls and topic data (a package).
 ``server_readiness``: whether an action or service server is up, asked of rclpy at most once a period.
 ``status_codec``: a tree's status as a bounded byte string and as ``TreeStatus`` messages.
+``shape_definition``: a tree shape's definition as a document and as link-sized parts.
 ``writable_blackboard``: the registry of blackboard keys the ground may write.
 ``viewer``: text and PNG renderings of a tree with its statuses.
 """

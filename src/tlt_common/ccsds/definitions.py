@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -209,7 +210,14 @@ _SCHEMA = {
 }
 
 
-def _limits(raw: dict[str, Any] | None, source: str, key: str) -> Limits | None:
+def _as_f32(value: float) -> float:
+    return struct.unpack(">f", struct.pack(">f", value))[0]
+
+
+def _limits(raw: dict[str, Any] | None, source: str, key: str, f32: bool = False) -> Limits | None:
+    """The limits of a field; for an ``f32`` field, each bound as the nearest f32 (the value the
+    field can carry): a value sent exactly at its limit (0.1 m, which is 0.10000000149 as f32)
+    is within it, not outside by the rounding."""
     if raw is None:
         return None
     pairs: dict[str, tuple[float, float] | None] = {}
@@ -223,7 +231,8 @@ def _limits(raw: dict[str, Any] | None, source: str, key: str) -> Limits | None:
             raise ConfigError(
                 source, f"{key}.limits.{colour}", "expected [low, high] numbers with low <= high"
             )
-        pairs[colour] = (float(pair[0]), float(pair[1]))
+        low, high = float(pair[0]), float(pair[1])
+        pairs[colour] = (_as_f32(low), _as_f32(high)) if f32 else (low, high)
     return Limits(**pairs)
 
 
@@ -263,7 +272,7 @@ def _field(raw: dict[str, Any], enums: Mapping[str, tuple[str, ...]], source: st
         description=raw["description"],
         enum=enum_values,
         enum_name=raw["enum"],
-        limits=_limits(raw["limits"], source, key),
+        limits=_limits(raw["limits"], source, key, f32=kind == "f32"),
         max_length=max_length,
         optional=raw["optional"],
         minimum=lo,

@@ -1,11 +1,15 @@
 """Each agent's behaviour tree status as the GSW shows it, from the ``tree_status`` parts in the
 archive: the newest tick of each agent, decoded against its tree definition when one is known,
-else the count of nodes per status of the parts seen."""
+else the count of nodes per status of the parts seen.
+
+A definition is found by the status's shape hash: among the shapes already known, then through
+``lookup`` (the archive's ``tree_definition`` packets, which every agent sends: no configuration
+needed), then in the agent's definition file when one is configured."""
 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,18 +55,34 @@ def status_part(fields: Mapping[str, Any]) -> StatusPart | None:
 class AgentTrees:
     """The newest :class:`TreeState` of each agent, and the tree shapes that decode them.
 
-    ``shapes`` starts from the configured definitions; with ``definition_files``, an agent whose
-    shape hash changes has its definition read again (the agent may have a new tree).
+    ``shapes`` (agent -> shape) starts from the configured definitions. An agent whose shape hash
+    changes is decoded with the shape of that hash: one seen before, else ``lookup(hash)`` (the
+    definitions the agents sent), else, with ``definition_files``, the agent's file read again
+    (the agent may have a new tree).
     """
 
     def __init__(
         self,
         shapes: Mapping[str, TreeShape] | None = None,
         definition_files: TreeDefinitionFiles | None = None,
+        lookup: Callable[[int], TreeShape | None] | None = None,
     ) -> None:
         self.shapes = dict(shapes or {})
+        self.by_hash = {shape.hash: shape for shape in self.shapes.values()}
         self.definition_files = definition_files
+        self.lookup = lookup
         self.reset()
+
+    def _shape_for(self, agent: str, shape_hash: int) -> TreeShape | None:
+        """The shape of ``shape_hash`` if known or found; else the agent's changed file's shape."""
+        shape = self.by_hash.get(shape_hash)
+        if shape is None and self.lookup is not None:
+            shape = self.lookup(shape_hash)
+        if shape is None and self.definition_files is not None:
+            shape = self.definition_files.changed(agent)
+        if shape is not None:
+            self.by_hash[shape.hash] = shape
+        return shape
 
     def reset(self) -> None:
         """Forget every status (the shapes learned so far are kept)."""
@@ -94,15 +114,16 @@ class AgentTrees:
             except StatusCodecError as exc:
                 state.error = str(exc)
             reassembler = self._reassemblers.get(part.agent)
-            if (reassembler is None or reassembler.shape.hash != part.shape_hash) and self.definition_files:
-                shape = self.definition_files.changed(part.agent)  # the agent may have a new tree
+            if reassembler is None or reassembler.shape.hash != part.shape_hash:
+                shape = self._shape_for(part.agent, part.shape_hash)  # the agent may have a new tree
                 if shape is not None:
                     self.shapes[part.agent] = shape
                     reassembler = self._reassemblers[part.agent] = Reassembler(shape)
             if reassembler is None:
                 state.error = state.error or (
                     f"no tree definition for agent {part.agent!r} (shape {part.shape_hash:08x}, "
-                    f"{part.node_count} nodes): name one under tree_definitions in the GUI config"
+                    f"{part.node_count} nodes) received yet: the CRS sends each agent's definition "
+                    "when its tree changes and every few seconds"
                 )
             else:
                 try:

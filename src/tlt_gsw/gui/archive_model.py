@@ -15,11 +15,14 @@ two ways to move it:
   position (the only part whose cost grows with the archive).
 
 State kept: the link figures (:mod:`~tlt_gsw.gui.link_counter`), the newest fields of every
-housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets and the datagrams
-the GSW itself rejected), commands sent with each acknowledgement stage matched by security
+housekeeping packet kind, the newest packets, events (the CRS's ``event`` packets, the datagrams
+the GSW itself rejected and every limit crossing), the limit alarms with the operator's
+acknowledgements (:mod:`~tlt_gsw.limit_events`: every packet of a limited kind is checked, not
+only the newest one shown), commands sent with each acknowledgement stage matched by security
 sequence number (a ``replay`` rejection of an already answered command answers a replayed copy:
 counted on the command, not taken as its stage), each agent's tree status
-(:mod:`~tlt_gsw.gui.agent_trees`), and the series of plotted fields. The records it builds are in
+(:mod:`~tlt_gsw.gui.agent_trees`, named with the ``tree_definition`` packets the agents sent:
+:meth:`ArchiveModel.archived_shape`), and the series of plotted fields. The records it builds are in
 :mod:`~tlt_gsw.gui.archive_records`.
 """
 
@@ -32,7 +35,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from tlt_common.bt.status_codec import TreeShape
+from tlt_common.bt.shape_definition import DefinitionAssembler, DefinitionPart
+from tlt_common.bt.status_codec import StatusCodecError, TreeShape
 from tlt_common.ccsds.codec import PRIMARY_HEADER_LEN, TIME_LEN
 from tlt_common.ccsds.definitions import Definitions
 from tlt_gsw.archive import query as archive_query
@@ -44,13 +48,15 @@ from tlt_gsw.gui.archive_records import (
     EventRecord,
     HousekeepingSnapshot,
     PacketSummary,
+    limit_event_record,
     rejection_event,
     typed_value,
 )
 from tlt_gsw.gui.link_counter import LinkCounter, LinkFigures
 from tlt_gsw.gui.tree_definitions import TreeDefinitionFiles
+from tlt_gsw.limit_events import LimitAlarms, LimitMonitor
 
-NON_HOUSEKEEPING = ("ack", "event", "tree_status")
+NON_HOUSEKEEPING = ("ack", "event", "tree_status", "tree_definition")
 _SECURITY_SEQ_OFFSET = PRIMARY_HEADER_LEN + TIME_LEN + 2  # after the 16-bit key id
 _U64 = struct.Struct(">Q")
 _SUMMARY = (
@@ -58,6 +64,8 @@ _SUMMARY = (
     "FROM packets"
 )
 TREE_PARTS_PER_REFRESH = 256
+# Copies of one shape's definition parts read at most (it is resent every few seconds).
+DEFINITION_PACKETS_READ = 1024
 
 
 class ArchiveModel:
@@ -80,7 +88,10 @@ class ArchiveModel:
     ) -> None:
         self.conn = conn
         self.defs = defs
-        self.agent_trees = AgentTrees(shapes, definition_files)
+        self.agent_trees = AgentTrees(shapes, definition_files, lookup=self.archived_shape)
+        self._definition_misses: dict[int, int] = {}  # shape hash -> newest definition packet then
+        self.limit_monitor = LimitMonitor(defs)
+        self.alarms = LimitAlarms()
         self.packet_rows = packet_rows
         self.event_rows = event_rows
         self.command_rows = command_rows
@@ -117,6 +128,8 @@ class ArchiveModel:
         self.events: deque[EventRecord] = deque(maxlen=self.event_rows)
         self.commands = CommandLog(self.command_rows)
         self.agent_trees.reset()
+        self.limit_monitor.levels.clear()
+        self.alarms.reset()
         for key in self.series:
             self.series[key] = {}
 
@@ -194,6 +207,42 @@ class ArchiveModel:
     def link_figures(self, now: float | None = None) -> LinkFigures:
         """The counters, with rates over ``rate_window_s`` ending at ``now`` (default: the position)."""
         return self.link.figures_at(self.position_time if now is None else now)
+
+    def archived_shape(self, shape_hash: int) -> TreeShape | None:
+        """The tree shape of ``shape_hash`` from the ``tree_definition`` packets in the archive
+        (anywhere in it: a definition never changes for its hash), or None. A hash not found is
+        looked for again only once more definition packets have arrived."""
+        newest = self.conn.execute(
+            "SELECT COALESCE(MAX(id), 0) FROM packets WHERE kind = 'tree_definition'"
+        ).fetchone()[0]
+        if not newest or self._definition_misses.get(shape_hash) == newest:
+            return None
+        names = self._field_ids("tree_definition").items()
+        hash_field = next((i for i, n in names if n == "shape_hash"), None)
+        ids = []
+        if hash_field is not None:
+            ids = [
+                pid
+                for (pid,) in self.conn.execute(
+                    "SELECT packet_id FROM fields WHERE field_id = ? AND value = ? "
+                    "ORDER BY packet_id DESC LIMIT ?",
+                    (hash_field, shape_hash, DEFINITION_PACKETS_READ),
+                )
+            ]
+        assembler = DefinitionAssembler()
+        for _, fields in sorted(self._kind_fields("tree_definition", ids).items(), reverse=True):
+            part = DefinitionPart.from_fields(fields)
+            if part is None:
+                continue
+            try:
+                shape = assembler.add(part)
+            except StatusCodecError:
+                continue  # an inconsistent set; an older copy may still make the shape
+            if shape is not None:
+                self._definition_misses.pop(shape_hash, None)
+                return shape
+        self._definition_misses[shape_hash] = newest
+        return None
 
     # -- plots ------------------------------------------------------------------------------
     def add_plot_field(self, kind: str, name: str, *, load: bool = True) -> None:
@@ -292,6 +341,10 @@ class ArchiveModel:
         self._apply_commands([i for name in self.defs.commands for i in by_kind.get(name, ())], changes)
         self._apply_acks(by_kind.get("ack", []), changes)
         changes.events.extend(self._events(by_kind.get("event", [])[-self.event_rows :]))
+        if any(kind in self.limit_monitor.fields for kind in by_kind):
+            limit_events = self.limit_monitor.read(self.conn, lo, hi)
+            changes.alarms = bool(self.alarms.apply(limit_events))
+            changes.events.extend(limit_event_record(e) for e in limit_events)
         changes.events.sort(key=lambda e: e.packet_id)
         self.events.extend(changes.events)
         self._apply_trees(by_kind.get("tree_status", [])[-TREE_PARTS_PER_REFRESH:], changes)
@@ -352,7 +405,10 @@ class ArchiveModel:
         self._apply_commands(sent, changes)
         oldest = self.time_of(sent[0]) if sent else t
         self._apply_acks(newest("ack", 4 * self.command_rows, since=oldest), changes)
+        limit_events = self.limit_monitor.read(self.conn, 0, target)
+        self.alarms.apply(limit_events)
         events = list(self._events(newest("event", self.event_rows))) + list(rejected)
+        events += [limit_event_record(e) for e in limit_events[-self.event_rows :]]
         events.sort(key=lambda e: e.packet_id)
         self.events.extend(events)
         changes.events = list(self.events)

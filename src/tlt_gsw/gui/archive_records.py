@@ -1,6 +1,6 @@
 """The records the GSW displays are drawn from, as :class:`~tlt_gsw.gui.archive_model.ArchiveModel`
-builds them from the telemetry archive: packets, commands with their acknowledgements, events,
-housekeeping snapshots, and what one refresh changed."""
+builds them from the telemetry archive: packets, commands with their acknowledgements, events
+(limit crossings among them), housekeeping snapshots, and what one refresh changed."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tlt_common.ccsds.definitions import FieldDef
+from tlt_gsw.limit_events import LimitEvent
 
 
 @dataclass(frozen=True)
@@ -124,12 +125,18 @@ class Changes:
     commands: set[int] = field(default_factory=set)
     trees: set[str] = field(default_factory=set)
     series: set[tuple[str, str]] = field(default_factory=set)
+    alarms: bool = False  # a limit alarm opened or changed
 
     def __bool__(self) -> bool:
         return bool(
             self.reset or self.packets or self.kinds or self.events or self.commands or self.trees
-            or self.series
+            or self.series or self.alarms
         )  # fmt: skip
+
+
+def limit_event_record(event: LimitEvent) -> EventRecord:
+    """The event shown for a field crossing a limit (or back within its limits)."""
+    return EventRecord(event.packet_id, event.time, event.severity, "gsw", event.code, "none", event.text())
 
 
 def rejection_event(row: PacketSummary) -> EventRecord:
@@ -159,6 +166,7 @@ __all__ = [
     "EventRecord",
     "HousekeepingSnapshot",
     "PacketSummary",
+    "limit_event_record",
     "rejection_event",
     "typed_value",
 ]

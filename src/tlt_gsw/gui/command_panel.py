@@ -19,7 +19,7 @@ from typing import Any
 from PySide6 import QtWidgets
 
 from tlt_common.ccsds.definitions import CommandDef, Definitions
-from tlt_gsw.gui.style import BAD_COLOUR
+from tlt_gsw.gui.style import BAD_COLOUR, HAZARDOUS_BUTTON
 
 Sender = Callable[[str, Mapping[str, Any]], Future]
 SIMPLE_COMMANDS = ("start", "pause", "resume", "stop")
@@ -77,7 +77,7 @@ class CommandPanel(QtWidgets.QGroupBox):
                 cmd.description + (" (hazardous: asks for confirmation)" if cmd.hazardous else "")
             )
             if cmd.hazardous:
-                button.setStyleSheet("QPushButton { color: #a01010; font-weight: bold; }")
+                button.setStyleSheet(HAZARDOUS_BUTTON)
             button.clicked.connect(lambda _=False, n=name: self.send(n, {}))
             row.addWidget(button)
             self.buttons[name] = button
@@ -111,7 +111,7 @@ class CommandPanel(QtWidgets.QGroupBox):
         self.act_value = QtWidgets.QLineEdit()
         send_act = QtWidgets.QPushButton("Send")
         send_act.setObjectName("command_set_actuator_state")
-        send_act.setStyleSheet("QPushButton { color: #a01010; font-weight: bold; }")
+        send_act.setStyleSheet(HAZARDOUS_BUTTON)
         send_act.clicked.connect(self._send_actuator)
         self.act_name.currentTextChanged.connect(self._actuator_changed)
         grid.addWidget(QtWidgets.QLabel("Actuator"), 0, 0)

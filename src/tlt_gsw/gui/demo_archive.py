@@ -8,7 +8,7 @@ the :class:`Recorder` exactly as the link thread stores what it receives. The st
 tower with bay 1 built and bay 2 half done; the lifter, grippers, end effectors and arms move;
 one lifter encoder drifts into its yellow and then red limit; the operator sends Start, Pause,
 Resume, a refused Set Blackboard Value and a Set Actuator State; the CRS reports events; the CRS
-tree status (a Fig. 13-shaped tree) is sent at 2 Hz.
+tree status (a Fig. 13-shaped tree) is sent at 2 Hz, its definition first and every 5 s.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import py_trees
 from py_trees.common import Status
 
 from tlt_common.bt.nodes import Action, Condition
+from tlt_common.bt.shape_definition import split_definition
 from tlt_common.bt.status_codec import TreeShape, encode
 from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import encode_command, encode_telemetry, parse_datagram
@@ -227,7 +228,7 @@ def write_demo_archive(
                     "limit_switches": 0, "watchdog_tripped": False, "link_ok": True,
                 }, t)  # fmt: skip
                 w.tm("hk_grippers", {
-                    "top_engaged": 0b1111, "top_position_mean": 0.027, "top_fault": False,
+                    "top_engaged": 0b1111, "top_position_mean": 0.0265, "top_fault": False,
                     "active_engaged": 0b0011, "active_height": 0.3 + 0.25 * math.sin(s / 5.0),
                     "active_fault": False,
                 }, t)  # fmt: skip
@@ -243,6 +244,9 @@ def write_demo_archive(
                         "q2": 1.5, "q3": -1.8, "q4": -1.57, "q5": 0.2 * math.cos(s / 2),
                         "protective_stop": False,
                     }, t)  # fmt: skip
+                if i % 50 == 0:  # the tree's definition, as the CRS sends it (first, then every 5 s)
+                    for definition_part in split_definition(shape, "crs"):
+                        w.tm("tree_definition", definition_part.fields(), t)
                 tick += 1
                 set_demo_statuses(shape, tick)
                 for part in encode(shape, agent="crs", tick_count=tick, max_status_bytes=8):

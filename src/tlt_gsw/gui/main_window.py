@@ -4,8 +4,9 @@ The window never receives or records packets itself: in live mode the link runs 
 (:mod:`tlt_gsw.gui.link_process`) and this window reads what it committed.
 
 Layout: the link status strip on top; on the left the command panel above the command history;
-on the right tabs for housekeeping, plots, behaviour trees, the tower and packets, above the event
-log; in replay mode the replay bar at the bottom.
+on the right tabs for housekeeping, plots, behaviour trees, the tower and packets, above the limit
+alarms (:mod:`~tlt_gsw.gui.limit_alarms`) and the event log; in replay mode the replay bar at the
+bottom.
 
 Each refresh (a :class:`QTimer` at ``refresh_hz``) moves the :class:`ArchiveModel`: live, to the
 newest packet the link thread committed; in replay, along the archive at the chosen speed. Only
@@ -31,6 +32,7 @@ from tlt_gsw.gui.command_panel import CommandPanel, Sender
 from tlt_gsw.gui.config import GuiConfig
 from tlt_gsw.gui.event_log import EventLog
 from tlt_gsw.gui.housekeeping import HousekeepingPages
+from tlt_gsw.gui.limit_alarms import LimitAlarmPanel
 from tlt_gsw.gui.link_status import LinkStatusPanel
 from tlt_gsw.gui.packet_view import PacketView
 from tlt_gsw.gui.plots import PlotsPage
@@ -124,9 +126,11 @@ class MainWindow(QtWidgets.QMainWindow):
             self.tabs.addTab(self.pages[key], TAB_TITLES[key])
         self.tabs.currentChanged.connect(lambda _: self._draw_current())
         self.event_log = EventLog(config.event_rows)
+        self.limit_alarms = LimitAlarmPanel(model.alarms, current=self._current_value)
         right.addWidget(self.tabs)
+        right.addWidget(self.limit_alarms)
         right.addWidget(self.event_log)
-        right.setSizes([620, 260])
+        right.setSizes([520, 150, 210])
         split.addWidget(left)
         split.addWidget(right)
         split.setSizes([560, 940])
@@ -145,6 +149,12 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timer = QtCore.QTimer(self)
         self.timer.setInterval(max(1, int(1000 / config.refresh_hz)))
         self.timer.timeout.connect(self.refresh)
+
+    def _current_value(self, key: tuple[str, str, str]) -> object:
+        """A housekeeping field's newest value shown (None when none is)."""
+        kind, instance, name = key
+        snapshot = self.model.housekeeping.get((kind, instance))
+        return None if snapshot is None else snapshot.fields.get(name)
 
     # -- tabs -------------------------------------------------------------------------------
     def show_tab(self, key: str) -> None:
@@ -186,6 +196,8 @@ class MainWindow(QtWidgets.QMainWindow):
     def apply(self, changes: Changes) -> None:
         """Redraw the views ``changes`` touches (hidden tabs when they are next shown)."""
         model = self.model
+        if changes.reset or changes.alarms or (self.limit_alarms.has_rows() and changes.kinds):
+            self.limit_alarms.show_alarms()  # the alarms, and the newest values of their fields
         if changes.reset:
             self.event_log.reset(model.events)
             self._dirty.update(TABS)

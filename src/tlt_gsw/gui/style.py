@@ -30,6 +30,12 @@ STAGE_COLOURS = {
 }
 OK_COLOUR = "#7bc96f"
 BAD_COLOUR = "#e8736c"
+# A hazardous command's button: dark red and bold, and grey like any disabled button when it is
+# disabled (a style sheet's colour otherwise overrides the disabled look).
+HAZARDOUS_BUTTON = (
+    "QPushButton { color: #a01010; font-weight: bold; }"
+    " QPushButton:disabled { color: #a0a0a0; font-weight: normal; }"
+)
 STATUS_NAMES = {
     Status.SUCCESS: "SUCCESS",
     Status.FAILURE: "FAILURE",
@@ -91,6 +97,7 @@ def rate_text(value: float, unit: str) -> str:
 
 __all__ = [
     "BAD_COLOUR",
+    "HAZARDOUS_BUTTON",
     "LIMIT_COLOURS",
     "OK_COLOUR",
     "SEVERITIES",

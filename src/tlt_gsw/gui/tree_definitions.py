@@ -1,10 +1,12 @@
-"""Behaviour-tree shape definitions for the GUI's tree view (JSON files of ``TreeShape.definition()``).
+"""Behaviour-tree shape definitions as files, for the GUI's tree view and the mission job.
 
-The agents send only their status bytes and a shape hash (docs/behaviour-trees.md); naming the
-nodes needs the tree's shape. :func:`write_tree_definition` saves an agent's shape as JSON (the
-CRS or a test does it once per tree build), :func:`load_tree_definition` reads it back on the
-ground, and :class:`TreeDefinitionFiles` re-reads an agent's file when the agent starts sending a
-new tree shape. A file that is not a valid definition raises :class:`ConfigError` naming the file.
+The agents send their tree definitions over the link (``tree_definition`` packets, kept in the
+archive), so the GUI needs no file to name the nodes. A file still serves where no definition was
+sent (an archive recorded before agents sent them, a tree shown without a link):
+:func:`write_tree_definition` saves an agent's shape as JSON (the document of
+:mod:`tlt_common.bt.shape_definition`), :func:`load_tree_definition` reads it back, and
+:class:`TreeDefinitionFiles` re-reads an agent's file when the agent starts sending a new tree
+shape. A file that is not a valid definition raises :class:`ConfigError` naming the file.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import json
 from collections.abc import Collection, Mapping
 from pathlib import Path
 
+from tlt_common.bt.shape_definition import definition_document
 from tlt_common.bt.status_codec import StatusCodecError, TreeShape
 from tlt_common.config_schema import ConfigError
 
@@ -21,8 +24,7 @@ def write_tree_definition(shape: TreeShape, path: str | Path, agent: str = "") -
     """Write ``shape`` as ``{"agent", "shape_hash", "definition"}`` JSON; return the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    body = {"agent": agent, "shape_hash": f"{shape.hash:08x}", "definition": shape.definition()}
-    path.write_text(json.dumps(body, indent=1), encoding="utf-8")
+    path.write_text(json.dumps(definition_document(shape, agent), indent=1), encoding="utf-8")
     return path
 
 

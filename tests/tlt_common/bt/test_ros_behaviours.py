@@ -507,6 +507,43 @@ def test_tree_status_published_in_parts_and_decoded(ros):
     assert status.as_dict()["ARS/busy"] is Status.RUNNING
 
 
+def test_each_shape_is_defined_before_its_first_status_and_a_late_subscriber_gets_it(ros):
+    """The definition of the shape being ticked goes out once per shape (transient local: a
+    subscriber that joins later still gets it) and names every node of the status."""
+    from std_msgs.msg import String
+
+    from tlt_common.bt.ros import TreeStatusPublisher
+    from tlt_common.bt.shape_definition import parse_document_json
+
+    server_node, node = ros
+    root = py_trees.composites.Sequence("ARS", memory=False, children=[py_trees.behaviours.Success("idle")])
+    tree = py_trees.trees.BehaviourTree(root)
+    publisher = TreeStatusPublisher(
+        node, "ars_x", topic="ars_x/defined_status", definition_topic="ars_x/tree_definition"
+    )
+    publisher.attach(tree)
+    tree.tick()
+    tree.tick()
+    documents: list[tuple[str, object]] = []
+    server_node.create_subscription(
+        String,
+        "ars_x/tree_definition",
+        lambda msg: documents.append(parse_document_json(msg.data)),
+        TreeStatusPublisher.DEFINITION_QOS,
+    )
+    wait_for(lambda: len(documents) == 1)
+    agent, shape = documents[0]
+    assert agent == "ars_x" and shape.hash == publisher.shape.hash
+    root.add_child(py_trees.behaviours.Running("request"))
+    publisher.refresh()
+    tree.tick()
+    wait_for(lambda: len(documents) == 2)
+    assert [n.path for n in documents[1][1].nodes] == ["ARS", "ARS/idle", "ARS/request"]
+    tree.tick()
+    time.sleep(0.2)
+    assert len(documents) == 2, "one definition per shape"
+
+
 def test_tree_status_with_a_period_is_published_after_the_first_tick_that_is_due(ros):
     from rclpy.parameter import Parameter
     from rclpy.time import Time

@@ -61,6 +61,24 @@ def test_limits_classify_values():
     assert link_ok.limits.classify(False) == "red"
 
 
+def test_an_f32_value_sent_exactly_at_its_limit_is_within_it():
+    """0.1 m travels as the f32 0.10000000149: against its red limit 0.1 as written it would be
+    red; an f32 field's limits are the nearest f32 values, so it is only yellow (above 0.09)."""
+    from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
+
+    defs = load_definitions()
+    values = {
+        "ars": "ars_x", "grasp_left": 0.0, "grasp_right": 0.0, "width": 0.1, "max_load": 0.7,
+        "calibrated": True, "part_grasped": False, "rivet_guns": 0, "fault": False,
+    }  # fmt: skip
+    packet = parse_datagram(encode_telemetry(defs, "hk_ee", values, seq_count=1, timestamp=1.0), defs)
+    fields = {f.name: f for f in defs.packet("hk_ee").fields}
+    assert (
+        packet.fields["width"] != 0.1 and fields["width"].limits.classify(packet.fields["width"]) == "yellow"
+    )
+    assert fields["width"].limits.classify(0.1001) == "red"
+
+
 def _broken(raw_doc, change):
     doc = copy.deepcopy(raw_doc)
     change(doc)

@@ -27,6 +27,42 @@ def qapp():
     yield app
 
 
+@pytest.fixture(scope="module")
+def x_display():
+    """An X display for real windows: ``$DISPLAY`` when one is set, else an Xvfb server started
+    here (scripts/setup.sh installs it, with the libraries Qt's xcb platform plugin loads).
+    Yields the environment a child process needs to draw on it with Qt's xcb plugin."""
+    import shutil
+    import subprocess
+    import time
+    from pathlib import Path
+
+    env = {k: v for k, v in os.environ.items() if k not in ("QT_QPA_PLATFORM", "WAYLAND_DISPLAY")}
+    if os.environ.get("DISPLAY"):
+        yield env
+        return
+    if shutil.which("Xvfb") is None:
+        pytest.fail("no X display and no Xvfb to start one: run scripts/setup.sh (it installs xvfb)")
+    number = 90
+    while Path(f"/tmp/.X11-unix/X{number}").exists() or Path(f"/tmp/.X{number}-lock").exists():
+        number += 1
+    server = subprocess.Popen(
+        ["Xvfb", f":{number}", "-screen", "0", "1600x1000x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        deadline = time.monotonic() + 15.0
+        while not Path(f"/tmp/.X11-unix/X{number}").exists():
+            if server.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"Xvfb :{number} did not start: {server.stderr.read().decode(errors='replace')}")
+            time.sleep(0.05)
+        yield env | {"DISPLAY": f":{number}"}
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
 @pytest.fixture(scope="session")
 def demo(tmp_path_factory):
     """A 40 s demo archive (real packets) and its CRS tree definition file."""

@@ -7,6 +7,7 @@ import os
 import pytest
 from py_trees.common import Status
 
+from tlt_common.bt.shape_definition import split_definition
 from tlt_common.bt.status_codec import TreeShape, encode
 from tlt_common.ccsds.auth import KeyRing
 from tlt_common.ccsds.codec import crc16_ccitt_false, encode_command, encode_telemetry, parse_datagram
@@ -188,6 +189,91 @@ def test_tree_without_definition_or_of_another_shape_says_why(writer):
     wrong = model_of(writer.recorder.path, shapes={"ars_x": other})
     wrong.advance()
     assert wrong.trees["ars_x"].decoded is None and "shape" in wrong.trees["ars_x"].error
+
+
+def _send_definition(writer: ArchiveWriter, shape: TreeShape, agent: str, chunk: int = 64) -> None:
+    for part in split_definition(shape, agent, max_chunk_bytes=chunk):
+        writer.tm("tree_definition", part.fields())
+
+
+def test_every_agents_tree_is_decoded_from_the_definitions_it_sent_with_no_configuration(writer):
+    """Live (advance) and in replay (seek), each agent's status is named with the definition it
+    sent over the link; a status that comes before its definition is named once it arrives."""
+    crs, ars = TreeShape.of(demo_tree()), TreeShape.of(demo_tree().children[4])
+    set_demo_statuses(crs, 3)
+    _send_definition(writer, crs, "crs")
+    for part in encode(crs, agent="crs", tick_count=3, max_status_bytes=4):
+        writer.tm("tree_status", {
+            "agent": part.agent, "shape_hash": part.shape_hash, "tick": part.tick_count,
+            "node_count": part.node_count, "part_index": part.part_index, "part_count": part.part_count,
+            "first_node": part.first_node, "status": part.status,
+        })  # fmt: skip
+    _send_tree(writer, ars, 1)  # the ARS's definition is not there yet
+    writer.flush()
+    live = model_of(writer.recorder.path)
+    before_ars_definition = live.head()
+    assert live.advance().trees == {"crs", "ars_x"}
+    assert [s for _, s in live.trees["crs"].decoded.nodes] == crs.statuses()
+    assert live.trees["ars_x"].decoded is None and "received yet" in live.trees["ars_x"].error
+    _send_definition(writer, ars, "ars_x")
+    _send_tree(writer, ars, 2)
+    writer.flush()
+    live.advance()
+    decoded = live.trees["ars_x"].decoded
+    assert decoded is not None and [path for path, _ in decoded.nodes] == [n.path for n in ars.nodes]
+    # Replay from the first status: the definitions are found in the archive, wherever they lie.
+    replay = model_of(writer.recorder.path)
+    replay.seek(before_ars_definition)
+    assert replay.trees["crs"].decoded is not None and replay.trees["ars_x"].decoded is not None
+    assert replay.trees["ars_x"].tick == 1
+
+
+def test_a_forged_or_partial_definition_names_nothing(writer):
+    """Definition parts whose body hashes to another shape, or that never complete, leave the
+    status undecoded with the reason; the agent's true definition, once sent, decodes it."""
+    shape, other = TreeShape.of(demo_tree()), TreeShape.of(demo_tree().children[4])
+    for part in split_definition(other, "ars_x", max_chunk_bytes=64):
+        writer.tm("tree_definition", part.fields() | {"shape_hash": shape.hash, "node_count": len(shape)})
+    writer.tm("tree_definition", split_definition(shape, "ars_x", max_chunk_bytes=64)[0].fields())
+    _send_tree(writer, shape, 1)
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    model.advance()
+    assert model.trees["ars_x"].decoded is None and "received yet" in model.trees["ars_x"].error
+    _send_definition(writer, shape, "ars_x")
+    _send_tree(writer, shape, 2)
+    writer.flush()
+    model.advance()
+    assert model.trees["ars_x"].decoded is not None
+
+
+def test_a_limit_crossed_between_two_refreshes_is_an_event_and_its_alarm_survives_a_seek(writer):
+    """Every packet is checked, not only the newest one shown: a red value followed by a nominal
+    one in the same refresh still raises (and clears) an alarm; a replay seek rebuilds the same
+    alarms and keeps the operator's acknowledgements."""
+    writer.tm("hk_lifter", LIFTER)
+    writer.tm("hk_lifter", LIFTER | {"position_1": 2.2})  # red
+    writer.tm("hk_lifter", LIFTER)  # back, before any refresh
+    writer.tm("hk_arm_joints", {"ars": "ars_y", **{f"q{i}": 0.0 for i in range(6)}, "protective_stop": True})
+    writer.flush()
+    model = model_of(writer.recorder.path)
+    changes = model.advance()
+    assert changes.alarms
+    codes = [(e.code, e.text) for e in model.events]
+    assert codes == [
+        ("LIMIT_RED", "hk_lifter.position_1 = 2.2 m: outside its red limits [-0.01, 2]"),
+        ("LIMIT_OK", "hk_lifter.position_1 = 0.5 m: back within limits [-0.01, 2]"),
+        ("LIMIT_RED", "hk_arm_joints.protective_stop (ars_y) = 1: outside its red limits [0, 0]"),
+    ]
+    lifter, arm = model.alarms.shown()
+    assert not lifter.active and arm.active and arm.raised.instance == "ars_y"
+    model.alarms.acknowledge(lifter)
+    assert model.alarms.shown() == [arm]
+    model.seek(model.head())
+    assert [a.id for a in model.alarms.shown()] == [arm.id], "the acknowledgement is kept"
+    model.seek(2)  # before the lifter came back: its alarm is active again, and acknowledged
+    (alarm,) = model.alarms.shown()
+    assert alarm.active and alarm.acknowledged and alarm.raised.field == "position_1"
 
 
 def test_ack_of_a_command_not_in_the_archive_is_still_shown(writer):

@@ -211,3 +211,103 @@ def link_severity(name: str):
     from tlt_common.ccsds.reasons import Severity
 
     return Severity[name.upper()]
+
+
+def test_a_limit_crossed_is_an_event_and_an_alarm_until_acknowledged(gui):
+    """Over the real link: a lifter position goes yellow, red, and back. Each crossing is an event
+    with its value and limit; the alarm stays listed after the value is back until acknowledged,
+    and an acknowledged alarm that gets worse asks again."""
+    window, crs, until = gui
+    link = crs.link
+    model = window.model
+
+    def lifter(position_3: float) -> None:
+        link.send_telemetry("hk_lifter", {
+            "state": "crs_control", "position_0": 0.5, "position_1": 0.5, "position_2": 0.5,
+            "position_3": position_3, "velocity": 100, "limit_switches": 0, "watchdog_tripped": False,
+            "link_ok": True,
+        })  # fmt: skip
+
+    for value in (0.5, 1.95, 1.95):
+        lifter(value)
+    until(lambda: any(e.code == "LIMIT_YELLOW" for e in model.events))
+    (row,) = window.limit_alarms.row_texts()
+    assert row[1:6] == ["hk_lifter.position_3", "YELLOW", "1.95 m", "[0, 1.9]", "1.95 m"]
+    assert row[6] == "OUT, NOT acknowledged" and "1 not acknowledged" in window.limit_alarms.title()
+    window.limit_alarms.ack_all.click()
+    assert window.limit_alarms.row_texts()[0][6] == "OUT, acknowledged"
+    lifter(2.05)  # worse than what was acknowledged
+    until(lambda: any(e.code == "LIMIT_RED" for e in model.events))
+    row = window.limit_alarms.row_texts()[0]
+    assert row[2:5] == ["RED", "2.05 m", "[-0.01, 2]"] and row[6] == "OUT, NOT acknowledged"
+    lifter(0.6)
+    until(lambda: any(e.code == "LIMIT_OK" for e in model.events))
+    assert window.limit_alarms.row_texts()[0][5:] == ["0.6 m", "back within limits, NOT acknowledged"]
+    texts = [r[3:] for r in window.event_log.row_texts() if r[3].startswith("LIMIT_")]
+    assert texts == [
+        ["LIMIT_YELLOW", "none", "hk_lifter.position_3 = 1.95 m: outside its yellow limits [0, 1.9]"],
+        ["LIMIT_RED", "none", "hk_lifter.position_3 = 2.05 m: outside its red limits [-0.01, 2]"],
+        ["LIMIT_OK", "none", "hk_lifter.position_3 = 0.6 m: back within limits [-0.01, 2]"],
+    ]
+    table = window.limit_alarms.table
+    table.selectRow(0)
+    window.limit_alarms.ack_selected.click()
+    assert window.limit_alarms.row_texts() == [], "acknowledged and back within limits: gone"
+    assert not window.limit_alarms.ack_all.isEnabled()
+
+
+def test_disabled_command_buttons_look_disabled(qapp):
+    """The hazardous commands' buttons (Stop, Set Actuator State's Send) are dark red when they can
+    be used and grey like every other button when they cannot (monitor only, replay)."""
+    from tlt_gsw.gui.command_panel import CommandPanel
+
+    def red_pixels(button: QtWidgets.QPushButton) -> int:
+        image = button.grab().toImage()
+        count = 0
+        for y in range(image.height()):
+            for x in range(image.width()):
+                colour = image.pixelColor(x, y)
+                count += colour.red() > 120 and colour.green() < 80 and colour.blue() < 80
+        return count
+
+    enabled = CommandPanel(DEFS, lambda name, params: None)
+    disabled = CommandPanel(DEFS, None, "monitor only")
+    for name in ("stop", "set_actuator_state"):
+        on, off = enabled.buttons[name], disabled.buttons[name]
+        assert on.isEnabled() and not off.isEnabled()
+        assert red_pixels(on) > 20, f"{name}: the enabled button is drawn dark red"
+        assert red_pixels(off) == 0, f"{name}: the disabled button is drawn in red"
+
+
+def test_an_agents_tree_is_named_from_the_definition_it_sent_with_no_configuration(gui):
+    """Live over the link: an ARS's status comes first (counts only, and why), then its definition
+    (as the CRS forwards it); the tree view then names every node."""
+    from tlt_common.bt.shape_definition import split_definition
+
+    window, crs, until = gui
+    link = crs.link
+    shape = TreeShape.of(demo_tree().children[4])
+    set_demo_statuses(shape, 2)
+
+    def send_status(tick: int) -> None:
+        for part in encode(shape, agent="ars_y", tick_count=tick, max_status_bytes=2):
+            link.send_telemetry("tree_status", {
+                "agent": part.agent, "shape_hash": part.shape_hash, "tick": part.tick_count,
+                "node_count": part.node_count, "part_index": part.part_index, "part_count": part.part_count,
+                "first_node": part.first_node, "status": part.status,
+            })  # fmt: skip
+
+    send_status(1)
+    until(lambda: "ars_y" in window.model.trees)
+    window.show_tab("tree")
+    window.tree_view.agent.setCurrentText("ars_y")
+    assert "received yet" in window.tree_view.summary.text() and window.tree_view.node_rows() == []
+    for part in split_definition(shape, "ars_y", max_chunk_bytes=100):
+        link.send_telemetry("tree_definition", part.fields())
+    send_status(2)
+    until(lambda: window.model.trees["ars_y"].decoded is not None)
+    window.show_tab("housekeeping")
+    window.show_tab("tree")
+    assert window.tree_view.node_rows() == [
+        (n.path, STATUS_NAMES[s]) for n, s in zip(shape.nodes, shape.statuses(), strict=True)
+    ]

@@ -1,12 +1,14 @@
-"""A tree's status published as ``tlt_interfaces/TreeStatus`` messages, at most once a period."""
+"""A tree's status published as ``tlt_interfaces/TreeStatus`` messages, at most once a period, and
+the definition of each shape it has (so the ground can name the nodes without configuration)."""
 
 from __future__ import annotations
 
 import py_trees
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from tlt_common.bt.ros.clock import node_clock
+from tlt_common.bt.shape_definition import document_json
 from tlt_common.bt.status_codec import DEFAULT_MAX_STATUS_BYTES, TreeShape, encode
 
 
@@ -20,7 +22,16 @@ class TreeStatusPublisher:
     ``py_trees.trees.BehaviourTree``, with tick count ``tree.count + 1`` (the first tick is 1).
     Call ``refresh()`` after changing the attached tree's structure so the shape hash and node list
     follow it.
+
+    With ``definition_topic``, the first status of every shape is preceded by the shape's
+    definition (:func:`tlt_common.bt.shape_definition.document_json`) as a ``std_msgs/String`` on
+    that topic, reliable and transient local: a subscriber that joins later (a restarted CRS)
+    still receives the definition of the shape being ticked.
     """
+
+    DEFINITION_QOS = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
 
     def __init__(
         self,
@@ -28,6 +39,7 @@ class TreeStatusPublisher:
         agent: str,
         *,
         topic: str = "tree_status",
+        definition_topic: str | None = None,
         period_s: float = 0.0,
         max_status_bytes: int = DEFAULT_MAX_STATUS_BYTES,
         qos: QoSProfile | int = 10,
@@ -39,6 +51,13 @@ class TreeStatusPublisher:
         self.period_s = period_s
         self.max_status_bytes = max_status_bytes
         self.publisher = node.create_publisher(TreeStatus, topic, qos)
+        self.definition_publisher = None
+        if definition_topic is not None:
+            from std_msgs.msg import String
+
+            self._definition_message = String
+            self.definition_publisher = node.create_publisher(String, definition_topic, self.DEFINITION_QOS)
+        self._defined_hash: int | None = None
         self._shape: TreeShape | None = None
         self._stale = False
         self._root: py_trees.behaviour.Behaviour | None = None
@@ -46,7 +65,11 @@ class TreeStatusPublisher:
         self._due = float("-inf")
 
     def publish(self, shape: TreeShape, tick_count: int) -> int:
-        """Publish every part of ``shape``'s current status; return how many were sent."""
+        """Publish every part of ``shape``'s current status (after its definition, the first time
+        this shape is published); return how many status parts were sent."""
+        if self.definition_publisher is not None and shape.hash != self._defined_hash:
+            self.definition_publisher.publish(self._definition_message(data=document_json(shape, self.agent)))
+            self._defined_hash = shape.hash
         stamp = self.node.get_clock().now().to_msg()
         parts = encode(shape, agent=self.agent, tick_count=tick_count, max_status_bytes=self.max_status_bytes)
         for part in parts:
