@@ -5,5 +5,6 @@
 ``server_readiness``: whether an action or service server is up, asked of rclpy at most once a period.
 ``status_codec``: a tree's status as a bounded byte string and as ``TreeStatus`` messages.
 ``writable_blackboard``: the registry of blackboard keys the ground may write.
+``ground_keys``: which agent, member or dispenser a ground "Set Blackboard Value" key names.
 ``viewer``: text and PNG renderings of a tree with its statuses.
 """
