@@ -324,7 +324,8 @@ class CommandProcessor:
                     "the tree keeps the tower model"
                 )
         if target.target in self.ars_registries:
-            return self.ars_registries[target.target].check(target.name, value).reason or None
+            refused = self.ars_registries[target.target].check(target.name, value).reason
+            return f"{target.target}: {refused}" if refused else None
         result = ctx.registry.check(target.name, value)
         if not result.accepted:
             return result.reason

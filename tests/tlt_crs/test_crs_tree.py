@@ -415,8 +415,8 @@ def test_a_write_to_an_ars_key_is_forwarded_to_that_ars_and_applied_there(rig, c
 @pytest.mark.parametrize(
     ("params", "reason"),
     [
-        ({"key": "ars_x/settle_s", "value": 20.0}, "key 'settle_s': 20.0 is above the maximum 10"),
-        ({"key": "ars_y/velocity_scale", "value": 0.2}, "unknown key 'velocity_scale'"),
+        ({"key": "ars_x/settle_s", "value": 20.0}, "ars_x: key 'settle_s': 20.0 is above the maximum 10"),
+        ({"key": "ars_y/velocity_scale", "value": 0.2}, "ars_y: unknown key 'velocity_scale'"),
         ({"key": "ars_x/motion_attempts", "value": "many"}, "expected int, got str"),
     ],
 )
