@@ -42,6 +42,10 @@ SCHEMA = {
     # Where a held part, a loaded rivet and the request that set its member are kept across a
     # restart (tlt_ars.request_data); none: in memory only.
     "state_file": opt("str", None, doc="ARS state file, relative to the repository root or absolute"),
+    # The keys the ground may write (tlt_ars.ground_writes); none: config/ars/writable_blackboard.yaml.
+    "writable_blackboard": opt(
+        "str", None, doc="whitelist file, relative to the repository root or absolute"
+    ),
     "check_reach": opt("bool", True),
     "started_on_launch": opt("bool", True),
     "tick_rate_hz": opt("float", 20.0, minimum=1.0, maximum=200.0),
@@ -185,6 +189,12 @@ class ArsConfig:
     @property
     def state_path(self) -> Path | None:
         return None if self.raw.get("state_file") is None else _resolve(self.raw["state_file"])
+
+    @property
+    def writable_blackboard_path(self) -> Path | None:
+        """The ground-writable keys' whitelist the file names; None: the project's."""
+        path = self.raw.get("writable_blackboard")
+        return None if path is None else _resolve(path)
 
     @property
     def arm(self) -> dict[str, Any]:

@@ -26,6 +26,9 @@ Serves, for the CRS:
   Cancel pre-empts the branch (the arm's trajectory goal is canceled, the driver holds the arm),
   waits until the JointState shows the arm stopped (≤ ``timeouts.stop_s``) and ends the goal
   CANCELED.
+* ``SetBlackboardValue`` on ``ros_names.set_blackboard_service(ars)``: the ground's writes to this
+  ARS's keys, forwarded by the CRS (:mod:`tlt_ars.ground_writes`): refused with the reason, or
+  applied to the running configuration.
 * ``GroundCommand`` on ``ros_names.ground_command_service(ars)``: Start (lets requests run; the
   ARS starts started when ``started_on_launch``), Pause (stops ticking and holds the arm: the
   running motion is canceled, Resume plans it again from where the arm stands), Resume, Stop
@@ -54,12 +57,13 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 from tlt_interfaces.msg import MissionProgress
-from tlt_interfaces.srv import GroundCommand
+from tlt_interfaces.srv import GroundCommand, SetBlackboardValue
 
 from tlt_ars.command_line import build_parser, config_from_args
 from tlt_ars.config import ArsConfig
 from tlt_ars.context import ArsContext
 from tlt_ars.goals import ACTION_TYPES, ActiveGoal, request_of
+from tlt_ars.ground_writes import load_ground_writes
 from tlt_ars.mission_checks import check_reach as check_reach_of_mission
 from tlt_ars.mission_checks import prepare_for_mission
 from tlt_ars.mission_state import Request
@@ -181,6 +185,13 @@ class ArsNode(LeanNode):
         self.create_service(
             GroundCommand, ros_names.ground_command_service(self.ars), self._on_ground, callback_group=goals
         )
+        self.ground_writes = load_ground_writes(config.raw, config.writable_blackboard_path)
+        self.create_service(
+            SetBlackboardValue,
+            ros_names.set_blackboard_service(self.ars),
+            self._on_set_blackboard,
+            callback_group=goals,
+        )
         self._progress_changed = threading.Condition()
         self._progress_count = 0
         self.create_subscription(
@@ -299,6 +310,15 @@ class ArsNode(LeanNode):
         return CancelResponse.ACCEPT
 
     # ----- ground commands -----
+    def _on_set_blackboard(self, request: Any, response: Any) -> Any:
+        with self._lock:
+            self.ground_writes.on_request(request, response)
+        if response.accepted:
+            self.get_logger().info(f"{request.key} set by the ground")
+        else:
+            self.get_logger().warning(f"ground write of {request.key} refused: {response.reason}")
+        return response
+
     def _on_ground(self, request: Any, response: Any) -> Any:
         cmd = request.command
         with self._lock:

@@ -19,7 +19,11 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "launch": ("tlt_common.cli:launch_main", "start the processes of a launch set"),
     "check": ("tlt_common.cli:check_main", "validate launch sets without starting anything"),
     "interfaces": ("tlt_common.interfaces_cli:main", "list the tlt_interfaces messages, services, actions"),
-    "gsw": ("tlt_gsw.cli:main", "ground station: gui, mission, summary, send, watch, query, export, keygen"),
+    "gsw": (
+        "tlt_gsw.cli:main",
+        "ground station: gui, mission, summary, send, watch, query, export, keygen, levers,"
+        " correct-member, correct-dispenser",
+    ),
     "twin": ("tlt_sim.cli:main", "the digital twin: run it behind the drivers' links, render a PNG"),
     "hosts": ("tlt_common.launch.hosts_cli:main", "emulated hosts: check, list, cut, heal, remove"),
     "mission-check": (

@@ -90,6 +90,11 @@ def ground_command_service(agent: str) -> str:
     return f"/{agent}/ground_command"
 
 
+def set_blackboard_service(agent: str) -> str:
+    """SetBlackboardValue of one agent: the ground's writes to its writable keys."""
+    return f"/{agent}/set_blackboard_value"
+
+
 def tree_status_topic(agent: str) -> str:
     """TreeStatus of an agent's behaviour tree."""
     return f"/{agent}/tree_status"

@@ -26,14 +26,28 @@ start                  -                                      not started, not p
 pause                  -                                      started and not paused
 resume                 -                                      paused
 stop                   -                                      not already stopping
-set_blackboard_value   key, value (bool/int/float/str)        the writable registry accepts it
-set_actuator_state     actuator, state, value (optional)      not building: idle, fault or done
+set_blackboard_value   key, value (bool/int/float/str)        the key's whitelist or the tower
+                                                              model's rules accept it (below)
+set_actuator_state     actuator, state, value (optional)      the actuator table has the state, and
+                                                              not building: idle, fault or done
 =====================  =====================================  ======================================
+
+Set Blackboard Value reaches what its key names (:mod:`tlt_common.bt.ground_keys`): a key of the
+CRS's whitelist; ``ars_x/<key>`` or ``ars_y/<key>``, checked here against the ARSs' whitelist
+(``ars_writable_blackboard`` of the CRS configuration) and forwarded to that ARS's
+``set_blackboard_value`` service, whose answer completes or fails the command; ``tower/<member>``
+(a mark of ``MEMBER_MARKS``) and ``dispenser/<name>`` (a count), corrections of the tower model
+under its rules, refused while building as actuator commands are, and reported as events.
+
+Set Actuator State takes exactly the actuators and states of the definitions file's
+``actuators`` table, the one the GSW offers; the processor refuses to start on a table that names
+a state it cannot drive (:func:`check_actuator_table`).
 
 Start, Pause, Resume and Stop are forwarded to each ARS with the ``GroundCommand`` service; a
 forward that gets no answer within ``timeouts.forward_s`` is reported in the completion detail and
-as a warning event, but does not undo the CRS's own change. Actuator commands run asynchronously
-(service call or trajectory goal) and complete when the driver answers.
+as a warning event, but does not undo the CRS's own change. Actuator commands and writes to an ARS
+run asynchronously (service call or trajectory goal) and complete when the driver or the ARS
+answers.
 """
 
 from __future__ import annotations
@@ -48,9 +62,14 @@ from typing import Any
 from py_trees.common import Status
 
 from tlt_common import ros_names
+from tlt_common.bt.ground_keys import DISPENSER, MEMBER_MARKS, TOWER, route
 from tlt_common.bt.nodes import Action
 from tlt_common.bt.ros import shared_action_client, shared_service_client
+from tlt_common.bt.writable_blackboard import WritableBlackboard, value_msg
+from tlt_common.ccsds.definitions import ActuatorDef, Definitions, load_definitions
 from tlt_common.ccsds.reasons import AckStage
+from tlt_common.config_schema import ConfigError
+from tlt_common.mission.tower_model import STATE_NAMES, TransitionRefused
 from tlt_crs.behaviours.actuators import trajectory_goal, trajectory_ok
 from tlt_crs.context import CrsContext, RunState
 
@@ -58,12 +77,40 @@ AckCallback = Callable[[AckStage, str], None]
 COMMANDS = ("start", "stop", "pause", "resume", "set_blackboard_value", "set_actuator_state")
 FORWARD_CODES = {"start": 0, "stop": 1, "pause": 2, "resume": 3}  # GroundCommand.Request constants
 LIFTER_MODES = {"hardware_control": 1, "crs_control": 2, "safe": 3}
-ACTUATOR_STATES = {
-    ros_names.LIFTER: ("safe", "hardware_control", "crs_control"),
-    ros_names.TOP_GRIPPERS: ("engage", "disengage"),
-    ros_names.ACTIVE_GRIPPERS: ("engage", "disengage"),
-    ros_names.CAMERA_MOUNTS: ("inward", "outward", "stow", "inspect_bay", "inspect_part", "move"),
+# What the CRS can drive (its _do_set_actuator_state): actuator -> (states, the states that take a
+# value). The definitions file's table, which the GSW offers, must stay within it.
+DRIVEN = {
+    ros_names.LIFTER: (tuple(LIFTER_MODES), ()),
+    ros_names.TOP_GRIPPERS: (("engage", "disengage"), ()),
+    ros_names.ACTIVE_GRIPPERS: (("engage", "disengage"), ()),
+    ros_names.CAMERA_MOUNTS: (("stow", "inspect_part", "inspect_bay", "move"), ("move",)),
 }
+
+
+def check_actuator_table(defs: Definitions) -> None:
+    """Raise ``ConfigError`` (file, key, reason) if the definitions' ``actuators`` table offers an
+    actuator or state the CRS cannot drive, or a value where the CRS takes none (or none where it
+    needs one): the GSW offers that table, so the two must agree."""
+    for name, actuator in defs.actuators.items():
+        if name not in DRIVEN:
+            raise ConfigError(
+                defs.source,
+                f"actuators.{name}",
+                f"the CRS drives no actuator {name!r} (it drives {', '.join(DRIVEN)})",
+            )
+        states, value_states = DRIVEN[name]
+        for state in actuator.states:
+            if state not in states:
+                raise ConfigError(
+                    defs.source,
+                    f"actuators.{name}.states",
+                    f"the CRS cannot drive {name} to {state!r} (its states: {', '.join(states)})",
+                )
+        if set(actuator.value_states) != set(value_states) & set(actuator.states):
+            needs = ", ".join(s for s in value_states if s in actuator.states) or "none"
+            raise ConfigError(
+                defs.source, f"actuators.{name}.value", f"the states of {name} that take a value are: {needs}"
+            )
 
 
 @dataclass
@@ -212,8 +259,16 @@ class CommandProcessor:
         hold: Callable[[], None],
         stop_tree: Callable[[], None],
         on_stopped: Callable[[], None],
+        definitions: Definitions | None = None,
     ) -> None:
+        """Raises ``ConfigError`` for an actuator table the CRS cannot drive or an ARS whitelist
+        that does not load."""
         self.ctx = ctx
+        defs = definitions or load_definitions()
+        check_actuator_table(defs)
+        self.actuators: Mapping[str, ActuatorDef] = defs.actuators
+        ars_registry = WritableBlackboard.load(ctx.config.ars_writable_blackboard)
+        self.ars_registries = dict.fromkeys(ros_names.ARS_AGENTS, ars_registry)
         self.queue = CommandQueue(self.check)
         self._hold = hold
         self._stop_tree = stop_tree
@@ -249,42 +304,76 @@ class CommandProcessor:
         elif name == "set_blackboard_value":
             if "key" not in params or "value" not in params:
                 return "set_blackboard_value needs 'key' and 'value'"
-            result = ctx.registry.check(str(params["key"]), params["value"])
-            if not result.accepted:
-                return result.reason
-            if params["key"] == "clear_fault" and params["value"] is True and not ctx.fault:
-                # Taken now, it would stand until the next fault and clear that one unseen.
-                if ctx.link_fault:
-                    return "the lifter link fault clears itself when the link is back"
-                return "no fault to clear"
+            return self._check_write(str(params["key"]), params["value"])
         elif name == "set_actuator_state":
             return self._check_actuator(params)
         return None
 
-    def _check_actuator(self, params: Mapping[str, Any]) -> str | None:
-        actuator, state = params.get("actuator"), params.get("state")
-        if actuator not in ACTUATOR_STATES:
-            known = ", ".join(ACTUATOR_STATES)
-            return f"actuator '{actuator}' is not driven by the CRS (CRS actuators: {known})"
-        if state not in ACTUATOR_STATES[actuator]:
-            states = ", ".join(ACTUATOR_STATES[actuator])
-            return f"actuator '{actuator}' has no state '{state}' (states: {states})"
-        if state == "move" and not isinstance(params.get("value"), int | float):
-            return f"'{actuator}' state 'move' needs a numeric value"
+    def _check_write(self, key: str, value: Any) -> str | None:
+        ctx, target = self.ctx, route(key)
+        if target.target == TOWER:
+            if not isinstance(value, str):
+                return f"key '{key}': a member's mark is a string ({', '.join(MEMBER_MARKS)}), not {value!r}"
+            with ctx.model.lock:
+                return ctx.model.check_correction(target.name, value) or self._building(
+                    "the tree keeps the tower model"
+                )
+        if target.target == DISPENSER:
+            with ctx.model.lock:
+                return ctx.model.check_remaining(target.name, value) or self._building(
+                    "the tree keeps the tower model"
+                )
+        if target.target in self.ars_registries:
+            refused = self.ars_registries[target.target].check(target.name, value).reason
+            return f"{target.target}: {refused}" if refused else None
+        result = ctx.registry.check(target.name, value)
+        if not result.accepted:
+            return result.reason
+        if target.name == "clear_fault" and value is True and not ctx.fault:
+            # Taken now, it would stand until the next fault and clear that one unseen.
+            if ctx.link_fault:
+                return "the lifter link fault clears itself when the link is back"
+            return "no fault to clear"
+        return None
+
+    def _building(self, why: str) -> str | None:
+        """Why the ground may not change what the tree changes itself (actuators, the tower
+        model) now; ``why`` says what the tree does with it."""
         run_state = self.ctx.run_state
         if run_state in (RunState.RUNNING, RunState.PAUSED):
             return (
-                f"refused while building (run state {run_state.name.lower()}): actuators are driven"
-                " by the tree; wait for a fault, the end of the build, or stop"
+                f"refused while building (run state {run_state.name.lower()}): {why};"
+                " wait for a fault, the end of the build, or stop"
             )
         if self.ctx.link_fault:
-            # The build is only held: it goes on by itself when the link is back, and an actuator
-            # moved meanwhile would be where the tree does not expect it.
+            # The build is only held: it goes on by itself when the link is back, and a change
+            # made meanwhile would be where the tree does not expect it.
             return (
                 "refused while building (run state fault: the build is held until the lifter link"
-                " is back and then goes on): actuators are driven by the tree; stop first"
+                f" is back and then goes on): {why}; stop first"
             )
         return None
+
+    def _check_actuator(self, params: Mapping[str, Any]) -> str | None:
+        actuator, state, value = params.get("actuator"), params.get("state"), params.get("value")
+        table = self.actuators.get(actuator) if isinstance(actuator, str) else None
+        if table is None:
+            known = ", ".join(self.actuators)
+            return f"actuator '{actuator}' is not driven by the CRS (CRS actuators: {known})"
+        if state not in table.states:
+            return f"actuator '{actuator}' has no state '{state}' (states: {', '.join(table.states)})"
+        if state in table.value_states:
+            # The table's value states always carry a range (definitions.py checks it on load).
+            low, high = table.value_minimum or 0.0, table.value_maximum or 0.0
+            if not isinstance(value, int | float) or isinstance(value, bool):
+                return (
+                    f"'{actuator}' state '{state}' needs a numeric value ({low:g} .. {high:g} {table.unit})"
+                )
+            if not low <= value <= high:
+                return f"'{actuator}' value {value!r} is outside {low:g} .. {high:g} {table.unit}"
+        elif value is not None:
+            return f"'{actuator}' state '{state}' takes no value"
+        return self._building("actuators are driven by the tree")
 
     # ----- holds the CRS itself decides -----
     def hold_build(self, reason: str) -> None:
@@ -380,14 +469,54 @@ class CommandProcessor:
         )
 
     def _do_set_blackboard_value(self, command: Command) -> None:
+        ctx = self.ctx
         key, value = str(command.params["key"]), command.params["value"]
-        with self.ctx.lock:
-            result = self.ctx.registry.write(key, value)
+        target = route(key)
+        if target.target in (TOWER, DISPENSER):
+            try:
+                if target.target == TOWER:
+                    ctx.model.correct_member(target.name, value)
+                    state = STATE_NAMES[ctx.model.state(target.name)]
+                    ctx.event(
+                        1, "TOWER_CORRECTED", f"{target.name} marked {value} from the ground: now {state}"
+                    )
+                else:
+                    ctx.model.set_remaining(target.name, value)
+                    ctx.event(
+                        1, "DISPENSER_CORRECTED", f"{target.name} holds {value} part(s), as the ground says"
+                    )
+            except TransitionRefused as refused:
+                command.ack(AckStage.FAILED, refused.reason)
+                return
+            command.ack(AckStage.COMPLETED, "")
+            return
+        if target.target in self.ars_registries:
+            self._forward_write(command, target.target, target.name, value)
+            return
+        with ctx.lock:
+            result = ctx.registry.write(target.name, value)
         if result.accepted:
-            self.ctx.event(1, "BLACKBOARD_SET", f"{key} = {value!r}")
+            ctx.event(1, "BLACKBOARD_SET", f"{key} = {value!r}")
             command.ack(AckStage.COMPLETED, "")
         else:
             command.ack(AckStage.FAILED, result.reason)
+
+    def _forward_write(self, command: Command, ars: str, name: str, value: Any) -> None:
+        """A write to an ARS key: its SetBlackboardValue service applies it, or says why not."""
+        from tlt_interfaces.srv import SetBlackboardValue
+
+        ctx = self.ctx
+        spec = self.ars_registries[ars].keys[name]
+        client = shared_service_client(ctx.node, SetBlackboardValue, ros_names.set_blackboard_service(ars))
+        request = SetBlackboardValue.Request(key=name, value=value_msg(value, spec.type))
+        step = _ServiceStep(ars, client, request, lambda r: (bool(r.accepted), r.reason))
+
+        def then(ok: bool, detail: str) -> None:
+            if ok:
+                ctx.event(1, "BLACKBOARD_SET", f"{ars}/{name} = {value!r}")
+
+        limit = max(ctx.config.timeouts.forward_s, ctx.config.timeouts.service_s)
+        self._operations.append(_Operation(command, [step], ctx.ros_seconds() + limit, True, then))
 
     def _do_set_actuator_state(self, command: Command) -> None:
         from tlt_interfaces.action import FollowJointTrajectory
@@ -491,4 +620,12 @@ class ProcessGroundCommand(Action):
         return Status.SUCCESS
 
 
-__all__ = ["COMMANDS", "Command", "CommandProcessor", "CommandQueue", "ProcessGroundCommand"]
+__all__ = [
+    "COMMANDS",
+    "DRIVEN",
+    "Command",
+    "CommandProcessor",
+    "CommandQueue",
+    "ProcessGroundCommand",
+    "check_actuator_table",
+]

@@ -71,6 +71,8 @@ def _active_default() -> GripperSetup:
 
 
 DEFAULT_WRITABLE_BLACKBOARD = REPO_CONFIG.parent / "writable_blackboard.yaml"
+# The ARSs' whitelist: the CRS checks a ground write to an ARS key on arrival, before forwarding it.
+DEFAULT_ARS_WRITABLE_BLACKBOARD = REPO_CONFIG.parents[1] / "ars" / "writable_blackboard.yaml"
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ class CrsConfig:
     state_file: Path  # tower model (tlt_common.mission.tower_model)
     progress_file: Path  # which bays the payload was indexed for (tlt_crs.index_record)
     writable_blackboard: Path = DEFAULT_WRITABLE_BLACKBOARD
+    ars_writable_blackboard: Path = DEFAULT_ARS_WRITABLE_BLACKBOARD
     tick_rate_hz: float = 10.0
     progress_rate_hz: float = 2.0
     status_rate_hz: float = 5.0
@@ -120,6 +123,9 @@ SCHEMA = {
     "state_file": Field("str", doc="tower model state file, persisted on every change"),
     "progress_file": opt("str", None, doc="payload indexing record; default: next to state_file"),
     "writable_blackboard": opt("str", None),
+    "ars_writable_blackboard": opt(
+        "str", None, doc="the ARSs' whitelist (config/ars/writable_blackboard.yaml)"
+    ),
     "tick_rate_hz": opt("float", 10.0, minimum=0.1, maximum=1000.0),
     "progress_rate_hz": opt("float", 2.0, minimum=0.01, maximum=100.0),
     "status_rate_hz": opt("float", 5.0, minimum=0.01, maximum=1000.0),
@@ -143,7 +149,7 @@ def _path(base: Path, text: str) -> Path:
     return path if path.is_absolute() else (base / path).resolve()
 
 
-_PATH_KEYS = ("mission", "state_file", "progress_file", "writable_blackboard")
+_PATH_KEYS = ("mission", "state_file", "progress_file", "writable_blackboard", "ars_writable_blackboard")
 
 
 def load_config(path: str | Path, **overrides: Any) -> CrsConfig:
@@ -169,6 +175,9 @@ def load_config(path: str | Path, **overrides: Any) -> CrsConfig:
         writable_blackboard=_path(base, data["writable_blackboard"])
         if data["writable_blackboard"]
         else DEFAULT_WRITABLE_BLACKBOARD,
+        ars_writable_blackboard=_path(base, data["ars_writable_blackboard"])
+        if data["ars_writable_blackboard"]
+        else DEFAULT_ARS_WRITABLE_BLACKBOARD,
         tick_rate_hz=data["tick_rate_hz"],
         progress_rate_hz=data["progress_rate_hz"],
         status_rate_hz=data["status_rate_hz"],

@@ -5,6 +5,11 @@
 ``query``   list archived packets, totals, or one field's series.
 ``export``  write the fields of one packet kind to CSV.
 ``keygen``  create a shared key file (mode 0600) for both ends.
+``levers``  list what an operator may set: every agent's writable keys (type, range, meaning),
+            the tower-model corrections and the actuators with their states.
+``correct-member``, ``correct-dispenser``
+            correct the CRS's tower model (Set Blackboard Value of ``tower/<member>`` or
+            ``dispenser/<name>``, :mod:`tlt_common.bt.ground_keys`), acknowledged like ``send``.
 ``mission`` start a build and follow it to tower built; ``summary`` summarize an archive
             (both in :mod:`tlt_gsw.mission_job`, with their own exit codes).
 
@@ -24,6 +29,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tlt_common.bt.ground_keys import (
+    AGENTS,
+    MEMBER_MARKS,
+    agent_key,
+    dispenser_key,
+    load_whitelists,
+    member_key,
+)
 from tlt_common.ccsds.auth import CommandSequencer, KeyFileError, KeyRing, ReplayStateError, write_key_file
 from tlt_common.ccsds.codec import Packet, ParseResult
 from tlt_common.ccsds.definitions import CommandDef, Definitions, FieldDef, load_definitions
@@ -175,7 +188,65 @@ def _cmd_send(args: argparse.Namespace, out) -> int:
         cmd = defs.command(args.command)
     except KeyError as exc:
         raise UsageError(str(exc.args[0])) from None
-    params = parse_params(cmd, args.params)
+    return _send(args, out, defs, conf, cmd, parse_params(cmd, args.params))
+
+
+def _cmd_correct_member(args: argparse.Namespace, out) -> int:
+    defs, conf = _settings(args)
+    params = {"key": member_key(args.member), "value": args.mark}
+    return _send(args, out, defs, conf, defs.command("set_blackboard_value"), params)
+
+
+def _cmd_correct_dispenser(args: argparse.Namespace, out) -> int:
+    defs, conf = _settings(args)
+    params = {"key": dispenser_key(args.dispenser), "value": args.count}
+    return _send(args, out, defs, conf, defs.command("set_blackboard_value"), params)
+
+
+def _range(spec: Any) -> str:
+    if spec.choices is not None:
+        return "one of " + ", ".join(map(str, spec.choices))
+    low = "" if spec.minimum is None else f"{spec.minimum:g}"
+    high = "" if spec.maximum is None else f"{spec.maximum:g}"
+    return f"{low} .. {high}".strip() if low or high else ""
+
+
+def _cmd_levers(args: argparse.Namespace, out) -> int:
+    defs = load_definitions(args.definitions)
+    whitelists = load_whitelists()
+    print("Set Blackboard Value keys (send set_blackboard_value key=KEY value=TYPE:VALUE):", file=out)
+    for agent in AGENTS:
+        for spec in whitelists[agent].writable():
+            limits = _range(spec)
+            units = f" {spec.units}" if spec.units else ""
+            print(f"  {agent_key(agent, spec.name):<30} {spec.type:<5} {limits}{units}".rstrip(), file=out)
+            print(f"      {spec.meaning}", file=out)
+    print("Tower model corrections:", file=out)
+    print(
+        f"  tower/<member id>              str   one of {', '.join(MEMBER_MARKS)}  (correct-member)", file=out
+    )
+    print("  dispenser/<name>               int   parts it holds  (correct-dispenser)", file=out)
+    print("Set Actuator State (send set_actuator_state actuator=A state=S [value=V] --yes):", file=out)
+    for actuator in defs.actuators.values():
+        value = (
+            f"  value {actuator.value_minimum:g} .. {actuator.value_maximum:g} {actuator.unit}"
+            f" with {', '.join(actuator.value_states)}"
+            if actuator.value_states
+            else ""
+        )
+        print(f"  {actuator.name:<16} {', '.join(actuator.states)}{value}", file=out)
+    return EXIT_OK
+
+
+def _send(
+    args: argparse.Namespace,
+    out,
+    defs: Definitions,
+    conf: dict[str, Any],
+    cmd: CommandDef,
+    params: dict[str, Any],
+) -> int:
+    """Send ``cmd`` and, as the options ask, wait for and print its acknowledgements."""
     if cmd.hazardous and not args.yes:
         raise UsageError(f"{cmd.name} is hazardous: add --yes to confirm")
     timeout = args.timeout if args.timeout is not None else conf["gsw"]["ack_timeout_s"]
@@ -339,16 +410,29 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--archive", help="archive SQLite file")
         p.add_argument("--no-archive", action="store_true", help="do not record")
 
+    def send_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--wait-ack", action="store_true", help="wait for accepted/rejected")
+        p.add_argument("--wait-complete", action="store_true", help="wait for completed/failed")
+        p.add_argument("--timeout", type=float, help="seconds to wait for each ack")
+        p.add_argument(
+            "--yes", action="store_true", help="confirm a hazardous command (stop, set_actuator_state)"
+        )
+        link_options(p)
+
     send = sub.add_parser("send", help="send a command")
     send.add_argument("command", help="start, stop, pause, resume, set_blackboard_value, set_actuator_state")
     send.add_argument("params", nargs="*", help="name=value parameters (value=int:3, value=str:abc, ...)")
-    send.add_argument("--wait-ack", action="store_true", help="wait for accepted/rejected")
-    send.add_argument("--wait-complete", action="store_true", help="wait for completed/failed")
-    send.add_argument("--timeout", type=float, help="seconds to wait for each ack")
-    send.add_argument(
-        "--yes", action="store_true", help="confirm a hazardous command (stop, set_actuator_state)"
-    )
-    link_options(send)
+    send_options(send)
+
+    member = sub.add_parser("correct-member", help="correct a member's state in the CRS's tower model")
+    member.add_argument("member", help="member id, e.g. bay1/vertical/x0_y1")
+    member.add_argument("mark", choices=MEMBER_MARKS)
+    send_options(member)
+    dispenser = sub.add_parser("correct-dispenser", help="correct the parts a dispenser holds")
+    dispenser.add_argument("dispenser", help="dispenser name, e.g. vertical_dispenser_x")
+    dispenser.add_argument("count", type=int, help="parts it holds")
+    send_options(dispenser)
+    sub.add_parser("levers", help="list the writable keys, tower corrections and actuator states")
 
     watch = sub.add_parser("watch", help="print telemetry as it arrives (and record it)")
     watch.add_argument("--duration", type=float, help="stop after this many seconds")
@@ -405,6 +489,9 @@ _ACTIONS = {
     "query": _cmd_query,
     "export": _cmd_export,
     "keygen": _cmd_keygen,
+    "levers": _cmd_levers,
+    "correct-member": _cmd_correct_member,
+    "correct-dispenser": _cmd_correct_dispenser,
 }
 
 

@@ -18,7 +18,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from tlt_interfaces.action import AddMember, AffixMember
 from tlt_interfaces.msg import MemberState, MissionProgress
-from tlt_interfaces.srv import GroundCommand
+from tlt_interfaces.srv import GroundCommand, SetBlackboardValue
 
 from tlt_ars.command_line import build_parser, config_from_args
 from tlt_ars.config import ars_config_from_dict, default_config_path
@@ -28,6 +28,7 @@ from tlt_ars.planning.reachability import UnreachableMember
 from tlt_ars.planning.targets import Target
 from tlt_ars.request_data import RequestData, RequestFile, RequestFileError
 from tlt_common import ros_names
+from tlt_common.bt.writable_blackboard import value_msg
 from tlt_common.config_schema import load_yaml
 from tlt_common.mission.schema import load_mission
 from tlt_common.ros.action_client import SerialisedActionClient
@@ -166,6 +167,24 @@ def test_requests_wait_for_start_and_ground_commands_follow_their_rules(idle_ars
         assert time.monotonic() < deadline
         time.sleep(0.05)
     assert request().result.reason == "rejected: stopped by ground command"
+
+
+def test_the_ars_applies_the_grounds_writes_to_its_keys_and_says_why_it_refuses_one(idle_ars):
+    ars, client = idle_ars
+    writes = client.create_client(SetBlackboardValue, ros_names.set_blackboard_service("ars_x"))
+    assert writes.wait_for_service(timeout_sec=DISCOVERY_S)
+
+    def write(key, value):
+        return _wait(writes.call_async(SetBlackboardValue.Request(key=key, value=value_msg(value))))
+
+    ok = write("present_part_timeout_s", 120.0)
+    assert ok.accepted and ars.config.timeouts["present_part_s"] == 120.0
+    assert ars.ctx.config.timeouts["present_part_s"] == 120.0  # what the behaviours read
+    refused = write("present_part_timeout_s", 1.0)
+    assert not refused.accepted and "below the minimum 10" in refused.reason
+    unknown = write("velocity_scale", 0.9)
+    assert not unknown.accepted and unknown.reason == "unknown key 'velocity_scale'"
+    assert ars.config.timeouts["present_part_s"] == 120.0
 
 
 @pytest.mark.parametrize("stop", ["ground", signal.SIGINT, signal.SIGTERM])

@@ -1,7 +1,9 @@
 """Stand-ins for what the CRS talks to, on real ROS interfaces, and helpers to tick CRS subtrees.
 
 * ``ArsStandIn``: action servers of one ARS (add_cross_frame, add_member, affix_member,
-  foundation_rivet), its GroundCommand service, and its end effector's and arm's states. It
+  foundation_rivet), its GroundCommand service, its SetBlackboardValue service (the ARS's own
+  :class:`tlt_ars.ground_writes.GroundWrites` over its configuration), and its end effector's and
+  arm's states. It
   records every request it gets, presents parts to ``/crs/inspect_part`` as the ARS of §V.C.3
   does (fetching another part after a failed inspection), and can be told to fail, to be slow, or
   to honour Pause. These are what the ARS issue replaces.
@@ -88,7 +90,10 @@ class ArsStandIn:
         from sensor_msgs.msg import JointState
         from tlt_interfaces.action import AddCrossFrame, AddMember, AffixMember, FoundationRivet
         from tlt_interfaces.msg import EndEffectorState
-        from tlt_interfaces.srv import GroundCommand, InspectPart
+        from tlt_interfaces.srv import GroundCommand, InspectPart, SetBlackboardValue
+
+        from tlt_ars.config import default_config_path, load_ars_config
+        from tlt_ars.ground_writes import load_ground_writes
 
         self.node, self.ars, self.recorder = node, ars, recorder
         self.hold_s = 0.0  # how long each request takes
@@ -125,6 +130,14 @@ class ArsStandIn:
             )
         self.service = node.create_service(
             GroundCommand, ros_names.ground_command_service(ars), self._on_command, callback_group=group
+        )
+        self.config = load_ars_config(default_config_path(ars))
+        self.ground_writes = load_ground_writes(self.config.raw, self.config.writable_blackboard_path)
+        self.bb_service = node.create_service(
+            SetBlackboardValue,
+            ros_names.set_blackboard_service(ars),
+            self.ground_writes.on_request,
+            callback_group=group,
         )
         self.ee_calibrated = True  # what its end effector's driver says of the width joint
         self._ee_pub = node.create_publisher(EndEffectorState, ros_names.state_topic(ros_names.ee(ars)), 10)
@@ -218,6 +231,7 @@ class ArsStandIn:
         for server in self.servers:
             server.destroy()
         self.node.destroy_service(self.service)
+        self.node.destroy_service(self.bb_service)
         self.node.destroy_timer(self._hardware_timer)
 
 

@@ -19,6 +19,7 @@ def test_shipped_configuration_loads_with_paths_relative_to_it():
     config = load_config(REPO_CONFIG)
     assert config.mission == REPO_CONFIG.parents[2] / "missions" / "one_bay.yaml"
     assert config.mission.exists() and config.writable_blackboard.exists()
+    assert config.ars_writable_blackboard == REPO_CONFIG.parents[1] / "ars" / "writable_blackboard.yaml"
     assert config.progress_file.name == "tower_model.indexed.json"
     # The lifter targets are the twin's machine: lowered = the build position, raised = one bay up
     # (from the mission), and the payload starts on the Top Grippers one bay up (indexed for bay 1).

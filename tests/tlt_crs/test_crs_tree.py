@@ -362,3 +362,129 @@ def test_the_tree_ticks_on_while_ros_time_stands_still(rig, crs, crs_node, stop_
     crs.wait_for(lambda: len(ticks) >= 5, what="ticks while ROS time stands still")
     _start(crs_node, crs)
     crs.wait_for(lambda: rig.recorder.requests, what="a request sent while ROS time stands still")
+
+
+def test_every_actuator_state_the_ground_is_offered_is_one_the_crs_accepts_when_idle(crs_node):
+    """The GSW offers the definitions' actuator table (GUI and CLI); the CRS takes all of it."""
+    from tlt_common.ccsds.definitions import load_definitions
+
+    table = load_definitions().actuators
+    assert table, "the definitions offer no actuator"
+    for actuator in table.values():
+        for state in actuator.states:
+            params = {"actuator": actuator.name, "state": state}
+            if state in actuator.value_states:
+                params["value"] = actuator.value_minimum
+            assert crs_node.processor.check("set_actuator_state", params) is None, params
+
+
+def test_the_crs_refuses_to_start_on_an_actuator_table_it_cannot_drive(tmp_path):
+    import yaml
+
+    from tlt_common.ccsds.definitions import DEFAULT_PATH, load_definitions
+    from tlt_common.config_schema import ConfigError
+    from tlt_crs.commands import check_actuator_table
+
+    doc = yaml.safe_load(DEFAULT_PATH.read_text())
+    doc["actuators"]["active_grippers"]["states"].append("raise")
+    path = tmp_path / "definitions.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError) as err:
+        check_actuator_table(load_definitions(path))
+    assert (err.value.source, err.value.key) == (str(path), "actuators.active_grippers.states")
+    assert "cannot drive active_grippers to 'raise'" in err.value.reason
+    doc["actuators"]["ee_x"] = {"states": ["open"]}
+    doc["actuators"]["active_grippers"]["states"].remove("raise")
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match="drives no actuator 'ee_x'"):
+        check_actuator_table(load_definitions(path))
+
+
+def test_a_write_to_an_ars_key_is_forwarded_to_that_ars_and_applied_there(rig, crs, crs_node):
+    before_y = rig.ars["ars_y"].config.raw["arm"]["settle_s"]
+    acks = _submit(crs_node, crs, "set_blackboard_value", {"key": "ars_x/settle_s", "value": 2.5})
+    assert [stage for stage, _ in acks.stages] == [AckStage.ACCEPTED, AckStage.COMPLETED], acks.stages
+    assert rig.ars["ars_x"].config.raw["arm"]["settle_s"] == 2.5
+    assert rig.ars["ars_y"].config.raw["arm"]["settle_s"] == before_y
+    acks = _submit(crs_node, crs, "set_blackboard_value", {"key": "ars_y/motion_attempts", "value": 4})
+    assert (
+        acks.final == (AckStage.COMPLETED, "") and rig.ars["ars_y"].config.raw["arm"]["motion_attempts"] == 4
+    )
+
+
+@pytest.mark.parametrize(
+    ("params", "reason"),
+    [
+        ({"key": "ars_x/settle_s", "value": 20.0}, "ars_x: key 'settle_s': 20.0 is above the maximum 10"),
+        ({"key": "ars_y/velocity_scale", "value": 0.2}, "ars_y: unknown key 'velocity_scale'"),
+        ({"key": "ars_x/motion_attempts", "value": "many"}, "expected int, got str"),
+    ],
+)
+def test_a_write_to_an_ars_key_outside_its_whitelist_is_refused_on_arrival(
+    rig, crs, crs_node, params, reason
+):
+    before = {ars: dict(a.config.raw["arm"]) for ars, a in rig.ars.items()}
+    acks = _submit(crs_node, crs, "set_blackboard_value", params)
+    assert acks.rejected and reason in acks.stages[0][1], acks.stages
+    assert {ars: dict(a.config.raw["arm"]) for ars, a in rig.ars.items()} == before
+
+
+def test_an_ars_that_refuses_a_write_fails_the_command_with_its_reason(rig, crs, crs_node):
+    import dataclasses
+
+    registry = rig.ars["ars_x"].ground_writes.registry
+    registry.keys["fire_s"] = dataclasses.replace(registry.keys["fire_s"], writable=False)
+    acks = _submit(crs_node, crs, "set_blackboard_value", {"key": "ars_x/fire_s", "value": 1.0})
+    assert acks.stages[0][0] == AckStage.ACCEPTED  # the CRS's copy of the whitelist allows it
+    assert acks.final == (AckStage.FAILED, "ars_x: key 'fire_s' is read-only"), acks.stages
+    assert rig.ars["ars_x"].config.raw["end_effector"]["fire_s"] == 0.5
+
+
+def test_tower_model_corrections_from_the_ground_are_applied_under_the_models_rules(crs, crs_node):
+    model = crs_node.ctx.model
+    events: list[tuple[str, str]] = []
+    crs_node.ctx.event_listeners.append(lambda severity, code, text: events.append((code, text)))
+    acks = _submit(
+        crs_node, crs, "set_blackboard_value", {"key": "tower/bay1/cross_frame", "value": "placed"}
+    )
+    assert acks.final == (AckStage.COMPLETED, ""), acks.stages
+    assert model.state("bay1/cross_frame") == 1  # PLACED
+    assert ("TOWER_CORRECTED", "bay1/cross_frame marked placed from the ground: now PLACED") in events
+    fewer = model.remaining["vertical_dispenser_x"] - 1
+    acks = _submit(
+        crs_node, crs, "set_blackboard_value", {"key": "dispenser/vertical_dispenser_x", "value": fewer}
+    )
+    assert acks.final == (AckStage.COMPLETED, "") and model.remaining["vertical_dispenser_x"] == fewer
+    assert any(code == "DISPENSER_CORRECTED" for code, _ in events)
+    progress = crs_node.progress()
+    assert next(d.remaining for d in progress.dispensers if d.name == "vertical_dispenser_x") == fewer
+
+
+@pytest.mark.parametrize(
+    ("params", "reason"),
+    [
+        ({"key": "tower/bay1/cross_frame", "value": "unplaced"}, "'bay1/cross_frame' is already NOT_PLACED"),
+        ({"key": "tower/bay1/cross_frame", "value": 1}, "a member's mark is a string"),
+        ({"key": "tower/bay7/cross_frame", "value": "placed"}, "unknown member 'bay7/cross_frame'"),
+        ({"key": "tower/bay1/cross_frame", "value": "gone"}, "unknown mark 'gone'"),
+        ({"key": "dispenser/vertical_dispenser_x", "value": 99}, "can hold at most"),
+        ({"key": "dispenser/nowhere", "value": 1}, "unknown dispenser 'nowhere'"),
+    ],
+)
+def test_tower_model_corrections_against_its_rules_are_refused_with_the_reason(crs, crs_node, params, reason):
+    revision = crs_node.ctx.model.revision
+    acks = _submit(crs_node, crs, "set_blackboard_value", params)
+    assert acks.rejected and reason in acks.stages[0][1], acks.stages
+    assert crs_node.ctx.model.revision == revision
+
+
+def test_tower_model_corrections_are_refused_while_building(rig, crs, crs_node):
+    rig.ars["ars_x"].hold_s = 2.0
+    _start(crs_node, crs)
+    acks = _submit(
+        crs_node, crs, "set_blackboard_value", {"key": "dispenser/vertical_dispenser_x", "value": 0}
+    )
+    assert acks.rejected, acks.stages
+    assert acks.stages[0][1].startswith(
+        "refused while building (run state running): the tree keeps the tower model"
+    )

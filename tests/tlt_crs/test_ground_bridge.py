@@ -189,3 +189,40 @@ def test_every_agents_tree_definition_reaches_the_ground_and_names_its_status(gr
     assert shapes["crs"].hash == node.shape.hash
     assert decoded["ars_x"].as_dict()["ARS x/Grasp Part"] is Status.RUNNING
     assert [path for path, _ in decoded["crs"].nodes] == [n.path for n in node.shape.nodes]
+
+
+def test_each_lever_of_table_1_reaches_what_acts_on_it_from_the_ground(ground, rig):
+    """Over the authenticated link, from the GSW: a write to an ARS key reaches that ARS, a tower
+    correction reaches the CRS's model, an actuator state of the table reaches its driver."""
+    node, gsw, packets = ground
+    sent = gsw.send_command("set_blackboard_value", {"key": "ars_y/planning_timeout_s", "value": 30.0})
+    assert _stages(gsw, sent) == [AckStage.ACCEPTED, AckStage.COMPLETED]
+    assert rig.ars["ars_y"].config.raw["timeouts"]["planning_s"] == 30.0
+    sent = gsw.send_command("set_blackboard_value", {"key": "tower/bay1/cross_frame", "value": "placed"})
+    assert _stages(gsw, sent) == [AckStage.ACCEPTED, AckStage.COMPLETED]
+    assert node.ctx.model.state("bay1/cross_frame") == 1  # PLACED
+    sent = gsw.send_command("set_actuator_state", {"actuator": "camera_mounts", "state": "inspect_bay"})
+    assert _stages(gsw, sent) == [AckStage.ACCEPTED, AckStage.COMPLETED]
+    assert rig.cameras.positions == list(node.ctx.config.camera_mounts.inward)
+    deadline = time.monotonic() + WAIT
+    while not any(p.kind == "event" and p.fields["code"] == "TOWER_CORRECTED" for p in packets):
+        assert time.monotonic() < deadline, "no TOWER_CORRECTED event reached the ground"
+        gsw.poll(0.2)
+
+
+@pytest.mark.parametrize(
+    ("params", "reason"),
+    [
+        ({"key": "ars_x/settle_s", "value": -1.0}, "key 'settle_s': -1.0 is below the minimum 0"),
+        ({"key": "tower/bay1/vertical/x0_y1", "value": "needs_inspection"}, "only an inspected member"),
+        ({"key": "dispenser/cross_frame_dispenser", "value": 40}, "can hold at most 3 part(s)"),
+    ],
+)
+def test_a_lever_the_crs_refuses_is_rejected_with_its_reason_on_the_ground(ground, rig, params, reason):
+    node, gsw, _ = ground
+    revision = node.ctx.model.revision
+    sent = gsw.send_command("set_blackboard_value", params)
+    assert _stages(gsw, sent) == [AckStage.REJECTED]
+    ack = sent.acks[0]
+    assert ack.reason is Reason.REFUSED and reason in ack.detail, ack
+    assert node.ctx.model.revision == revision and rig.ars["ars_x"].config.raw["arm"]["settle_s"] == 1.0

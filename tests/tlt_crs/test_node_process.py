@@ -224,6 +224,15 @@ def test_bad_configuration_is_refused(tmp_path, crs):
     assert proc.returncode == 2 and "tick_rate_hz" in out and str(config) in out
 
 
+def test_a_bad_ars_whitelist_is_refused_with_file_key_and_reason(tmp_path, crs):
+    """The CRS checks a ground write to an ARS key against the ARSs' whitelist: it loads it at start."""
+    bad = tmp_path / "ars_keys.yaml"
+    bad.write_text("keys:\n  settle_s: {type: float, writable: true, meaning: m, minimum: 5, maximum: 1}\n")
+    proc = _start(_config(tmp_path, crs, ars_writable_blackboard=str(bad)))
+    out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 2 and str(bad) in out and "keys.settle_s" in out and "above maximum" in out
+
+
 def test_state_file_of_another_mission_is_refused(tmp_path, crs):
     from tlt_common.mission.schema import load_mission
     from tlt_common.mission.tower_model import TowerModel

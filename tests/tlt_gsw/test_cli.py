@@ -8,6 +8,7 @@ import os
 import socket
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -19,6 +20,34 @@ from tlt_crs.ground_link import GroundLink
 from tlt_gsw import cli
 
 DEFS = load_definitions()
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _link_yaml(tmp_path: Path, key_file: Path, crs_port: int) -> str:
+    config = tmp_path / "link.yaml"
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "key_file": str(key_file),
+                "key_id": 3,
+                "crs": {
+                    "bind_host": "127.0.0.1",
+                    "bind_port": 0,
+                    "replay_state": str(tmp_path / "replay.json"),
+                },
+                "gsw": {
+                    "crs_host": "127.0.0.1",
+                    "crs_port": crs_port,
+                    "bind_host": "127.0.0.1",
+                    "bind_port": 0,
+                    "archive": str(tmp_path / "archive.sqlite"),
+                    "command_state": str(tmp_path / "seq.json"),
+                    "ack_timeout_s": 5.0,
+                },
+            }
+        )
+    )
+    return str(config)
 
 
 @pytest.fixture
@@ -95,6 +124,75 @@ def test_send_waits_for_accepted_and_completed(setup):
     rows = [line.split() for line in text.splitlines()]
     assert ["tx", "start", "ok", "1"] in rows and ["tx", "set_blackboard_value", "ok", "1"] in rows
     assert ["rx", "ack", "ok", "4"] in rows  # accepted and completed for each command
+
+
+def test_tower_corrections_are_sent_as_set_blackboard_value_and_archived(setup):
+    code, text = run(
+        "--config", setup["config"], "correct-member", "bay1/vertical/x0_y1", "placed", "--wait-complete"
+    )
+    assert code == cli.EXIT_OK and "completed (done)" in text, text
+    code, text = run(
+        "--config", setup["config"], "correct-dispenser", "vertical_dispenser_x", "5", "--wait-complete"
+    )
+    assert code == cli.EXIT_OK and "completed (done)" in text, text
+    assert [(c.name, c.params) for c in setup["handled"]] == [
+        ("set_blackboard_value", {"key": "tower/bay1/vertical/x0_y1", "value": "placed"}),
+        ("set_blackboard_value", {"key": "dispenser/vertical_dispenser_x", "value": 5}),
+    ]
+    code, text = run("--config", setup["config"], "query", "--counts")
+    rows = [line.split() for line in text.splitlines()]
+    assert ["tx", "set_blackboard_value", "ok", "2"] in rows
+
+
+def test_a_mark_outside_the_models_marks_is_refused_before_sending(setup, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        run("--config", setup["config"], "correct-member", "bay1/cross_frame", "vanished")
+    assert exit_.value.code == cli.EXIT_USAGE and "invalid choice: 'vanished'" in capsys.readouterr().err
+    assert setup["handled"] == []
+
+
+def test_a_correction_the_crs_refuses_prints_the_reason(tmp_path):
+    """Against a CRS end that checks corrections with the tower model's rules."""
+    from tlt_common.bt.ground_keys import route
+    from tlt_common.ccsds.reasons import Reason
+    from tlt_common.mission.schema import load_mission
+    from tlt_common.mission.tower_model import TowerModel
+
+    model = TowerModel(load_mission(REPO / "missions" / "one_bay.yaml"))
+
+    def validator(command):
+        key = route(command.params["key"])
+        why = model.check_correction(key.name, command.params["value"])
+        return (Reason.REFUSED, why) if why else None
+
+    key_file = write_key_file(tmp_path / "keys" / "ground.key", {3: os.urandom(32)}, {1: os.urandom(32)})
+    crs = GroundLink(
+        DEFS, KeyRing.load(key_file), tmp_path / "replay.json", validator=validator, stats_period_s=0
+    )
+    crs.start()
+    try:
+        config = _link_yaml(tmp_path, key_file, crs.address[1])
+        code, text = run("--config", config, "correct-member", "bay1/cross_frame", "unplaced", "--wait-ack")
+    finally:
+        crs.close()
+    assert code == cli.EXIT_REFUSED
+    assert "rejected reason=refused ('bay1/cross_frame' is already NOT_PLACED)" in text, text
+
+
+def test_levers_lists_every_agents_keys_the_corrections_and_the_actuator_table():
+    code, text = run("levers")
+    assert code == cli.EXIT_OK
+    for expected in (
+        "lifter_speed",
+        "ars_x/settle_s",
+        "ars_y/fire_s",
+        "tower/<member id>",
+        "dispenser/<name>",
+    ):
+        assert expected in text
+    for actuator in DEFS.actuators.values():
+        line = next(line for line in text.splitlines() if line.split()[:1] == [actuator.name])
+        assert ", ".join(actuator.states) in line
 
 
 def test_hazardous_command_needs_confirmation(setup, capsys):

@@ -6,5 +6,6 @@
 ``status_codec``: a tree's status as a bounded byte string and as ``TreeStatus`` messages.
 ``shape_definition``: a tree shape's definition as a document and as link-sized parts.
 ``writable_blackboard``: the registry of blackboard keys the ground may write.
+``ground_keys``: which agent, member or dispenser a ground "Set Blackboard Value" key names.
 ``viewer``: text and PNG renderings of a tree with its statuses.
 """

@@ -5,10 +5,16 @@ its type (bool, int, float, str), its range or choices, its meaning and whether 
 Declared read-only keys are listed so a refusal can say "read-only" rather than "unknown", and
 so operators can read what they mean. A write is checked against the declaration; a refused
 write names the reason and changes nothing. An accepted write goes to the py_trees blackboard.
+
+Each agent has one such file: the CRS ``config/crs/writable_blackboard.yaml``, each ARS
+``config/ars/writable_blackboard.yaml``. An ARS's tree reads its tuning values from its
+configuration, so its keys name that entry (``config: arm.settle_s``) and the ARS applies an
+accepted write there (:mod:`tlt_ars.ground_writes`).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +25,7 @@ import py_trees
 from tlt_common.config_schema import ConfigError, Field, load_validated, opt
 
 _TYPES = ("bool", "int", "float", "str")
+_CONFIG_ENTRY = re.compile(r"[a-z_][a-z0-9_]*\.[a-z_][a-z0-9_]*")
 
 
 def _check_key(entry: dict[str, Any]) -> str | None:
@@ -36,6 +43,10 @@ def _check_key(entry: dict[str, Any]) -> str | None:
             problem = _type_problem(kind, choice)
             if problem:
                 return f"choice {choice!r}: {problem}"
+    if entry["config"] is not None and not _CONFIG_ENTRY.fullmatch(entry["config"]):
+        return f"config {entry['config']!r} is not 'section.name'"
+    if entry["config"] is not None and not entry["writable"]:
+        return "config applies to writable keys only"
     if entry["default"] is not None:
         problem = _type_problem(kind, entry["default"]) or _range_problem(entry, entry["default"])
         if problem:
@@ -52,6 +63,7 @@ KEY_SCHEMA = {
     "choices": opt("list"),
     "default": opt("any"),
     "units": opt("str", ""),
+    "config": opt("str", None, doc="the agent's configuration entry 'section.name' the key stands for"),
 }
 
 SCHEMA = {
@@ -99,6 +111,7 @@ class KeySpec:
     choices: tuple[Any, ...] | None = None
     default: Any = None
     units: str = ""
+    config: str = ""
 
 
 @dataclass(frozen=True)
@@ -113,6 +126,7 @@ class WritableBlackboard:
     def __init__(self, keys: Mapping[str, KeySpec], namespace: str = "") -> None:
         self.keys = dict(keys)
         self.namespace = namespace.strip("/")
+        self.source = ""
 
     @classmethod
     def load(cls, path: str | Path) -> WritableBlackboard:
@@ -133,8 +147,11 @@ class WritableBlackboard:
                 choices,
                 entry["default"],
                 entry["units"],
+                entry["config"] or "",
             )
-        return cls(keys, data["namespace"])
+        registry = cls(keys, data["namespace"])
+        registry.source = str(path)
+        return registry
 
     def blackboard_name(self, key: str) -> str:
         return f"/{self.namespace}/{key}" if self.namespace else f"/{key}"
@@ -163,6 +180,10 @@ class WritableBlackboard:
                 self.blackboard_name(key), float(value) if spec.type == "float" else value
             )
         return result
+
+    def writable(self) -> list[KeySpec]:
+        """The keys the ground may write, in file order."""
+        return [spec for spec in self.keys.values() if spec.writable]
 
     def write_msg(self, key: str, value_msg: Any) -> WriteResult:
         """Write a ``tlt_interfaces/BlackboardValue``: its ``type`` picks which field is the value."""
@@ -199,4 +220,22 @@ class WritableBlackboard:
         return [spec.__dict__.copy() for spec in self.keys.values()]
 
 
-__all__ = ["SCHEMA", "KeySpec", "WritableBlackboard", "WriteResult"]
+def value_msg(value: Any, kind: str | None = None) -> Any:
+    """``value`` as a ``tlt_interfaces/BlackboardValue`` of ``kind`` (bool, int, float, str; by
+    default the value's own type): how a write travels to another agent's registry."""
+    from tlt_interfaces.msg import BlackboardValue
+
+    kind = kind or {bool: "bool", int: "int", float: "float"}.get(type(value), "str")
+    msg = BlackboardValue()
+    if kind == "bool":
+        msg.type, msg.bool_value = BlackboardValue.TYPE_BOOL, bool(value)
+    elif kind == "int":
+        msg.type, msg.int_value = BlackboardValue.TYPE_INT, int(value)
+    elif kind == "float":
+        msg.type, msg.float_value = BlackboardValue.TYPE_FLOAT, float(value)
+    else:
+        msg.type, msg.string_value = BlackboardValue.TYPE_STRING, str(value)
+    return msg
+
+
+__all__ = ["SCHEMA", "KeySpec", "WritableBlackboard", "WriteResult", "value_msg"]

@@ -216,9 +216,23 @@ def check_command(defs: Definitions, cmd: CommandDef, params: Mapping[str, Any])
             f"{state!r} is not a state of {actuator.name} ({', '.join(actuator.states)})",
         )
     value = params.get("value")
+    if "state" in params and state in actuator.value_states and value is None:
+        return FieldError(
+            Reason.BAD_PARAMETER_RANGE,
+            "value",
+            f"state {state!r} of {actuator.name} needs a numeric value"
+            f" ({actuator.value_minimum:g} .. {actuator.value_maximum:g} {actuator.unit})",
+        )
     if value is not None:
-        if actuator.value_minimum is None:
+        if actuator.value_minimum is None or actuator.value_maximum is None:
             return FieldError(Reason.BAD_PARAMETER_RANGE, "value", f"{actuator.name} takes no value")
+        if "state" in params and state not in actuator.value_states:
+            return FieldError(
+                Reason.BAD_PARAMETER_RANGE,
+                "value",
+                f"state {state!r} of {actuator.name} takes no value"
+                f" (only {', '.join(actuator.value_states)} does)",
+            )
         if not actuator.value_minimum <= value <= actuator.value_maximum:
             return FieldError(
                 Reason.BAD_PARAMETER_RANGE,

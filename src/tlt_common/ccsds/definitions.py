@@ -107,6 +107,7 @@ class ActuatorDef:
     value_minimum: float | None = None
     value_maximum: float | None = None
     unit: str = ""
+    value_states: tuple[str, ...] = ()  # the states that need the value; the others take none
 
 
 @dataclass(frozen=True)
@@ -178,6 +179,7 @@ _SCHEMA = {
                         "minimum": Field("float"),
                         "maximum": Field("float"),
                         "unit": opt("str", ""),
+                        "states": Field("list", item=Field("str"), min_items=1),
                     },
                 ),
             },
@@ -319,12 +321,20 @@ def parse_definitions(data: Any, source: str | Path) -> Definitions:
         value = raw["value"]
         if value is not None and value["minimum"] > value["maximum"]:
             raise ConfigError(source, f"actuators.{name}.value", "minimum is above maximum")
+        if len(set(raw["states"])) != len(raw["states"]):
+            raise ConfigError(source, f"actuators.{name}.states", "duplicate state")
+        stray = [s for s in (value["states"] if value else ()) if s not in raw["states"]]
+        if stray:
+            raise ConfigError(
+                source, f"actuators.{name}.value.states", f"not states of {name}: {', '.join(stray)}"
+            )
         actuators[name] = ActuatorDef(
             name=name,
             states=tuple(raw["states"]),
             value_minimum=value["minimum"] if value else None,
             value_maximum=value["maximum"] if value else None,
             unit=value["unit"] if value else "",
+            value_states=tuple(value["states"]) if value else (),
         )
 
     commands: dict[str, CommandDef] = {}

@@ -11,6 +11,13 @@ Each dispenser has ``remaining`` parts and a count of parts ``discarded`` after 
 inspection. Any refused change (an already placed member, riveting an unplaced one, an empty
 dispenser) raises :class:`TransitionRefused` with the reason and changes nothing.
 
+Operators correct the model from the ground (:meth:`TowerModel.correct_member` with one of
+:data:`MEMBER_MARKS`, :meth:`TowerModel.set_remaining`) under the model's rules: a bay stands on
+the bays below it, so a member is marked placed only once every lower bay is built, and marked
+unplaced or needing inspection only while no higher bay has a member in place; a discarded part
+is one taken from the member's dispenser and never placed; a dispenser holds at most what was
+loaded less what was discarded.
+
 Every accepted change is persisted at once to a JSON file by an atomic, crash-safe write (temp
 file, fsync, rename, fsync of the directory), so a CRS that restarts :meth:`TowerModel.open`\\ s
 the file and resumes where it stood, never adding a member the model says is placed. A file made
@@ -35,6 +42,8 @@ FILE_FORMAT = 1
 NOT_PLACED, PLACED, RIVETED, INSPECTED = 0, 1, 2, 3  # tlt_interfaces/MemberState.STATE_*
 STATE_NAMES = {NOT_PLACED: "NOT_PLACED", PLACED: "PLACED", RIVETED: "RIVETED", INSPECTED: "INSPECTED"}
 _STATE_CODES = {v: k for k, v in STATE_NAMES.items()}
+# What the ground may say of a member (correct_member).
+MEMBER_MARKS = ("placed", "unplaced", "discarded", "needs_inspection")
 SEQUENCES = {
     "cross_frame": (NOT_PLACED, PLACED, INSPECTED),
     "vertical": (NOT_PLACED, PLACED, RIVETED, INSPECTED),
@@ -306,6 +315,106 @@ class TowerModel:
             self.discarded[dispenser] += count
             self._commit()
 
+    # ----- corrections from the ground -----
+    def done_state(self, member_id: str) -> int:
+        """The state in which ``member_id`` stands fixed in the tower (see :meth:`is_done`)."""
+        return PLACED if self.member(member_id).kind == "cross_frame" else RIVETED
+
+    def _lower_bay_unbuilt(self, member: Member) -> str | None:
+        for other in self.mission.members:
+            if other.bay < member.bay and not self.is_done(other.id):
+                return (
+                    f"bay {other.bay} is not built ('{other.id}' is {STATE_NAMES[self.states[other.id]]}):"
+                    f" a member of bay {member.bay} stands on it"
+                )
+        return None
+
+    def _higher_bay_placed(self, member: Member, why: str) -> str | None:
+        for other in self.mission.members:
+            if other.bay > member.bay and self.states[other.id] != NOT_PLACED:
+                return (
+                    f"bay {other.bay} stands on bay {member.bay} ('{other.id}' is"
+                    f" {STATE_NAMES[self.states[other.id]]}): {why}"
+                )
+        return None
+
+    def check_correction(self, member_id: str, mark: str) -> str | None:
+        """Why the ground's ``mark`` of ``member_id`` is refused, or None when the model takes it."""
+        if member_id not in self._members:
+            return f"unknown member '{member_id}'"
+        if mark not in MEMBER_MARKS:
+            return f"unknown mark {mark!r} (marks: {', '.join(MEMBER_MARKS)})"
+        member, state = self._members[member_id], self.states[member_id]
+        name = STATE_NAMES[state]
+        if mark == "placed":
+            if self.is_done(member_id):
+                return f"'{member_id}' is already placed ({name})"
+            return self._lower_bay_unbuilt(member)
+        if mark == "unplaced":
+            if state == NOT_PLACED:
+                return f"'{member_id}' is already NOT_PLACED"
+            return self._higher_bay_placed(member, "unplace those first")
+        if mark == "discarded":
+            if self.is_done(member_id):
+                return f"'{member_id}' is {name} in the tower; mark it unplaced first"
+            taken = self.mission.dispensers[member.dispenser].count - self.remaining[member.dispenser]
+            if self.discarded[member.dispenser] >= taken:
+                return (
+                    f"dispenser '{member.dispenser}': {taken} part(s) taken,"
+                    f" {self.discarded[member.dispenser]} already discarded; no part of it to discard"
+                )
+            return None
+        # needs_inspection
+        if state != INSPECTED:
+            if self.is_done(member_id):
+                return f"'{member_id}' already waits for its bay's inspection ({name})"
+            return f"'{member_id}' is {name}; only an inspected member can need inspection again"
+        return self._higher_bay_placed(member, "its bay can no longer be tested")
+
+    def correct_member(self, member_id: str, mark: str) -> None:
+        """Apply the ground's ``mark`` of ``member_id``: placed (fixed in the tower: PLACED for a
+        cross frame, else RIVETED), unplaced (NOT_PLACED: the tree builds it again), discarded
+        (its part thrown away: NOT_PLACED, one more part discarded from its dispenser) or
+        needs_inspection (back from INSPECTED: the tree tests its bay again).
+        :class:`TransitionRefused` with the reason when :meth:`check_correction` refuses it."""
+        with self.lock:
+            reason = self.check_correction(member_id, mark)
+            if reason:
+                raise TransitionRefused(reason)
+            if mark in ("placed", "needs_inspection"):
+                self.states[member_id] = self.done_state(member_id)
+            else:
+                self.states[member_id] = NOT_PLACED
+            if mark == "discarded":
+                self.discarded[self._members[member_id].dispenser] += 1
+            self._commit()
+
+    def check_remaining(self, dispenser: str, remaining: Any) -> str | None:
+        """Why the ground's count of ``dispenser`` is refused, or None when the model takes it."""
+        if dispenser not in self.remaining:
+            return f"unknown dispenser '{dispenser}'"
+        if isinstance(remaining, bool) or not isinstance(remaining, int) or remaining < 0:
+            return f"a dispenser count is a whole number of parts, 0 or more, not {remaining!r}"
+        loaded, discarded = self.mission.dispensers[dispenser].count, self.discarded[dispenser]
+        if remaining > loaded - discarded:
+            return (
+                f"dispenser '{dispenser}' can hold at most {loaded - discarded} part(s)"
+                f" ({loaded} loaded, {discarded} discarded)"
+            )
+        if remaining == self.remaining[dispenser]:
+            return f"dispenser '{dispenser}' already holds {remaining} part(s)"
+        return None
+
+    def set_remaining(self, dispenser: str, remaining: int) -> None:
+        """The ground's count of the parts ``dispenser`` holds; :class:`TransitionRefused` with the
+        reason when :meth:`check_remaining` refuses it."""
+        with self.lock:
+            reason = self.check_remaining(dispenser, remaining)
+            if reason:
+                raise TransitionRefused(reason)
+            self.remaining[dispenser] = remaining
+            self._commit()
+
     # ----- ROS messages -----
     def member_states(self) -> list[Any]:
         """Every member as ``tlt_interfaces/MemberState``, in build order."""
@@ -348,6 +457,7 @@ class TowerModel:
 
 __all__ = [
     "INSPECTED",
+    "MEMBER_MARKS",
     "NOT_PLACED",
     "PLACED",
     "RIVETED",

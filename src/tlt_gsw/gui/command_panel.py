@@ -1,9 +1,13 @@
 """Command panel for the six commands of Table 1, with confirmation of the hazardous ones.
 
-Start, Stop, Pause and Resume are one button each; Set Blackboard Value takes a key and a typed
-value, Set Actuator State an actuator, one of its states and, where the actuator declares a range,
-an optional value (all from the definitions file). A command marked ``hazardous`` there (Stop, Set
-Actuator State) is sent only after the operator confirms a dialog. Sending goes through
+Start, Stop, Pause and Resume are one button each; Set Blackboard Value takes a key (completed
+from every agent's whitelist, which also picks the value's type and shows the key's range and
+meaning) and a typed value; Correct Tower Model marks a member (placed, unplaced, discarded,
+needs_inspection) or sets the parts a dispenser holds, as Set Blackboard Value of the keys of
+:mod:`tlt_common.bt.ground_keys`; Set Actuator State takes an actuator, one of its states and, for
+the states that take one, a value, offering exactly the definitions file's table, which is what
+the CRS accepts. A command marked ``hazardous`` there (Stop, Set Actuator State) is sent only
+after the operator confirms a dialog. Sending goes through
 ``sender(name, params) -> Future`` (the link thread's :meth:`LinkWorker.submit`); without a sender
 (replay, monitor-only) the panel is disabled and says why. A command that cannot be sent (bad
 parameter, link down) is reported in the panel's status line; acknowledgements appear in the
@@ -16,9 +20,12 @@ from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from typing import Any
 
-from PySide6 import QtWidgets
+from PySide6 import QtCore, QtWidgets
 
+from tlt_common.bt.ground_keys import MEMBER_MARKS, dispenser_key, load_whitelists, member_key, writable_keys
+from tlt_common.bt.writable_blackboard import KeySpec
 from tlt_common.ccsds.definitions import CommandDef, Definitions
+from tlt_common.mission.schema import Mission
 from tlt_gsw.gui.style import BAD_COLOUR, HAZARDOUS_BUTTON
 
 Sender = Callable[[str, Mapping[str, Any]], Future]
@@ -58,9 +65,15 @@ class CommandPanel(QtWidgets.QGroupBox):
         sender: Sender | None,
         disabled_reason: str = "",
         parent: QtWidgets.QWidget | None = None,
+        *,
+        mission: Mission | None = None,
+        keys: Mapping[str, KeySpec] | None = None,
     ) -> None:
+        """``keys``: the writable keys offered (default: every agent's project whitelist);
+        ``mission``: its members and dispensers are offered for corrections."""
         super().__init__("Commands", parent)
         self.defs = defs
+        self.keys = dict(keys) if keys is not None else writable_keys(load_whitelists())
         # Not ``self.sender``: that would hide QObject.sender().
         self._sender = sender
         self.pending: list[tuple[str, Future]] = []
@@ -86,7 +99,9 @@ class CommandPanel(QtWidgets.QGroupBox):
         bb = QtWidgets.QGroupBox("Set Blackboard Value")
         form = QtWidgets.QGridLayout(bb)
         self.bb_key = QtWidgets.QLineEdit()
-        self.bb_key.setPlaceholderText("key, e.g. lifter_speed")
+        self.bb_key.setPlaceholderText("key, e.g. lifter_speed or ars_x/settle_s")
+        self.bb_key.setCompleter(_completer(list(self.keys), self.bb_key))
+        self.bb_key.textChanged.connect(self._key_changed)
         self.bb_type = QtWidgets.QComboBox()
         self.bb_type.addItems(VALUE_TYPES)
         self.bb_value = QtWidgets.QLineEdit()
@@ -103,6 +118,37 @@ class CommandPanel(QtWidgets.QGroupBox):
         self.buttons["set_blackboard_value"] = send_bb
         layout.addWidget(bb)
 
+        tower = QtWidgets.QGroupBox("Correct Tower Model")
+        tgrid = QtWidgets.QGridLayout(tower)
+        self.member = QtWidgets.QLineEdit()
+        self.member.setPlaceholderText("member id, e.g. bay1/vertical/x0_y1")
+        self.mark = QtWidgets.QComboBox()
+        self.mark.addItems(MEMBER_MARKS)
+        self.dispenser = QtWidgets.QLineEdit()
+        self.dispenser.setPlaceholderText("dispenser, e.g. vertical_dispenser_x")
+        self.count = QtWidgets.QSpinBox()
+        self.count.setRange(0, 999)
+        if mission is not None:
+            self.member.setCompleter(_completer([m.id for m in mission.members], self.member))
+            self.dispenser.setCompleter(_completer(list(mission.dispensers), self.dispenser))
+        send_member = QtWidgets.QPushButton("Send")
+        send_member.setObjectName("command_correct_member")
+        send_member.clicked.connect(self._send_member)
+        send_dispenser = QtWidgets.QPushButton("Send")
+        send_dispenser.setObjectName("command_correct_dispenser")
+        send_dispenser.clicked.connect(self._send_dispenser)
+        tgrid.addWidget(QtWidgets.QLabel("Member"), 0, 0)
+        tgrid.addWidget(self.member, 0, 1)
+        tgrid.addWidget(self.mark, 0, 2)
+        tgrid.addWidget(send_member, 0, 3)
+        tgrid.addWidget(QtWidgets.QLabel("Dispenser"), 1, 0)
+        tgrid.addWidget(self.dispenser, 1, 1)
+        tgrid.addWidget(self.count, 1, 2)
+        tgrid.addWidget(send_dispenser, 1, 3)
+        self.buttons["correct_member"] = send_member
+        self.buttons["correct_dispenser"] = send_dispenser
+        layout.addWidget(tower)
+
         act = QtWidgets.QGroupBox("Set Actuator State (hazardous)")
         grid = QtWidgets.QGridLayout(act)
         self.act_name = QtWidgets.QComboBox()
@@ -114,6 +160,7 @@ class CommandPanel(QtWidgets.QGroupBox):
         send_act.setStyleSheet(HAZARDOUS_BUTTON)
         send_act.clicked.connect(self._send_actuator)
         self.act_name.currentTextChanged.connect(self._actuator_changed)
+        self.act_state.currentTextChanged.connect(self._state_changed)
         grid.addWidget(QtWidgets.QLabel("Actuator"), 0, 0)
         grid.addWidget(self.act_name, 0, 1)
         grid.addWidget(QtWidgets.QLabel("State"), 0, 2)
@@ -130,23 +177,44 @@ class CommandPanel(QtWidgets.QGroupBox):
         self.status.setWordWrap(True)
         layout.addWidget(self.status)
         if sender is None:
-            for widget in (*self.buttons.values(), bb, act):
+            for widget in (*self.buttons.values(), bb, tower, act):
                 widget.setEnabled(False)
 
     # -- forms ------------------------------------------------------------------------------
-    def _actuator_changed(self, name: str) -> None:
-        actuator = self.defs.actuators.get(name)
-        self.act_state.clear()
-        if actuator is None:
+    def _key_changed(self, key: str) -> None:
+        """A known key picks its value type and shows its range and meaning."""
+        spec = self.keys.get(key.strip())
+        if spec is None:
+            self.bb_key.setToolTip("")
             return
-        self.act_state.addItems(list(actuator.states))
-        ranged = actuator.value_minimum is not None
+        self.bb_type.setCurrentText(spec.type)
+        limits = (
+            f"one of {', '.join(map(str, spec.choices))}"
+            if spec.choices is not None
+            else " .. ".join("" if v is None else f"{v:g}" for v in (spec.minimum, spec.maximum))
+        )
+        units = f" {spec.units}" if spec.units else ""
+        shown = f"{spec.type}, {limits}{units}" if limits.strip(" .") else spec.type
+        self.bb_key.setToolTip(f"{shown}: {spec.meaning}")
+        self.bb_value.setPlaceholderText(shown)
+
+    def _actuator_changed(self, name: str) -> None:
+        self.act_state.clear()
+        actuator = self.defs.actuators.get(name)
+        if actuator is not None:
+            self.act_state.addItems(list(actuator.states))
+        self._state_changed(self.act_state.currentText())
+
+    def _state_changed(self, state: str) -> None:
+        """The value box is open only for the states that take a value (the definitions' table)."""
+        actuator = self.defs.actuators.get(self.act_name.currentText())
+        ranged = actuator is not None and state in actuator.value_states
         self.act_value.setEnabled(ranged)
         self.act_value.clear()
         self.act_value.setPlaceholderText(
-            f"optional, {actuator.value_minimum:g} .. {actuator.value_maximum:g} {actuator.unit}"
-            if ranged
-            else "no value for this actuator"
+            f"{actuator.value_minimum:g} .. {actuator.value_maximum:g} {actuator.unit}"
+            if ranged and actuator is not None and actuator.value_minimum is not None
+            else "no value for this state"
         )
 
     def blackboard_params(self) -> dict[str, Any]:
@@ -167,6 +235,34 @@ class CommandPanel(QtWidgets.QGroupBox):
             except ValueError:
                 raise ParameterError(f"value: {text!r} is not a number") from None
         return params
+
+    def member_params(self) -> dict[str, Any]:
+        member = self.member.text().strip()
+        if not member:
+            raise ParameterError("member: enter a member id")
+        return {"key": member_key(member), "value": self.mark.currentText()}
+
+    def dispenser_params(self) -> dict[str, Any]:
+        dispenser = self.dispenser.text().strip()
+        if not dispenser:
+            raise ParameterError("dispenser: enter a dispenser name")
+        return {"key": dispenser_key(dispenser), "value": self.count.value()}
+
+    def _send_member(self) -> None:
+        try:
+            params = self.member_params()
+        except ParameterError as exc:
+            self._report(f"tower correction not sent: {exc}", error=True)
+            return
+        self.send("set_blackboard_value", params)
+
+    def _send_dispenser(self) -> None:
+        try:
+            params = self.dispenser_params()
+        except ParameterError as exc:
+            self._report(f"dispenser correction not sent: {exc}", error=True)
+            return
+        self.send("set_blackboard_value", params)
 
     def _send_blackboard(self) -> None:
         try:
@@ -228,6 +324,13 @@ class CommandPanel(QtWidgets.QGroupBox):
     def _report(self, text: str, error: bool = False) -> None:
         self.status.setText(text)
         self.status.setStyleSheet(f"color: {BAD_COLOUR}; font-weight: bold;" if error else "")
+
+
+def _completer(words: list[str], parent: QtWidgets.QWidget) -> QtWidgets.QCompleter:
+    completer = QtWidgets.QCompleter(words, parent)
+    completer.setCaseSensitivity(QtCore.Qt.CaseSensitivity.CaseInsensitive)
+    completer.setFilterMode(QtCore.Qt.MatchFlag.MatchContains)
+    return completer
 
 
 __all__ = ["CommandPanel", "ParameterError", "parse_typed_value"]

@@ -97,7 +97,7 @@ class MainWindow(QtWidgets.QMainWindow):
         split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
         reason = disabled_reason or ("replay: commands are not sent" if replay else "")
-        self.command_panel = CommandPanel(model.defs, None if replay else sender, reason)
+        self.command_panel = CommandPanel(model.defs, None if replay else sender, reason, mission=mission)
         self.command_history = CommandHistory()
         history_box = QtWidgets.QGroupBox("Command history")
         QtWidgets.QVBoxLayout(history_box).addWidget(self.command_history)

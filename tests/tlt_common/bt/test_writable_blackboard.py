@@ -8,6 +8,14 @@ import py_trees
 import pytest
 from tlt_interfaces.msg import BlackboardValue
 
+from tlt_common.bt.ground_keys import (
+    GroundKey,
+    dispenser_key,
+    load_whitelists,
+    member_key,
+    route,
+    writable_keys,
+)
 from tlt_common.bt.writable_blackboard import WritableBlackboard
 from tlt_common.config_schema import ConfigError
 
@@ -106,6 +114,12 @@ def test_namespace(tmp_path):
         ("keys:\n  a: {type: int, meaning: m, default: x}\n", "keys.a", "default 'x'"),
         ("keys:\n  a: {type: bool, meaning: m, colour: red}\n", "keys.a.colour", "unknown key"),
         ("keys:\n  a/b: {type: bool, meaning: m}\n", "keys.a/b", "without '/'"),
+        (
+            "keys:\n  a: {type: int, meaning: m, writable: true, config: arm}\n",
+            "keys.a",
+            "config 'arm' is not 'section.name'",
+        ),
+        ("keys:\n  a: {type: int, meaning: m, config: arm.x}\n", "keys.a", "writable keys only"),
     ],
 )
 def test_bad_registry_files_name_file_key_reason(tmp_path, text, key, reason):
@@ -116,3 +130,26 @@ def test_bad_registry_files_name_file_key_reason(tmp_path, text, key, reason):
     assert err.value.source == str(path)
     assert err.value.key == key
     assert reason in err.value.reason
+
+
+def test_every_agents_project_whitelist_loads_and_routes_its_keys():
+    whitelists = load_whitelists()
+    assert set(whitelists) == {"crs", "ars_x", "ars_y"}
+    keys = writable_keys(whitelists)
+    assert "lifter_speed" in keys and "ars_x/settle_s" in keys and "ars_y/motion_attempts" in keys
+    assert "started" not in keys  # read-only
+    assert all(spec.config for key, spec in keys.items() if route(key).agent != "crs")
+    assert route("ars_y/settle_s") == GroundKey("ars_y", "settle_s")
+    assert route("crs/lifter_speed") == route("lifter_speed") == GroundKey("crs", "lifter_speed")
+    assert route(member_key("bay1/vertical/x0_y1")) == GroundKey("tower", "bay1/vertical/x0_y1")
+    assert route(dispenser_key("rivet_dispenser_x")) == GroundKey("dispenser", "rivet_dispenser_x")
+    assert route("tower/bay1/cross_frame").agent is None
+
+
+def test_a_bad_agent_whitelist_names_its_file(tmp_path):
+    path = tmp_path / "ars.yaml"
+    path.write_text("keys:\n  settle_s: {type: float, writable: true, meaning: m, minimum: 2, maximum: 1}\n")
+    with pytest.raises(ConfigError) as err:
+        load_whitelists({"ars_x": path})
+    assert (err.value.source, err.value.key) == (str(path), "keys.settle_s")
+    assert "above maximum" in err.value.reason

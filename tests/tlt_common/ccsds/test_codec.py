@@ -70,7 +70,7 @@ COMMAND_PARAMS = {
     ],
     "set_actuator_state": [
         {"actuator": "lifter", "state": "safe"},
-        {"actuator": "active_grippers", "state": "move", "value": 0.3},
+        {"actuator": "camera_mounts", "state": "move", "value": 0.3},
     ],
 }
 CASES = [(n, p) for n, ps in COMMAND_PARAMS.items() for p in (ps if isinstance(ps, list) else [ps])]
@@ -226,6 +226,18 @@ def test_command_rejections_have_reasons():
         (
             "set_actuator_state",
             {"actuator": "lifter", "state": "safe", "value": float("nan")},
+            Reason.BAD_PARAMETER_RANGE,
+        ),
+        # the table's value states: move needs its value, the other states of the mounts take none
+        ("set_actuator_state", {"actuator": "camera_mounts", "state": "move"}, Reason.BAD_PARAMETER_RANGE),
+        (
+            "set_actuator_state",
+            {"actuator": "camera_mounts", "state": "stow", "value": 0.2},
+            Reason.BAD_PARAMETER_RANGE,
+        ),
+        (
+            "set_actuator_state",
+            {"actuator": "camera_mounts", "state": "move", "value": 4.0},
             Reason.BAD_PARAMETER_RANGE,
         ),
         ("set_blackboard_value", {"key": "9 not a key", "value": 1}, Reason.BAD_PARAMETER_RANGE),

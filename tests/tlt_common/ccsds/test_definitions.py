@@ -118,6 +118,16 @@ def _broken(raw_doc, change):
         ),
         (lambda d: d["telemetry"].pop("ack"), "telemetry.ack", "missing required packet"),
         (lambda d: d["telemetry"]["hk_tower"].update(apid=0x010), "telemetry.hk_tower.apid", "command APID"),
+        (
+            lambda d: d["actuators"]["camera_mounts"]["value"].update(states=["warp"]),
+            "actuators.camera_mounts.value.states",
+            "not states of camera_mounts: warp",
+        ),
+        (
+            lambda d: d["actuators"]["lifter"].update(states=["safe", "safe"]),
+            "actuators.lifter.states",
+            "duplicate state",
+        ),
     ],
 )
 def test_errors_name_file_key_and_reason(raw_doc, change, key, words):

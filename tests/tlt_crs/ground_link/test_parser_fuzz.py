@@ -33,7 +33,7 @@ VALID = [
     ("resume", {}),
     ("set_blackboard_value", {"key": "speed", "value": 0.5}),
     ("set_blackboard_value", {"key": "note", "value": "hello"}),
-    ("set_actuator_state", {"actuator": "active_grippers", "state": "move", "value": 0.25}),
+    ("set_actuator_state", {"actuator": "camera_mounts", "state": "move", "value": 0.25}),
     ("set_actuator_state", {"actuator": "lifter", "state": "safe"}),
 ]
 

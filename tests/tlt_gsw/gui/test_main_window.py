@@ -137,6 +137,51 @@ def test_declined_confirmation_and_bad_parameters_send_nothing(gui, qapp):
     assert crs.handled == [] and window.command_history.rowCount() == 0
 
 
+def test_a_tower_correction_is_sent_and_the_refusal_shows_why(gui):
+    window, crs, until = gui
+    panel = window.command_panel
+    left = QtCore.Qt.MouseButton.LeftButton
+    # The mission's members and dispensers are offered.
+    assert panel.member.completer().model().rowCount() == len(TWO_BAY.members)
+    panel.member.setText("bay1/vertical/x0_y1")
+    panel.mark.setCurrentText("discarded")
+    QTest.mouseClick(panel.buttons["correct_member"], left)
+    until(lambda: history(window).get("set_blackboard_value", [""])[0] == "sent → rejected")
+    assert history(window)["set_blackboard_value"][1:] == [
+        "refused",
+        "tower/bay1/vertical/x0_y1 is not ground-writable",
+    ]
+    panel.dispenser.setText("vertical_dispenser_x")
+    panel.count.setValue(3)
+    QTest.mouseClick(panel.buttons["correct_dispenser"], left)
+    until(lambda: len(window.command_history.row_texts()) == 2)
+    shown = [row[5] for row in window.command_history.row_texts()]
+    assert "key=dispenser/vertical_dispenser_x, value=3" in shown, shown
+    assert "key=tower/bay1/vertical/x0_y1, value=discarded" in shown, shown
+    assert crs.handled == []  # both refused on arrival
+    panel.member.clear()
+    QTest.mouseClick(panel.buttons["correct_member"], left)
+    assert "not sent: member: enter a member id" in panel.status.text()
+
+
+def test_the_forms_offer_exactly_the_definitions_and_every_agents_keys(gui):
+    window, _crs, _until = gui
+    panel = window.command_panel
+    assert [panel.act_name.itemText(i) for i in range(panel.act_name.count())] == list(DEFS.actuators)
+    for actuator in DEFS.actuators.values():
+        panel.act_name.setCurrentText(actuator.name)
+        assert [panel.act_state.itemText(i) for i in range(panel.act_state.count())] == list(actuator.states)
+        for state in actuator.states:
+            panel.act_state.setCurrentText(state)
+            assert panel.act_value.isEnabled() == (state in actuator.value_states), (actuator.name, state)
+    panel.bb_key.setText("ars_x/motion_attempts")
+    assert panel.bb_type.currentText() == "int"
+    assert "1 .. 5" in panel.bb_key.toolTip() and "Tries of a failed motion" in panel.bb_key.toolTip()
+    panel.bb_key.setText("lifter_speed")
+    assert panel.bb_type.currentText() == "float" and "m/s" in panel.bb_key.toolTip()
+    assert {"lifter_speed", "ars_x/settle_s", "ars_y/fire_s"} <= set(panel.keys)
+
+
 def test_telemetry_views_show_what_the_crs_sends(gui, tmp_path):
     window, crs, until = gui
     link = crs.link
