@@ -477,7 +477,9 @@ class Assembly:
             )  # fmt: skip
             if failed is None and target.end is not None:
                 part, end, cf, corner = target.end
-                if self.rivet(part, end, cf, corner, kind) is not None:
+                # The head faces the gun: the fitting's side towards the EE's flange.
+                facing = -self.body_pose(names.ee_body(arm))[1][:, 2]
+                if self.rivet(part, end, cf, corner, kind, facing) is not None:
                     shot.joined.append(target.equality)
             elif failed is None:
                 cf, corner = target.corner
@@ -489,6 +491,7 @@ class Assembly:
             if failed is None or target.equality not in self.rivet_joints:
                 self.rivet_joints[target.equality] = record
         self._settle_parts()
+        mujoco.mj_kinematics(self.m, self.d)  # the heads where the shot left them, for a frame now
         return shot
 
     def _rivet_targets(self, arm: str, side: str) -> list[_Target]:
@@ -600,17 +603,25 @@ class Assembly:
         return True
 
     def rivet(
-        self, part: PartInfo, end: str, cross_frame: str, corner: int, kind: str = "good"
+        self,
+        part: PartInfo,
+        end: str,
+        cross_frame: str,
+        corner: int,
+        kind: str = "good",
+        facing: np.ndarray | None = None,
     ) -> str | None:
         """Join ``part``'s ``end`` to ``cross_frame`` at ``corner`` as they lie now, as a rivet of
-        outcome ``kind`` does (:data:`~tlt_sim.model.rivet_outcomes.EFFECTS`), and show its head.
+        outcome ``kind`` does (:data:`~tlt_sim.model.rivet_outcomes.EFFECTS`), and show its head on
+        the side of the fitting ``facing`` (world) points to (where the generator put it: None).
         Returns the weld's name, or None if nothing was joined anew (joined well already, or a kind
         that joins nothing)."""
         name = f"rivet/{part.body}/{cross_frame}"
         if self._well_joined(name):
             return None
         effect = EFFECTS[kind]
-        self.heads.show(part.body, end, effect.head)
+        local = None if facing is None else self.body_pose(part.body)[1].T @ facing
+        self.heads.show(part.body, end, effect.head, local)
         if not effect.joins:
             self.switch_off(name)
             return None

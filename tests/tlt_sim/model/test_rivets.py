@@ -50,6 +50,15 @@ def _shoot(scene, mover, offset=(0.0, 0.0, 0.0), tilt_deg=0.0, load=True):
     return scene.fire_rivet(ARM, GUN)
 
 
+def _from_the_fitting(scene, part, head, fitting):
+    """How far the head's centre stands out from the axis of its end fitting, and along it (m)."""
+    axis = np.zeros(9)
+    mujoco.mju_quat2Mat(axis, fitting.quat)
+    axis = axis.reshape(3, 3)[:, 2]
+    d = head.pos - fitting.pos
+    return float(np.linalg.norm(d - (d @ axis) * axis)), float(d @ axis)
+
+
 def _scene_with(tmp_path, faults):
     mission = load_mission(REPO_ROOT / "missions" / "one_bay.yaml")
     scenario = parse_scenario({"name": "rivets", "faults": faults}, mission)
@@ -94,7 +103,7 @@ def test_an_injected_fault_spoils_its_joint_and_a_second_shot_repairs_it(tmp_pat
     part, weld = _bay_but_one_rivet(scene)
     end = _end_at(scene, part, JOINT)
     head, shank = (scene.model.geom(f"{part.body}/rivet_{end}{s}") for s in ("", "#1"))
-    seated = head.pos.copy()
+    fitting = scene.model.geom(f"{part.body}/fitting_{end}")
     effect = EFFECTS[kind]
 
     shot = _shoot(scene, mover)
@@ -109,10 +118,13 @@ def test_an_injected_fault_spoils_its_joint_and_a_second_shot_repairs_it(tmp_pat
         assert _solref(scene, weld) == scene.edu["rivets"][effect.softer]
     assert (head.group == RIVET_GROUP) == (effect.head is not None)
     assert (shank.group == RIVET_GROUP) == (effect.head in ("proud", "partial"))
-    moved = float(np.linalg.norm(head.pos - seated))
-    expected = {"proud": "proud_height", "partial": "partial_grip_height", "wrong_hole": "wrong_hole_offset"}
-    want = scene.edu["rivets"][expected[effect.head]] if effect.head in expected else 0.0
-    assert moved == pytest.approx(want, abs=1e-9)
+    rivets, radius = scene.edu["rivets"], scene.edu["parts"]["fitting_radius"]
+    out, along = _from_the_fitting(scene, part, head, fitting)
+    rise = {"proud": rivets["proud_height"], "partial": rivets["partial_grip_height"]}.get(effect.head, 0.0)
+    assert out == pytest.approx(radius + rise, abs=1e-9)
+    assert abs(along) == pytest.approx(
+        rivets["wrong_hole_offset"] if effect.head == "wrong_hole" else 0.0, abs=1e-9
+    )
 
     # A second shot at the joint (a new rivet unless the old one is still in the gun) sets it well.
     again = _shoot(scene, mover, load=kind != "misfire")
@@ -121,7 +133,10 @@ def test_an_injected_fault_spoils_its_joint_and_a_second_shot_repairs_it(tmp_pat
     assert again.joined == [weld] and scene.data.eq_active[scene.assembly.eq[weld]]
     assert _solref(scene, weld) == scene.edu["physics"]["rivet_solref"]
     assert head.group == RIVET_GROUP and shank.group == HIDDEN_GROUP
-    assert np.allclose(head.pos, seated)
+    assert _from_the_fitting(scene, part, head, fitting) == pytest.approx((radius, 0.0), abs=1e-9)
+    # on the fitting's side towards the EE that fired it, where its camera sees it
+    toward = scene.data.geom_xpos[head.id] - scene.data.geom_xpos[fitting.id]
+    assert float(toward @ -scene.body_pose(names.ee_body(ARM))[1][:, 2]) > 0.7 * radius
     scene.close()
 
 
