@@ -269,3 +269,29 @@ def test_a_failed_joint_gives_more_under_the_bay_compression_test(scene, kind):
 def test_staging_refuses_a_rivet_kind_at_a_joint_the_bay_has_no_rivet_at(scene):
     with pytest.raises(ValueError, match="no rivet at bay1/vertical/x0_y0 bay1/x1_y1"):
         scene.stage_bay(1, rivet_kinds={(MEMBER, "bay1/x1_y1"): "loose"})
+
+
+def _lifter_push(scene, rise_m=0.002, settle_s=1.0):
+    """The Test Bay's push as the CRS makes it: each carriage commanded ``rise_m`` up, the Top
+    Grippers holding the frame above; returns how far each carriage's encoder says it went (m)."""
+    lifter = [names.lifter_joint(i) for i in range(4)]
+    scene.advance(0.3)
+    start = [scene.position(j) for j in lifter]
+    for joint, q in zip(lifter, start, strict=True):
+        scene.command_position(joint, q + rise_m)
+    scene.advance(settle_s)
+    return np.array([scene.position(j) - q for j, q in zip(lifter, start, strict=True)])
+
+
+@pytest.mark.parametrize("kind", ["loose", "proud_head", "wrong_hole"])
+def test_the_lifters_own_encoders_show_a_bad_joint_under_the_test_bays_push(scene, kind):
+    """The carriages are position-servoed against the bay: where the bay gives more, its carriage
+    gets further. Corner 0's carriage (under the bad joint, x0_y0) runs on past the others."""
+    scene.stage_bay(1)
+    good = _lifter_push(scene)
+    assert np.ptp(good) < 1e-5 and good.min() > 0.0005  # four equal corners
+    scene.reset()
+    scene.stage_bay(1, rivet_kinds={(MEMBER, JOINT): kind})
+    bad = _lifter_push(scene)
+    assert int(np.argmax(bad)) == 0
+    assert bad[0] - good[0] > 0.00015  # 30 encoder counts at 200 000 counts per m
