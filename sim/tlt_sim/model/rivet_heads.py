@@ -44,10 +44,6 @@ class RivetHeads:
                 self._ends[(part.body, end)] = (head, shank, centre, along / np.linalg.norm(along))
         self.reset()
 
-    def has(self, body: str, end: str) -> bool:
-        """Whether ``end`` of part ``body`` has a fitting, and so a hole to rivet."""
-        return (body, end) in self._ends
-
     def reset(self) -> None:
         """Every head hidden, back where a good rivet seats."""
         for key in self._ends:
