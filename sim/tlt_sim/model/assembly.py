@@ -14,10 +14,14 @@ and switched on here with the bodies' pose at that instant, so nothing jumps:
 * a rivet gun loads when its muzzle is inserted at a rivet dispenser's pickup that has rivets left.
 * rivet ``rivet/<strut>/<cf>`` (weld): when a loaded rivet gun fires with a strut end and a cross
   frame corner both within ``rivet_reach`` of the gun; ``foundation/<i>/<cf>`` when a corner is at
-  the foundation pad instead.
+  the foundation pad instead. Each joint the shot reaches turns out as where the gun stands and the
+  scenario's rivet faults say (:mod:`tlt_sim.model.rivet_outcomes`): good, a softer weld, or none;
+  its head shows accordingly (:mod:`tlt_sim.model.rivet_heads`) and the outcome is recorded
+  (:attr:`Assembly.rivet_joints`, the twin's truth).
 
 Scenario faults act here too: a grasp that slips lets go after its time, a part taken off-centre
-sits in the grasp with its offset (and so is placed out of tolerance).
+sits in the grasp with its offset (and so is placed out of tolerance), a rivet fault spoils the
+joint of its shot.
 """
 
 from __future__ import annotations
@@ -29,7 +33,9 @@ import numpy as np
 
 from tlt_common.geometry.transforms import rotation_to_mujoco_quat
 from tlt_sim.model import names
-from tlt_sim.model.generate import HIDDEN_GROUP, PART_BIT, RIVET_GROUP, ModelInfo, PartInfo
+from tlt_sim.model.generate import PART_BIT, ModelInfo, PartInfo
+from tlt_sim.model.rivet_heads import RivetHeads
+from tlt_sim.model.rivet_outcomes import EFFECTS, SHOT_KINDS, RivetJoint, bar_angle_deg, judge_geometry
 
 _PARALLEL_COS = np.cos(np.radians(20.0))
 # Jaw angles (rad) short of the contact angle at which they count as closed on a part, and as
@@ -62,6 +68,7 @@ class RivetShot:
     time: float
     loaded: bool
     joined: list[str] = field(default_factory=list)  # equality names switched on
+    outcomes: list[RivetJoint] = field(default_factory=list)  # each joint the shot reached
 
 
 @dataclass(frozen=True)
@@ -91,6 +98,8 @@ class Assembly:
         self._jaw_range = {
             (arm, s): int(model.joint(names.grasp_joint(arm, s)).id) for arm in names.ARMS for s in ("a", "b")
         }
+        self.heads = RivetHeads(model, info, info.edu)
+        self._solref0 = model.eq_solref.copy()  # as built: a good rivet's, the holds'
         self.reset()
 
     # -- state -------------------------------------------------------------------------------
@@ -111,6 +120,11 @@ class Assembly:
         }
         self.state = dict.fromkeys(self.info.parts, "stowed")  # stowed, grasped, placed, dropped
         self.shots: list[RivetShot] = []
+        self.rivet_joints: dict[str, RivetJoint] = {}  # equality name -> the joint's latest outcome
+        self.rivet_log: list[RivetJoint] = []  # every outcome as it comes (the twin takes them)
+        self._shots_at: dict[str, int] = {}  # equality name -> shots that reached it
+        self.m.eq_solref[:] = self._solref0
+        self.heads.reset()
         self.releases: list[Release] = []  # the twin takes them as they come (Twin.tick)
         self._watch()
         self._pending = True  # evaluate the rules once on the next update whatever moved
@@ -118,10 +132,6 @@ class Assembly:
             self.m.jnt_range[jid, 1] = self.ee["jaw_range"][1]
         for part in self.info.parts.values():
             self._set_falling(part, False)
-            for end in ("a", "b"):
-                gid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"{part.body}/rivet_{end}")
-                if gid >= 0:
-                    self.m.geom_group[gid] = HIDDEN_GROUP
 
     def q(self, joint: str) -> float:
         return float(self.d.qpos[self._qadr[joint]])
@@ -174,6 +184,14 @@ class Assembly:
         for k, b in ((0, b1), (3, b2)):
             self.m.eq_data[i, k : k + 3] = self.d.xmat[b].reshape(3, 3).T @ (point - self.d.xpos[b])
         self.d.eq_active[i] = 1
+
+    def slip(self, name: str) -> float:
+        """How far (m) the two points equality ``name`` holds together stand apart now (0 when it
+        is inactive): a soft weld or connect giving under load."""
+        i = self.eq[name]
+        equality = self.d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+        rows = np.nonzero(equality & (self.d.efc_id == i))[0]
+        return float(np.linalg.norm(self.d.efc_pos[rows[:3]])) if len(rows) else 0.0
 
     def switch_off(self, name: str) -> None:
         """Lift equality ``name``: the bodies it joined move apart freely again."""
@@ -423,14 +441,66 @@ class Assembly:
         return False
 
     def fire_rivet(self, arm: str, side: str) -> RivetShot:
-        """Trigger gun ``side``: rivet every strut end and cross frame corner at the gun together."""
+        """Trigger gun ``side``: rivet every strut end and cross frame corner at the gun together
+        (a foundation corner when no strut end is left to rivet there), each joint as its outcome
+        says. An end already joined well is not riveted again; one an earlier rivet left bad is,
+        anew, by a shot that finds nothing new to rivet (:meth:`_rivet_targets`)."""
         shot = RivetShot(arm, side, float(self.d.time), self.loaded[(arm, side)])
         self.shots.append(shot)
         if not shot.loaded:
             return shot
-        self.loaded[(arm, side)] = False
-        self._show_loaded_rivet(arm, side, False)
+        targets = self._rivet_targets(arm, side)
+        plan = self.info.scenario.rivets
+        numbers = [self._shots_at.get(t.equality, 0) + 1 for t in targets]
+        injected = [
+            plan.injected(t.member, t.joint, n) if t.member else None
+            for t, n in zip(targets, numbers, strict=True)
+        ]
+        failed = next((k for k in injected if k in SHOT_KINDS), None)
+        if failed is None or EFFECTS[failed].spent:
+            self.loaded[(arm, side)] = False
+            self._show_loaded_rivet(arm, side, False)
+        if failed == "no_rivet":
+            shot.loaded = False  # the rivet had left the gun before it fired
+        for target, number, fault in zip(targets, numbers, injected, strict=True):
+            self._shots_at[target.equality] = number
+            if failed is not None:
+                kind, cause, reason = failed, "injected", f"the whole shot: {failed}"
+            elif fault is not None:
+                kind, cause, reason = fault, "injected", "scenario"
+            else:
+                kind, reason = judge_geometry(target.offset_m, target.angle_deg, self.info.edu["rivets"])
+                cause = "geometry"
+            record = RivetJoint(
+                target.member, target.joint, target.equality, kind, cause, reason, number,
+                arm, side, shot.time, target.offset_m, target.angle_deg,
+            )  # fmt: skip
+            if failed is None and target.end is not None:
+                part, end, cf, corner = target.end
+                # The head faces the gun: the fitting's side towards the EE's flange.
+                facing = -self.body_pose(names.ee_body(arm))[1][:, 2]
+                if self.rivet(part, end, cf, corner, kind, facing) is not None:
+                    shot.joined.append(target.equality)
+            elif failed is None:
+                cf, corner = target.corner
+                if self._join_foundation(target.equality, self.site_pos(names.corner_site(cf, corner)), kind):
+                    shot.joined.append(target.equality)
+            shot.outcomes.append(record)
+            self.rivet_log.append(record)
+            # A shot that set no rivet leaves the joint as an earlier rivet left it.
+            if failed is None or target.equality not in self.rivet_joints:
+                self.rivet_joints[target.equality] = record
+        self._settle_parts()
+        mujoco.mj_kinematics(self.m, self.d)  # the heads where the shot left them, for a frame now
+        return shot
+
+    def _rivet_targets(self, arm: str, side: str) -> list[_Target]:
+        """The joints a shot of gun ``side`` of ``arm`` reaches, as it stands now: strut ends at the
+        gun that no rivet reached yet, riveted to the frame whose corner is there; else joints at the
+        gun an earlier rivet left bad (a second shot); else a corner on a foundation pad. A later
+        member's shot at a corner so leaves an earlier member's bad joint there as it is."""
         gun = self.site_pos(names.rivet_gun_site(arm, side))
+        bar = self.grasp_line(arm)[1]
         reach = self.ee["rivet_reach"]
         corners = [
             (cf, i)
@@ -438,43 +508,147 @@ class Assembly:
             for i in range(4)
             if np.linalg.norm(self.site_pos(names.corner_site(cf, i)) - gun) <= reach
         ]
-        # Strut ends at the gun not yet riveted to the frame whose corner is there.
-        ends = [
-            (part, end, cf, i)
-            for part in self.info.parts.values()
-            if part.kind != "cross_frame" and self.state[part.name] != "stowed"
-            for end, local in part.ends.items()
-            if np.linalg.norm(self.part_point(part, local) - gun) <= reach
-            for cf, i in corners
-            if not self.d.eq_active[self.eq[f"rivet/{part.body}/{cf}"]]
-        ]
-        for part, end, cf, i in ends:
-            name = self.rivet(part, end, cf, i)
-            if name is not None:
-                shot.joined.append(name)
-        if not ends:  # nothing left to join to the frame here: a foundation rivet, if on a pad
-            top = self.info.edu["site"]["foundation_top"]
-            for cf, i in corners:
-                pad = np.array([*_corner_xy(self.info, i), top])
-                name = f"foundation/{i}/{cf}"
-                near = np.linalg.norm(self.site_pos(names.corner_site(cf, i)) - pad) <= reach
-                if near and not self.d.eq_active[self.eq[name]]:
-                    self.connect(name, self.site_pos(names.corner_site(cf, i)))
-                    shot.joined.append(name)
-        self._settle_parts()
-        return shot
+        fresh: list[_Target] = []
+        again: list[_Target] = []
+        for part in self.info.parts.values():
+            if part.kind == "cross_frame" or self.state[part.name] == "stowed":
+                continue
+            for end, local in part.ends.items():
+                point = self.part_point(part, local)
+                if np.linalg.norm(point - gun) > reach:
+                    continue
+                for cf, i in corners:
+                    name = f"rivet/{part.body}/{cf}"
+                    if self._well_joined(name):
+                        continue
+                    joint = self._mission_joint(self.site_pos(names.corner_site(cf, i)))
+                    axis = self.part_point(part, part.ends["b"]) - self.part_point(part, part.ends["a"])
+                    target = _Target(
+                        name, self._member_at(part, end, joint), joint,
+                        float(np.linalg.norm(point - gun)), bar_angle_deg(bar, axis), (part, end, cf, i),
+                    )  # fmt: skip
+                    (again if name in self.rivet_joints else fresh).append(target)
+        top = self.info.edu["site"]["foundation_top"]
+        pads: list[_Target] = []
+        for cf, i in corners:
+            pad = np.array([*_corner_xy(self.info, i), top])
+            corner = self.site_pos(names.corner_site(cf, i))
+            name = f"foundation/{i}/{cf}"
+            if np.linalg.norm(corner - pad) <= reach and not self._well_joined(name):
+                joint = self._mission_joint(corner)
+                member = next(
+                    (
+                        m.id
+                        for m in self.info.mission.members
+                        if m.kind == "foundation_rivet" and m.joints[0][0] == joint
+                    ),
+                    "",
+                )
+                offset = float(np.linalg.norm(corner - gun))
+                angle = bar_angle_deg(bar, self.body_pose(cf)[1][:, 2])  # the tower axis
+                target = _Target(name, member, joint, offset, angle, corner=(cf, i))
+                (again if name in self.rivet_joints else pads).append(target)
+        return fresh or again or pads
 
-    def rivet(self, part: PartInfo, end: str, cross_frame: str, corner: int) -> str | None:
-        """Join ``part``'s ``end`` to ``cross_frame`` at ``corner`` as they lie now, and show the rivet.
-        Returns the weld's name, or None if they were already joined."""
+    def _well_joined(self, name: str) -> bool:
+        record = self.rivet_joints.get(name)
+        return bool(self.d.eq_active[self.eq[name]]) and (record is None or record.good)
+
+    def _mission_joint(self, point: np.ndarray) -> str:
+        """The mission's joint at world ``point`` on the tower as it stands ('' if none is near)."""
+        pos, rot = self.body_pose("payload")
+        best, dist = "", self.ee["rivet_reach"]
+        for joint, local in self.info.mission.joints.items():
+            d = float(np.linalg.norm(pos + rot @ np.asarray(local, dtype=float) - point))
+            if d <= dist:
+                best, dist = joint, d
+        return best
+
+    def _member_at(self, part: PartInfo, end: str, joint: str) -> str:
+        """The mission's member of ``part``'s kind that ``part`` stands as, its ``end`` at ``joint``
+        ('' if it stands as none): of the members riveted there, the one whose other joint lies
+        nearest its other end."""
+        if not joint:
+            return ""
+        other = self.part_point(part, part.ends["b" if end == "a" else "a"])
+        best, dist = "", 2 * self.ee["rivet_reach"]
+        for member in self.info.mission.members:
+            points = dict(member.joints)
+            if member.kind != part.kind or joint not in points:
+                continue
+            for far in points:
+                if far != joint:
+                    d = float(np.linalg.norm(self._tower_point(points[far]) - other))
+                    if d <= dist:
+                        best, dist = member.id, d
+        return best
+
+    def _tower_point(self, local: tuple[float, float, float]) -> np.ndarray:
+        pos, rot = self.body_pose("payload")
+        return pos + rot @ np.asarray(local, dtype=float)
+
+    def _set_solref(self, name: str, kind: str) -> None:
+        i = self.eq[name]
+        softer = EFFECTS[kind].softer
+        self.m.eq_solref[i] = self._solref0[i] if softer is None else self.info.edu["rivets"][softer]
+
+    def _join_foundation(self, name: str, point: np.ndarray, kind: str) -> bool:
+        """Connect a frame corner to its foundation pad at ``point`` as ``kind`` leaves it; True if
+        joined."""
+        if not EFFECTS[kind].joins:
+            self.switch_off(name)
+            return False
+        self._set_solref(name, kind)
+        self.connect(name, point)
+        return True
+
+    def rivet(
+        self,
+        part: PartInfo,
+        end: str,
+        cross_frame: str,
+        corner: int,
+        kind: str = "good",
+        facing: np.ndarray | None = None,
+    ) -> str | None:
+        """Join ``part``'s ``end`` to ``cross_frame`` at ``corner`` as they lie now, as a rivet of
+        outcome ``kind`` does (:data:`~tlt_sim.model.rivet_outcomes.EFFECTS`), and show its head on
+        the side of the fitting ``facing`` (world) points to (where the generator put it: None).
+        Returns the weld's name, or None if nothing was joined anew (joined well already, or a kind
+        that joins nothing)."""
         name = f"rivet/{part.body}/{cross_frame}"
-        gid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"{part.body}/rivet_{end}")
-        if gid >= 0:
-            self.m.geom_group[gid] = RIVET_GROUP
-        if self.d.eq_active[self.eq[name]]:
+        if self._well_joined(name):
             return None
+        effect = EFFECTS[kind]
+        local = None if facing is None else self.body_pose(part.body)[1].T @ facing
+        self.heads.show(part.body, end, effect.head, local)
+        if not effect.joins:
+            self.switch_off(name)
+            return None
+        self._set_solref(name, kind)
         self._weld(name, self.site_pos(names.corner_site(cross_frame, corner)))
         return name
+
+    def record_joint(self, record: RivetJoint) -> None:
+        """Note a joint's outcome made without a shot (a staged rivet)."""
+        self._shots_at[record.equality] = record.shot
+        self.rivet_joints[record.equality] = record
+        self.rivet_log.append(record)
+
+
+@dataclass(frozen=True)
+class _Target:
+    """A joint a shot reaches: its equality, mission member and joint ('' where unknown), the gun's
+    offset from the hole and its bar's angle to the member's axis; a strut end (part, end, frame,
+    corner) or a foundation corner (frame, corner)."""
+
+    equality: str
+    member: str
+    joint: str
+    offset_m: float
+    angle_deg: float
+    end: tuple[PartInfo, str, str, int] | None = None
+    corner: tuple[str, int] = ("", 0)
 
 
 def _corner_xy(info: ModelInfo, i: int) -> tuple[float, float]:

@@ -28,7 +28,7 @@ _CLASS_PATTERNS = (
     (re.compile(r"/fitting_[ab]$"), "end_fitting"),
     (re.compile(r"/side_\d$"), "cross_frame"),
     (re.compile(r"/corner_\d$"), "corner_joint"),
-    (re.compile(r"/rivet_\w+$"), "rivet"),
+    (re.compile(r"/rivet_\w+(#\d+)?$"), "rivet"),
     (re.compile(r"/tag$"), "apriltag"),
 )
 

@@ -2,13 +2,15 @@
 
 The lifter's push reaches the bottom cross frame through the Active Grippers; here it is a force
 on that frame while the latches' constraints are lifted, so that the bay's struts and rivets carry
-all of it. The result is the frame's displacement along the tower axis, and so the bay's stiffness.
+all of it. The result is the frame's displacement along the tower axis, and so the bay's stiffness,
+and how far each rivet joint slips under the load (the twin's truth of each joint's share: a rivet
+that did not seat or a loose joint slips measurably more than a good one).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from tlt_sim.model import names
 from tlt_sim.model.assembly import Assembly
@@ -20,6 +22,7 @@ class CompressionResult:
     displacement_m: float  # bottom cross frame towards the top one, under the force
     top: str
     bottom: str
+    slips_m: dict[str, float] = field(default_factory=dict)  # rivet equality -> slip under the load
 
     @property
     def stiffness_n_per_m(self) -> float:
@@ -54,12 +57,13 @@ def compression_test(
     try:
         step(settle_s)
         after = data.xpos[b].copy() - assembly.body_pose(top)[0]
+        slips = {name: assembly.slip(name) for name in assembly.active("rivet/")}
     finally:
         data.xfrc_applied[b, :] = 0.0
     step(settle_s)
     for i, name in latched:
         assembly.connect(name, assembly.site_pos(names.corner_site(bottom, i)))
-    return CompressionResult(force_n, float((after - before) @ axis), top, bottom)
+    return CompressionResult(force_n, float((after - before) @ axis), top, bottom, slips)
 
 
 __all__ = ["CompressionResult", "compression_test"]

@@ -3,7 +3,9 @@
 :func:`load_edu` reads the file, checks every key (type, range, unknown keys) with
 ``tlt_common.config_schema`` and then checks the machine against the mission geometry: the lifter
 travel covers a whole bay, the end effector can widen to a diagonal, the posts reach above the
-top grippers. Any problem raises ``ConfigError`` naming the file, the dotted key and the reason.
+top grippers; and the rivets' tolerances and failure shapes against the gun and the parts (a
+tolerance inside the gun's reach, a wrong hole on the fitting, a bad joint softer than a good one).
+Any problem raises ``ConfigError`` naming the file, the dotted key and the reason.
 """
 
 from __future__ import annotations
@@ -154,6 +156,18 @@ SCHEMA = {
             "rivet_radius": _pos(),
         },
     ),
+    "rivets": Field(
+        "dict",
+        schema={
+            "max_offset": _pos(doc="m, gun muzzle to the hole"),
+            "max_angle_deg": _pos(maximum=90.0),
+            "proud_height": _pos(),
+            "partial_grip_height": _pos(),
+            "wrong_hole_offset": _pos(),
+            "unseated_solref": SOLREF,
+            "loose_solref": SOLREF,
+        },
+    ),
     "dispensers": Field(
         "dict",
         schema={
@@ -235,10 +249,46 @@ def check_against_mission(edu: dict[str, Any], mission: Mission, source: str) ->
             "end_effector.rivet_gun_offset",
             f"rivet guns do not meet the ends of a {vertical} m strut",
         )
+    check_rivets(edu, source)
     if 2 * (parts["corner_size"] / 2 + parts["fitting_length"]) >= vertical:
         raise ConfigError(source, "parts.fitting_length", "end fittings and corners leave no tube")
     if parts["tube_radius"] >= parts["fitting_radius"]:
         raise ConfigError(source, "parts.tube_radius", "the tube must be thinner than its end fittings")
+
+
+def check_rivets(edu: dict[str, Any], source: str) -> None:
+    """Refuse rivet tolerances and failure shapes the machine and its parts cannot have."""
+    rivets, ee, parts = edu["rivets"], edu["end_effector"], edu["parts"]
+    if rivets["max_offset"] >= ee["rivet_reach"]:
+        raise ConfigError(
+            source,
+            "rivets.max_offset",
+            f"must be less than end_effector.rivet_reach ({ee['rivet_reach']} m): past the reach a"
+            " gun rivets nothing",
+        )
+    if rivets["partial_grip_height"] >= rivets["proud_height"]:
+        raise ConfigError(source, "rivets.partial_grip_height", "must be less than rivets.proud_height")
+    room = parts["fitting_length"] / 2 - parts["rivet_radius"]
+    if rivets["wrong_hole_offset"] > room:
+        raise ConfigError(
+            source,
+            "rivets.wrong_hole_offset",
+            f"the wrong hole must lie on the end fitting: at most {room:.4f} m"
+            " (parts.fitting_length / 2 - parts.rivet_radius)",
+        )
+    if rivets["wrong_hole_offset"] < 2 * parts["rivet_radius"]:
+        raise ConfigError(
+            source, "rivets.wrong_hole_offset", "a head in the wrong hole must not overlap the right hole's"
+        )
+    good = edu["physics"]["rivet_solref"][0]
+    for key in ("unseated_solref", "loose_solref"):
+        if rivets[key][0] <= good:
+            raise ConfigError(
+                source,
+                f"rivets.{key}",
+                f"a joint that holds badly must be softer than a good one: time constant above"
+                f" physics.rivet_solref's {good} s",
+            )
 
 
 def load_edu(
@@ -255,4 +305,4 @@ def load_edu(
     return edu, mission
 
 
-__all__ = ["DEFAULT_EDU", "REPO_ROOT", "SCHEMA", "check_against_mission", "load_edu"]
+__all__ = ["DEFAULT_EDU", "REPO_ROOT", "SCHEMA", "check_against_mission", "check_rivets", "load_edu"]

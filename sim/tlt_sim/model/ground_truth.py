@@ -2,8 +2,10 @@
 
 :class:`GroundTruth` reads the simulation as it stands: world poses of bodies, sites and the
 mission's joints (on the tower as it stands now), where each part is and in what state, what the
-dispensers still hold, and the forces constraints and contacts carry. The twin's record of a
-placement (:meth:`GroundTruth.placement`) judges a release here, and tests check the physics with it.
+dispensers still hold, the forces constraints and contacts carry, and how each riveted joint truly
+turned out (:meth:`GroundTruth.rivet_joints`). The twin's record of a placement
+(:meth:`GroundTruth.placement`) judges a release here, and tests check the physics with it. All of
+it is for judging: the system under test measures, it never reads this.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from tlt_common.mission.schema import Mission
 from tlt_sim.model.assembly import Assembly, Release
 from tlt_sim.model.generate import ModelInfo, PartInfo
 from tlt_sim.model.placement import Placement, placement_of
+from tlt_sim.model.rivet_outcomes import RivetJoint
 
 
 class GroundTruth:
@@ -90,6 +93,19 @@ class GroundTruth:
             (self.data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY) & (self.data.efc_id == i)
         )[0]
         return self.data.efc_force[rows[:3]].copy() if len(rows) else np.zeros(3)
+
+    def constraint_slip(self, name: str) -> float:
+        """How far (m) the two points an active equality holds together have moved apart: a weld
+        or connect giving under load; 0 when inactive."""
+        return self.assembly.slip(name)
+
+    def rivet_joints(self) -> list[RivetJoint]:
+        """Every joint a rivet reached (shot or staged), as its latest shot left it."""
+        return list(self.assembly.rivet_joints.values())
+
+    def rivet_joint(self, member: str, joint: str) -> RivetJoint | None:
+        """The outcome at ``joint`` of mission member ``member`` (None: never riveted)."""
+        return next((r for r in self.rivet_joints() if (r.member, r.joint) == (member, joint)), None)
 
     def contact_force(self, body: str) -> np.ndarray:
         """Total contact force (N, world frame) that other bodies exert on ``body`` now."""

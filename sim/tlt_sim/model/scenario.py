@@ -2,7 +2,9 @@
 
 Part faults are the model's: a defective part (a strut without one end fitting, or with a bent
 tube) is built that way; an empty dispenser is built with no parts; a grasp that slips lets go
-after some seconds; a part taken off-centre ends up placed out of tolerance. Device faults (a servo
+after some seconds; a part taken off-centre ends up placed out of tolerance. Rivet faults spoil a
+chosen joint's shot, or joints drawn at random with a seed, as one of the ways a rivet fails
+(:mod:`tlt_sim.model.rivet_outcomes`). Device faults (a servo
 failure, a stuck lifter limit switch, a dropped link) belong to the emulators: they are validated
 here and handed on unchanged in :attr:`Scenario.device_faults`.
 
@@ -25,6 +27,7 @@ from typing import Any
 
 from tlt_common.config_schema import ConfigError, Field, load_yaml, opt, validate
 from tlt_common.mission.schema import ARS_NAMES, Mission
+from tlt_sim.model.rivet_outcomes import FAULT_KINDS, NO_FAULTS, RandomRivetFaults, RivetFaultPlan
 
 DEFECTS = ("missing_end_fitting", "bent_tube")
 LINKS = ("lifter", "top_grippers", "active_grippers", "camera_mounts", "ee_x", "ee_y", "ur_x", "ur_y")
@@ -80,6 +83,30 @@ SCHEMA = {
                 ),
             ),
             "empty_dispensers": opt("list", [], item=Field("str")),
+            "rivet_faults": opt(
+                "list",
+                [],
+                item=Field(
+                    "dict",
+                    schema={
+                        "member": Field("str"),
+                        "joint": Field("str", doc="a joint the mission rivets the member at"),
+                        "kind": Field("str", choices=FAULT_KINDS),
+                        "shot": opt("int", 1, minimum=1, doc="which shot at that joint, 1 = first"),
+                    },
+                ),
+            ),
+            "random_rivet_faults": opt(
+                "dict",
+                None,
+                schema={
+                    "rate": Field("float", minimum=0.0, maximum=1.0, doc="chance a joint's first shot fails"),
+                    "seed": Field("int", minimum=0),
+                    "kinds": opt(
+                        "list", list(FAULT_KINDS), item=Field("str", choices=FAULT_KINDS), min_items=1
+                    ),
+                },
+            ),
             "servo_failure": opt(
                 "list",
                 [],
@@ -141,6 +168,7 @@ class Scenario:
     empty: frozenset[str] = frozenset()
     device_faults: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     built: tuple[str, ...] = ()  # member ids, in the mission's build order
+    rivets: RivetFaultPlan = NO_FAULTS
 
 
 NOMINAL = Scenario(name="nominal")
@@ -184,6 +212,40 @@ def _check_built(ids: list[str], mission: Mission, empty: set[str], source: str)
     return tuple(sorted(ids, key=order.index))
 
 
+def _check_rivets(faults: dict[str, Any], mission: Mission, source: str) -> RivetFaultPlan:
+    chosen: dict[tuple[str, str, int], str] = {}
+    members = {m.id: m for m in mission.members}
+    for i, entry in enumerate(faults["rivet_faults"]):
+        key = f"faults.rivet_faults[{i}]"
+        member = members.get(entry["member"])
+        if member is None:
+            raise ConfigError(
+                source, f"{key}.member", f"'{entry['member']}' is not a member of mission '{mission.name}'"
+            )
+        joints = [r.joint for r in member.rivets]
+        if entry["joint"] not in joints:
+            raise ConfigError(
+                source,
+                f"{key}.joint",
+                f"'{member.id}' is riveted at {', '.join(joints) or 'no joint'}, not at '{entry['joint']}'",
+            )
+        slot = (member.id, entry["joint"], entry["shot"])
+        if slot in chosen:
+            raise ConfigError(source, key, f"shot {slot[2]} at {slot[1]} of {slot[0]} already has a fault")
+        chosen[slot] = entry["kind"]
+    drawn = faults["random_rivet_faults"]
+    random = None
+    if drawn is not None:
+        kinds = drawn["kinds"]
+        for i, kind in enumerate(kinds):
+            if kind in kinds[:i]:
+                raise ConfigError(
+                    source, f"faults.random_rivet_faults.kinds[{i}]", f"'{kind}' is listed twice"
+                )
+        random = RandomRivetFaults(drawn["rate"], drawn["seed"], tuple(kinds))
+    return RivetFaultPlan(chosen, random)
+
+
 def parse_scenario(raw: Any, mission: Mission, source: str | Path = "<scenario>") -> Scenario:
     """Validate loaded YAML as a scenario for ``mission``."""
     source = str(source)
@@ -215,9 +277,11 @@ def parse_scenario(raw: Any, mission: Mission, source: str | Path = "<scenario>"
         slips[slot] = entry["after_s"]
     device = {k: faults[k] for k in ("servo_failure", "limit_switch_stuck", "link_drop")}
     built = _check_built(data["built"], mission, empty, source)
+    rivets = _check_rivets(faults, mission, source)
     return Scenario(
-        data["name"], source, data["description"], defects, offsets, slips, frozenset(empty), device, built
-    )
+        data["name"], source, data["description"], defects, offsets, slips, frozenset(empty), device, built,
+        rivets,
+    )  # fmt: skip
 
 
 def load_scenario(path: str | Path, mission: Mission) -> Scenario:

@@ -15,7 +15,7 @@ A model MuJoCo refuses raises :class:`ModelCompileError` with MuJoCo's message a
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import mujoco
@@ -299,8 +299,13 @@ class Scene:
     def stage_member(self, member_id: str, part: str | None = None, rivet: bool = True) -> str:
         return self.staging.stage_member(member_id, part, rivet)
 
-    def stage_bay(self, bay: int, skip_rivets: tuple[tuple[str, str], ...] = ()) -> dict[str, str]:
-        return self.staging.stage_bay(bay, skip_rivets)
+    def stage_bay(
+        self,
+        bay: int,
+        skip_rivets: tuple[tuple[str, str], ...] = (),
+        rivet_kinds: Mapping[tuple[str, str], str] | None = None,
+    ) -> dict[str, str]:
+        return self.staging.stage_bay(bay, skip_rivets, rivet_kinds)
 
     # -- cameras -----------------------------------------------------------------------------
     def renderer(self, width: int = 640, height: int = 480, antialias: bool = True) -> CameraRenderer:

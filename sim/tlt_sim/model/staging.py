@@ -9,7 +9,7 @@ built, a bay for the compression test or a picture).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import mujoco
@@ -22,6 +22,7 @@ from tlt_sim.model.assembly import Assembly
 from tlt_sim.model.camera_views import CameraViews
 from tlt_sim.model.generate import ModelInfo, PartInfo
 from tlt_sim.model.ground_truth import GroundTruth
+from tlt_sim.model.rivet_outcomes import RivetJoint
 from tlt_sim.model.servos import Servos
 
 
@@ -128,10 +129,12 @@ class Staging:
             self.assembly.update()
         elif rivet:
             for r in member.rivets:
-                self._stage_rivet(info, r.joint)
+                self._stage_rivet(info, member_id, r.joint)
         return part
 
-    def _stage_rivet(self, part: PartInfo, joint: str) -> None:
+    def _stage_rivet(self, part: PartInfo, member_id: str, joint: str, kind: str = "good") -> None:
+        """Rivet ``part`` (standing as ``member_id``) at ``joint`` as a rivet of outcome ``kind``
+        leaves it, and record that outcome."""
         target = self.truth.joint_position_world(joint)
         end = min(
             part.ends, key=lambda e: np.linalg.norm(self.assembly.part_point(part, part.ends[e]) - target)
@@ -141,10 +144,21 @@ class Staging:
             for i in range(4):
                 corner = self.truth.site_position(names.corner_site(cf, i))
                 if np.linalg.norm(corner - target) <= reach:
-                    self.assembly.rivet(part, end, cf, i)
+                    self.assembly.rivet(part, end, cf, i, kind)
+                    name = f"rivet/{part.body}/{cf}"
+                    cause = "staged" if kind == "good" else "injected"
+                    self.assembly.record_joint(RivetJoint(member_id, joint, name, kind, cause, "staged", 1))
 
-    def stage_bay(self, bay: int, skip_rivets: tuple[tuple[str, str], ...] = ()) -> dict[str, str]:
-        """Stage every member of ``bay``; ``skip_rivets`` lists (member id, joint id) left out."""
+    def stage_bay(
+        self,
+        bay: int,
+        skip_rivets: tuple[tuple[str, str], ...] = (),
+        rivet_kinds: Mapping[tuple[str, str], str] | None = None,
+    ) -> dict[str, str]:
+        """Stage every member of ``bay``; ``skip_rivets`` lists (member id, joint id) left out,
+        ``rivet_kinds`` maps (member id, joint id) to a rivet outcome other than good
+        (:data:`~tlt_sim.model.rivet_outcomes.KINDS`)."""
+        kinds = dict(rivet_kinds or {})
         placed = {}
         for member in self.mission.bay_members(bay):
             part = self.stage_member(member.id, rivet=False)
@@ -152,17 +166,25 @@ class Staging:
             if member.kind != "cross_frame":
                 for r in member.rivets:
                     if (member.id, r.joint) not in skip_rivets:
-                        self._stage_rivet(self.info.parts[part], r.joint)
+                        kind = kinds.pop((member.id, r.joint), "good")
+                        self._stage_rivet(self.info.parts[part], member.id, r.joint, kind)
+        if kinds:
+            raise ValueError(f"bay {bay} has no rivet at {', '.join(f'{m} {j}' for m, j in kinds)}")
         mujoco.mj_forward(self.model, self.data)
         return placed
 
     def stage_built(self, member_ids: Iterable[str]) -> None:
         """Members that start built stand as the build would have left them; their rivets came
-        out of the feeders."""
+        out of the feeders, each turned out as the scenario's rivet faults say for a first shot
+        (good where none is injected)."""
         member_ids = list(member_ids)
+        plan = self.info.scenario.rivets
         for member_id in member_ids:
-            self.stage_member(member_id)
+            part = self.stage_member(member_id, rivet=False)
             for rivet in self.mission.member(member_id).rivets:
+                if self.info.parts[part].kind != "cross_frame":
+                    kind = plan.injected(member_id, rivet.joint, 1)
+                    self._stage_rivet(self.info.parts[part], member_id, rivet.joint, kind or "good")
                 self.assembly.rivets_left[rivet.dispenser] -= 1
         if member_ids:
             mujoco.mj_forward(self.model, self.data)

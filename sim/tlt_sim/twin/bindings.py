@@ -19,7 +19,8 @@ Every binding has two halves the twin calls once per sync period, from its one s
   their rated speeds. The controller reports that path, so an arm that a contact holds off it is
   logged by the twin (what the contact is), the one place it can be seen.
 * :class:`EEGpioBinding`: the EE limit switch input is the model's width switch; a rising edge on a
-  rivet-gun output fires that gun in the model; a gun inserted at a rivet feeder takes a rivet.
+  rivet-gun output fires that gun in the model (each joint it reaches noted with its true outcome);
+  a gun inserted at a rivet feeder takes a rivet.
 """
 
 from __future__ import annotations
@@ -215,11 +216,14 @@ class EEGpioBinding:
             rising = (edges + 1) // 2 if on else edges // 2
             for _ in range(rising):
                 shot = scene.fire_rivet(self.arm, side)
-                outcome = (
-                    ("joined " + ", ".join(shot.joined))
-                    if shot.joined
-                    else ("loaded, nothing in reach" if shot.loaded else "dry shot")
-                )
+                if shot.joined:
+                    outcome = "joined " + ", ".join(shot.joined)
+                elif shot.outcomes:
+                    outcome = "nothing joined"
+                else:
+                    outcome = "loaded, nothing in reach" if shot.loaded else "dry shot"
+                if shot.outcomes:  # the twin's truth of each joint it reached
+                    outcome += " (" + ", ".join(f"{o.equality}: {o.kind}" for o in shot.outcomes) + ")"
                 self.shots.append((scene.time, side, outcome))
                 log.info("%s rivet gun %s fired at %.3f s: %s", self.arm, side, scene.time, outcome)
 

@@ -12,7 +12,10 @@
 Each part an arm lets go of is judged against the mission's places by the model's truth
 (:meth:`Scene.placement`): logged, and appended to ``<run_dir>/placements.jsonl`` (one JSON object
 a release: arm, sim time, part, member, centre and angle error, each joint point's error), so a
-run's record says where every part really went, beside what vision measured.
+run's record says where every part really went, beside what vision measured. Each joint a rivet
+shot reaches is recorded likewise with its true outcome (:mod:`tlt_sim.model.rivet_outcomes`: good,
+or how it failed, and why) in ``<run_dir>/rivets.jsonl``: for judging a run, never read by the
+system under test.
 
 Only the thread that calls :meth:`tick` touches the Scene. The emulators' pty and socket threads
 answer the drivers in between, under the emulators' own locks.
@@ -66,6 +69,8 @@ class Twin:
         self._closed = False
         self.placements_path = self.run_dir / "placements.jsonl"
         self._placements = JsonLinesWriter(self.placements_path)
+        self.rivets_path = self.run_dir / "rivets.jsonl"
+        self._rivets = JsonLinesWriter(self.rivets_path)
 
     def start(self) -> None:
         """Serve every device link; faults due at time 0 apply at once."""
@@ -97,6 +102,7 @@ class Twin:
         self.devices.drive(dt)
         self.scene.advance(dt)
         self._note_releases()
+        self._note_rivets()
         self.devices.sense(dt)
         self._apply_faults()
         self._note_traffic()
@@ -119,6 +125,16 @@ class Twin:
                 self._placements.append(record)
             except OSError as exc:
                 log.warning("cannot record a placement in %s: %s", self.placements_path, exc)
+
+    def _note_rivets(self) -> None:
+        outcomes = self.scene.assembly.rivet_log
+        while outcomes:
+            joint = outcomes.pop(0)
+            (log.info if joint.good else log.warning)("rivet %s at %.3f s", joint.describe(), joint.time)
+            try:
+                self._rivets.append(joint.as_dict())
+            except OSError as exc:
+                log.warning("cannot record a rivet in %s: %s", self.rivets_path, exc)
 
     def _apply_faults(self) -> None:
         for what in self.faults.apply_due(self.scene.time):

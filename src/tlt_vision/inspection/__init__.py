@@ -16,8 +16,11 @@ never counted as a found part.
   fittings) its arm's EE cameras see.
 * Bay: the corner joints found match the mission's joint positions up to one rigid motion (the
   camera's pose drops out) within the position tolerance.
+* Rivet joint (:mod:`.rivet_joint`, from one EE camera frame's rivet masks and depth rather than
+  from poses): the head present, seated and in its hole, or what is wrong, or cannot judge.
 
-One module per check (:mod:`.strut`, :mod:`.cross_frame`, :mod:`.alignment`, :mod:`.bay`), the
+One module per check (:mod:`.strut`, :mod:`.cross_frame`, :mod:`.alignment`, :mod:`.bay`,
+:mod:`.rivet_joint`), the
 shared verdict and tolerance types in :mod:`.report`, the rigid fit in :mod:`.rigid`.
 """
 
@@ -32,12 +35,21 @@ from tlt_vision.inspection.alignment import (
 from tlt_vision.inspection.bay import bay_joints, inspect_bay
 from tlt_vision.inspection.cross_frame import inspect_cross_frame
 from tlt_vision.inspection.report import InspectionReport, Observation, Tolerances
+from tlt_vision.inspection.rivet_joint import (
+    HoleView,
+    RivetJointJudgement,
+    RivetJointLimits,
+    judge_rivet_joint,
+)
 from tlt_vision.inspection.strut import inspect_strut, missing_fitting_places
 
 __all__ = [
     "HeldAlignment",
+    "HoleView",
     "InspectionReport",
     "Observation",
+    "RivetJointJudgement",
+    "RivetJointLimits",
     "Tolerances",
     "bay_joints",
     "corner_joint_prior",
@@ -46,5 +58,6 @@ __all__ = [
     "inspect_bay",
     "inspect_cross_frame",
     "inspect_strut",
+    "judge_rivet_joint",
     "missing_fitting_places",
 ]

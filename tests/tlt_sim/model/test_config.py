@@ -35,6 +35,21 @@ def test_default_machine_loads_with_its_mission():
         (lambda d: d["arms"]["ars_x"].update(home=[0, 0, 0]), "arms.ars_x.home", "6 numbers"),
         (lambda d: d["parts"].pop("tube_radius"), "parts.tube_radius", "missing required key"),
         (lambda d: d["cameras"].update(zed_fov=70), "cameras.zed_fov", "unknown key"),
+        (lambda d: d["rivets"].pop("max_angle_deg"), "rivets.max_angle_deg", "missing required key"),
+        (lambda d: d["rivets"].update(max_offset=0.05), "rivets.max_offset", "end_effector.rivet_reach"),
+        (
+            lambda d: d["rivets"].update(partial_grip_height=0.01),
+            "rivets.partial_grip_height",
+            "proud_height",
+        ),
+        (
+            lambda d: d["rivets"].update(wrong_hole_offset=0.02),
+            "rivets.wrong_hole_offset",
+            "on the end fitting",
+        ),
+        (lambda d: d["rivets"].update(wrong_hole_offset=0.01), "rivets.wrong_hole_offset", "overlap"),
+        (lambda d: d["rivets"].update(loose_solref=[0.004, 1.0]), "rivets.loose_solref", "softer"),
+        (lambda d: d["rivets"].update(unseated_solref=[0.03]), "rivets.unseated_solref", "2 numbers"),
     ],
 )
 def test_bad_parameter_is_refused_with_file_key_and_reason(tmp_path, change, key, reason):

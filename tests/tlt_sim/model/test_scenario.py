@@ -101,3 +101,79 @@ def test_bad_built_members_are_refused(built, empty, key, reason):
         parse_scenario(raw, MISSION, "late.yaml")
     assert (err.value.source, err.value.key) == ("late.yaml", key)
     assert reason in err.value.reason
+
+
+def test_rivet_faults_at_chosen_joints_and_at_random_make_the_scenarios_plan():
+    raw = {
+        "name": "rivets",
+        "faults": {
+            "rivet_faults": [
+                {"member": "bay1/vertical/x0_y0", "joint": "bay1/x0_y0", "kind": "misfire"},
+                {"member": "bay1/vertical/x0_y0", "joint": "bay1/x0_y0", "kind": "wrong_hole", "shot": 2},
+                {"member": "foundation/x1_y1", "joint": "bay1/x1_y1", "kind": "loose"},
+            ],
+            "random_rivet_faults": {"rate": 0.05, "seed": 9, "kinds": ["proud_head", "no_rivet"]},
+        },
+    }
+    plan = parse_scenario(raw, MISSION).rivets
+    assert plan.chosen == {
+        ("bay1/vertical/x0_y0", "bay1/x0_y0", 1): "misfire",
+        ("bay1/vertical/x0_y0", "bay1/x0_y0", 2): "wrong_hole",
+        ("foundation/x1_y1", "bay1/x1_y1", 1): "loose",
+    }
+    assert (plan.random.rate, plan.random.seed, plan.random.kinds) == (0.05, 9, ("proud_head", "no_rivet"))
+    assert parse_scenario({"name": "plain", "faults": {}}, MISSION).rivets.random is None
+
+
+RIVET = {"member": "bay1/diagonal/face_x0", "joint": "bay1/x0_y0", "kind": "loose"}
+
+
+@pytest.mark.parametrize(
+    ("faults", "key", "reason"),
+    [
+        ({"rivet_faults": [{**RIVET, "member": "bay9/x"}]}, "faults.rivet_faults[0].member", "not a member"),
+        (
+            {"rivet_faults": [{**RIVET, "joint": "bay0/x0_y1"}]},
+            "faults.rivet_faults[0].joint",
+            "riveted at bay1/x0_y0, not at 'bay0/x0_y1'",
+        ),
+        (
+            {"rivet_faults": [{**RIVET, "member": "bay1/cross_frame"}]},
+            "faults.rivet_faults[0].joint",
+            "riveted at no joint",
+        ),
+        ({"rivet_faults": [{**RIVET, "kind": "good"}]}, "faults.rivet_faults[0].kind", "expected one of"),
+        ({"rivet_faults": [{**RIVET, "shot": 0}]}, "faults.rivet_faults[0].shot", "at least 1"),
+        (
+            {"rivet_faults": [RIVET, {**RIVET, "kind": "misfire"}]},
+            "faults.rivet_faults[1]",
+            "already has a fault",
+        ),
+        ({"random_rivet_faults": {"rate": 1.5, "seed": 1}}, "faults.random_rivet_faults.rate", "at most"),
+        ({"random_rivet_faults": {"rate": 0.1}}, "faults.random_rivet_faults.seed", "missing required key"),
+        (
+            {"random_rivet_faults": {"rate": 0.1, "seed": 1, "kinds": []}},
+            "faults.random_rivet_faults.kinds",
+            "at least 1 item",
+        ),
+        (
+            {"random_rivet_faults": {"rate": 0.1, "seed": 1, "kinds": ["loose", "loose"]}},
+            "faults.random_rivet_faults.kinds[1]",
+            "listed twice",
+        ),
+        (
+            {"random_rivet_faults": {"rate": 0.1, "seed": 1, "kinds": ["rusty"]}},
+            "faults.random_rivet_faults.kinds[0]",
+            "expected one of",
+        ),
+    ],
+)
+def test_bad_rivet_faults_are_refused_naming_file_key_and_reason(tmp_path, faults, key, reason):
+    import yaml
+
+    path = tmp_path / "rivets.yaml"
+    path.write_text(yaml.safe_dump({"name": "bad", "faults": faults}))
+    with pytest.raises(ConfigError) as err:
+        load_scenario(path, MISSION)
+    assert (err.value.source, err.value.key) == (str(path), key)
+    assert reason in err.value.reason

@@ -136,6 +136,34 @@ def test_ee_limit_switch_input_and_rivet_gun_output_through_gpio(make_twin):
     chip.close()
 
 
+def test_each_rivet_joint_goes_on_the_runs_record_with_its_true_outcome(make_twin, caplog):
+    """The twin's truth of each joint (here the rivets of members that start built, one with an
+    injected fault) is logged and appended to ``rivets.jsonl``, for judging a run."""
+    from tlt_sim.model.config import REPO_ROOT
+    from tlt_sim.model.scenario import parse_scenario
+
+    from tlt_common.mission.schema import load_mission
+
+    caplog.set_level(logging.INFO, logger="tlt.twin")
+    mission = load_mission(REPO_ROOT / "missions" / "one_bay.yaml")
+    member = "bay1/vertical/x0_y0"
+    raw = {
+        "name": "proud",
+        "built": ["bay1/cross_frame", member],
+        "faults": {"rivet_faults": [{"member": member, "joint": "bay1/x0_y0", "kind": "proud_head"}]},
+    }
+    twin = make_twin(scenario=parse_scenario(raw, mission))
+    twin.tick()
+    records = json_lines.read(twin.rivets_path)
+    assert [(r["member"], r["joint"], r["kind"], r["cause"]) for r in records] == [
+        (member, "bay0/x0_y0", "good", "staged"),
+        (member, "bay1/x0_y0", "proud_head", "injected"),
+    ]
+    assert f"rivet {member} at bay1/x0_y0: proud_head (injected: staged)" in caplog.text
+    twin.tick()
+    assert len(json_lines.read(twin.rivets_path)) == 2  # each outcome once
+
+
 def test_a_rivet_gun_pushed_into_a_feeder_takes_one_rivet(make_twin):
     twin = make_twin()
     scene, binding = twin.scene, twin.devices.gpio["ee_x"]

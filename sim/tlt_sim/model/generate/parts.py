@@ -62,7 +62,7 @@ def cross_frame_geoms(
 def strut_geoms(
     body: ET.Element, prefix: str, parts: dict[str, Any], length: float, defect: Defect | None
 ) -> dict[str, np.ndarray]:
-    """The tube, end fittings and (hidden) rivets of a strut along ``body``'s z, end a at its
+    """The tube, end fittings and (hidden) rivet heads and shanks of a strut along ``body``'s z, end a at its
     origin; returns its ends. A ``bent_tube`` defect kinks the tube at mid-length, a
     ``missing_end_fitting`` one leaves that end's fitting out."""
     p = parts
@@ -122,6 +122,20 @@ def strut_geoms(
             type="sphere",
             size=(p["rivet_radius"],),
             pos=rivet,
+            material="rivet",
+            group=HIDDEN_GROUP,
+        )
+        # The shank of a head that did not seat, between the fitting and the head; where it shows,
+        # and how long it is, follows the shot (tlt_sim.model.rivet_heads). One instance with its head.
+        surface = rivet - np.array([p["rivet_radius"], 0, 0])
+        sub(
+            body,
+            "geom",
+            name=f"{prefix}/rivet_{end}#1",
+            class_="deco",
+            type="capsule",
+            size=(p["rivet_radius"] / 2,),
+            fromto=(*surface, *rivet),
             material="rivet",
             group=HIDDEN_GROUP,
         )
