@@ -15,7 +15,7 @@ The twin's MJCF is generated from ``config/twin/edu.yaml`` and the UR10e table t
   spheres), in their model colours.
 
 Bodies on a free joint (the payload and every part) are not the robot: they move on their own and
-are published as frames of the world (:func:`free_body_poses`). A joint the URDF cannot say (a hinge
+are published as frames of the world (:func:`free_bodies`). A joint the URDF cannot say (a hinge
 off its body's origin, two joints in one body) is refused with its name.
 
     tlt twin urdf -o edu.urdf
@@ -226,33 +226,6 @@ def urdf(model: mujoco.MjModel, velocities: Mapping[str, float] | None = None, n
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
 
 
-def _pose(data: mujoco.MjData, b: int) -> tuple[np.ndarray, np.ndarray]:
-    return data.xpos[b], data.xmat[b].reshape(3, 3)
-
-
-def moving_poses(
-    model: mujoco.MjModel, data: mujoco.MjData, tree: list[Link]
-) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
-    """Child link -> (parent link, position, rotation in the parent) of every non-fixed link of
-    ``tree`` as ``data`` has them now (its kinematics computed)."""
-    out = {}
-    for link in tree:
-        if link.joint_type == "fixed":
-            continue
-        pp, pr = _pose(data, int(model.body_parentid[link.body]))
-        cp, cr = _pose(data, link.body)
-        out[link.name] = (link.parent, pr.T @ (cp - pp), pr.T @ cr)
-    return out
-
-
-def free_body_poses(model: mujoco.MjModel, data: mujoco.MjData) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Body name -> (position, rotation) in the world of every body on a free joint."""
-    return {
-        model.body(b).name: (data.xpos[b].copy(), data.xmat[b].reshape(3, 3).copy())
-        for b in free_bodies(model)
-    }
-
-
 def main(argv: list[str] | None = None) -> int:
     """``tlt twin urdf``: write the EDU's URDF (to a file or stdout). Returns the exit status."""
     from tlt_sim.model.config import DEFAULT_EDU
@@ -284,11 +257,9 @@ __all__ = [
     "WORLD",
     "Link",
     "free_bodies",
-    "free_body_poses",
     "geom_shapes",
     "links",
     "main",
-    "moving_poses",
     "urdf",
     "visible_geoms",
 ]

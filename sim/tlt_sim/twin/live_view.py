@@ -29,6 +29,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from tlt_common import ros_names
 from tlt_common.geometry.transforms import rotation_to_quaternion
+from tlt_common.ros.stamps import split_seconds
 from tlt_common.ros.transform_messages import TF_QOS, TF_STATIC_QOS, transform_stamped
 from tlt_sim.model import names, urdf
 from tlt_sim.model.scene import Scene
@@ -46,17 +47,58 @@ def static_transforms(scene: Scene, t: float = 0.0) -> TFMessage:
     return TFMessage(transforms=out)
 
 
-def moving_transforms(scene: Scene, tree: list[urdf.Link], t: float) -> TFMessage:
-    """The EDU's moving joints and the free bodies as the simulation has them now."""
-    m, d = scene.model, scene.data
-    out = [
-        transform_stamped(parent, child, p, r, t)
-        for child, (parent, p, r) in urdf.moving_poses(m, d, tree).items()
-    ]
-    out += [
-        transform_stamped(topics.WORLD_FRAME, b, p, r, t) for b, (p, r) in urdf.free_body_poses(m, d).items()
-    ]
-    return TFMessage(transforms=out)
+def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise Hamilton products of (w, x, y, z) quaternions."""
+    aw, ax, ay, az = a.T
+    bw, bx, by, bz = b.T
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=1,
+    )
+
+
+class MovingTransforms:
+    """``/tf`` of ``scene``: every moving joint of ``tree`` (parent -> child) and every free body
+    (``world`` -> body), computed for all at once from the simulation's body poses into messages
+    made once (a /tf message is published many times a simulated second while a recorder listens)."""
+
+    def __init__(self, scene: Scene, tree: list[urdf.Link]) -> None:
+        m = scene.model
+        self.scene = scene
+        moving = [link for link in tree if link.joint_type != "fixed"]
+        free = urdf.free_bodies(m)
+        self.child = np.array([link.body for link in moving] + free, dtype=int)
+        # The world body (0) stands for the free bodies' parent: its pose is the identity.
+        self.parent = np.array(
+            [int(m.body_parentid[link.body]) for link in moving] + [0] * len(free), dtype=int
+        )
+        frames = [(link.parent, link.name) for link in moving]
+        frames += [(topics.WORLD_FRAME, m.body(b).name) for b in free]
+        self.message = TFMessage(
+            transforms=[transform_stamped(p, c, np.zeros(3), np.eye(3), 0.0) for p, c in frames]
+        )
+
+    def at(self, t: float) -> TFMessage:
+        """The message with the poses the simulation has now, stamped ``t``."""
+        d = self.scene.data
+        pp, cp = d.xpos[self.parent], d.xpos[self.child]
+        pr = d.xmat[self.parent].reshape(-1, 3, 3)
+        pos = np.einsum("nji,nj->ni", pr, cp - pp)  # the parent's rotation transposed
+        pq = d.xquat[self.parent] * np.array([1.0, -1.0, -1.0, -1.0])
+        quat = _quat_multiply(pq, d.xquat[self.child])
+        quat *= np.where(quat[:, :1] < 0, -1.0, 1.0)
+        sec, nanosec = split_seconds(t)
+        for msg, p, q in zip(self.message.transforms, pos.tolist(), quat.tolist(), strict=True):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            tr, rot = msg.transform.translation, msg.transform.rotation
+            tr.x, tr.y, tr.z = p
+            rot.w, rot.x, rot.y, rot.z = q
+        return self.message
 
 
 def free_body_markers(model: mujoco.MjModel) -> MarkerArray:
@@ -88,7 +130,7 @@ class LiveView:
     def __init__(self, node: Node, scene: Scene, tf_rate_hz: float) -> None:
         self.scene = scene
         self.period = 1.0 / tf_rate_hz
-        self.tree = urdf.links(scene.model)
+        self.moving = MovingTransforms(scene, urdf.links(scene.model))
         self._next = 0.0
         self._tf = node.create_publisher(TFMessage, ros_names.TF, TF_QOS)
         self._static = node.create_publisher(TFMessage, ros_names.TF_STATIC, TF_STATIC_QOS)
@@ -106,7 +148,7 @@ class LiveView:
         self._next += self.period
         if self._next <= t + 1e-9:  # after a pause (nobody subscribed): a new grid from t
             self._next = t + self.period
-        self._tf.publish(moving_transforms(self.scene, self.tree, t))
+        self._tf.publish(self.moving.at(t))
 
 
-__all__ = ["TOWER_FRAME", "LiveView", "free_body_markers", "moving_transforms", "static_transforms"]
+__all__ = ["TOWER_FRAME", "LiveView", "MovingTransforms", "free_body_markers", "static_transforms"]

@@ -53,7 +53,7 @@ SCHEMA = {
         },
     ),
     "ground_truth_rate_hz": opt("float", 10.0, minimum=0.1, maximum=500.0),
-    "tf_rate_hz": opt("float", 20.0, minimum=0.1, maximum=500.0, doc="/tf messages per simulated second"),
+    "tf_rate_hz": opt("float", 10.0, minimum=0.1, maximum=500.0, doc="/tf messages per simulated second"),
     "viewer": opt(
         "dict",
         {"enabled": False, "rate_hz": 30.0},
@@ -81,7 +81,7 @@ class TwinSettings:
     d405_size: tuple[int, int] = (320, 240)
     camera_antialias: bool = True
     ground_truth_rate_hz: float = 10.0
-    tf_rate_hz: float = 20.0
+    tf_rate_hz: float = 10.0
     viewer: bool = False
     viewer_rate_hz: float = 30.0
 

@@ -91,26 +91,3 @@ def test_the_urdfs_kinematics_are_the_twins(scene):
         p, r = scene.camera_pose(camera)
         assert np.allclose(poses[names.optical_frame(camera)][0], p, atol=1e-5), camera
         assert np.allclose(poses[names.optical_frame(camera)][1], r, atol=1e-5), camera
-
-
-def test_moving_poses_and_the_fixed_origins_rebuild_every_link_in_the_world(scene):
-    """What the twin publishes (/tf: the moving joints, /tf_static: the fixed origins) composes to
-    the model's own poses."""
-    m, d = scene.model, scene.data
-    scene.pose_arm("ars_x", np.array([0.3, -1.2, 1.4, -1.0, -1.5, 0.4]))
-    mujoco.mj_kinematics(m, d)
-    tree = urdf.links(m)
-    moving = urdf.moving_poses(m, d, tree)
-    assert set(moving) == {link.name for link in tree if link.joint_type != "fixed"}
-    world = {"world": (np.zeros(3), np.eye(3))}
-    for link in tree:
-        parent, p, r = moving.get(link.name) or (link.parent, *link.origin)
-        pp, pr = world[parent]
-        world[link.name] = (pp + pr @ p, pr @ r)
-    for link in tree:
-        if link.body >= 0:
-            assert np.allclose(world[link.name][0], d.xpos[link.body], atol=1e-6), link.name
-            assert np.allclose(world[link.name][1], d.xmat[link.body].reshape(3, 3), atol=1e-6), link.name
-    free = urdf.free_body_poses(m, d)
-    assert "payload" in free and any(n.startswith("part/") for n in free)
-    assert np.allclose(free["payload"][0], scene.tower_pose()[0])

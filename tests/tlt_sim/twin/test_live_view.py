@@ -37,7 +37,10 @@ def test_static_and_moving_transforms_place_every_body_where_the_twin_has_it(tmp
         scene.step()
         tree = urdf.links(scene.model)
         edges = {}
-        for msg in (live_view.static_transforms(scene), live_view.moving_transforms(scene, tree, scene.time)):
+        for msg in (
+            live_view.static_transforms(scene),
+            live_view.MovingTransforms(scene, tree).at(scene.time),
+        ):
             for m in msg.transforms:
                 assert m.child_frame_id not in edges, f"{m.child_frame_id} has two parents"
                 edges[m.child_frame_id] = (m.header.frame_id, *_pose(m))
