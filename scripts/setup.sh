@@ -81,7 +81,7 @@ ${need_gib} GiB free for $VENV (2.4 GiB installed, and pip's unpacking); $(( fre
         fail "pip install -r requirements/runtime.txt -r requirements/dev.txt left broken dependencies"
     }
     "$VENV/bin/python" -c 'import rclpy, py_trees, serial, dynamixel_sdk, rtde_control, cv2, torch, \
-ompl, pinocchio, mujoco, spacepackets, PySide6, pytest' \
+ompl, pinocchio, mujoco, spacepackets, PySide6, foxglove, pytest' \
         || fail "a pinned dependency does not import"
     stamp_set pip "$h"
 }
