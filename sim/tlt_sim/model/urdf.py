@@ -36,7 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from tlt_sim.model import names
-from tlt_sim.model.generate import HIDDEN_GROUP, RIVET_GROUP
+from tlt_sim.model.generate import HIDDEN_GROUP
 
 WORLD = "world"
 ROBOT_NAME = "tlt_edu"
@@ -145,13 +145,14 @@ def _geom_rgba(model: mujoco.MjModel, g: int) -> np.ndarray:
 
 
 def visible_geoms(model: mujoco.MjModel, body: int) -> list[int]:
-    """The geoms of ``body`` a viewer should draw: not hidden, not a rivet's stand-in, not clear."""
+    """The geoms of ``body`` a viewer should draw now: not hidden (a part's rivets until they are
+    set, :mod:`tlt_sim.model.assembly`), not clear, not the floor."""
     return [
         g
         for g in range(
             int(model.body_geomadr[body]), int(model.body_geomadr[body] + model.body_geomnum[body])
         )
-        if int(model.geom_group[g]) not in (HIDDEN_GROUP, RIVET_GROUP)
+        if int(model.geom_group[g]) != HIDDEN_GROUP
         and int(model.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_PLANE)
         and _geom_rgba(model, g)[3] > 0
     ]

@@ -13,7 +13,8 @@ Topics (names in :mod:`tlt_common.ros_names` and :mod:`tlt_sim.twin.topics`):
   links, EE width and jaws) and ``world`` -> each free body (``payload``, ``part/<dispenser>/<i>``),
   all of one instant, stamped with sim time;
 * ``/twin/markers`` (``visualization_msgs/MarkerArray``, latched): the payload's and every part's
-  shapes, each in its body's frame (``frame_locked``), so the tower's members move with /tf.
+  shapes, each in its body's frame (``frame_locked``), so the tower's members move with /tf; sent
+  again whenever what is shown changes (a rivet set appears).
 
 Runs on the simulation thread, like :mod:`tlt_sim.twin.ros_streams`.
 """
@@ -102,8 +103,9 @@ class MovingTransforms:
 
 
 def free_body_markers(model: mujoco.MjModel) -> MarkerArray:
-    """The visible shapes of the payload and every part, one marker each, in its body's frame."""
-    out = MarkerArray()
+    """The visible shapes of the payload and every part, one marker each, in its body's frame (a
+    namespace per body), after a DELETEALL of what the topic showed before."""
+    out = MarkerArray(markers=[Marker(action=Marker.DELETEALL)])
     for b in urdf.free_bodies(model):
         body = model.body(b).name
         n = 0
@@ -139,16 +141,36 @@ class LiveView:
         velocities = {j: scene.max_velocity(j) for j in names.all_actuated_joints()}
         self._description.publish(String(data=urdf.urdf(scene.model, velocities)))
         self._static.publish(static_transforms(scene, scene.time))
-        self._markers.publish(free_body_markers(scene.model))
+        free = urdf.free_bodies(scene.model)
+        self._free_geoms = np.concatenate(
+            [
+                np.arange(
+                    scene.model.body_geomadr[b], scene.model.body_geomadr[b] + scene.model.body_geomnum[b]
+                )
+                for b in free
+            ]
+        ).astype(int)
+        self._shown = b""
+        self.publish_markers_if_changed()
+
+    def publish_markers_if_changed(self) -> None:
+        """Send the part markers again if the parts' shown geoms changed (a rivet was set)."""
+        shown = self.scene.model.geom_group[self._free_geoms].tobytes()
+        if shown != self._shown:
+            self._shown = shown
+            self._markers.publish(free_body_markers(self.scene.model))
 
     def publish_due(self, t: float) -> None:
-        """Publish /tf when someone subscribes and it is due at sim time ``t``."""
-        if self._tf.get_subscription_count() == 0 or t + 1e-9 < self._next:
+        """Publish /tf when someone subscribes and it is due at sim time ``t``; the markers when
+        what they show changed."""
+        if t + 1e-9 < self._next:
             return
         self._next += self.period
         if self._next <= t + 1e-9:  # after a pause (nobody subscribed): a new grid from t
             self._next = t + self.period
-        self._tf.publish(self.moving.at(t))
+        self.publish_markers_if_changed()
+        if self._tf.get_subscription_count() > 0:
+            self._tf.publish(self.moving.at(t))
 
 
 __all__ = ["TOWER_FRAME", "LiveView", "MovingTransforms", "free_body_markers", "static_transforms"]

@@ -18,8 +18,10 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 from tlt_sim.model import names, urdf
+from tlt_sim.model.generate import RIVET_GROUP
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin import live_view
+from visualization_msgs.msg import Marker
 
 from tlt_common import ros_names
 from tlt_common.geometry.transforms import quaternion_to_rotation
@@ -63,10 +65,25 @@ def test_static_and_moving_transforms_place_every_body_where_the_twin_has_it(tmp
         for part in scene.info.parts.values():
             assert edges[part.body][0] == "world"
             assert np.allclose(edges[part.body][1], scene.body_pose(part.body)[0])
-        markers = live_view.free_body_markers(scene.model).markers
+        clear, *markers = live_view.free_body_markers(scene.model).markers
+        assert clear.action == Marker.DELETEALL
         parts = {m.header.frame_id for m in markers}
         assert parts == {"payload", *(p.body for p in scene.info.parts.values())}
         assert all(m.frame_locked and m.scale.x > 0 and m.color.a > 0 for m in markers)
+
+
+def test_a_rivet_set_in_the_tower_appears_among_the_markers(tmp_path):
+    with Scene(out_dir=tmp_path / "model") as scene:
+        strut = next(p for p in scene.info.parts.values() if p.kind == "vertical")
+
+        def rivets_shown() -> int:
+            markers = live_view.free_body_markers(scene.model).markers
+            return sum(m.ns == strut.body and m.color.r > 0.8 and m.color.g < 0.2 for m in markers)
+
+        before = rivets_shown()
+        rivet = scene.model.geom(f"{strut.body}/rivet_a").id
+        scene.model.geom_group[rivet] = RIVET_GROUP  # as Assembly.rivet shows a rivet it sets
+        assert rivets_shown() > before
 
 
 def test_a_twin_process_publishes_tf_its_static_frames_and_its_robot_description(tmp_path):
