@@ -3,7 +3,8 @@
 #   1. Debian packages listed in requirements/apt.txt
 #   2. a virtual environment (.venv, or $TLT_VENV) with the pinned Python dependencies
 #   3. the wheels' CMake include paths rewritten for this interpreter (see docs/setup.md)
-#   4. msgs/ (tlt_interfaces) generated with rosidl and installed into the venv
+#   4. msgs/ generated with rosidl and installed into the venv: the standard interface packages no
+#      wheel provides (msgs/standard/: tf2_msgs), then tlt_interfaces
 #   5. this project installed into the venv in editable mode
 # Each stage records a stamp (a hash of its inputs) only after it succeeded, and is skipped when
 # its stamp matches, so a second run that finds everything in place takes seconds and a run that
@@ -96,7 +97,7 @@ ${need_gib} GiB free for $VENV (2.4 GiB installed, and pip's unpacking); $(( fre
         fail "pip install -r requirements/runtime.txt -r requirements/dev.txt left broken dependencies"
     }
     "$VENV/bin/python" -c 'import rclpy, py_trees, serial, dynamixel_sdk, rtde_control, cv2, torch, \
-ompl, pinocchio, mujoco, spacepackets, PySide6, pytest' \
+ompl, pinocchio, mujoco, spacepackets, PySide6, foxglove, pytest' \
         || fail "a pinned dependency does not import"
     stamp_set pip "$h"
 }
@@ -121,28 +122,40 @@ cmake_paths_stage() {
     stamp_set cmake-paths "$h"
 }
 
-# --- 4. tlt_interfaces ------------------------------------------------------------------------
+# --- 4. interface packages -------------------------------------------------------------------
+# build_interfaces NAME SOURCE : generate and install one rosidl package into the venv.
+build_interfaces() {
+    local name=$1 src=$2
+    local log="$BUILD/msgs/$name/build.log"
+    mkdir -p "$BUILD/msgs/$name"
+    (
+        export PATH="$VENV/bin:$PATH"
+        export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+        cd "$BUILD/msgs/$name"
+        cmake "$src" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+            -DCMAKE_PREFIX_PATH="$VENV" -DCMAKE_INSTALL_PREFIX="$VENV" \
+            -DPython3_EXECUTABLE="$VENV/bin/python" \
+            && make -j"$(nproc)" install
+    ) >"$log" 2>&1 || { tail -30 "$log" >&2; fail "building $name from ${src#"$ROOT"/} (full log: $log)"; }
+}
+
 msgs_stage() {
     local h
     h=$(cd "$ROOT" && { cat "$STAMPS/pip"; find msgs -type f | sort | xargs sha256sum; } \
         | sha256sum | cut -c1-16)
     stamp_ok msgs "$h" && return 0
     rm -f "$STAMPS/msgs"
-    say "building msgs/ (tlt_interfaces) into the venv"
     rm -rf "$BUILD/msgs"
-    mkdir -p "$BUILD/msgs"
-    local log="$BUILD/msgs/build.log"
-    (
-        export PATH="$VENV/bin:$PATH"
-        export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
-        cd "$BUILD/msgs"
-        cmake "$ROOT/msgs" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
-            -DCMAKE_PREFIX_PATH="$VENV" -DCMAKE_INSTALL_PREFIX="$VENV" \
-            -DPython3_EXECUTABLE="$VENV/bin/python" \
-            && make -j"$(nproc)" install
-    ) >"$log" 2>&1 || { tail -30 "$log" >&2; fail "building msgs/ (full log: $log)"; }
-    "$VENV/bin/python" -c 'import tlt_interfaces.msg, tlt_interfaces.srv, tlt_interfaces.action' \
-        || fail "tlt_interfaces was built but does not import"
+    local pkg
+    for pkg in "$ROOT"/msgs/standard/*/; do
+        pkg=${pkg%/}
+        say "building ${pkg#"$ROOT"/} into the venv"
+        build_interfaces "$(basename "$pkg")" "$pkg"
+    done
+    say "building msgs/ (tlt_interfaces) into the venv"
+    build_interfaces tlt_interfaces "$ROOT/msgs"
+    "$VENV/bin/python" -c 'import tf2_msgs.msg, tlt_interfaces.msg, tlt_interfaces.srv, tlt_interfaces.action' \
+        || fail "the interface packages were built but do not import"
     stamp_set msgs "$h"
 }
 

@@ -8,6 +8,7 @@ import sys
 COMMANDS = {
     "run": ("tlt_sim.twin.main", "run the twin as a ROS process behind the drivers' links"),
     "render": ("tlt_sim.model.render_png", "render the EDU scene to a PNG"),
+    "urdf": ("tlt_sim.model.urdf", "write the EDU's URDF (robot description), read off the twin model"),
 }
 
 

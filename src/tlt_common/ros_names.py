@@ -119,3 +119,13 @@ VISION_LOCATE_TAG = "/vision/locate_tag"
 # diagnostic_msgs/DiagnosticStatus, latched (tlt_common.ros.readiness): OK once vision can place
 # every camera (it has heard the joint states of both arms and the camera mounts), else why not.
 VISION_STATUS = "/vision/status"
+# visualization_msgs/MarkerArray: each certified pose a request found, in its camera's frame
+# (docs/live-view.md).
+VISION_MARKERS = "/vision/markers"
+
+# --- live view (docs/live-view.md) -----------------------------------------------------------------
+# tf2_msgs/TFMessage: transforms that move, and the fixed ones (latched), as every ROS 2 tool reads them.
+TF = "/tf"
+TF_STATIC = "/tf_static"
+# std_msgs/String, latched: the EDU's URDF.
+ROBOT_DESCRIPTION = "/robot_description"

@@ -14,10 +14,13 @@ Services (names from :mod:`tlt_common.ros_names`; paper §V.E), each answered by
 * ``VISION_LOCATE_TAG`` (``LocateTag``): the dispenser's AprilTag (cv2.aruco, IPPE square) in the
   named camera's RGB; the answered pose is the dispenser's frame in the world (the tag marks it).
 
-And publishes ``VISION_STATUS`` (``diagnostic_msgs/DiagnosticStatus``, latched:
-:mod:`tlt_common.ros.readiness`): why a request could not place its camera yet (``no joint state
-yet for ur_x_shoulder_pan_joint ...``) until every joint the cameras and end effectors need has
-been heard of, then ``ready``; the CRS refuses Start until then.
+Each certified pose a request finds goes out on ``/tf`` (child of the camera's optical frame,
+``vision/<camera>/<class>_<n>``) and as markers on ``VISION_MARKERS``
+(:mod:`tlt_vision.pose_broadcast`). And the node publishes ``VISION_STATUS``
+(``diagnostic_msgs/DiagnosticStatus``, latched: :mod:`tlt_common.ros.readiness`): why a request
+could not place its camera yet (``no joint state yet for ur_x_shoulder_pan_joint ...``) until
+every joint the cameras and end effectors need has been heard of, then ``ready``; the CRS refuses
+Start until then.
 
 Each request takes one fresh frame of its camera (:mod:`tlt_vision.services.frame_source`: subscribed
 only while it waits, at most ``timeouts.frame_s``), segments it (``segmentation.source``: the
@@ -67,6 +70,7 @@ from tlt_vision.frames import CameraRig
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config
 from tlt_vision.node_config_schema import SEGMENTATION_SOURCES
 from tlt_vision.part_inspection import PartInspector
+from tlt_vision.pose_broadcast import PoseBroadcaster
 from tlt_vision.segmentation_source import MaskRcnnSegmenter, TwinLabels
 from tlt_vision.self_filter import EeSelfFilter
 from tlt_vision.services.check_alignment import CheckAlignmentHandler
@@ -113,7 +117,9 @@ class VisionNode(LeanNode):
         self._subscribe_joint_states(sensors)
 
         logger = self.get_logger()
-        poser = FramePoser(self.inspector, config)
+        # Every certified pose a request finds, on /tf and as markers (docs/live-view.md).
+        self.pose_broadcast = PoseBroadcaster(self)
+        poser = FramePoser(self.inspector, config, self.pose_broadcast)
         self.part_handler = InspectPartHandler(
             frames=self.frames,
             detector=self.detector,

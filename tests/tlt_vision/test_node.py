@@ -30,6 +30,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from tf2_msgs.msg import TFMessage
 from tlt_interfaces.msg import EndEffectorState
 from tlt_interfaces.srv import CheckAlignment, InspectPart, LocateTag
 from tlt_sim.model import names
@@ -37,6 +38,7 @@ from tlt_sim.model.camera_sensor import load_camera_sensors
 from tlt_sim.model.scene import Scene
 from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher
 from tlt_sim.twin.settings import load_settings
+from visualization_msgs.msg import MarkerArray
 
 from tlt_ars.planning.reachability import TargetUnreachable, reach_target
 from tlt_ars.planning.targets import dispenser_targets, placement_targets
@@ -269,6 +271,12 @@ def test_a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
 def _a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     member = "bay1/vertical/x0_y1"
     _show(rig, "vertical_dispenser_x/2")
+    tf: list[TFMessage] = []
+    markers: list[MarkerArray] = []
+    subs = [
+        rig.client.create_subscription(TFMessage, ros_names.TF, tf.append, 10),
+        rig.client.create_subscription(MarkerArray, ros_names.VISION_MARKERS, markers.append, 10),
+    ]
     good = rig.call(
         InspectPart,
         ros_names.VISION_INSPECT_PART,
@@ -279,6 +287,15 @@ def _a_good_strut_passes_and_defective_ones_fail_with_the_reason(rig):
     classes = sorted(p.object_class for p in good.poses)
     assert classes == ["end_fitting", "end_fitting", "strut_tube"]
     assert all(p.certified for p in good.poses)
+    # The certified poses went out on /tf, in the camera's frame, and as markers.
+    deadline = time.monotonic() + 10.0
+    while not (tf and markers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    for sub in subs:
+        rig.client.destroy_subscription(sub)
+    seen = {t.child_frame_id for m in tf for t in m.transforms if t.header.frame_id == "zed_1_optical"}
+    assert {"vision/zed_1/end_fitting_0", "vision/zed_1/end_fitting_1", "vision/zed_1/strut_tube_0"} <= seen
+    assert any(m.ns == "vision/zed_1" for a in markers for m in a.markers)
 
     _show(rig, "vertical_dispenser_x/0")  # built without end fitting b
     missing = rig.call(

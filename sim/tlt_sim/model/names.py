@@ -93,6 +93,11 @@ def all_actuated_joints() -> list[str]:
     return names
 
 
+def optical_frame(camera: str) -> str:
+    """Frame id of a camera's optical frame (x right, y down, z forward), as its images name it."""
+    return f"{camera}_optical"
+
+
 def cameras() -> list[str]:
     names = [zed_camera(i) for i in range(len(ZED_CORNERS))]
     for arm in ARMS:

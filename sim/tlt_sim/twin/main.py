@@ -168,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     from tlt_common.ros.rosout_logging import forward_logging_to_rosout, init_rclpy
 
     init_rclpy(["twin", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    from tlt_sim.twin.live_view import LiveView
     from tlt_sim.twin.ros_streams import CameraStreams, ClockPublisher, GroundTruth
 
     node = LeanNode("twin")
@@ -177,6 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         clock = ClockPublisher(node)
         cameras = CameraStreams(node, scene, settings, sensors)
         truth = GroundTruth(node, scene, settings.ground_truth_rate_hz)
+        live = LiveView(node, scene, settings.tf_rate_hz)
         try:
             twin.start()
         except OSError as exc:  # a UR address already served by another emulator, a pty refused
@@ -203,6 +205,7 @@ def main(argv: list[str] | None = None) -> int:
             clock.publish(t)
             cameras.publish_due(t)
             truth.publish_due(t)
+            live.publish_due(t)
             if view is not None:
                 view.maybe_sync()
             pacer.wait(t)

@@ -53,6 +53,7 @@ SCHEMA = {
         },
     ),
     "ground_truth_rate_hz": opt("float", 10.0, minimum=0.1, maximum=500.0),
+    "tf_rate_hz": opt("float", 10.0, minimum=0.1, maximum=500.0, doc="/tf messages per simulated second"),
     "viewer": opt(
         "dict",
         {"enabled": False, "rate_hz": 30.0},
@@ -80,6 +81,7 @@ class TwinSettings:
     d405_size: tuple[int, int] = (320, 240)
     camera_antialias: bool = True
     ground_truth_rate_hz: float = 10.0
+    tf_rate_hz: float = 10.0
     viewer: bool = False
     viewer_rate_hz: float = 30.0
 
@@ -105,6 +107,7 @@ def load_settings(path: str | Path = DEFAULT_SETTINGS) -> TwinSettings:
         d405_size=(cams["d405"]["width"], cams["d405"]["height"]),
         camera_antialias=cams["antialias"],
         ground_truth_rate_hz=doc["ground_truth_rate_hz"],
+        tf_rate_hz=doc["tf_rate_hz"],
         viewer=doc["viewer"]["enabled"],
         viewer_rate_hz=doc["viewer"]["rate_hz"],
     )

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from tlt_sim.model import names
+
 CLOCK = "/clock"
 GROUND_TRUTH = "/twin/ground_truth"
 SEGMENTATION_LABELS = "/cameras/segmentation_labels"
+# visualization_msgs/MarkerArray, latched: the payload's and the parts' shapes (tlt_sim.twin.live_view).
+MARKERS = "/twin/markers"
 WORLD_FRAME = "world"
 CAMERA_STREAMS = ("rgb", "depth", "segmentation", "camera_info")
 
@@ -18,13 +22,14 @@ def camera_topic(camera: str, stream: str) -> str:
 
 def camera_frame(camera: str) -> str:
     """Frame id of a camera's optical frame (x right, y down, z forward)."""
-    return f"{camera}_optical"
+    return names.optical_frame(camera)
 
 
 __all__ = [
     "CAMERA_STREAMS",
     "CLOCK",
     "GROUND_TRUTH",
+    "MARKERS",
     "SEGMENTATION_LABELS",
     "WORLD_FRAME",
     "camera_frame",

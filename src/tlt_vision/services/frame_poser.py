@@ -14,6 +14,8 @@ from tlt_vision.node_config import VisionConfig
 from tlt_vision.part_inspection import PartInspector
 
 Prior = Callable[[str, np.ndarray], np.ndarray | None]
+# Told every frame's observations once posed (tlt_vision.pose_broadcast publishes them).
+PosesListener = Callable[[CameraFrame, list[inspection.Observation]], None]
 
 
 class FramePoser:
@@ -21,18 +23,21 @@ class FramePoser:
 
     Reads the frame's depth, RGB and intrinsics, the camera's depth noise (node.yaml
     ``depth_noise``) and ``held_piece_gate``. An instance that cannot be posed is an observation
-    with its reason, never an exception.
+    with its reason, never an exception. ``listener``, if given, hears each frame's observations.
     """
 
-    def __init__(self, inspector: PartInspector, config: VisionConfig) -> None:
+    def __init__(
+        self, inspector: PartInspector, config: VisionConfig, listener: PosesListener | None = None
+    ) -> None:
         self.inspector = inspector
         self.config = config
+        self.listener = listener
 
     def observe(
         self, pipeline: str, detections: list[Detection], frame: CameraFrame, prior: Prior | None = None
     ) -> list[inspection.Observation]:
         """The observations of ``pipeline`` (a part kind, "bay" or "rivet") for ``detections``."""
-        return self.inspector.observe(
+        observations = self.inspector.observe(
             pipeline,
             detections,
             frame.get("depth"),
@@ -41,6 +46,14 @@ class FramePoser:
             prior,
             self.config.depth_noise_of(frame.camera, float(frame.camera_matrix[0, 0])),
         )
+        self.tell(frame, observations)
+        return observations
+
+    def tell(self, frame: CameraFrame, observations: list[inspection.Observation]) -> None:
+        """Hand the listener ``frame``'s observations (those made here, or by the inspector's own
+        pipelines for InspectPart)."""
+        if self.listener is not None:
+            self.listener(frame, observations)
 
     def within(
         self,

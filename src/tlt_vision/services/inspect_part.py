@@ -103,6 +103,7 @@ class InspectPartHandler:
             self.detector.closer(frame),
             self.config.depth_noise_of(frame.camera, float(frame.camera_matrix[0, 0])),
         )
+        self.poser.tell(frame, obs)
         ids = {id(o.estimate): o.object_id for o in obs if o.estimate is not None}
         return report_msg(report, frame.stamp, frame.frame_id, ids)
 
