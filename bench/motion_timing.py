@@ -2,16 +2,17 @@
 
 Plans the moves of building a tower (the query list of bench/planning.py: for each member in
 build order, dispenser approach, grasp, lift, inspection, pre-place, place, retreat, home, and each
-rivet likewise, each move starting where the previous one ended) and times every plan three ways:
+rivet likewise, each move starting where the previous one ended) and times every plan:
 
 * old: the trapezoid per segment, stopping at every waypoint (``time_parameterise(plan.path)``);
 * new: the plan's corners blended where the arcs are collision-free (``Planner.blended``) and the
   blended path timed by reachability analysis (``time_parameterise(blended)``), as the ARS does;
 * bound: a lower bound on the duration of any motion along the path the new timing follows,
   under the same limits: the larger of (a) the slowest joint alone, from rest to rest over each
-  stretch it moves one way (it must stop where it turns back), and (b) the time every step of the
-  path needs at the speed of its fastest-turning joint. No timing along that path can beat it,
-  but it ignores how the joints' limits combine round a corner, so it is loose there;
+  stretch it moves one way (it must stop where it turns back), and (b) a phase-plane bound: on
+  short intervals along the path, upper bounds on the path speed (joint velocities, acceleration
+  normal to the path) and on the path acceleration, integrated from rest at both ends
+  (``_phase_plane_bound``). No timing along that path can beat it;
 * fine: the same reachability analysis on a grid ten times finer along the path (and four times
   finer round the arcs), which converges to the time-optimal duration along the path: what the
   grid of the new timing costs.
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import statistics
 import sys
 import time
@@ -36,7 +38,7 @@ from types import ModuleType
 import numpy as np
 
 from tlt_ars.planning import time_parameterisation
-from tlt_ars.planning.blended_path import BlendedPath, blend_corners
+from tlt_ars.planning.blended_path import Arc, BlendedPath, blend_corners
 from tlt_ars.planning.planner import Planner, PlanningFailed
 from tlt_ars.planning.time_parameterisation import time_parameterise
 from tlt_ars.planning.world import build_scene, load_scene_config
@@ -77,7 +79,6 @@ def _bound(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, resolution: floa
     for section in path.sections:
         qs = BlendedPath([section], [[]]).configurations(resolution)
         dq = np.diff(qs, axis=0)
-        by_speed = float(np.sum(np.max(np.abs(dq) / vel, axis=1)))
         by_joint = 0.0
         for i in range(qs.shape[1]):
             steps = dq[:, i][np.abs(dq[:, i]) > 1e-12]
@@ -86,18 +87,71 @@ def _bound(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, resolution: floa
             turns = np.flatnonzero(np.sign(steps[1:]) != np.sign(steps[:-1])) + 1
             runs = np.abs(np.array([r.sum() for r in np.split(steps, turns)]))
             by_joint = max(by_joint, float(np.sum(rest_to_rest(runs, vel[i], acc[i]))))
-        total += max(by_speed, by_joint)
+        total += max(by_joint, _phase_plane_bound(section, vel, acc, resolution))
+    return total
+
+
+def _phase_plane_bound(section: list, vel: np.ndarray, acc: np.ndarray, resolution: float) -> float:
+    """A lower bound on a rest-to-rest motion along ``section`` from the phase plane: on each short
+    interval, an upper bound ``cap`` on x = (ds/dt)^2 from the joint velocities and the
+    acceleration normal to the path, and ``U`` on |d2s/dt2|; no motion's x exceeds the curves
+    that accelerate at U from rest at the start and to rest at the end, capped by ``cap``, so its
+    duration is at least the integral of ds / sqrt of their minimum. Bounds over an interval of an
+    arc widen the values at its ends by how far a sinusoid of the turn can bulge in between."""
+    deltas, caps, limits = [], [], []
+    for piece in section:
+        m = max(1, int(np.ceil(piece.length / resolution)))
+        edges = np.linspace(0.0, piece.length, m + 1)
+        _, t, k = piece.evaluate(edges)
+        t0, t1 = t[:-1], t[1:]
+        if isinstance(piece, Arc):
+            radius = piece.radius
+            n = k * radius  # unit normal
+            bulge = ((np.diff(edges) / radius) ** 2 / 8.0)[:, None] * np.hypot(piece.tangent, piece.normal)
+        else:
+            radius, n, bulge = np.inf, np.zeros_like(t), np.zeros_like(t0)
+        same_sign = np.sign(t0) == np.sign(t1)
+        t_min = np.where(same_sign, np.maximum(np.minimum(np.abs(t0), np.abs(t1)) - bulge, 0.0), 0.0)
+        t_max = np.maximum(np.abs(t0), np.abs(t1)) + bulge
+        n_max = np.maximum(np.abs(n[:-1]), np.abs(n[1:])) + bulge
+        with np.errstate(divide="ignore"):
+            cap = np.min(np.where(t_min > 0, (vel / np.where(t_min > 0, t_min, 1.0)) ** 2, np.inf), axis=1)
+            if isinstance(piece, Arc):  # the acceleration normal to the path
+                cap = np.minimum(cap, radius * (n_max @ acc))
+            # Along the path: each joint's |t_i u| <= a_i + |n_i| x / radius, and u <= sum |t_i| a_i.
+            along = (acc + n_max * (cap / radius)[:, None]) / np.where(t_min > 0, t_min, np.nan)
+            limit = np.minimum(np.nanmin(np.where(t_min > 0, along, np.inf), axis=1), t_max @ acc)
+        deltas.append(np.diff(edges))
+        caps.append(cap)
+        limits.append(limit)
+    delta, cap, limit = (np.concatenate(v).tolist() for v in (deltas, caps, limits))
+    count = len(delta)
+    forward = [0.0] * (count + 1)
+    for j in range(count):
+        forward[j + 1] = min(forward[j] + 2.0 * limit[j] * delta[j], cap[j])
+    backward = [0.0] * (count + 1)
+    for j in range(count - 1, -1, -1):
+        backward[j] = min(backward[j + 1] + 2.0 * limit[j] * delta[j], cap[j])
+    total = 0.0
+    for j in range(count):
+        d, u = delta[j], limit[j]
+        # On the interval x <= cap, <= forward[j] + 2 u (s - s_j), <= backward[j + 1] + 2 u (s_j+1 - s).
+        best = d / math.sqrt(min(cap[j], forward[j + 1], backward[j]))
+        best = max(best, (math.sqrt(forward[j] + 2 * u * d) - math.sqrt(forward[j])) / u)
+        best = max(best, (math.sqrt(backward[j + 1] + 2 * u * d) - math.sqrt(backward[j + 1])) / u)
+        total += best
     return total
 
 
 def fine_duration(path: BlendedPath, vel: np.ndarray, acc: np.ndarray) -> float:
     """The new timing's duration on a grid ten times finer (four times round arcs)."""
-    step, turn = time_parameterisation.GRID_STEP, time_parameterisation.ARC_GRID_TURN
-    time_parameterisation.GRID_STEP, time_parameterisation.ARC_GRID_TURN = step / 10, turn / 4
+    tp = time_parameterisation
+    saved = tp.GRID_STEP, tp.ARC_GRID_TURN, tp.PIECE_INTERVALS
+    tp.GRID_STEP, tp.ARC_GRID_TURN, tp.PIECE_INTERVALS = saved[0] / 10, saved[1] / 4, saved[2] * 10
     try:
         return time_parameterise(path, vel, acc).duration
     finally:
-        time_parameterisation.GRID_STEP, time_parameterisation.ARC_GRID_TURN = step, turn
+        tp.GRID_STEP, tp.ARC_GRID_TURN, tp.PIECE_INTERVALS = saved
 
 
 def tool_offset(planner: Planner, qs: np.ndarray) -> float:

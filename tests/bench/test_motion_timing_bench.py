@@ -40,3 +40,18 @@ def test_the_bound_is_exact_on_a_straight_line_and_below_the_timing_round_a_corn
     corner = [np.zeros(6), np.array([1.0, 0, 0, 0, 0, 0]), np.array([1.0, 1.0, 0, 0, 0, 0])]
     path = blend_corners(corner, 0.1)
     assert bench.lower_bound(path, VEL, ACC) < time_parameterise(path, VEL, ACC).duration
+
+
+def test_no_timing_beats_the_bound_on_random_blended_paths(bench):
+    from tlt_ars.planning.time_parameterisation import time_parameterise
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        path = [rng.uniform(-2.0, 2.0, 6)]
+        for _ in range(int(rng.integers(1, 5))):
+            path.append(path[-1] + rng.normal(0.0, 0.5, 6))
+        blended = blend_corners(path, float(rng.choice([0.02, 0.1, 0.3])))
+        new = time_parameterise(blended, VEL, ACC).duration
+        bound = bench.lower_bound(blended, VEL, ACC)
+        assert bound <= new * (1 + 1e-9)
+        assert bound >= 0.7 * new  # and it is not a trivial one

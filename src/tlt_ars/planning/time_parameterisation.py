@@ -40,6 +40,9 @@ from tlt_ars.planning.blended_path import Arc, BlendedPath, Line, Piece
 # optimum, the turn how far the limits along an arc are tightened.
 GRID_STEP = 0.05
 ARC_GRID_TURN = 0.02
+# Fewest grid intervals on a piece: on a short line between tight arcs the arm speeds up and slows
+# down again, which one interval (one constant acceleration) cannot do.
+PIECE_INTERVALS = 8
 # Limits are applied this much tighter, so that rounding never puts a sample over them.
 _ROUNDING = 1e-9
 
@@ -132,7 +135,7 @@ class _ToppSection:
             m = math.ceil(piece.length / GRID_STEP)
             if isinstance(piece, Arc):
                 m = max(m, math.ceil(piece.angle / ARC_GRID_TURN))
-            edges = np.linspace(0.0, piece.length, max(m, 1) + 1)
+            edges = np.linspace(0.0, piece.length, max(m, PIECE_INTERVALS) + 1)
             s0.append(edges[:-1])
             s1.append(edges[1:])
             owner.append(np.full(len(edges) - 1, j))
