@@ -265,9 +265,12 @@ class Trajectory:
         """Samples every ``period`` seconds plus every stop and the end, in time order."""
         if period <= 0:
             raise ValueError("sample period must be positive")
-        times = set(np.arange(0.0, self.duration, period).round(9).tolist())
-        times.update(float(t) for t in self._starts)
-        return [self.sample(t) for t in sorted(times)]
+        stops = np.asarray(self._starts, dtype=float)
+        grid = np.arange(0.0, self.duration, period)
+        # A grid time a hair from a stop would make two points the nanosecond stamps of a
+        # JointTrajectory cannot tell apart (the controller refuses points not after the previous).
+        apart = np.min(np.abs(grid[:, None] - stops[None, :]), axis=1) >= 1e-6
+        return [self.sample(t) for t in sorted(set(grid[apart].tolist()) | set(stops.tolist()))]
 
     def stops(self) -> list[TrajectoryPoint]:
         """One point per stop (at rest): the start, every corner not blended, the end."""

@@ -179,3 +179,15 @@ def test_a_corner_of_nearly_straight_segments_is_turned_at_full_speed():
     straight = straight_line_duration(path[0], path[-1], VEL, ACC)
     assert stops > 3 * straight
     assert blended < 1.05 * straight
+
+
+def test_points_are_at_least_a_microsecond_apart_even_where_a_stop_falls_beside_a_sample():
+    # Segments whose durations put a stop within a nanosecond of the 50 ms grid.
+    q1 = np.array([0.0, 0.0, 6.0 * 0.025**2, 0.0, 0.0, 0.0])  # a 0.05 s triangle on the elbow
+    path = [np.zeros(6), q1 * (1 + 1e-9), q1 * 2]
+    traj = time_parameterise(path, VEL, ACC)
+    stops = [p.t for p in traj.stops()]
+    assert any(abs(t / 0.05 - round(t / 0.05)) * 0.05 < 1e-6 for t in stops[1:-1])
+    times = [p.t for p in traj.points(0.05)]
+    assert all(b - a >= 1e-6 for a, b in pairwise(times))
+    assert set(stops) <= set(times)
