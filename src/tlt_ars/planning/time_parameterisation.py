@@ -284,8 +284,11 @@ def _sections(
     if len(pieces) == 1 and isinstance(pieces[0], Line):
         line = pieces[0]
         return [_segment(line.start, line.start + line.direction * line.length, 0.0, vel, acc)]
-    blended = _ToppSection(pieces, vel, acc)
     stops = [_segment(q0, q1, 0.0, vel, acc) for q0, q1 in pairwise(waypoints)]
+    try:
+        blended = _ToppSection(pieces, vel, acc)
+    except ValueError:  # a degenerate section (none is known): the planned corners always serve
+        return stops
     # An arc cut from short segments is tight, and at a sharp corner it can take longer than
     # stopping: then the section stops at its corners, as planned.
     return [blended] if blended.duration <= sum(s.duration for s in stops) else stops

@@ -191,3 +191,19 @@ def test_points_are_at_least_a_microsecond_apart_even_where_a_stop_falls_beside_
     times = [p.t for p in traj.points(0.05)]
     assert all(b - a >= 1e-6 for a, b in pairwise(times))
     assert set(stops) <= set(times)
+
+
+def test_a_section_the_grid_cannot_time_is_followed_with_its_stops(monkeypatch):
+    from tlt_ars.planning import time_parameterisation
+
+    path = [np.zeros(6), np.array([1.0, 0, 0, 0, 0, 0]), np.array([1.0, 1.0, 0, 0, 0, 0])]
+    blended = blend_corners(path, 0.1)
+    assert time_parameterise(blended, VEL, ACC).duration < time_parameterise(path, VEL, ACC).duration
+    # One grid interval round a quarter turn: the arc's limits cannot be kept between its ends.
+    monkeypatch.setattr(time_parameterisation, "ARC_GRID_TURN", 10.0)
+    monkeypatch.setattr(time_parameterisation, "GRID_STEP", 10.0)
+    monkeypatch.setattr(time_parameterisation, "PIECE_INTERVALS", 1)
+    traj = time_parameterise(blended, VEL, ACC)
+    assert traj.duration == pytest.approx(time_parameterise(path, VEL, ACC).duration)
+    assert len(traj.stops()) == 3
+    check_limits(traj, path)
