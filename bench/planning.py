@@ -326,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         dt = time.perf_counter() - t0
         times.append(dt)
         cpu.append(time.process_time() - c0)
-        traj = time_parameterise(plan.path, vel, acc)
+        traj = time_parameterise(planner.blended(plan), vel, acc)  # as the ARS executes it
         if plan.straight_line:
             straight_used += 1
         line_free = plan.straight_line or planner.scene.segment_free(
@@ -373,7 +373,7 @@ def main(argv: list[str] | None = None) -> int:
               f" median {statistics.median(ratios):.3f}, max {max(ratios):.3f} (goal <= 1.3)")  # fmt: skip
     if cartesian_ratios:
         print(
-            f"Cartesian moves (tool on a straight line, stops at each waypoint, n={len(cartesian_ratios)}):"
+            f"Cartesian moves (tool on a straight line, corners blended, n={len(cartesian_ratios)}):"
             f" duration / joint straight line median {statistics.median(cartesian_ratios):.3f},"
             f" max {max(cartesian_ratios):.3f} (not planner output: the tool path is prescribed)"
         )

@@ -1,8 +1,9 @@
 """The ARS's interface to the planning package (``tlt_ars.planning``), paper §V.D.
 
 :class:`MotionPlanner` builds the collision scene as the arm stands (tower as placed so far, the
-other arm where its JointState says, the part held), plans with OMPL, time-parameterises under
-the UR10e limits scaled by ``arm.velocity_scale`` and returns a ``trajectory_msgs/JointTrajectory``
+other arm where its JointState says, the part held), plans with OMPL, blends the plan's corners
+where the arcs are free in the same scene, time-parameterises the result under the UR10e limits
+scaled by ``arm.velocity_scale`` and returns a ``trajectory_msgs/JointTrajectory``
 of the arm's joints, or raises :class:`~tlt_ars.planning.planner.PlanningFailed` with the reason.
 The arm is only ever sent a trajectory that came out of it, so it never moves on a path that was
 not checked. :class:`MotionGoal` says where a motion goes; the behaviours that plan and execute
@@ -143,7 +144,7 @@ class MotionPlanner:
                     "timeout" if searched_out else "ik",
                     f"none of {len(goal.targets)} candidate(s) is usable: " + "; ".join(reasons),
                 )
-        traj = time_parameterise(plan.path, self.velocity, self.acceleration)
+        traj = time_parameterise(planner.blended(plan), self.velocity, self.acceleration)
         return PlannedMotion(self.to_msg(traj), traj.duration, chosen)
 
     def to_msg(self, traj: Any) -> JointTrajectory:

@@ -24,6 +24,11 @@ A request succeeds only with a path the arm may follow. The order of work:
 Cartesian approaches (:meth:`Planner.plan_cartesian`) move the tool along a straight line
 instead, through IK solutions that follow each other, with the same dense check.
 
+:meth:`Planner.blended` turns a plan into the path the arm follows: its corners blended by arcs
+within ``blend_deviation`` rad (``cartesian_blend_deviation`` for a Cartesian move, whose tool must
+stay near its line), each arc checked at the dense resolution in the same scene
+(``blended_path``).
+
 Failures raise :class:`PlanningFailed` with ``kind`` (ik, start_collision, goal_collision,
 limits, timeout, dense_check, collision, goal_rejected) and a reason a person can act on.
 
@@ -42,6 +47,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from tlt_ars.planning.blended_path import BlendedPath, blend_corners
 from tlt_ars.planning.collision_scene import CollisionScene
 from tlt_common.geometry.transforms import describe_pose, pose_error
 from tlt_common.geometry.ur10e import IkFailed, flange_batch
@@ -92,7 +98,8 @@ class Planner:
     """Plans for the arm of ``scene``. Resolutions are the largest joint step (rad) between
     checked configurations; ``planning_time_s`` bounds the OMPL search of one request; ``home``
     is a via point of the detours; ``vias`` are joint configurations tried as start -> via -> goal
-    after the detours; ``detours=False`` goes from the straight line to the search."""
+    after the detours; ``detours=False`` goes from the straight line to the search. The blend
+    deviations (rad) bound how far :meth:`blended` cuts a plan's corners."""
 
     def __init__(
         self,
@@ -107,6 +114,8 @@ class Planner:
         repair_time_s: float = 0.2,
         detours: bool = True,
         vias: Sequence[Sequence[float]] = (),
+        blend_deviation: float = 0.1,
+        cartesian_blend_deviation: float = 0.005,
     ) -> None:
         if dense_check_resolution > check_resolution:
             raise ValueError("dense_check_resolution must not be coarser than check_resolution")
@@ -121,6 +130,8 @@ class Planner:
         self.repair_time_s = float(repair_time_s)
         self.detours = bool(detours)
         self.vias = [np.asarray(v, dtype=float) for v in vias]
+        self.blend_deviation = float(blend_deviation)
+        self.cartesian_blend_deviation = float(cartesian_blend_deviation)
         for v in self.vias:
             if v.shape != (6,):
                 raise ValueError(f"a via configuration must be six joint angles, got {v.tolist()!r}")
@@ -139,6 +150,20 @@ class Planner:
             simplify_time_s=planning["simplify_time_s"],
             max_ik_solutions=planning["max_ik_solutions"],
             vias=planning.get("via_configurations", ()),
+            blend_deviation=planning.get("blend_deviation", 0.1),
+            cartesian_blend_deviation=planning.get("cartesian_blend_deviation", 0.005),
+        )
+
+    def blended(self, plan: Plan) -> BlendedPath:
+        """The path the arm follows for ``plan``: its corners cut by arcs within the blend deviation
+        (the Cartesian one for a Cartesian move), each arc free at the dense resolution in this
+        planner's scene, else a stop at that corner."""
+        deviation = self.cartesian_blend_deviation if "cartesian" in plan.notes else self.blend_deviation
+        return blend_corners(
+            plan.path,
+            deviation,
+            is_free=lambda q: not self.scene.in_collision(q),
+            resolution=self.dense_check_resolution,
         )
 
     # ----- requests -----

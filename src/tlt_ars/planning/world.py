@@ -155,6 +155,8 @@ SCHEMA = {
             "simplify_time_s": Field("float", minimum=0.0),
             "max_ik_solutions": Field("int", minimum=1, maximum=8),
             "via_configurations": opt("list", [], item=_vec(6)),
+            "blend_deviation": opt("float", 0.1, minimum=0.0, maximum=0.5),
+            "cartesian_blend_deviation": opt("float", 0.005, minimum=0.0, maximum=0.5),
         },
     ),
     "limits": Field(

@@ -55,7 +55,12 @@ def test_plan_around_an_obstacle_is_collision_free_when_densely_rechecked():
         # Re-checked four times finer than the planner's own dense check.
         assert dense_free(unpadded, plan.path, 0.00125)
 
-        traj = time_parameterise(plan.path, VEL, ACC)
+        # The path the arm follows, corners blended where the arcs are free, is free too.
+        blended = planner.blended(plan)
+        assert blended.blended + blended.stops == len(plan.path) - 2
+        assert not any(unpadded.in_collision(q) for q in blended.configurations(0.00125))
+        traj = time_parameterise(blended, VEL, ACC)
+        assert traj.duration <= time_parameterise(plan.path, VEL, ACC).duration
         for p in traj.points(0.01):
             assert np.all(p.q >= scene.kin.lower) and np.all(p.q <= scene.kin.upper)
             assert np.all(np.abs(p.qd) <= np.asarray(VEL) * (1 + 1e-9))
