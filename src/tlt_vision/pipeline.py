@@ -422,13 +422,15 @@ class PartPipeline:
         )
         bound = noise.max_allowance * model.diameter
         if noise.precision_sigmas * precision.add_s <= bound:
-            return certificate
+            return replace(certificate, precision=precision.add_s)
         reason = (
             f"depth too noisy to certify at {depth:.2f} m: the fit places the part to "
             f"{precision.add_s * 1000:.1f} mm (1 sigma, ADD-S), over {noise.max_allowance:.0%} of "
             f"its size ({bound * 1000:.1f} mm) at {noise.precision_sigmas:g} sigma"
         )
-        return replace(certificate, certified=False, reason=reason)
+        return replace(
+            certificate, certified=False, reason=reason, precision=precision.add_s, depth_limited=True
+        )
 
     def _surface(self, object_class: str) -> np.ndarray:
         """A fixed surface sample of the class's model, of the free-space check's size."""

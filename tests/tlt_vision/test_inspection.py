@@ -187,7 +187,9 @@ def test_part_not_in_view_and_too_few_points():
     assert not rep.passed and any("too few points" in r for r in rep.reasons)
 
 
-def _cross_frame(rng, drop_corner: int | None = None, shift_corner: int | None = None) -> list[Observation]:
+def _cross_frame(
+    rng, drop_corner: int | None = None, shift_corner: int | None = None, shift: float = 0.02
+) -> list[Observation]:
     frame = MODELS["cross_frame"]
     rot, t = _rx(-2.3), np.array([0.05, 0.1, 1.3])  # seen from above at an angle
     cloud = synthetic_view(frame, rot, t, 800, rng, noise=0.0007)
@@ -197,7 +199,7 @@ def _cross_frame(rng, drop_corner: int | None = None, shift_corner: int | None =
     for i, (x, y) in enumerate(((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))):
         if i == drop_corner:
             continue
-        offset = np.array([0.02, 0.0, 0.0]) if i == shift_corner else np.zeros(3)
+        offset = np.array([shift, 0.0, 0.0]) if i == shift_corner else np.zeros(3)
         tj = rot @ (np.array([x, y, 0.0]) + offset) + t
         c = synthetic_view(joint, rot, tj, 200, rng, noise=0.0005)
         obs.append(Observation("corner_joint", _estimate(joint, c, rot, tj)))
@@ -460,3 +462,49 @@ def test_a_corner_joint_seen_at_its_corner_but_not_certified_cannot_be_judged_no
     gone[2] = _refused(gone[2])
     rep = inspect_cross_frame("c", MISSION.bay_width, gone, TOL)
     assert not rep.passed and not rep.cannot_judge and "missing corner joint at corner 0" in rep.reasons
+
+
+def _depth_limited(o: Observation, precision: float) -> Observation:
+    """``o`` refused only for the depth's noise, the fit placing it to ``precision`` (m, 1 sigma)."""
+    e = o.estimate
+    cert = dataclasses.replace(
+        e.certificate,
+        certified=False,
+        reason="depth too noisy to certify",
+        precision=precision,
+        depth_limited=True,
+    )
+    return dataclasses.replace(o, estimate=dataclasses.replace(e, certificate=cert))
+
+
+@pytest.mark.parametrize(
+    ("precision", "passed", "cannot_judge"),
+    [(0.001, True, False), (0.0015, True, False), (0.002, False, True)],
+)
+def test_a_corner_joint_the_depth_places_to_its_tolerance_is_judged_though_not_certified(
+    precision, passed, cannot_judge
+):
+    """A lifter ZED places a frame's far corner joints to 1-1.5 mm, not to 2 % of their size
+    (1.7 mm): judged against the 5 mm tolerance at three times that, they serve; at 2 mm they
+    cannot (6 mm over the tolerance)."""
+    obs = _cross_frame(np.random.default_rng(8))
+    joints = [i for i, o in enumerate(obs) if o.object_class == "corner_joint"]
+    for i in joints[1:3]:
+        obs[i] = _depth_limited(obs[i], precision)
+    rep = inspect_cross_frame("c", MISSION.bay_width, obs, TOL)
+    assert (rep.passed, rep.cannot_judge) == (passed, cannot_judge), rep.reasons
+
+
+def test_a_depth_placed_corner_joint_off_by_less_than_the_noise_allows_is_a_doubt_more_a_verdict():
+    """1 mm of precision allows 3 mm over the 5 mm tolerance: a joint 7 mm off is a doubt, 20 mm off
+    a verdict; the same joints certified on exact depth are verdicts at 9 mm (the rigid fit leaves
+    about two thirds of the move on the joint)."""
+    for shift, verdict in ((0.009, False), (0.02, True)):
+        obs = _cross_frame(np.random.default_rng(8), shift_corner=1, shift=shift)
+        exact = inspect_cross_frame("c", MISSION.bay_width, obs, TOL)
+        assert not exact.passed and not exact.cannot_judge, exact.reasons
+        joints = [i for i, o in enumerate(obs) if o.object_class == "corner_joint"]
+        obs = [_depth_limited(o, 0.001) if i in joints else o for i, o in enumerate(obs)]
+        rep = inspect_cross_frame("c", MISSION.bay_width, obs, TOL)
+        assert not rep.passed and rep.cannot_judge is not verdict, rep.reasons
+        assert any("corner 1" in r for r in rep.reasons), rep.reasons

@@ -15,6 +15,23 @@ from tlt_vision.inspection.report import (
     uncertified,
 )
 from tlt_vision.inspection.rigid import rigid_residuals
+from tlt_vision.pose.estimator import PoseEstimate
+
+# A corner joint the depth placed to ``JUDGE_SIGMAS`` of its precision within the position
+# tolerance can be judged against that tolerance, though not certified to 2 % of its size.
+JUDGE_SIGMAS = 3.0
+
+
+def _precision(estimate: PoseEstimate) -> float:
+    """The fit's predicted error (m, 1 sigma) of a pose on noisy depth; 0 on exact depth."""
+    return estimate.certificate.precision
+
+
+def _judged_by_depth(o: Observation, tolerance: float) -> bool:
+    """Whether ``o`` is a corner joint refused only for the depth's noise, placed precisely enough
+    to judge against ``tolerance`` (m)."""
+    c = o.estimate.certificate if o.estimate is not None else None
+    return c is not None and c.depth_limited and 0.0 < JUDGE_SIGMAS * c.precision <= tolerance
 
 
 def inspect_cross_frame(
@@ -31,6 +48,12 @@ def inspect_cross_frame(
     judges where each stands. The frame's own pose is less precise than its corner joints' (C-3PO's
     pose of a 0.75 m frame can move a good frame's corners millimetres between two runs on one
     image), so it is not the reference for the corners' positions.
+
+    On a noisy depth camera a corner joint refused only because the depth cannot place it to 2 %
+    of its size (1.7 mm) is still judged where it is placed to ``JUDGE_SIGMAS`` of its precision
+    within the position tolerance (5 mm): a lifter ZED places a frame's far corner joints, 0.8-1
+    m away, to 1-1.5 mm. Such a corner over the tolerance by less than the noise allows is a doubt
+    ("cannot judge"), not a verdict.
     """
     used = tuple(o.estimate for o in observations if o.estimate is not None)
     if not any(o.object_class == "cross_frame" for o in observations):
@@ -48,7 +71,12 @@ def inspect_cross_frame(
     hw = bay_width / 2
     square = np.array([[x, y, 0.0] for x, y in ((-hw, -hw), (hw, -hw), (hw, hw), (-hw, hw))])
     joints, joint_bad = split_certified(observations, "corner_joint")
-    seen = [o for o in uncertified(observations, "corner_joint") if o.estimate is not None]
+    refused = uncertified(observations, "corner_joint")
+    why_refused = {id(o): r for o, r in zip(refused, joint_bad, strict=True)}
+    by_depth = {id(o) for o in refused if _judged_by_depth(o, tol.position)}
+    joints += [o.estimate for o in refused if id(o) in by_depth and o.estimate is not None]
+    others = [o for o in refused if id(o) not in by_depth]
+    seen = [o for o in others if o.estimate is not None]
     taken: set[int] = set()  # ids of the uncertified joints taken as seen at their corner
     unsure: list[str] = []
     found: dict[int, int] = {}  # corner -> index into joints
@@ -69,18 +97,21 @@ def inspect_cross_frame(
         else:
             reasons.append(f"missing corner joint at corner {i}")
     if any(r.startswith("missing corner joint") for r in reasons):
-        reasons.extend(
-            r
-            for o, r in zip(uncertified(observations, "corner_joint"), joint_bad, strict=True)
-            if id(o) not in taken
-        )
+        reasons.extend(why_refused[id(o)] for o in others if id(o) not in taken)
     elif len(found) > 1:
         corners = list(found)
         residuals = rigid_residuals(
             square[corners], np.array([np.asarray(joints[found[i]].translation) for i in corners])
         )
-        reasons += [f"corner joint at corner {i} off by {r * 1000:.1f} mm"
-                    for i, r in zip(corners, residuals, strict=True) if r > tol.position]  # fmt: skip
+        for i, r in zip(corners, residuals, strict=True):
+            noise = JUDGE_SIGMAS * _precision(joints[found[i]])
+            if r > tol.position + noise:
+                reasons.append(f"corner joint at corner {i} off by {r * 1000:.1f} mm")
+            elif r > tol.position:
+                unsure.append(
+                    f"cannot judge the corner joint at corner {i}: off by {r * 1000:.1f} mm, within "
+                    f"what the depth's noise allows over the {tol.position * 1000:.0f} mm tolerance"
+                )
     if unsure and not reasons:
         return InspectionReport(target_id, "cross_frame", False, tuple(unsure), used, cannot_judge=True)
     reasons += unsure

@@ -251,7 +251,9 @@ def placed_along_axis(
             return replace(slid, certificate=certificate)
     why = "degenerate view: neither end of the part seen in the depth (its place along its axis is open)"
     reason = "; ".join(r for r in (first.certificate.reason, why) if r)
-    return replace(first, certificate=replace(first.certificate, certified=False, reason=reason))
+    return replace(
+        first, certificate=replace(first.certificate, certified=False, reason=reason, depth_limited=False)
+    )
 
 
 def _edge(

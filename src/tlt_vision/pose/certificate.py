@@ -8,7 +8,10 @@ observed points lie within ``visibility radius`` of it once posed (config/vision
 A pose is certified when both hold; otherwise ``reason`` says which failed and by how much.
 
 On a noisy depth camera the threshold grows by an ``allowance`` for the noise, added in quadrature
-(:mod:`tlt_vision.depth_noise`); the certificate reports the threshold it was judged against.
+(:mod:`tlt_vision.depth_noise`); the certificate reports the threshold it was judged against, and
+how precisely the fit places the part (``precision``): a pose refused only because the depth
+cannot place it to 2 % of its size (``depth_limited``) can still serve a check whose tolerance is
+wider than that (a cross frame's corner joints, :mod:`tlt_vision.inspection.cross_frame`).
 """
 
 from __future__ import annotations
@@ -35,6 +38,11 @@ class Certificate:
     visible_groups: tuple[str, ...]
     reason: str  # empty when certified
     allowance: float = 0.0  # m, the depth noise's share of the threshold (0 on exact depth)
+    # On noisy depth: the fit's predicted ADD-S error, 1 sigma (m; 0 on exact depth or where not
+    # predicted), and whether the depth's noise alone kept the pose from being certified (observably
+    # correct, non-degenerate, but not placed to 2 % of the part's size: tlt_vision.pose.precision).
+    precision: float = 0.0
+    depth_limited: bool = False
 
     @property
     def observably_correct(self) -> bool:

@@ -87,7 +87,10 @@ def checked(
         f"posed model where the camera saw past it: {fraction:.0%} of its surface more than "
         f"{check.margin * 1000:.0f} mm in front of the depth seen (limit {check.max_fraction:.0%})"
     )
-    return replace(estimate, certificate=replace(estimate.certificate, certified=False, reason=reason))
+    return replace(
+        estimate,
+        certificate=replace(estimate.certificate, certified=False, reason=reason, depth_limited=False),
+    )
 
 
 __all__ = ["DEFAULT", "FreeSpace", "checked", "free_space_fraction", "nearest_depth"]
