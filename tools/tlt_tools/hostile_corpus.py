@@ -26,6 +26,7 @@ import struct
 from collections import Counter
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from tlt_common.bt.shape_definition import split_definition
 from tlt_common.bt.status_codec import TreeShape
@@ -107,19 +108,18 @@ class _Forger:
 
     def forged_command(self, key_id: int) -> bytes:
         rng = self.rng
-        name, params = rng.choice(
-            [
-                ("start", {}),
-                ("stop", {}),
-                ("pause", {}),
-                ("resume", {}),
-                ("switch_tm_key", {}),
-                ("set_blackboard_value", {"key": "lifter_speed", "value": rng.uniform(-1e3, 1e3)}),
-                ("set_blackboard_value", {"key": "tower/bay1/vertical/x0_y0", "value": "placed"}),
-                ("set_actuator_state", {"actuator": "lifter", "state": "hardware_control"}),
-                ("set_actuator_state", {"actuator": "camera_mounts", "state": "move", "value": 1.0}),
-            ]
-        )
+        choices: list[tuple[str, dict[str, Any]]] = [
+            ("start", {}),
+            ("stop", {}),
+            ("pause", {}),
+            ("resume", {}),
+            ("switch_tm_key", {}),
+            ("set_blackboard_value", {"key": "lifter_speed", "value": rng.uniform(-1e3, 1e3)}),
+            ("set_blackboard_value", {"key": "tower/bay1/vertical/x0_y0", "value": "placed"}),
+            ("set_actuator_state", {"actuator": "lifter", "state": "hardware_control"}),
+            ("set_actuator_state", {"actuator": "camera_mounts", "state": "move", "value": 1.0}),
+        ]
+        name, params = rng.choice(choices)
         return encode_command(
             self.defs, name, params, key_id=key_id, key=self.guessed_key(), security_seq=self.security_seq(),
             seq_count=rng.randrange(0x4000), check=False,
@@ -129,21 +129,20 @@ class _Forger:
         """A telemetry packet from the public definitions: signed with a guessed key under
         ``key_id``, or in the unauthenticated offline form when ``key_id`` is None."""
         rng = self.rng
-        kind, values = rng.choice(
-            [
-                ("ack", {
-                    "command_apid": self.defs.command_apid, "command_seq_count": rng.randrange(0x4000),
-                    "security_seq": rng.randrange(2**64), "command": rng.choice(["stop", "start"]),
-                    "stage": rng.choice(["accepted", "completed"]), "reason": "none",
-                    "detail": "stop completed by the CRS, all motion halted",
-                }),
-                ("event", {
-                    "severity": "info", "source": "crs.ground_link", "code": "BAY_BUILT",
-                    "reason": "none", "text": "bay 2 built",
-                }),
-                ("tree_definition", self.rng.choice(self.tree_parts).fields()),
-            ]
-        )  # fmt: skip
+        choices: list[tuple[str, dict[str, Any]]] = [
+            ("ack", {
+                "command_apid": self.defs.command_apid, "command_seq_count": rng.randrange(0x4000),
+                "security_seq": rng.randrange(2**64), "command": rng.choice(["stop", "start"]),
+                "stage": rng.choice(["accepted", "completed"]), "reason": "none",
+                "detail": "stop completed by the CRS, all motion halted",
+            }),
+            ("event", {
+                "severity": "info", "source": "crs.ground_link", "code": "BAY_BUILT",
+                "reason": "none", "text": "bay 2 built",
+            }),
+            ("tree_definition", self.rng.choice(self.tree_parts).fields()),
+        ]  # fmt: skip
+        kind, values = rng.choice(choices)
         seq_count = rng.randrange(0x4000)
         if key_id is None:
             return encode_telemetry(self.defs, kind, values, seq_count=seq_count)

@@ -90,6 +90,7 @@ def test_a_hostile_corpus_is_refused_counted_and_never_acted_on(tmp_path):
                 attacker.sendto(item.data, crs.address)
                 sent_by.append(item.category)
             wait_handled(results, len(sent_by))
+            operator.poll(0.0)  # the ground reads what the CRS reports (events, rejected replays' acks)
             if burst % OPERATOR_EVERY == OPERATOR_EVERY - 1:
                 command("pause" if burst % 2 else "resume")  # the operator goes on working
         flood_s = time.monotonic() - started
