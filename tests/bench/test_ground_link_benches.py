@@ -14,5 +14,7 @@ def test_ingest_bench_stores_everything(load_bench, capsys):
 def test_roundtrip_bench_gets_every_ack(load_bench, capsys):
     assert load_bench("ground_link_roundtrip").main(["--commands", "20", "--warmup", "2"]) == 0
     out = capsys.readouterr().out
-    assert "commands: 20 measured after 2 warm-up, 0 without an accepted ack" in out
-    assert "p50" in out and "p99" in out
+    assert "authenticated    n=20 lost=0  p50 " in out  # both directions signed and verified
+    assert "unauthenticated  n=20 lost=0  p50 " in out  # the same exchange without security
+    assert "ratio authenticated / unauthenticated: p50 " in out
+    assert "goal p50 <= 5 ms and p99 <= 20 ms, both directions authenticated" in out
