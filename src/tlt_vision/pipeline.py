@@ -422,7 +422,7 @@ class PartPipeline:
         )
         bound = noise.max_allowance * model.diameter
         if noise.precision_sigmas * precision.add_s <= bound:
-            return replace(certificate, precision=precision.add_s)
+            return replace(certificate, precision=precision.add_s, rotation_precision=precision.rotation)
         reason = (
             f"depth too noisy to certify at {depth:.2f} m: the fit places the part to "
             f"{precision.add_s * 1000:.1f} mm (1 sigma, ADD-S), over {noise.max_allowance:.0%} of "

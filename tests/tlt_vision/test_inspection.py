@@ -508,3 +508,18 @@ def test_a_depth_placed_corner_joint_off_by_less_than_the_noise_allows_is_a_doub
         rep = inspect_cross_frame("c", MISSION.bay_width, obs, TOL)
         assert not rep.passed and rep.cannot_judge is not verdict, rep.reasons
         assert any("corner 1" in r for r in rep.reasons), rep.reasons
+
+
+@pytest.mark.parametrize(("deg", "verdict"), [(8.0, "cannot judge"), (14.0, "fail"), (1.0, "pass")])
+def test_a_fittings_angle_the_fit_cannot_turn_finer_than_is_a_doubt(deg, verdict):
+    """A fitting 0.58 m from a ZED is placed to a millimetre but its axis only to about 2.5 deg (1
+    sigma, the certificate's ``rotation_precision``): 8 deg off there is no verdict, 14 deg is."""
+    obs = _strut(np.random.default_rng(10))
+    fittings = [i for i, o in enumerate(obs) if o.object_class == "end_fitting"]
+    for i, d in ((fittings[0], 0.0), (fittings[1], deg)):
+        tilted = _tilted(obs[i], d, 0.0005)
+        cert = dataclasses.replace(tilted.estimate.certificate, rotation_precision=math.radians(2.45))
+        obs[i] = dataclasses.replace(tilted, estimate=dataclasses.replace(tilted.estimate, certificate=cert))
+    rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
+    got = "pass" if rep.passed else "cannot judge" if rep.cannot_judge else "fail"
+    assert got == verdict, rep.reasons

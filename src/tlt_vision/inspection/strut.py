@@ -32,10 +32,19 @@ TUBE_AXIAL_UNCERTAINTY = 0.015
 FITTING_SEEN_WITHIN = 0.03
 
 
+# Standard errors of a fit's turn (the certificate's ``rotation_precision``) an axis may be off by
+# for the depth's noise before an angle over the tolerance is a verdict: good struts' fittings 0.58
+# m from a realistic ZED came out up to about four of them off (docs/vision.md).
+AXIS_SIGMAS = 4.0
+
+
 def _axis_doubt(e: PoseEstimate, parts: Mapping[str, Any]) -> float:
     """How far (rad) a fitting's posed axis may be off for the depth's noise: its ends each that
-    much (the certificate's allowance) across its length. 0 on exact depth."""
-    return math.atan2(2.0 * e.certificate.allowance, float(parts["fitting_length"]))
+    much (the certificate's allowance) across its length, or ``AXIS_SIGMAS`` times the turn the
+    fit's precision leaves it (:mod:`tlt_vision.pose.precision`), whichever is more. 0 on exact
+    depth."""
+    ends = math.atan2(2.0 * e.certificate.allowance, float(parts["fitting_length"]))
+    return max(ends, AXIS_SIGMAS * e.certificate.rotation_precision)
 
 
 def _angle_verdict(angle: float, doubt: float, tol: Tolerances, what: str) -> tuple[str | None, str | None]:

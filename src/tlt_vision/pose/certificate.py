@@ -43,6 +43,7 @@ class Certificate:
     # correct, non-degenerate, but not placed to 2 % of the part's size: tlt_vision.pose.precision).
     precision: float = 0.0
     depth_limited: bool = False
+    rotation_precision: float = 0.0  # rad, 1 sigma: the largest turn the depth leaves the fit
 
     @property
     def observably_correct(self) -> bool:

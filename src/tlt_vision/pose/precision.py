@@ -55,6 +55,9 @@ class Precision:
     add_s: float  # m, RMS; inf where the cloud leaves a direction the part's surface shows free
     points_per_draw: float  # k: points sharing one draw of the noise
     variance_factor: float  # >= 1: the residuals' spread over the noise's
+    # rad, 1 sigma: the largest turn the depth leaves the fit (about any axis a turn about which
+    # moves the part's surface; a fitting's tilt, not its spin about its own axis)
+    rotation: float = 0.0
 
 
 def model_motion_matrix(model: CadModel, samples: int = 512) -> np.ndarray:
@@ -121,7 +124,9 @@ def pose_precision(
     h_inv = np.diag(1.0 / h_values[depth_placed])
     covariance = h_inv @ (basis.T @ b @ basis) @ h_inv
     add_s = math.sqrt(max(float(np.trace(basis.T @ motion @ basis @ covariance)), 0.0))
-    return Precision(add_s, k, factor)
+    turn = (basis @ covariance @ basis.T)[3:, 3:]
+    rotation = math.sqrt(max(float(np.linalg.eigvalsh(turn).max()), 0.0))
+    return Precision(add_s, k, factor, rotation)
 
 
 __all__ = ["Precision", "model_motion_matrix", "points_per_draw", "pose_precision"]
