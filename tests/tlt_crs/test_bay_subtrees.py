@@ -200,12 +200,12 @@ def _start_ars_x(rig, crs):
     rig.ars["ars_x"] = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
 
 
-@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
-def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_had(rig, crs, tmp_path, phase):
+def _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase):
+    """Kill ARS X's servers while it runs the subtree's request, at ``phase``, and bring up a new
+    ARS X (a launcher restart); returns the new stand-in."""
     import rclpy
     from action_msgs.msg import GoalStatusArray
 
-    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
     rig.ars["ars_x"].hold_s = 30.0
     # An earlier ARS X that died is still listed for its lease, as DDS keeps a lost participant's
     # endpoints: its server's status publisher.
@@ -220,7 +220,6 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
             }
         )
     )
-    subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
     if phase == "waiting for the part":
         # The CRS learns the goal was accepted only after the ARS that took it died: its request
         # for the result reaches no server, and the server it finds next is the restarted one.
@@ -235,6 +234,57 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
         crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and rig.vision.part_calls != [])
         _stop_ars_x(rig)
     _start_ars_x(rig, crs)
+    return rig.ars["ars_x"]
+
+
+@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
+def test_ars_replaced_mid_request_is_sent_the_request_again(rig, crs, tmp_path, phase):
+    """A restarted ARS knows from its state file what the request did; the CRS sends it again to the
+    new server (no fault), and the member is placed once."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    events = []
+    ctx.event_listeners.append(lambda severity, code, text: events.append((code, text)))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    subtree = add_diagonal(ctx, member)
+    _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase)
+    assert crs.tick_until(subtree, timeout=10.0) == Status.SUCCESS
+    requests = [(r.ars, r.request, r.member_id) for r in rig.recorder.requests]
+    assert requests == [("ars_x", "add_member", member.id)] * 2  # once to each ARS X process
+    assert rig.recorder.requests[1].outcome == "succeeded"
+    assert ctx.model.states[member.id] == RIVETED
+    assert ctx.model.remaining["diagonal_dispenser_x"] == 3  # one part taken: nothing placed twice
+    resent = [text for code, text in events if code == "ARS_REQUEST_RESENT"]
+    assert len(resent) == 1 and member.id in resent[0] and "(1 of 2)" in resent[0], events
+
+
+def test_a_resent_request_the_restarted_ars_finishes_without_a_part_succeeds(rig, crs, tmp_path):
+    """The restarted ARS had set the member before it was killed (its state file says so): sent
+    again, it finishes the request without presenting a part, and that is the member done."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    subtree = add_diagonal(ctx, member)
+    rig.ars["ars_x"].hold_s = 30.0
+    crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and rig.vision.part_calls != [])
+    _stop_ars_x(rig)
+    import rclpy
+
+    node = rclpy.create_node("ars_x_restarted")
+    rig.add(node)
+    restarted = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
+    restarted.present_parts = False  # it lets go and retreats: no part to present
+    rig.ars["ars_x"] = restarted
+    assert crs.tick_until(subtree, timeout=10.0) == Status.SUCCESS
+    assert [r.outcome for r in rig.recorder.requests][1:] == ["succeeded"]
+    assert rig.vision.part_calls == [member.id]  # the part was inspected once, by the first ARS X
+    assert ctx.model.states[member.id] == RIVETED
+
+
+@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
+def test_ars_replaced_mid_request_once_too_often_fails_with_the_reason(rig, crs, tmp_path, phase):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    ctx.board.set("ars_resends", 0)
+    subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
+    _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase)
     assert crs.tick_until(subtree, timeout=10.0) == Status.FAILURE
     assert rig.recorder.requests[1:] == []  # nothing sent to the new server
     failed = [b for b in subtree.iterate() if b.status == Status.FAILURE and b.children == []]
