@@ -377,3 +377,89 @@ def test_ars_giving_up_on_parts_is_recorded_with_its_reason(rig, crs, tmp_path):
     assert ctx.model.discarded["diagonal_dispenser_x"] == 2
     assert ctx.model.remaining["diagonal_dispenser_x"] == 2
     assert ctx.model.states[member.id] == NOT_PLACED
+
+
+# A vision process's /vision/inspect_bay: it says its readiness as vision does (a reason while it
+# cannot place its cameras, then ready), and either never answers (it is about to be killed) or
+# passes the bay. It prints each request it takes.
+VISION_PROCESS = """
+import sys, threading, time
+import rclpy
+from rclpy.executors import MultiThreadedExecutor
+from tlt_interfaces.srv import InspectBay
+from tlt_common import ros_names
+from tlt_common.ros.readiness import ReadinessPublisher
+
+mode = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("vision")
+readiness = ReadinessPublisher(node, ros_names.VISION_STATUS, "vision")
+readiness.say("no joint state for camera_mount_1 yet")
+
+def inspect(request, response):
+    print("request", request.bay, flush=True)
+    if mode == "forget":
+        threading.Event().wait()
+    response.report.target_id = f"bay{request.bay}"
+    response.report.passed = True
+    return response
+
+node.create_service(InspectBay, ros_names.VISION_INSPECT_BAY, inspect)
+time.sleep(0.3)
+readiness.say("")
+print("ready", flush=True)
+executor = MultiThreadedExecutor()
+executor.add_node(node)
+executor.spin()
+"""
+
+
+class _VisionProcess:
+    def __init__(self, mode: str) -> None:
+        import os
+        import subprocess
+        import sys
+        import threading
+
+        self.lines: list[str] = []
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", VISION_PROCESS, mode],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=os.environ.copy(),
+        )
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.process.stdout:
+            self.lines.append(line.strip())
+
+    def kill(self) -> None:
+        import signal
+
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGKILL)
+        self.process.wait(timeout=10.0)
+
+
+def test_a_bay_inspection_lost_with_a_killed_vision_is_sent_again_to_the_restarted_one(rig, crs, tmp_path):
+    """Vision killed (SIGKILL) with Inspect Bay out and restarted by the launcher: the CRS sends the
+    inspection again once the new vision says ready, and Test Bay passes without a fault."""
+    rig.vision.withdraw()  # vision is a process of its own here
+    visions = [_VisionProcess("forget")]
+    try:
+        ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+        for m in ctx.mission.bay_members(1):
+            ctx.model.override(m.id, PLACED if m.kind == "cross_frame" else RIVETED)
+        crs.wait_for(lambda: "ready" in visions[0].lines, timeout=30.0, what="the first vision")
+        crs.wait_for(lambda: ctx.vision_status.not_ready() == "", timeout=10.0, what="vision's ready word")
+        subtree = bay_test(ctx, 1, Actuators(ctx))
+        crs.tick_until(subtree, until=lambda: "request 1" in visions[0].lines, timeout=30.0)
+        visions[0].kill()
+        visions.append(_VisionProcess("answer"))
+        assert crs.tick_until(subtree, timeout=60.0) == Status.SUCCESS
+        assert visions[1].lines.count("request 1") == 1
+        assert all(ctx.model.states[m.id] == INSPECTED for m in ctx.mission.bay_members(1))
+    finally:
+        for vision in visions:
+            vision.kill()
