@@ -48,6 +48,9 @@ SCHEMA = {
     ),
     "check_reach": opt("bool", True),
     "started_on_launch": opt("bool", True),
+    # Questions to vision given up (vision restarted, or no answer in timeouts.service_s) and asked
+    # again once vision says ready, per question, before the question fails.
+    "vision_retries": opt("int", 2, minimum=0, maximum=10),
     "tick_rate_hz": opt("float", 20.0, minimum=1.0, maximum=200.0),
     "status_rate_hz": opt("float", 5.0, minimum=0.1, maximum=200.0),
     "arm": Field(
@@ -108,6 +111,7 @@ SCHEMA = {
             "planning_s": opt("float", 5.0, minimum=0.01),
             "trajectory_margin_s": opt("float", 10.0, minimum=0.0),
             "service_s": opt("float", 30.0, minimum=0.0),
+            "vision_back_s": opt("float", 300.0, minimum=0.0),
             "present_part_s": opt("float", 300.0, minimum=0.0),
             "width_s": opt("float", 120.0, minimum=0.0),
             "sensor_s": opt("float", 2.0, minimum=0.0),

@@ -46,6 +46,7 @@ from tlt_ars.request_data import RequestData, RequestFile
 from tlt_common import ros_names
 from tlt_common.bt.ros import Clock, TopicCache, node_clock
 from tlt_common.mission.schema import Member, Mission
+from tlt_common.ros.readiness import ReadinessWatch
 
 # Above this the width slide is taken to be moving (the servo's 15 mm/s drive, not its jitter).
 WIDTH_MOVING_M_S = 0.002
@@ -84,6 +85,9 @@ class ArsContext:
         if self.other_joint_topic:
             self.cache.watch(self.other_joint_topic, JointState)
         self.cache.watch(self.ee_topic, EndEffectorState)
+        # Vision's word on its readiness: a question to vision lost with a restarted vision process
+        # is asked again once it says ready (tlt_ars.behaviours.vision).
+        self.vision_status = ReadinessWatch(node, ros_names.VISION_STATUS)
         # One width-command publisher for every Set Width of every branch the ARS builds.
         self.width_publisher = node.create_publisher(
             Float64MultiArray, ros_names.position_command_topic(ros_names.ee(self.ars)), 10

@@ -69,6 +69,12 @@ def ee_calibrate_service(ee_component: str) -> str:
     return f"/{ee_component}/calibrate"
 
 
+def ee_calibrate_when_released_service(ee_component: str) -> str:
+    """std_srvs/Trigger: seek the EE width joint's limit switch once the grippers hold no part (an
+    operator's choice while the driver waits with a part held after its width servo lost its count)."""
+    return f"/{ee_component}/calibrate_when_released"
+
+
 def ee_rivet_gun_service(ee_component: str) -> str:
     """SetActuatorState: drive one of the EE's rivet-gun GPIO outputs."""
     return f"/{ee_component}/set_rivet_gun"

@@ -30,6 +30,7 @@ class Timeouts:
     forward_s: float = 2.0  # each ARS must answer a forwarded ground command
     sensor_max_age_s: float = 1.0  # older sensor messages count as no message
     lifter_link_s: float = 1.0  # the lifter unreachable this long (ROS time) holds the build
+    vision_back_s: float = 300.0  # a restarted vision must say ready this long after a lost inspection
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,7 @@ class CrsConfig:
     tick_rate_hz: float = 10.0
     progress_rate_hz: float = 2.0
     status_rate_hz: float = 5.0
+    vision_retries: int = 2  # inspections lost with a restarted vision, asked again per inspection
     timeouts: Timeouts = field(default_factory=Timeouts)
     lifter: LifterSetup = field(default_factory=LifterSetup)
     top_grippers: GripperSetup = field(default_factory=_top_default)
@@ -129,6 +131,7 @@ SCHEMA = {
     "tick_rate_hz": opt("float", 10.0, minimum=0.1, maximum=1000.0),
     "progress_rate_hz": opt("float", 2.0, minimum=0.01, maximum=100.0),
     "status_rate_hz": opt("float", 5.0, minimum=0.01, maximum=1000.0),
+    "vision_retries": opt("int", 2, minimum=0, maximum=10),
     "timeouts": opt("dict", None, schema=_TIMEOUTS),
     "lifter": opt("dict", None, schema=_LIFTER),
     "top_grippers": opt("dict", None, schema=_GRIPPER),
@@ -181,6 +184,7 @@ def load_config(path: str | Path, **overrides: Any) -> CrsConfig:
         tick_rate_hz=data["tick_rate_hz"],
         progress_rate_hz=data["progress_rate_hz"],
         status_rate_hz=data["status_rate_hz"],
+        vision_retries=data["vision_retries"],
         timeouts=_merge(Timeouts(), data["timeouts"]),
         lifter=_merge(LifterSetup(), data["lifter"]),
         top_grippers=_merge(_top_default(), data["top_grippers"]),

@@ -169,10 +169,12 @@ class CrsContext:
         self._servers = self._build_server_checks()
         from diagnostic_msgs.msg import DiagnosticStatus
 
-        from tlt_common.ros.readiness import LATCHED
+        from tlt_common.ros.readiness import LATCHED, ReadinessWatch
 
         # Vision's services may be up before it has heard the joint states that place its cameras.
         self.cache.watch(ros_names.VISION_STATUS, DiagnosticStatus, LATCHED)
+        # Every word vision says: an inspection lost with a restarted vision is asked again.
+        self.vision_status = ReadinessWatch(node, ros_names.VISION_STATUS)
 
     def device_topics(self) -> list[str]:
         """The state topics of the lifter and the grippers, which the tree cannot build without."""
@@ -225,6 +227,20 @@ class CrsContext:
                 ),
             )
         )
+
+    def vision_call_options(self) -> dict[str, Any]:
+        """The limits of an inspection asked of vision (a ``ServiceCall``'s keywords), and how it is
+        asked again when vision was restarted with it: once the new vision says ready, up to
+        ``vision_retries`` times, each waiting up to ``timeouts.vision_back_s``."""
+        timeouts = self.config.timeouts
+        return {
+            "service_timeout": timeouts.service_s,
+            "timeout": timeouts.vision_s,
+            "clock": self.clock,
+            "retries": self.config.vision_retries,
+            "server_state": self.vision_status,
+            "back_within": timeouts.vision_back_s,
+        }
 
     def vision_not_ready(self) -> str:
         """Why vision cannot answer yet ('' when it can), as its latched status says: it cannot

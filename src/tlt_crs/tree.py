@@ -282,10 +282,8 @@ def bay_test(ctx: CrsContext, bay: int, actuators: Actuators) -> py_trees.behavi
         InspectBay,
         ros_names.VISION_INSPECT_BAY,
         lambda: InspectBay.Request(bay=bay),
-        service_timeout=ctx.config.timeouts.service_s,
-        timeout=ctx.config.timeouts.vision_s,
         response_ok=inspection_ok,
-        clock=ctx.clock,
+        **ctx.vision_call_options(),
     )
     return Sequence(
         f"Test Bay {bay}",

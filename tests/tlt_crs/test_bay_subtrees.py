@@ -200,12 +200,12 @@ def _start_ars_x(rig, crs):
     rig.ars["ars_x"] = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
 
 
-@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
-def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_had(rig, crs, tmp_path, phase):
+def _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase):
+    """Kill ARS X's servers while it runs the subtree's request, at ``phase``, and bring up a new
+    ARS X (a launcher restart); returns the new stand-in."""
     import rclpy
     from action_msgs.msg import GoalStatusArray
 
-    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
     rig.ars["ars_x"].hold_s = 30.0
     # An earlier ARS X that died is still listed for its lease, as DDS keeps a lost participant's
     # endpoints: its server's status publisher.
@@ -220,7 +220,6 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
             }
         )
     )
-    subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
     if phase == "waiting for the part":
         # The CRS learns the goal was accepted only after the ARS that took it died: its request
         # for the result reaches no server, and the server it finds next is the restarted one.
@@ -235,6 +234,57 @@ def test_ars_replaced_mid_request_fails_instead_of_waiting_for_a_goal_it_never_h
         crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and rig.vision.part_calls != [])
         _stop_ars_x(rig)
     _start_ars_x(rig, crs)
+    return rig.ars["ars_x"]
+
+
+@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
+def test_ars_replaced_mid_request_is_sent_the_request_again(rig, crs, tmp_path, phase):
+    """A restarted ARS knows from its state file what the request did; the CRS sends it again to the
+    new server (no fault), and the member is placed once."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    events = []
+    ctx.event_listeners.append(lambda severity, code, text: events.append((code, text)))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    subtree = add_diagonal(ctx, member)
+    _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase)
+    assert crs.tick_until(subtree, timeout=10.0) == Status.SUCCESS
+    requests = [(r.ars, r.request, r.member_id) for r in rig.recorder.requests]
+    assert requests == [("ars_x", "add_member", member.id)] * 2  # once to each ARS X process
+    assert rig.recorder.requests[1].outcome == "succeeded"
+    assert ctx.model.states[member.id] == RIVETED
+    assert ctx.model.remaining["diagonal_dispenser_x"] == 3  # one part taken: nothing placed twice
+    resent = [text for code, text in events if code == "ARS_REQUEST_RESENT"]
+    assert len(resent) == 1 and member.id in resent[0] and "(1 of 2)" in resent[0], events
+
+
+def test_a_resent_request_the_restarted_ars_finishes_without_a_part_succeeds(rig, crs, tmp_path):
+    """The restarted ARS had set the member before it was killed (its state file says so): sent
+    again, it finishes the request without presenting a part, and that is the member done."""
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    member = _member(ctx, "bay1/diagonal/face_x0")
+    subtree = add_diagonal(ctx, member)
+    rig.ars["ars_x"].hold_s = 30.0
+    crs.tick_until(subtree, until=lambda: len(rig.recorder.requests) == 1 and rig.vision.part_calls != [])
+    _stop_ars_x(rig)
+    import rclpy
+
+    node = rclpy.create_node("ars_x_restarted")
+    rig.add(node)
+    restarted = crs.ArsStandIn(node, "ars_x", rig.recorder, rig.group)
+    restarted.present_parts = False  # it lets go and retreats: no part to present
+    rig.ars["ars_x"] = restarted
+    assert crs.tick_until(subtree, timeout=10.0) == Status.SUCCESS
+    assert [r.outcome for r in rig.recorder.requests][1:] == ["succeeded"]
+    assert rig.vision.part_calls == [member.id]  # the part was inspected once, by the first ARS X
+    assert ctx.model.states[member.id] == RIVETED
+
+
+@pytest.mark.parametrize("phase", ["waiting for the result", "waiting for the part"])
+def test_ars_replaced_mid_request_once_too_often_fails_with_the_reason(rig, crs, tmp_path, phase):
+    ctx = crs.make_context(rig, crs.fast_config(tmp_path, ars_server_s=0.3))
+    ctx.board.set("ars_resends", 0)
+    subtree = add_diagonal(ctx, _member(ctx, "bay1/diagonal/face_x0"))
+    _replace_ars_x_mid_request(rig, crs, ctx, subtree, phase)
     assert crs.tick_until(subtree, timeout=10.0) == Status.FAILURE
     assert rig.recorder.requests[1:] == []  # nothing sent to the new server
     failed = [b for b in subtree.iterate() if b.status == Status.FAILURE and b.children == []]
@@ -327,3 +377,89 @@ def test_ars_giving_up_on_parts_is_recorded_with_its_reason(rig, crs, tmp_path):
     assert ctx.model.discarded["diagonal_dispenser_x"] == 2
     assert ctx.model.remaining["diagonal_dispenser_x"] == 2
     assert ctx.model.states[member.id] == NOT_PLACED
+
+
+# A vision process's /vision/inspect_bay: it says its readiness as vision does (a reason while it
+# cannot place its cameras, then ready), and either never answers (it is about to be killed) or
+# passes the bay. It prints each request it takes.
+VISION_PROCESS = """
+import sys, threading, time
+import rclpy
+from rclpy.executors import MultiThreadedExecutor
+from tlt_interfaces.srv import InspectBay
+from tlt_common import ros_names
+from tlt_common.ros.readiness import ReadinessPublisher
+
+mode = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("vision")
+readiness = ReadinessPublisher(node, ros_names.VISION_STATUS, "vision")
+readiness.say("no joint state for camera_mount_1 yet")
+
+def inspect(request, response):
+    print("request", request.bay, flush=True)
+    if mode == "forget":
+        threading.Event().wait()
+    response.report.target_id = f"bay{request.bay}"
+    response.report.passed = True
+    return response
+
+node.create_service(InspectBay, ros_names.VISION_INSPECT_BAY, inspect)
+time.sleep(0.3)
+readiness.say("")
+print("ready", flush=True)
+executor = MultiThreadedExecutor()
+executor.add_node(node)
+executor.spin()
+"""
+
+
+class _VisionProcess:
+    def __init__(self, mode: str) -> None:
+        import os
+        import subprocess
+        import sys
+        import threading
+
+        self.lines: list[str] = []
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", VISION_PROCESS, mode],
+            stdout=subprocess.PIPE,
+            text=True,
+            env=os.environ.copy(),
+        )
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.process.stdout:
+            self.lines.append(line.strip())
+
+    def kill(self) -> None:
+        import signal
+
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGKILL)
+        self.process.wait(timeout=10.0)
+
+
+def test_a_bay_inspection_lost_with_a_killed_vision_is_sent_again_to_the_restarted_one(rig, crs, tmp_path):
+    """Vision killed (SIGKILL) with Inspect Bay out and restarted by the launcher: the CRS sends the
+    inspection again once the new vision says ready, and Test Bay passes without a fault."""
+    rig.vision.withdraw()  # vision is a process of its own here
+    visions = [_VisionProcess("forget")]
+    try:
+        ctx = crs.make_context(rig, crs.fast_config(tmp_path))
+        for m in ctx.mission.bay_members(1):
+            ctx.model.override(m.id, PLACED if m.kind == "cross_frame" else RIVETED)
+        crs.wait_for(lambda: "ready" in visions[0].lines, timeout=30.0, what="the first vision")
+        crs.wait_for(lambda: ctx.vision_status.not_ready() == "", timeout=10.0, what="vision's ready word")
+        subtree = bay_test(ctx, 1, Actuators(ctx))
+        crs.tick_until(subtree, until=lambda: "request 1" in visions[0].lines, timeout=30.0)
+        visions[0].kill()
+        visions.append(_VisionProcess("answer"))
+        assert crs.tick_until(subtree, timeout=60.0) == Status.SUCCESS
+        assert visions[1].lines.count("request 1") == 1
+        assert all(ctx.model.states[m.id] == INSPECTED for m in ctx.mission.bay_members(1))
+    finally:
+        for vision in visions:
+            vision.kill()

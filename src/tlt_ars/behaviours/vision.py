@@ -12,6 +12,11 @@ the alignment of a held or placed part from the EE camera, and the check that a 
   rivet in the gun (part kind ``rivet``, member id ``<ars>/<gun>``, the EE camera).
 
 Poses from vision must be in ``cameras.world_frame``; any other frame fails with that reason.
+
+Each question survives a restart of the vision process (:func:`vision_call_options`): one that got
+no response because vision was killed with it is asked again once the new vision says ready on
+``ros_names.VISION_STATUS``, up to ``vision_retries`` times, each waiting up to
+``timeouts.vision_back_s`` for vision to come back.
 """
 
 from __future__ import annotations
@@ -29,6 +34,19 @@ from tlt_common import ros_names
 from tlt_common.bt.nodes import Condition
 from tlt_common.bt.ros import ServiceCall
 from tlt_common.geometry.transforms import invert, pose_matrix, quaternion_to_rotation, rpy_from_matrix
+
+
+def vision_call_options(ctx: ArsContext) -> dict[str, Any]:
+    """The limits of a question to vision, and how it is asked again after a vision restart."""
+    timeouts = ctx.config.timeouts
+    return {
+        "service_timeout": timeouts["server_s"],
+        "timeout": timeouts["service_s"],
+        "clock": ctx.clock,
+        "retries": ctx.config.raw["vision_retries"],
+        "server_state": ctx.vision_status,
+        "back_within": timeouts["vision_back_s"],
+    }
 
 
 def pose_to_matrix(pose: Any) -> np.ndarray:
@@ -55,10 +73,8 @@ class LocateDispenser(ServiceCall):
             LocateTag,
             ros_names.VISION_LOCATE_TAG,
             lambda: LocateTag.Request(dispenser=dispenser, camera=ctx.config.cameras["end_effector"]),
-            service_timeout=ctx.config.timeouts["server_s"],
-            timeout=ctx.config.timeouts["service_s"],
             response_ok=self._ok,
-            clock=ctx.clock,
+            **vision_call_options(ctx),
         )
 
     def _ok(self, response: Any) -> tuple[bool, str]:
@@ -114,10 +130,8 @@ class MeasureAlignment(ServiceCall):
             CheckAlignment,
             ros_names.VISION_CHECK_ALIGNMENT,
             self._request,
-            service_timeout=ctx.config.timeouts["server_s"],
-            timeout=ctx.config.timeouts["service_s"],
             response_ok=self._ok,
-            clock=ctx.clock,
+            **vision_call_options(ctx),
         )
 
     def _request(self) -> Any:
@@ -204,10 +218,8 @@ def verify_rivet_loaded(ctx: ArsContext, name: str = "Verify Rivet Loaded") -> S
         lambda: InspectPart.Request(
             member_id=f"{ctx.ars}/{gun}", part_kind="rivet", camera=ctx.config.cameras["end_effector"]
         ),
-        service_timeout=ctx.config.timeouts["server_s"],
-        timeout=ctx.config.timeouts["service_s"],
         response_ok=ok,
-        clock=ctx.clock,
+        **vision_call_options(ctx),
     )
 
 
@@ -220,4 +232,5 @@ __all__ = [
     "located_dispenser_targets",
     "pose_to_matrix",
     "verify_rivet_loaded",
+    "vision_call_options",
 ]

@@ -12,6 +12,14 @@ rejected, server gone while the goal runs (not discoverable for ``ars_server_s``
 server is: the ARS process that took the goal was replaced, say restarted by the launcher, and the
 new one will never answer it), no result within blackboard ``ars_result_timeout``, aborted, or a
 result of failure with the ARS's reason.
+
+A goal whose server was replaced is not yet a fault: the restarted ARS knows from its state file
+what the request had done (the part in its jaws, a member it set or may have set), and the same
+request sent again finishes it without placing anything twice (:mod:`tlt_ars.request_data`). So
+:class:`RequestScope` sends it again, from the start of the scope, up to blackboard
+``ars_resends`` times per run (event ``ARS_REQUEST_RESENT``); a resent request that the ARS
+finishes with success without presenting its part again (it had set the member already) succeeds,
+as its result is recorded in the tower model.
 Every wait is measured on the mission clock, which stands still while the CRS is paused. Whether
 a server is there is read through :mod:`tlt_common.bt.server_readiness`: waiting uses an answer up
 to a quarter second old, and the "missing" and "gone" failures are decided on a fresh one.
@@ -20,7 +28,7 @@ to a quarter second old, and the "missing" and "gone" failures are decided on a 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import py_trees
@@ -76,6 +84,9 @@ class ArsRequest:
         self.title = request.replace("_", " ").title().replace(" ", "")
         self._servers: dict[str, _Server] = {}
         self.reset()
+        # Of the last goal sent, kept past the reset that forgets it, for RequestScope to read:
+        self.replaced = False  # its server was replaced while it ran (the ARS restarted)
+        self.concluded_ok = False  # it ended in success, recorded in the tower model
 
     def ars(self) -> str:
         return self._ars() if callable(self._ars) else self._ars
@@ -118,6 +129,7 @@ class ArsRequest:
     def send(self, ars: str, goal: Any) -> None:
         """Send ``goal`` to ``ars``, noting which servers were there to take it."""
         self.ars_name = ars
+        self.replaced = self.concluded_ok = False
         self._sent_to = self._status_publishers()
         self.send_future = self.client(ars).send_goal_async(goal, feedback_callback=self._on_feedback)
 
@@ -166,6 +178,7 @@ class ArsRequest:
         name = self.describe()
         why = "" if not up else f": a new '{self.server(self.ars_name).action}' server does not know the goal"
         self.cancel()
+        self.replaced = up
         return f"ARS '{name.rsplit(' on ', 1)[-1]}' gone while running {name}{why}"
 
     def describe(self) -> str:
@@ -214,6 +227,8 @@ class ArsRequest:
         if self.inspected:
             self.ctx.desk.withdraw(self.member.id, "the ARS finished the request")
         self.reset()
+        self.replaced = status == GoalStatus.STATUS_UNKNOWN
+        self.concluded_ok = ok
         return ok, (f"{name} done" if ok else f"{name} failed: {reason or 'no reason given'}")
 
     def _on_feedback(self, message: Any) -> None:
@@ -327,11 +342,58 @@ class AwaitArsResult(Action):
 
 class RequestScope(py_trees.composites.Sequence):
     """A Sequence with memory owning one :class:`ArsRequest`: when it ends other than in SUCCESS
-    (pre-empted or failed), the goal still in flight is canceled."""
+    (pre-empted or failed), the goal still in flight is canceled.
+
+    Reads: blackboard ``ars_resends``. Writes: event ``ARS_REQUEST_RESENT``.
+    When it fails because the server running its goal was replaced (the ARS restarted, see
+    :meth:`ArsRequest.server_gone` and :meth:`ArsRequest.conclude`), it starts again from its first
+    child, which sends the same request to the new server, and answers RUNNING instead, up to
+    ``ars_resends`` times per run. After such a resend, a failure of a request the ARS finished
+    with success (a Wait For Part that saw the result before any part) is SUCCESS: the result is
+    recorded in the tower model.
+    """
 
     def __init__(self, name: str, request: ArsRequest, children: list[py_trees.behaviour.Behaviour]) -> None:
         super().__init__(name, memory=True, children=children)
         self.request = request
+        self.resends = 0
+
+    def initialise(self) -> None:
+        self.resends = 0
+
+    def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        for node in super().tick():
+            if node is self and self.status == Status.FAILURE:
+                self._after_failure()
+            yield node
+
+    def _after_failure(self) -> None:
+        """Turn a failure into a resend (RUNNING) or, after one, into the ARS's success."""
+        req, ctx = self.request, self.request.ctx
+        if self.resends and req.concluded_ok:
+            self.status = Status.SUCCESS
+            self.feedback_message = f"{req.describe()} finished by the restarted ARS"
+            return
+        if not req.replaced:
+            return
+        limit = int(ctx.board.get("ars_resends", 2))
+        if self.resends >= limit:
+            self.feedback_message = f"sent {self.resends + 1} times, the ARS replaced each time"
+            return
+        self.resends += 1
+        ctx.event(
+            2,
+            "ARS_REQUEST_RESENT",
+            f"{req.describe()}: the ARS was replaced (restarted) while it ran the request; sent"
+            f" again ({self.resends} of {limit})",
+        )
+        req.replaced = False
+        for child in self.children:
+            if child.status != Status.INVALID:
+                child.stop(Status.INVALID)
+        self.current_child = self.children[0]
+        self.status = Status.RUNNING
+        self.feedback_message = f"sending again to the restarted ARS ({self.resends} of {limit})"
 
     def terminate(self, new_status: Status) -> None:
         # Pre-empted, or failed part-way (e.g. a part failed inspection too often): the ARS stops too.

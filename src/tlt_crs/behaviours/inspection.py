@@ -245,10 +245,8 @@ def inspection_check(ctx: CrsContext, request: ArsRequest) -> py_trees.behaviour
         InspectPart,
         ros_names.VISION_INSPECT_PART,
         vision_request,
-        service_timeout=ctx.config.timeouts.service_s,
-        timeout=ctx.config.timeouts.vision_s,
         response_ok=lambda response: (True, ""),  # pass or fail, the report is forwarded
-        clock=ctx.clock,
+        **ctx.vision_call_options(),
     )
     forward = ForwardResult(request, inspect)
     check = py_trees.composites.Sequence(

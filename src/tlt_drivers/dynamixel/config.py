@@ -87,6 +87,13 @@ CALIBRATION_SCHEMA = {
         doc="after a fault, the calibration holds while the width reads within this of its last reading "
         "(joint units; a servo that lost its multi-turn count reads whole turns off)",
     ),
+    "release_travel": opt(
+        "float",
+        0.05,
+        minimum=1e-6,
+        doc="a part held when the count was lost counts as put down once no grasp presses and a grasp "
+        "joint moved this far from where it held the part (rad)",
+    ),
 }
 
 EE_SCHEMA = {

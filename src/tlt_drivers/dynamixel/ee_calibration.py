@@ -7,6 +7,12 @@ Until that has happened, :meth:`WidthCalibration.refusal` gives the reason every
 the end effector is refused. The seek gives up (FAILED, with the reason) after ``max_travel`` of
 travel or ``timeout_s``. A hardware recovery may have rebooted the servos, so it invalidates the
 calibration.
+
+A seek drags whatever the grippers hold along the slide. So a calibration lost while a part is
+held is not sought again by itself: :meth:`WidthCalibration.hold_for_operator` puts it in WAITING,
+with the reason, until an operator chooses: :meth:`WidthCalibration.start` (calibrate now) or
+:meth:`WidthCalibration.start_when_released` (calibrate once no part is held, which the driver
+watches for).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from tlt_drivers.hardware_interface import Lifecycle
 class CalibrationState(enum.Enum):
     UNCALIBRATED = "uncalibrated"
     SEEKING = "seeking the limit switch"
+    WAITING = "waiting for an operator"
     CALIBRATED = "calibrated"
     FAILED = "failed"
 
@@ -49,6 +56,8 @@ class WidthCalibration:
         self.reason = "not calibrated since power-up"
         self._origin = 0.0
         self._t0 = 0.0
+        #: while WAITING: the operator chose to calibrate once the grippers hold no part
+        self.when_released = False
 
     @property
     def calibrated(self) -> bool:
@@ -71,6 +80,7 @@ class WidthCalibration:
             return None
         self.state = CalibrationState.SEEKING
         self.reason = "in progress"
+        self.when_released = False
         self._origin = self.hw.position[self.joint]
         self._t0 = now
         self.hw.unclamped.add(self.joint)
@@ -80,6 +90,23 @@ class WidthCalibration:
         self.hw.unclamped.discard(self.joint)
         self.state = CalibrationState.UNCALIBRATED
         self.reason = reason
+        self.when_released = False
+
+    def hold_for_operator(self, reason: str) -> None:
+        """The calibration is lost and must not be sought by itself (a part is held): WAITING,
+        with ``reason``, until :meth:`start` or :meth:`start_when_released`."""
+        self.invalidate(reason)
+        self.state = CalibrationState.WAITING
+
+    def start_when_released(self) -> str | None:
+        """The operator's choice to calibrate once no part is held; a reason when the calibration
+        is not waiting for an operator."""
+        if self.state != CalibrationState.WAITING:
+            return f"{self.hw.name}: the calibration is {self.state.value}, not waiting for an operator"
+        if not self.when_released:
+            self.when_released = True
+            self.reason += "; calibrating once the part is put down (the grippers hold none)"
+        return None
 
     def _fail(self, reason: str) -> dict[str, float]:
         self.hw.unclamped.discard(self.joint)

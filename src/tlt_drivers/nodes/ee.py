@@ -9,10 +9,17 @@ with ``read_input(name) -> bool`` and ``write_output(name, value)`` (:class:`Dig
 
 Calibration runs on activation when ``ee.calibration.on_start`` is set, and on request through
 ``/<ee>/calibrate`` (``std_srvs/Trigger``). Until it has succeeded every motion command is refused
-with the reason. Rivet guns: ``/<ee>/set_rivet_gun`` (``tlt_interfaces/srv/SetActuatorState``,
-actuator ``rivet_gun_0`` or ``rivet_gun_1``, state ``on`` or ``off``). State:
-``tlt_interfaces/msg/EndEffectorState`` on ``/<ee>/state``; ``part_grasped`` is true when every grasp
-joint presses with at least ``ee.grasp_effort_threshold`` of stall current.
+with the reason. A width servo that rebooted and lost its multi-turn count while the grippers hold
+a part is not calibrated by the driver on its own, since the seek would drag the part along the
+slide: the driver holds, says why in ``EndEffectorState`` (``fault`` set, ``fault_reason``) and in
+its log, and waits for an operator's choice: ``/<ee>/calibrate`` (now) or
+``/<ee>/calibrate_when_released`` (``std_srvs/Trigger``: once the part is put down). Meanwhile the
+grasp joints may move (to put the part down), the width joint may not.
+
+Rivet guns: ``/<ee>/set_rivet_gun`` (``tlt_interfaces/srv/SetActuatorState``, actuator
+``rivet_gun_0`` or ``rivet_gun_1``, state ``on`` or ``off``). State:
+``tlt_interfaces/msg/EndEffectorState`` on ``/<ee>/state``; ``part_grasped`` is true when every
+grasp joint presses with at least ``ee.grasp_effort_threshold`` of stall current.
 """
 
 from __future__ import annotations
@@ -72,8 +79,18 @@ class EndEffectorNode(DynamixelDriverNode):
         self._activations_seen = 0
         self._width_read: float | None = None  # the width joint's last reading while active
         component = config["component"]
+        self._grasped_read = False  # whether the grippers held a part at that reading
+        # Where the grasp joints stood when the calibration began to wait with a part held.
+        self._held_at: dict[str, float] = {}
         self.state_pub = self.create_publisher(EndEffectorState, ros_names.state_topic(component), 10)
         self.create_service(Trigger, ros_names.ee_calibrate_service(component), self._on_calibrate)
+        self.create_service(
+            Trigger,
+            ros_names.ee_calibrate_when_released_service(component),
+            self._on_calibrate_when_released,
+        )
+        if self.loop.trajectory is not None:
+            self.loop.trajectory.motion_gate = self._grasp_refusal
         self.create_service(SetActuatorState, ros_names.ee_rivet_gun_service(component), self._on_rivet_gun)
         for name in self.ee["rivet_gun_outputs"]:
             self.gpio.write_output(name, False)
@@ -86,6 +103,25 @@ class EndEffectorNode(DynamixelDriverNode):
 
     def _calibration_refusal(self) -> str | None:
         return self._calibration.refusal() if self._calibration is not None else "starting up"
+
+    def _grasp_refusal(self) -> str | None:
+        """The grasp joints' gate: as every motion's, except while the calibration waits for an
+        operator, when the jaws may open to put the held part down."""
+        refusal = self.loop.motion_refusal()
+        if (
+            refusal is not None
+            and self.calibration.state == CalibrationState.WAITING
+            and self.hw.state == Lifecycle.ACTIVE
+        ):
+            return None
+        return refusal
+
+    def _part_grasped(self) -> bool:
+        """Every grasp joint presses with at least ``ee.grasp_effort_threshold`` of stall current."""
+        threshold = self.ee["grasp_effort_threshold"]
+        return self.hw.state == Lifecycle.ACTIVE and all(
+            abs(self.hw.effort[n]) >= threshold for n in self.ee["grasp_joints"]
+        )
 
     def _calibration_ended(self) -> None:
         if self.calibration.calibrated:
@@ -100,21 +136,39 @@ class EndEffectorNode(DynamixelDriverNode):
 
     def _override(self, now: float) -> dict[str, float]:
         width = self.ee["width_joint"]
+        grasped = self._part_grasped()
+        waiting = CalibrationState.WAITING
         if self.loop.activations != self._activations_seen:
             if self._activations_seen:
-                self._check_count_after_fault(width)
+                self._check_count_after_fault(width, held=grasped or self._grasped_read)
             self._activations_seen = self.loop.activations
-            if self.ee["calibration"]["on_start"] and not self.calibration.calibrated:
+            if self.ee["calibration"]["on_start"] and self.calibration.state not in (
+                CalibrationState.CALIBRATED,
+                waiting,
+            ):
                 self.calibration.start(now)
+        if self.calibration.state == waiting and self.calibration.when_released and self._put_down(grasped):
+            self.get_logger().info(f"{self.config['component']}: the part is put down: calibrating the width")
+            self.calibration.start(now)
         self._width_read = self.hw.position[width]
+        self._grasped_read = grasped
         return self.calibration.update(now)
 
-    def _check_count_after_fault(self, width: str) -> None:
+    def _put_down(self, grasped: bool) -> bool:
+        """Whether the part held when the calibration began to wait is put down: no grasp presses
+        and a grasp joint moved ``calibration.release_travel`` from where it stood then. Pressing
+        alone does not tell, as a re-activation holds the jaws where they stand, pressing on
+        nothing, with the part still between them."""
+        travel = self.ee["calibration"]["release_travel"]
+        return not grasped and any(abs(self.hw.position[n] - at) >= travel for n, at in self._held_at.items())
+
+    def _check_count_after_fault(self, width: str, held: bool) -> None:
         """Re-activated after a fault: a width servo that rebooted or lost power lost its
         multi-turn count (its encoder covers one turn), and its position then reads off by whole
         turns from the last one read before the fault. Only then is the calibration lost: a seek
         to the limit switch drags whatever part the grippers hold along the slide, so a fault of
-        the link alone must not start one."""
+        the link alone must not start one, and with a part ``held`` (before the fault or now) the
+        driver waits for an operator's choice instead of seeking."""
         before, after = self._width_read, self.hw.position[width]
         if self.calibration.state == CalibrationState.SEEKING:
             # A seek cut by the fault starts again: its travel was counted from where it began.
@@ -124,11 +178,22 @@ class EndEffectorNode(DynamixelDriverNode):
             return
         keep = self.ee["calibration"]["keep_within"]
         if abs(after - before) > keep:
-            self.calibration.invalidate(
+            lost = (
                 f"the width read {after:.4f} after a fault, {before:.4f} before: its servo lost its "
                 "multi-turn count"
             )
             component = self.config["component"]
+            if held:
+                self._held_at = {n: self.hw.position[n] for n in self.ee["grasp_joints"]}
+                self.calibration.hold_for_operator(
+                    f"{lost} while a part is held: not seeking the limit switch with the part in the"
+                    f" grippers; an operator chooses {ros_names.ee_calibrate_service(component)}"
+                    f" (now) or {ros_names.ee_calibrate_when_released_service(component)}"
+                    " (once the part is put down)"
+                )
+                self.get_logger().error(f"{component}: {self.calibration.reason}")
+                return
+            self.calibration.invalidate(lost)
             self.get_logger().warning(f"{component}: {self.calibration.reason}; calibrating again")
         else:
             self.get_logger().info(
@@ -140,6 +205,12 @@ class EndEffectorNode(DynamixelDriverNode):
         problem = self.calibration.start(self.loop.now())
         response.success = problem is None
         response.message = problem or f"calibration {self.calibration.state.value}"
+        return response
+
+    def _on_calibrate_when_released(self, _request, response):
+        problem = self.calibration.start_when_released()
+        response.success = problem is None
+        response.message = problem or self.calibration.reason
         return response
 
     # --- rivet guns ----------------------------------------------------------------------------------------
@@ -193,13 +264,13 @@ class EndEffectorNode(DynamixelDriverNode):
             msg.limit_switch = self._limit_switch()
         except Exception:  # a failing GPIO read must not stop the state stream
             msg.limit_switch = False
-        threshold = self.ee["grasp_effort_threshold"]
-        msg.part_grasped = self.hw.state == Lifecycle.ACTIVE and all(
-            abs(self.hw.effort[n]) >= threshold for n in self.ee["grasp_joints"]
-        )
+        msg.part_grasped = self._part_grasped()
         msg.rivet_gun_output = [bool(v) for v in self.rivet_outputs[:2]]
-        msg.fault = self.hw.state == Lifecycle.ERROR
-        msg.fault_reason = self.hw.fault
+        # Waiting for an operator's choice of calibration is a fault too: it says why nothing moves.
+        waiting = self.calibration.state == CalibrationState.WAITING
+        errored = self.hw.state == Lifecycle.ERROR
+        msg.fault = errored or waiting
+        msg.fault_reason = self.calibration.reason if waiting and not errored else self.hw.fault
         self.state_pub.publish(msg)
 
 

@@ -587,3 +587,167 @@ def test_tree_status_follows_the_tree_after_a_refresh(ros):
     tree.tick()
     assert [n.path for n in sent[-1].nodes] == ["ARS", "ARS/idle", "ARS/request"]
     assert sent[-1].hash != sent[0].hash
+
+
+class ServerWords:
+    """A server process's readiness as ReadinessWatch gives it, set by the test."""
+
+    def __init__(self) -> None:
+        self.words = 1  # it said ready once, before the test's requests
+        self.reason = ""
+
+    def say(self, reason: str) -> None:
+        self.words += 1
+        self.reason = reason
+
+    def heard(self) -> int:
+        return self.words
+
+    def not_ready(self) -> str:
+        return self.reason
+
+
+class ForgetfulService:
+    """Answers every request but those in ``lost`` (their process 'died' with them)."""
+
+    def __init__(self, node, name: str) -> None:
+        self.received: list[str] = []
+        self.lost = threading.Event()  # set: the next request is never answered
+        self.release = threading.Event()
+        self.service = node.create_service(
+            SetBlackboardValue, name, self.handle, callback_group=ReentrantCallbackGroup()
+        )
+
+    def handle(self, request, response):
+        self.received.append(request.key)
+        if self.lost.is_set():
+            self.lost.clear()
+            self.release.wait(timeout=10.0)
+        response.accepted = True
+        return response
+
+
+@pytest.fixture
+def forgetful(ros):
+    server_node, _ = ros
+    name = f"vision_{len(FORGETFUL)}/ask"
+    FORGETFUL.append(name)
+    service = ForgetfulService(server_node, name)
+    yield service
+    service.release.set()  # the held request is answered; its service goes with the node
+
+
+FORGETFUL: list[str] = []
+
+
+def asking(node, service: ForgetfulService, clock, state, retries: int = 2) -> ServiceCall:
+    return ServiceCall(
+        "ask",
+        node,
+        SetBlackboardValue,
+        service.service.srv_name,
+        request("lifter_speed"),
+        timeout=30.0,
+        clock=clock,
+        retries=retries,
+        server_state=state,
+        back_within=100.0,
+    )
+
+
+def test_a_request_lost_with_a_restarted_server_is_asked_again_once_it_says_ready(ros, forgetful):
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    forgetful.lost.set()
+    call = asking(node, forgetful, clock, state)
+    wait_for(lambda: len(forgetful.received) == 1, tick=call.tick_once)
+    call.tick_once()
+    assert call.status is Status.RUNNING
+    state.say("no joint state for ur_x_shoulder_pan_joint yet")  # the new process, starting
+    call.tick_once()
+    assert call.status is Status.RUNNING and "restarted" in call.feedback_message
+    for _ in range(3):
+        clock.now += 10.0
+        call.tick_once()
+        assert call.status is Status.RUNNING
+        assert "waiting for it to come back: no joint state" in call.feedback_message
+    assert len(forgetful.received) == 1  # nothing asked of a process that is not ready
+    state.say("")
+    run_to_end(call)
+    assert call.status is Status.SUCCESS
+    assert forgetful.received == ["lifter_speed"] * 2
+
+
+def test_a_request_unanswered_in_time_is_asked_again_only_once_the_process_is_back(ros, forgetful):
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    forgetful.lost.set()
+    call = asking(node, forgetful, clock, state)
+    wait_for(lambda: len(forgetful.received) == 1, tick=call.tick_once)
+    clock.now += 31.0
+    call.tick_once()
+    assert call.status is Status.RUNNING and "within 30 s" in call.feedback_message
+    clock.now += 50.0
+    call.tick_once()
+    assert call.status is Status.RUNNING and "no word from its process" in call.feedback_message
+    state.say("")  # a new process said ready at once
+    run_to_end(call)
+    assert call.status is Status.SUCCESS and len(forgetful.received) == 2
+
+
+def test_a_process_that_does_not_come_back_in_time_fails_the_request(ros, forgetful):
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    forgetful.lost.set()
+    call = asking(node, forgetful, clock, state)
+    wait_for(lambda: len(forgetful.received) == 1, tick=call.tick_once)
+    clock.now += 31.0
+    call.tick_once()
+    clock.now += 101.0
+    call.tick_once()
+    assert call.status is Status.FAILURE
+    assert "no response" in call.feedback_message and "not back within 100 s" in call.feedback_message
+
+
+def test_requests_are_asked_again_at_most_retries_times(ros, forgetful):
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    call = asking(node, forgetful, clock, state, retries=1)
+    for _ in range(2):
+        forgetful.lost.set()
+        asked = len(forgetful.received)
+        wait_for(lambda asked=asked: len(forgetful.received) == asked + 1, tick=call.tick_once)
+        state.say("")  # a restarted process says ready
+        call.tick_once()
+    assert call.status is Status.FAILURE
+    assert "restarted" in call.feedback_message and "(asked 2 times)" in call.feedback_message
+
+
+def test_without_retries_a_word_from_the_process_changes_nothing(ros, forgetful):
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    forgetful.lost.set()
+    call = asking(node, forgetful, clock, state, retries=0)
+    wait_for(lambda: len(forgetful.received) == 1, tick=call.tick_once)
+    state.say("")
+    call.tick_once()
+    assert call.status is Status.RUNNING
+    clock.now += 31.0
+    call.tick_once()
+    assert call.status is Status.FAILURE and call.feedback_message.endswith("within 30 s")
+
+
+def test_the_first_word_heard_after_the_request_went_out_is_not_a_restart(ros, forgetful):
+    """A caller that has just subscribed can hear the server's latched word after its request."""
+    _, node = ros
+    clock, state = FakeClock(), ServerWords()
+    state.words = 0
+    forgetful.lost.set()
+    call = asking(node, forgetful, clock, state)
+    wait_for(lambda: len(forgetful.received) == 1, tick=call.tick_once)
+    state.say("")
+    call.tick_once()
+    assert call.status is Status.RUNNING and call.feedback_message.startswith("request sent")
+    forgetful.release.set()
+    run_to_end(call)
+    assert call.status is Status.SUCCESS and len(forgetful.received) == 1

@@ -111,3 +111,19 @@ def test_cannot_start_while_hardware_inactive(rig):
     hw.deactivate()
     cal = WidthCalibration(hw, "width", SETTINGS, lambda: False)
     assert "cannot calibrate, hardware is INACTIVE" in cal.start(0.0)
+
+
+def test_a_calibration_waiting_for_an_operator_moves_nothing_until_one_chooses(rig):
+    chain, hw = rig
+    cal = WidthCalibration(hw, "width", SETTINGS, lambda: chain.servo(3).position <= SWITCH_TICKS)
+    assert "not waiting for an operator" in cal.start_when_released()  # nothing to choose yet
+    cal.hold_for_operator("count lost while a part is held")
+    assert cal.state == CalibrationState.WAITING and cal.update(0.0) == {}  # no seek commands
+    assert "waiting for an operator: count lost while a part is held" in cal.refusal()
+    assert cal.start_when_released() is None and cal.when_released
+    assert cal.start_when_released() is None  # asked twice, said once
+    assert cal.reason.count("once the part is put down") == 1
+    assert cal.state == CalibrationState.WAITING and cal.update(0.1) == {}
+    assert cal.start(0.0) is None and not cal.when_released  # the driver starts it (or "now")
+    run_cycles(chain, hw, cal, 3.0)
+    assert cal.state == CalibrationState.CALIBRATED

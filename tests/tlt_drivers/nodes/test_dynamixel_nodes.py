@@ -490,6 +490,87 @@ def test_ee_keeps_its_calibration_through_a_link_fault_and_seeks_again_after_a_l
         chain.stop()
 
 
+def grasp(harness: Harness, action, positions) -> None:
+    """Grasp joints to ``positions``, pressing on whatever is between the jaws (no tolerances)."""
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = ["grasp_left", "grasp_right"]
+    goal.trajectory.points = [
+        JointTrajectoryPoint(positions=list(positions), time_from_start=Duration(sec=1))
+    ]
+    goal.path_tolerance = [JointTolerance(name=n, position=-1.0) for n in ("grasp_left", "grasp_right")]
+    goal.goal_tolerance = [JointTolerance(name=n, position=-1.0) for n in ("grasp_left", "grasp_right")]
+    handle = harness.result(action.send_goal_async(goal), "grasp goal acceptance")
+    assert handle.accepted
+    result = harness.result(handle.get_result_async(), "grasp result").result
+    assert result.error_code == 0, result.error_string
+
+
+def test_ee_holding_a_part_waits_for_an_operator_after_a_lost_count_instead_of_seeking(harness):
+    """A width servo that reboots and loses its multi-turn count while the jaws hold a part: the
+    driver does not seek its limit switch (that would drag the part along the slide). It holds,
+    says why as a fault, opens the jaws when told (to put the part down), and seeks once the
+    operator chose "when released" and the grippers hold no part."""
+    chain = DynamixelChain([1, 2, 3])
+    chain.start()
+    switch_ticks = 2048 - 0.002 / 0.01 * 4096
+    try:
+        gpio = LimitSwitchFromServo(chain, 3, switch_ticks)
+        config = ee_config(chain.port)
+        config["ee"]["calibration"]["on_start"] = True  # as the shipped drivers: a lost count is sought again
+        node = harness.add(EndEffectorNode(config, gpio, context=harness.context))
+        states: list[EndEffectorState] = []
+        rejected: list[String] = []
+        harness.client.create_subscription(EndEffectorState, "/ee_x/state", states.append, 50)
+        harness.client.create_subscription(String, "/ee_x/position_command/rejected", rejected.append, 10)
+        commands = harness.client.create_publisher(Float64MultiArray, "/ee_x/position_command", 10)
+        when_released = harness.client.create_client(Trigger, "/ee_x/calibrate_when_released")
+        action = SerialisedActionClient(
+            harness.client, FollowJointTrajectory, "/ee_x/follow_joint_trajectory"
+        )
+        harness.spin()
+        harness.wait(lambda: node.calibration.calibrated, "calibrated on start")
+        harness.wait(lambda: commands.get_subscription_count() > 0, "command subscription")
+        commands.publish(Float64MultiArray(data=[0.015]))  # a turn and a half from the switch
+        harness.wait(lambda: abs(node.hw.position["width"] - 0.015) < 0.0005, "width at 15 mm")
+        harness.wait(action.server_is_ready, "action server")
+        for dxl_id in (1, 2):  # a strut between the jaws
+            chain.servo(dxl_id).set_obstacle(upper=2048 + 0.7 * 4096 / (2 * math.pi))
+        grasp(harness, action, [1.2, 1.2])
+        harness.wait(lambda: states and states[-1].part_grasped, "the part held")
+
+        activations, seen = node.loop.activations, len(states)
+        chain.servo(3).inject_hardware_error(HW_OVERLOAD)  # the driver reboots it to clear the error
+        harness.wait(lambda: node.loop.activations > activations, "recovery through a reboot")
+        held = "lost its multi-turn count while a part is held"
+        # The servo's hardware error is a fault first (the link's); then the driver's own.
+        harness.wait(lambda: any(m.fault and held in m.fault_reason for m in states[seen:]), "the fault")
+        fault = next(m for m in states[seen:] if m.fault and held in m.fault_reason)
+        assert "/ee_x/calibrate_when_released" in fault.fault_reason and not fault.calibrated
+        assert node.calibration.state.name == "WAITING"
+        stands = chain.servo(3).position
+        time.sleep(0.5)
+        assert chain.servo(3).position == pytest.approx(stands, abs=5)  # no seek with the part held
+        assert node.calibration.state.name == "WAITING" and states[-1].fault
+
+        reply = harness.result(when_released.call_async(Trigger.Request()), "the operator's choice")
+        assert reply.success and "once the part is put down" in reply.message, reply.message
+        time.sleep(0.3)
+        assert node.calibration.state.name == "WAITING"  # the part is still held
+        assert chain.servo(3).position == pytest.approx(stands, abs=5)
+        commands.publish(Float64MultiArray(data=[0.01]))
+        harness.wait(lambda: rejected, "the width command refused")
+        assert "waiting for an operator" in rejected[-1].data, rejected[-1].data
+        for dxl_id in (1, 2):  # the part is taken off the jaws as they open
+            chain.servo(dxl_id).set_obstacle()
+        grasp(harness, action, [0.0, 0.0])  # the jaws may move while the width may not
+        harness.wait(lambda: node.calibration.calibrated, "calibrated once no part is held")
+        assert node.hw.position["width"] == pytest.approx(0.0, abs=0.001)  # the seek ended on the switch
+        harness.wait(lambda: not states[-1].fault, "the fault cleared")
+    finally:
+        harness.close()
+        chain.stop()
+
+
 def test_ee_calibration_fails_with_reason_when_switch_never_closes(harness):
     chain = DynamixelChain([1, 2, 3])
     chain.start()
