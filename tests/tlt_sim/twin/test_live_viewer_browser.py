@@ -1,7 +1,8 @@
 """The live view in a browser (docs/live-view.md, issue 69's goal): a twin process, tlt-live-bridge
 and tlt-live-viewer running, headless Chromium opens the viewer's page, which talks Foxglove's
 WebSocket protocol to the bridge; its screenshot shows the EDU and the parts where a page with no
-bridge shows only the floor grid, and /tf keeps moving them at the twin's sim time."""
+bridge shows only the floor grid, and an arm moved through its controller (the real ur-rtde
+library against the twin) moves in the page to where the twin has it."""
 
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import rtde_control
+import rtde_receive
 from tlt_sim.model.scene import Scene
 from websockets.sync.client import connect
 
@@ -29,7 +32,8 @@ BROWSERS = ("chromium-headless-shell", "chromium")
 WINDOW = (1024, 640)
 BACKGROUND = np.array([0x27, 0x21, 0x1D])  # the page's background, BGR
 STATUS_ROWS = 28  # the page's status line, at the top
-TWIN_ARGS = ["--rtf", "1", "--duration", "300", "--ur-x-host", "127.0.76.4", "--ur-y-host", "127.0.76.5"]
+ARM_X_HOST = "127.0.76.4"  # loopback addresses no other test file's emulated arms use
+TWIN_ARGS = ["--rtf", "1", "--duration", "300", "--ur-x-host", ARM_X_HOST, "--ur-y-host", "127.0.76.5"]
 BRIDGE_ARGS = ["--port", "0", "--topics", "/tf", "/tf_static", "/robot_description", "/twin/markers"]
 BRIDGE_ARGS += ["--ros-args", "-p", "use_sim_time:=true"]
 # Frames at the end of chains of moving joints, whose drawn positions are checked.
@@ -128,11 +132,15 @@ class _DevTools:
         self._stack.close()
 
 
-def _stats_until(page: _DevTools, condition, timeout_s: float, what: str) -> dict:
+def _stats_until(page: _DevTools, condition, timeout_s: float, what: str, offset: str = "") -> dict:
+    """The page's counts once ``condition`` holds of them; with ``offset`` (a JavaScript expression
+    of a vector) its length too, as ``moved``."""
     deadline = time.monotonic() + timeout_s
     stats: dict = {}
     while time.monotonic() < deadline:
         stats = page.evaluate("window.tltViewer ? window.tltViewer.stats() : null") or {}
+        if stats and offset:
+            stats["moved"] = float(np.linalg.norm(page.evaluate(offset)))
         if stats and condition(stats):
             return stats
         time.sleep(0.2)
@@ -191,6 +199,7 @@ def test_headless_chromium_sees_the_edu_the_tower_and_the_arms_through_the_bridg
         stack.callback(lambda: statuses.update(twin=_stop(twin)))
         bridge = _start([sys.executable, "-m", "tlt_common.foxglove_bridge", *BRIDGE_ARGS])
         stack.callback(lambda: statuses.update(bridge=_stop(bridge)))
+        _line(twin, r"links up", 60.0)
         bridge_port = int(_line(bridge, r"open ws://127\.0\.0\.1:(\d+)", 30.0).group(1))
         viewer = LiveViewerServer(port=0, bridge_port=bridge_port)
         stack.callback(viewer.server_close)
@@ -214,12 +223,26 @@ def test_headless_chromium_sees_the_edu_the_tower_and_the_arms_through_the_bridg
         assert not first["errors"]
         # Every shape hangs from a frame joined to world: meshesInWorld counts only those.
         assert first["meshesInWorld"] >= first["robotVisuals"] + first["markers"]
-        later = _stats_until(
-            page, lambda s: s["simTime"] >= first["simTime"] + 1.0, 20.0, "/tf stopped at the page"
+        # ARS X's arm turns (moveJ through its UR controller): the page follows /tf.
+        before = np.array(page.evaluate('window.tltViewer.worldPosition("ars_x/link_6")'))
+        receive = rtde_receive.RTDEReceiveInterface(ARM_X_HOST)
+        stack.callback(receive.disconnect)
+        control = rtde_control.RTDEControlInterface(ARM_X_HOST)
+        stack.callback(control.disconnect)
+        target = np.array(receive.getActualQ()) + np.array([0.8, 0.0, -0.5, 0.0, 0.0, 0.0])
+        assert control.moveJ(target.tolist(), 1.0, 2.0)  # returns once the arm stands there
+        arm_q = np.array(receive.getActualQ())
+        stopped = page.evaluate("window.tltViewer.stats().simTime")
+        moved = _stats_until(
+            page,
+            lambda s: s["simTime"] >= stopped + 0.5 and s["moved"] > 0.3,
+            20.0,
+            "the arm did not move in the page",
+            f"window.tltViewer.worldPosition('ars_x/link_6').map((v, i) => v - {before.tolist()}[i])",
         )
-        assert later["tfMessages"] > first["tfMessages"]
+        assert moved["tfMessages"] > first["tfMessages"]
         drawn = page.evaluate(f"{json.dumps(FRAMES)}.map((f) => window.tltViewer.worldPosition(f))")
-        time.sleep(3.5)  # the view fits itself to the scene a few times, half a second apart
+        _stats_until(page, lambda s: s["viewFitted"], 10.0, "the view never fitted itself to the scene")
         shot = page.screenshot()
         keep = os.environ.get(SCREENSHOT_ENV)
         if keep:
@@ -230,9 +253,10 @@ def test_headless_chromium_sees_the_edu_the_tower_and_the_arms_through_the_bridg
         assert coloured > 0.002, f"only {coloured:.2%} of the screenshot shows the parts' colours"
     assert statuses == {"bridge": 0, "twin": 0}
     # The page puts the arms' links, the lifter's carriages and the payload where the twin has them
-    # (the twin holds its first pose while nothing commands it): /tf_static and /tf composed
-    # through every joint from world.
+    # (its first pose, ARS X's arm where the controller says it stopped): /tf_static and /tf
+    # composed through every joint from world.
     with Scene(out_dir=tmp_path / "model") as scene:
+        scene.pose_arm("ars_x", arm_q)
         for frame, position in zip(FRAMES, drawn, strict=True):
             assert position is not None, f"{frame} is not joined to world in the page"
             assert np.allclose(position, scene.body_pose(frame)[0], atol=0.002), frame

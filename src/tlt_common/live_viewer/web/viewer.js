@@ -227,7 +227,7 @@ function stats() {
   world.traverse((o) => (visible += o.isMesh ? 1 : 0));
   return { connection, frames: frames.size, robotVisuals: robotVisuals.length, markers: shownMarkers,
     meshesInWorld: visible, tfMessages, simTime, received: { ...client.received },
-    resubscribed: client.resubscribed,
+    resubscribed: client.resubscribed, viewFitted: cameraFitted,
     errors: client.errors.slice(-5) };
 }
 
