@@ -6,6 +6,7 @@
 #   4. msgs/ generated with rosidl and installed into the venv: the standard interface packages no
 #      wheel provides (msgs/standard/: tf2_msgs), then tlt_interfaces
 #   5. this project installed into the venv in editable mode
+#   6. the live viewer's three.js, from the npm registry with npm ci (src/tlt_common/live_viewer/web)
 # Each stage records a stamp (a hash of its inputs) only after it succeeded, and is skipped when
 # its stamp matches, so a second run that finds everything in place takes seconds and a run that
 # failed half-way is redone, never trusted.
@@ -172,6 +173,35 @@ project_stage() {
     stamp_set project "$h"
 }
 
+# --- 6. the live viewer's browser dependencies ------------------------------------------------
+# three.js for tlt-live-viewer's page, at the version and hash its package-lock.json pins, installed
+# beside the page (web/node_modules, not committed). Where npm is missing or the registry cannot be
+# reached, set-up warns and goes on: only the viewer needs it, and it says so when started.
+web_stage() {
+    local web="$ROOT/src/tlt_common/live_viewer/web"
+    local h
+    # node_modules lies in the checkout, so the checkout is part of the stamp (as for the project).
+    h=$(hash_of src/tlt_common/live_viewer/web/package.json src/tlt_common/live_viewer/web/package-lock.json)
+    h="$h-$(printf '%s' "$ROOT" | sha256sum | cut -c1-8)"
+    stamp_ok web "$h" && [ -f "$web/node_modules/three/build/three.module.js" ] && return 0
+    rm -f "$STAMPS/web"
+    local log="$BUILD/live-viewer-npm.log"
+    if ! command -v npm >/dev/null 2>&1; then
+        WEB_MISSING="three.js for tlt-live-viewer: npm not found"
+    else
+        say "installing the live viewer's three.js (npm ci)"
+        mkdir -p "$BUILD"
+        if (cd "$web" && npm ci --ignore-scripts --no-audit --no-fund) >"$log" 2>&1; then
+            stamp_set web "$h"
+            return 0
+        fi
+        tail -20 "$log" >&2
+        WEB_MISSING="three.js for tlt-live-viewer: npm ci failed (full log: $log)"
+    fi
+    printf '[setup] WARNING: %s; the rest of the stack does not need it (docs/live-view.md)\n' "$WEB_MISSING" >&2
+}
+WEB_MISSING=""
+
 # One set-up at a time (a main job and a test run started together share the venv).
 mkdir -p "$(dirname "$VENV")"
 exec 9>"$VENV.setup-lock"
@@ -182,8 +212,15 @@ venv_stage
 cmake_paths_stage
 msgs_stage
 project_stage
+web_stage
+missing=""
 if [ -n "$APT_MISSING" ]; then
-    say "ready: $VENV (but Debian packages missing: $APT_MISSING)"
+    missing="Debian packages missing: $APT_MISSING${WEB_MISSING:+; $WEB_MISSING}"
+elif [ -n "$WEB_MISSING" ]; then
+    missing="$WEB_MISSING"
+fi
+if [ -n "$missing" ]; then
+    say "ready: $VENV (but $missing)"
 else
     say "ready: $VENV"
 fi
