@@ -2,8 +2,10 @@
 drawings, and what it answers for a frame with a seated head, a proud one, none, and for a
 request it cannot judge (no frame, a camera not on an end effector, no depth, directions that
 say nothing). The frame is made by hand: a fitting's face 0.30 m in front of the camera and a
-rivet head's disc on it, its mask standing in for the segmenter's (the twin renders are
-test_rivet_joint.py's)."""
+rivet head's disc on it, its mask standing in for the segmenter's. Then on the twin: a shot of
+each kind rendered by D405 a, the joint asked about where the ARS's model puts it (the mission's
+joint where its planning scene stands the tower) and the gun's side from the end effector's pose,
+the twin's rivet masks standing in for Mask R-CNN's."""
 
 from __future__ import annotations
 
@@ -12,8 +14,16 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import yaml
 from tlt_interfaces.srv import VerifyJoint
+from tlt_sim.model import ik, names
+from tlt_sim.model.config import REPO_ROOT
+from tlt_sim.model.scenario import parse_scenario
+from tlt_sim.model.scene import Scene
 
+from tlt_ars.planning.world import load_scene_config, tower_origin
+from tlt_common.geometry.transforms import frame_from_axes, pose_matrix
+from tlt_common.mission.schema import load_mission
 from tlt_vision.camera_frame import CameraFrame
 from tlt_vision.camera_frames import NoFrame
 from tlt_vision.detections import Detection
@@ -144,3 +154,90 @@ def test_an_unexpected_error_is_an_answer_that_cannot_judge():
     response = _ask(handler)
     assert response.verdict == VerifyJoint.Response.CANNOT_JUDGE
     assert response.reason.startswith("vision error:")
+
+
+# ----- on the twin -----
+ARM, GUN, FEEDER = "ars_x", "a", "rivet_dispenser_x"
+MEMBER, TWIN_JOINT = "bay1/vertical/x0_y0", "bay1/x0_y0"
+
+
+def _arm_to(scene, position, rotation, point):
+    waypoints = ik.plan(scene.model, scene.data.qpos, ARM, position, rotation, scene.ee_point(ARM, point))
+    assert waypoints is not None, f"no way to {position}"
+    scene.pose_arm(ARM, waypoints[-1])
+
+
+def _load_gun(scene):
+    pickup = scene.site_position(f"dispenser/{FEEDER}/pickup")
+    for yaw in np.arange(8) * np.pi / 4:
+        rotation = frame_from_axes([np.cos(yaw), np.sin(yaw), 0.0], [0.0, 0.0, -1.0])
+        if ik.plan(scene.model, scene.data.qpos, ARM, pickup, rotation, scene.ee_point(ARM, f"gun_{GUN}")):
+            _arm_to(scene, pickup, rotation, f"gun_{GUN}")
+            assert scene.load_rivet(ARM, GUN)
+            return
+    raise AssertionError("no way to the feeder")
+
+
+@pytest.fixture(scope="module")
+def twin_shots(tmp_path_factory):
+    """Each kind's shot at TWIN_JOINT as D405 a sees it, the ARS's geometry of the joint, and the
+    frame's camera pose."""
+    mission = load_mission(REPO_ROOT / "missions" / "one_bay.yaml")
+    member = mission.member(MEMBER)
+    origin = tower_origin(load_scene_config(), mission, member.bay)
+    here = origin + np.asarray(dict(member.joints)[TWIN_JOINT], dtype=float)
+    there = origin + np.asarray(next(p for k, p in member.joints if k != TWIN_JOINT), dtype=float)
+    out = {}
+    for kind in ("good", "proud_head", "no_rivet"):
+        faults = (
+            {}
+            if kind == "good"
+            else {"rivet_faults": [{"member": MEMBER, "joint": TWIN_JOINT, "kind": kind}]}
+        )
+        scenario = parse_scenario({"name": kind, "faults": faults}, mission)
+        scene = Scene(mission=mission, scenario=scenario, out_dir=tmp_path_factory.mktemp(kind))
+        scene.stage_bay(1, skip_rivets=((MEMBER, TWIN_JOINT),))
+        _load_gun(scene)
+        approach = frame_from_axes([0.0, 0.0, 1.0], [-0.3, 1.0, 0.0])
+        _arm_to(scene, scene.truth.joint_position_world(TWIN_JOINT), approach, f"gun_{GUN}")
+        scene.fire_rivet(ARM, GUN)
+        gun_side = -scene.body_pose(names.ee_body(ARM))[1][:, 2]  # the tool's -z, as the ARS sends it
+        shot = scene.render(names.d405_camera(ARM, GUN), 320, 240)
+        out[kind] = (shot, here, there - here, gun_side)
+        scene.close()
+    return out
+
+
+@pytest.mark.parametrize(
+    ("kind", "verdict"), [("good", "good"), ("proud_head", "unseated"), ("no_rivet", "no_head")]
+)
+def test_the_twin_s_shots_are_judged_at_the_joint_the_ars_s_model_gives(twin_shots, kind, verdict):
+    shot, joint, along, gun_side = twin_shots[kind]
+    shown = shot.instances()
+    rivets = [
+        Detection("rivet", shot.mask(name))
+        for name, cls in zip(shot.labels.instance_names, shot.labels.classes, strict=True)
+        if cls == "rivet" and name in shown
+    ]
+    k = shot.intrinsics
+    frame = CameraFrame(CAMERA, 1.0, "d405_a_optical", k, np.eye(3), {"depth": shot.depth})
+    pose = pose_matrix(shot.position, shot.rotation)
+    parts = yaml.safe_load((REPO_ROOT / "config" / "vision" / "parts.yaml").read_text())
+    handler = VerifyJointHandler(
+        frames=_Frames(frame),
+        detector=_Detector(rivets),
+        rig=SimpleNamespace(ee={CAMERA: None}, camera_pose=lambda camera, at: pose),
+        parts=parts,
+        limits=RivetJointLimits(head_radius=float(parts["rivet_radius"])),
+        clock=lambda: 1.0,
+        logger=logging.getLogger("test"),
+    )
+    request = VerifyJoint.Request(joint_id=f"{MEMBER}@{TWIN_JOINT}", camera=CAMERA)
+    request.joint.x, request.joint.y, request.joint.z = joint
+    request.along.x, request.along.y, request.along.z = along
+    request.outward.x, request.outward.y, request.outward.z = gun_side
+    response = handler(request, VerifyJoint.Response())
+    assert response.verdict == verdict, response.reason
+    if verdict != "no_head":
+        head = np.array([response.head.x, response.head.y, response.head.z])
+        assert np.linalg.norm(head - joint) < 0.06  # on the fitting at this joint, in the world
