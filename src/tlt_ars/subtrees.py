@@ -400,6 +400,12 @@ class SubtreeBuilder:
         on = self.ctx.config.verify_joints["enabled"] and member.kind in ("vertical", "diagonal")
         return joint if on else ""
 
+    def _request_joint(self, request: str, member: Member) -> str:
+        """The joint ``request`` shoots into ``member`` when the ARS verifies it, else ""."""
+        step = {"add_member": "add", "affix_member": "affix"}.get(request)
+        rivet = next((r for r in member.rivets if r.step == step), None)
+        return self.checked_joint(member, rivet.joint) if rivet is not None else ""
+
     def verify_joint(self, joint: str) -> Sequence:
         """Look at ``joint`` with the EE camera (Look At Joint); a look vision cannot judge is
         taken again, ``verify_joints.looks`` looks in all. Never fails: the looks are the verdict
@@ -610,11 +616,15 @@ class SubtreeBuilder:
         """What is left of ``request`` for ``member`` after the member was set: an added member let
         go of (a grasp already open stays open), the retreat from the tower along the approach its
         fine move took (and, after a diagonal, the width retracted). A Retreat that got part of the
-        way starts from where the arm stands."""
+        way starts from where the arm stands. A joint verified by this ARS and shot but never looked
+        at (the ARS killed in between) is looked at first, from where the arm stands: a view that
+        cannot judge it leaves it unverified, never good."""
         key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
         kind = member.kind if request == "add_member" else ""
         let_go = [release(self.ctx)] if request == "add_member" else []
-        return _seq(_finish_name(request), [*let_go, *self._retreat(kind, key)])
+        joint = self._request_joint(request, member)
+        look = [self.verify_joint(joint)] if joint and not self.ctx.data.looks else []
+        return _seq(_finish_name(request), [*look, *let_go, *self._retreat(kind, key)])
 
     def finish_in_doubt(self, request: str, member: Member) -> Sequence:
         """What is left of ``request`` for ``member`` when the step that sets it began and was never
@@ -629,9 +639,7 @@ class SubtreeBuilder:
             again = self.let_go_at_place()
         else:
             kind = member.kind if request == "add_member" else "rivet"
-            step = {"add_member": "add", "affix_member": "affix"}.get(request)
-            rivet = next((r for r in member.rivets if r.step == step), None)
-            joint = self.checked_joint(member, rivet.joint) if rivet is not None else ""
+            joint = self._request_joint(request, member)
             again = self.rivet_member(kind, record=ctx.data.setting, member=member, joint=joint)
         return _seq(_finish_name(request), [ArmStillThere("Arm Still There?", ctx), again])
 

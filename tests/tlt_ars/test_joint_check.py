@@ -115,13 +115,14 @@ def test_judged_reads_only_the_looks_since_the_last_shot():
 @pytest.mark.parametrize(
     ("looks", "shots", "settled", "state"),
     [
-        ([], 1, True, ""),
+        ([], 1, True, "unverified"),  # shot, never looked at
         ([_look("good")], 1, True, "verified"),
         ([_look("cannot_judge"), _look("cannot_judge")], 1, True, "unverified"),
         ([_look("unseated")], 1, False, "failed"),
         ([_look("no_head"), _look("wrong_hole", 2)], 2, True, "failed"),
         ([_look("no_head"), _look("good", 2)], 2, True, "verified"),
         ([_look("no_head")], 2, True, "unverified"),  # shot again, killed before the look
+        ([], 0, True, ""),  # never shot at here
     ],
 )
 def test_a_joint_is_settled_when_no_new_rivet_is_wanted_and_its_state_follows(looks, shots, settled, state):
@@ -173,6 +174,14 @@ def test_the_result_reports_the_last_judged_look_with_every_verdict():
     assert list(check.verdicts) == ["unseated", "good", "cannot_judge"]
     assert (check.height, check.along_offset, check.pixels) == (0.001, -0.002, 90)
     assert (check.head.x, check.head.y, check.head.z) == (1.0, 2.0, 3.0)
+
+
+def test_a_joint_shot_and_never_looked_at_is_reported_unverified():
+    ctx = _ctx()
+    ctx.data.shots = 1
+    (check,) = joint_checks(ctx.data)
+    assert (check.joint, check.state, check.verdict, check.looks) == (JOINT, "unverified", "", 0)
+    assert "never looked at" in check.reason
 
 
 def test_shots_and_looks_are_kept_in_the_state_file(tmp_path):
@@ -326,6 +335,16 @@ def test_a_joint_still_bad_after_its_reshots_is_reported_failed_and_the_request_
     assert shot.ctx.data.shots == 2 and shot.loaded == 1
     (check,) = joint_checks(shot.ctx.data)
     assert (check.state, check.verdict, list(check.verdicts)) == ("failed", "no_head", ["no_head", "no_head"])
+
+
+def test_a_request_finished_after_a_restart_looks_at_a_joint_shot_and_never_looked_at(ros):
+    ctx = _ctx(ros.ars)
+    ctx.data.shots = 1
+    builder = SubtreeBuilder(ctx, planner=None)
+    builder._move = lambda name, goal: Scripted(name)
+    assert [c.name for c in builder.finish("affix_member", MEMBER).children] == ["Verify Joint", "Retreat"]
+    ctx.data.looks = [_look("good")]
+    assert [c.name for c in builder.finish("affix_member", MEMBER).children] == ["Retreat"]
 
 
 def test_verification_is_for_struts_and_switched_by_the_ars_file():

@@ -35,6 +35,7 @@ from tlt_common.bt.ros import ServiceCall
 GOOD, CANNOT_JUDGE = "good", "cannot_judge"
 BAD_VERDICTS = ("no_head", "unseated", "wrong_hole")  # a new rivet can fix each (the old drilled out)
 VERIFIED, FAILED, UNVERIFIED = "verified", "failed", "unverified"
+_STEPS = {"add_member": "add", "affix_member": "affix"}  # the mission rivet step each request shoots
 
 
 def joint_geometry(ctx: ArsContext, joint: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -193,9 +194,9 @@ class CountShot(Action):
 def joint_state(data: RequestData) -> str:
     """How the request leaves its joint: ``verified`` (the last look since the last shot saw a
     good head), ``failed`` (a bad one), ``unverified`` (it could not judge, or no look followed the
-    last shot), or "" when the joint was never looked at."""
+    last shot), or "" when the joint was neither shot at (counted) nor looked at."""
     if not data.looks:
-        return ""
+        return UNVERIFIED if data.shots else ""
     look = last_look(data)
     if look is None or look.verdict == CANNOT_JUDGE:
         return UNVERIFIED
@@ -208,13 +209,24 @@ def judged_look(data: RequestData) -> JointLook | None:
     return judged[-1] if judged else (data.looks[-1] if data.looks else None)
 
 
+def _shot_joint(data: RequestData) -> str:
+    """The joint the request shoots: the one it names (a reshot), else its step's in the mission."""
+    request, member = data.request, data.member
+    if request is None or member is None:
+        return ""
+    if request.joint:
+        return request.joint
+    step = _STEPS.get(request.request)
+    return next((r.joint for r in member.rivets if r.step == step), "")
+
+
 def joint_checks(data: RequestData) -> list[Any]:
-    """The result's ``joints``: one JointCheck for the request's joint when it was looked at
-    (its state, the evidence of its last judged look, every look's verdict), else none."""
+    """The result's ``joints``: one JointCheck for the request's joint when it was shot at or
+    looked at (its state, the evidence of its last judged look, every look's verdict), else none."""
     state = joint_state(data)
-    look = judged_look(data)
-    if not state or look is None or data.member is None:
+    if not state or data.member is None:
         return []
+    look = judged_look(data) or JointLook(_shot_joint(data), data.shots, "", "shot, never looked at")
     check = JointCheck(
         member_id=data.member.id,
         joint=look.joint,

@@ -50,7 +50,7 @@ def evidence(joint: str, record: dict[str, Any]) -> str:
         else "no head measured"
     )
     return (
-        f"joint {joint} {record['state']}: {record['verdict']}: {record['reason']} ({figures};"
+        f"joint {joint} {record['state']}: {record['verdict'] or 'no look'}: {record['reason']} ({figures};"
         f" {record['shots']} shot(s), looks {', '.join(record['verdicts']) or 'none'};"
         f" camera {record['camera'] or '?'})"
     )
