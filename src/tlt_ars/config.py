@@ -104,6 +104,18 @@ SCHEMA = {
             "world_frame": opt("str", "world"),
         },
     ),
+    # Verify Joint (tlt_ars.behaviours.joint_check): after each rivet shot into a strut's joint,
+    # the EE camera looks at it; ``looks`` bounds the looks at a joint vision cannot judge,
+    # ``reshots`` the new rivets shot into a joint seen bad before it is reported failed.
+    "verify_joints": opt(
+        "dict",
+        {"enabled": False, "looks": 2, "reshots": 1},
+        schema={
+            "enabled": opt("bool", False),
+            "looks": opt("int", 2, minimum=1, maximum=5),
+            "reshots": opt("int", 1, minimum=0, maximum=3),
+        },
+    ),
     "timeouts": Field(
         "dict",
         schema={
@@ -211,6 +223,10 @@ class ArsConfig:
     @property
     def cameras(self) -> dict[str, Any]:
         return self.raw["cameras"]
+
+    @property
+    def verify_joints(self) -> dict[str, Any]:
+        return self.raw["verify_joints"]
 
     @property
     def timeouts(self) -> dict[str, float]:

@@ -199,7 +199,8 @@ class ArsContext:
     def finishes(self, request: Request) -> bool:
         """Whether ``request`` repeats the unfinished request (same request and member)."""
         left = self.unfinished.request if self.unfinished is not None else None
-        return left is not None and (left.request, left.member_id) == (request.request, request.member_id)
+        same = (request.request, request.member_id, request.joint)
+        return left is not None and (left.request, left.member_id, left.joint) == same
 
     def check_request(self, request: Request) -> str | None:
         """``None`` when ``request`` may run (it may finish the unfinished one), else why not."""

@@ -32,6 +32,7 @@ def request_of(kind: str, goal: Any) -> Request:
         bay=int(goal.bay),
         kind=int(getattr(goal, "kind", 0)),
         position=getattr(goal, "position", ""),
+        joint=getattr(goal, "joint", ""),
     )
 
 
@@ -47,6 +48,7 @@ class ActiveGoal:
     cancel_requested: bool = False
     stopping_since: float | None = None
     discarded_from: list[str] = field(default_factory=list)  # the dispenser of each part discarded
+    joints: list[Any] = field(default_factory=list)  # JointCheck of the request's joint, if looked at
     successor: ActiveGoal | None = None  # the newer goal for the same request that took the job over
     feedback: tuple[str, float] | None = None  # the step and progress last sent to the CRS
 

@@ -10,8 +10,9 @@ count is the lowest of this ARS's own count and the CRS's (parts are only ever t
 refuse it: unknown member, a member of another kind or bay, a request for another ARS or for a
 strut or foundation rivet the mission gives the other ARS, a bay not yet started (bay n starts
 when the CRS says its current bay is n, or when every member of bay n-1 stands), a member already
-placed (or already affixed / riveted), a member to affix that is not placed yet. Nothing here
-talks to ROS.
+placed (or already affixed / riveted), a member to affix that is not placed yet. An Affix Member
+that names a joint (:attr:`Request.reshot`) shoots that joint of a placed member again: it needs
+the member placed and the joint one this ARS rivets in the mission. Nothing here talks to ROS.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ class DispenserEmpty(RuntimeError):
 @dataclass(frozen=True)
 class Request:
     """One CRS request, reduced to what the checks need. ``kind`` is the goal's KIND_* code (0 when
-    the request has none); ``position`` is empty when the request has none."""
+    the request has none); ``position`` is empty when the request has none; ``joint`` names the
+    joint an Affix Member shoots again (an operator's retry of a failed joint), empty otherwise."""
 
     request: str  # add_cross_frame, add_member, affix_member, foundation_rivet
     member_id: str
@@ -42,6 +44,12 @@ class Request:
     bay: int = 0
     kind: int = 0
     position: str = ""
+    joint: str = ""
+
+    @property
+    def reshot(self) -> bool:
+        """An Affix Member that shoots a joint of a set member again, and does nothing else."""
+        return self.request == "affix_member" and bool(self.joint)
 
 
 _KIND_CODES = {"vertical": 1, "diagonal": 2}
@@ -166,6 +174,13 @@ class MissionState:
             return f"member '{member.id}' is at '{member.position}', not '{req.position}'"
         if req.bay and member.kind != "foundation_rivet" and req.bay != member.bay:
             return f"member '{member.id}' belongs to bay {member.bay}, not bay {req.bay}"
+        if req.reshot:
+            rivet = next((r for r in member.rivets if r.joint == req.joint), None)
+            if rivet is None:
+                return f"member '{member.id}' has no rivet at joint '{req.joint}' in the mission"
+            if rivet.ars != self.ars:
+                return f"joint '{req.joint}' of '{member.id}' is for '{rivet.ars}' to rivet, not '{self.ars}'"
+            return None
         # A strut's parts and rivets come from its ARS's own dispensers, within its own reach; a
         # cross frame may go to either ARS (the CRS's writable cross_frame_ars).
         owner = member.affix_ars if req.request == "affix_member" else member.add_ars
@@ -180,6 +195,10 @@ class MissionState:
                 return f"bay {member.bay} has not started (bay {member.bay - 1} is not complete)"
             if req.request in ("add_cross_frame", "add_member") and member.id in self._placed:
                 return f"member '{member.id}' is already placed"
+            if req.reshot:
+                if member.id not in self._placed:
+                    return f"member '{member.id}' is not placed: no joint of it to shoot again"
+                return None
             if req.request == "affix_member":
                 if member.id not in self._placed:
                     return f"member '{member.id}' is not placed yet: nothing to affix"

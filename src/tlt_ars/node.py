@@ -59,6 +59,7 @@ from rclpy.signals import SignalHandlerOptions
 from tlt_interfaces.msg import MissionProgress
 from tlt_interfaces.srv import GroundCommand, SetBlackboardValue
 
+from tlt_ars.behaviours.joint_check import joint_checks
 from tlt_ars.command_line import build_parser, config_from_args
 from tlt_ars.config import ArsConfig
 from tlt_ars.context import ArsContext
@@ -281,6 +282,8 @@ class ArsNode(LeanNode):
         if hasattr(result, "discarded_from"):
             result.parts_discarded = len(goal.discarded_from)
             result.discarded_from = list(goal.discarded_from)
+        if hasattr(result, "joints"):
+            result.joints = list(goal.joints)
         if state == "succeeded":
             handle.succeed()
         elif state == "canceled" and handle.is_cancel_requested:
@@ -294,6 +297,7 @@ class ArsNode(LeanNode):
         while goal.successor is not None:  # the job was taken over by a newer goal
             goal = goal.successor
         goal.discarded_from = list(self.ctx.data.discarded_from)
+        goal.joints = joint_checks(self.ctx.data)
         self.ctx.end(goal.request)
         goal.outcome = ("succeeded", "") if ok else ("aborted", reason)
         with self._lock:
@@ -421,6 +425,7 @@ class ArsNode(LeanNode):
         if goal is None:
             return
         goal.discarded_from = list(self.ctx.data.discarded_from)
+        goal.joints = joint_checks(self.ctx.data)
         self.ctx.end(goal.request)
         goal.outcome = (state, reason)
         if self.active is goal:

@@ -19,7 +19,8 @@ start-up: :class:`tlt_ars.context.ArsContext` finishes the kept request when it 
 empty, open jaws stay open), has a held part discarded before anything else, and looks for the kept
 rivet before loading one. What the file keeps is what that needs: the request, what it set or was
 setting, the part held and its dispenser, the rivet, and the targets its approaches chose (the
-retreat goes back along the one its fine move took). It is removed once none is left.
+retreat goes back along the one its fine move took), and the shots at its joint and the looks at it
+(Verify Joint), reported again when it is finished. It is removed once none is left.
 
 The file is JSON, written whole (:func:`tlt_common.mission.tower_model.atomic_write`); one that
 cannot be read, is not such a file, or belongs to another mission or ARS raises
@@ -48,6 +49,22 @@ RECORDS = ("placed", "affixed", "riveted")
 HELD_KINDS = tuple(k for k in PART_KINDS if k != "rivet")  # a rivet rides in the gun
 
 
+@dataclass(frozen=True)
+class JointLook:
+    """One look at the request's joint after its ``shot``-th shot (VerifyJoint): the verdict, why,
+    and the figures it rests on (m; the head's world position when one was seen)."""
+
+    joint: str
+    shot: int
+    verdict: str
+    reason: str
+    height: float = 0.0
+    along: float = 0.0
+    pixels: int = 0
+    head: tuple[float, float, float] | None = None
+    camera: str = ""
+
+
 @dataclass
 class RequestData:
     """Working data of one request; a fresh one for every request."""
@@ -66,6 +83,8 @@ class RequestData:
     setting_q: tuple[float, ...] | None = None
     located: dict[str, np.ndarray] = field(default_factory=dict)  # dispenser -> world pose from its tag
     alignment: Any = None  # the latest CheckAlignment response
+    shots: int = 0  # rivet shots at the request's joint (Verify Joint counts them)
+    looks: list[JointLook] = field(default_factory=list)  # every look at that joint, in order
 
     @property
     def parts_discarded(self) -> int:
@@ -110,6 +129,8 @@ class RequestFile:
             "rivet_in_gun": data.rivet_in_gun,
             "setting": data.setting,
             "setting_q": list(data.setting_q) if data.setting_q is not None else None,
+            "shots": data.shots,
+            "looks": [asdict(look) for look in data.looks],
             "targets": {
                 key: {"label": t.label, "pose": t.pose.tolist(), "pre_pose": t.pre_pose.tolist()}
                 for key, t in data.targets.items()
@@ -160,6 +181,9 @@ class RequestFile:
             setting, setting_q = document.get("setting", ""), document.get("setting_q")
             if setting_q is not None:
                 setting_q = tuple(float(v) for v in setting_q)
+            # Files written without joint verification have no shots or looks.
+            shots = int(document.get("shots", 0))
+            looks = [_look(entry) for entry in document.get("looks", [])]
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise self._error(f"has a bad entry: {type(exc).__name__}: {exc}") from exc
         if recorded not in ("", *RECORDS):
@@ -184,10 +208,23 @@ class RequestFile:
             rivet_in_gun=rivet_in_gun,
             setting=setting,
             setting_q=setting_q if setting else None,
+            shots=shots,
+            looks=looks,
         )
 
     def _error(self, reason: str) -> RequestFileError:
         return RequestFileError(f"{self.path}: ARS state file {reason}")
+
+
+def _look(entry: Any) -> JointLook:
+    look = JointLook(**entry)
+    head = None if look.head is None else tuple(float(v) for v in look.head)
+    if head is not None and len(head) != 3:
+        raise ValueError(f"a look's head must be 3 numbers, got {look.head!r}")
+    return JointLook(
+        str(look.joint), int(look.shot), str(look.verdict), str(look.reason),
+        float(look.height), float(look.along), int(look.pixels), head, str(look.camera),
+    )  # fmt: skip
 
 
 def _pose(value: Any) -> np.ndarray:
@@ -197,4 +234,4 @@ def _pose(value: Any) -> np.ndarray:
     return pose
 
 
-__all__ = ["RequestData", "RequestFile", "RequestFileError"]
+__all__ = ["JointLook", "RequestData", "RequestFile", "RequestFileError"]

@@ -32,9 +32,17 @@ Load Rivet                  33         Rivets Left?, Approach Rivet Dispenser, S
                                        gun: first Rivet Still Loaded?, the camera)
 Place Member                36         Coarse Approach, Fine Approach, Fine Alignment
 Rivet Member                37         Fire Rivet Gun, Record Placed, Release, Retreat (Retract Width
-                                       for a diagonal, commanded and not waited for)
+                                       for a diagonal, commanded and not waited for); with joint
+                                       verification, Count Shot before the shot, Verify Joint after
+                                       the record and Settle Joint after the retreat
+Verify Joint                -          Look At Joint, then Look Again while vision cannot judge
+                                       (``verify_joints.looks`` in all)
+Settle Joint                -          Joint Settled? or Reshoot Joint (Load Rivet, the gun looked
+                                       into first; Approach Joint, Fine Approach Joint, Settle, Count
+                                       Shot, Fire Rivet Gun, Verify Joint, Retreat), per reshot
 Foundation Rivet            38         Load Rivet, Place Rivet (recording the rivet set)
-Affix Member                39         Load Rivet, Place Rivet (recording the member affixed)
+Affix Member                39         Load Rivet, Place Rivet (recording the member affixed); one
+                                       that names a joint: Reshot (Reshoot Joint), nothing recorded
 Place Rivet                 40         Approach Joint (coarse), Fine Approach Joint, Settle, Rivet
                                        Member (Fire Rivet Gun, Record Riveted / Affixed, Retreat)
 Finish <request>            -          Release (an added member), Retreat (Retract Width for a
@@ -54,6 +62,12 @@ frame is let go of at its place): a request that ends between the mark and the r
 then, the gun's output never seen off) may have set its member, so it is finished by that step
 again from the same place (a spent gun fires empty, open jaws stay open), never by a discard that
 would tear the member out of the tower nor by a new part for a place that may be taken.
+
+Joint verification (``verify_joints`` in the ARS file; :mod:`tlt_ars.behaviours.joint_check`):
+each shot into a vertical's or a diagonal's joint is looked at by the EE camera before anything
+moves, and a joint seen bad gets a new rivet after the retreat. The member is recorded set before
+the look, as without it; the request succeeds whatever the looks say, and its result reports the
+joint (verified, failed, unverified) with the evidence, for the CRS to act on.
 """
 
 from __future__ import annotations
@@ -72,6 +86,7 @@ from tlt_ars.behaviours.end_effector import (
     grasp,
     release,
 )
+from tlt_ars.behaviours.joint_check import CountShot, JointJudged, JointSettled, LookAtJoint
 from tlt_ars.behaviours.member_record import ArmStillThere, MarkSetting, RecordMember
 from tlt_ars.behaviours.parts import (
     CountDiscard,
@@ -320,10 +335,11 @@ class SubtreeBuilder:
         return _seq("Place Member", self._approach_placement(member))
 
     # ----- rivets (Figs. 33, 37, 40) -----
-    def load_rivet(self, dispenser: str) -> py_trees.behaviour.Behaviour:
+    def load_rivet(self, dispenser: str, *, look_first: bool = False) -> py_trees.behaviour.Behaviour:
         """Fig. 33: take a rivet into the gun; the EE camera confirms it is loaded. When an earlier
-        request left a rivet in the gun, the camera looks for it first, and only a gun seen empty
-        goes to the feeder (a loaded gun pushed into it would jam)."""
+        request left a rivet in the gun, or with ``look_first`` (a reshot: a misfire leaves its
+        rivet in the gun), the camera looks for it first, and only a gun seen empty goes to the
+        feeder (a loaded gun pushed into it would jam)."""
         ctx = self.ctx
         load = _seq(
             "Load Rivet",
@@ -345,27 +361,99 @@ class SubtreeBuilder:
                 KeepData("Rivet In Gun", ctx, rivet_in_gun=True),
             ],
         )
-        if not ctx.data.rivet_in_gun:
+        if not (ctx.data.rivet_in_gun or look_first):
             return load
         load.name = "Load Another Rivet"
         return _fallback("Load Rivet", [verify_rivet_loaded(ctx, "Rivet Still Loaded?"), load])
 
-    def rivet_member(self, kind: str, *, record: str = "placed") -> Sequence:
+    def rivet_member(
+        self, kind: str, *, record: str = "placed", member: Member | None = None, joint: str = ""
+    ) -> Sequence:
         """Fig. 37: fire the gun; record the member ``record``; with the member held (``record``
         placed), let go of it; retreat; for a diagonal, retract the width afterwards. The record
         comes straight after the rivet, which is what sets the member: a Release that fails, or
-        an ARS killed before it, leaves a riveted member that is finished, not placed again."""
+        an ARS killed before it, leaves a riveted member that is finished, not placed again.
+        With ``joint`` (a strut's joint, verification on: :meth:`checked_joint`), the shot is
+        counted, the EE camera looks at the joint right after the record (Verify Joint, before
+        anything moves), and after the retreat a joint seen bad is shot again (Settle Joint)."""
         ctx = self.ctx
+        counted = [CountShot("Count Shot", ctx)] if joint else []
         children: list[py_trees.behaviour.Behaviour] = [
             MarkSetting("Mark Shot", ctx, record),
+            *counted,
             FireRivetGun("Fire Rivet Gun", ctx),
             RecordMember(f"Record {record.capitalize()}", ctx, record),
         ]
+        if joint:
+            children.append(self.verify_joint(joint))
         holding = record == "placed"
         if holding:
             children.append(release(ctx))
         children += self._retreat(kind, "place" if holding else "joint")
+        if joint and member is not None and ctx.config.verify_joints["reshots"] > 0:
+            children.append(self.settle_joint(member, joint))
         return _seq("Rivet Member", children)
+
+    # ----- joint verification (paper §VI, §VII: the rivet V&V the EDU left to an operator) -----
+    def checked_joint(self, member: Member, joint: str) -> str:
+        """``joint`` when the ARS verifies it (``verify_joints.enabled``, a strut's joint), else ""."""
+        on = self.ctx.config.verify_joints["enabled"] and member.kind in ("vertical", "diagonal")
+        return joint if on else ""
+
+    def _request_joint(self, request: str, member: Member) -> str:
+        """The joint ``request`` shoots into ``member`` when the ARS verifies it, else ""."""
+        step = {"add_member": "add", "affix_member": "affix"}.get(request)
+        rivet = next((r for r in member.rivets if r.step == step), None)
+        return self.checked_joint(member, rivet.joint) if rivet is not None else ""
+
+    def verify_joint(self, joint: str) -> Sequence:
+        """Look at ``joint`` with the EE camera (Look At Joint); a look vision cannot judge is
+        taken again, ``verify_joints.looks`` looks in all. Never fails: the looks are the verdict
+        (:func:`tlt_ars.behaviours.joint_check.joint_state`)."""
+        ctx = self.ctx
+        children: list[py_trees.behaviour.Behaviour] = [LookAtJoint("Look At Joint", ctx, joint)]
+        for n in range(2, ctx.config.verify_joints["looks"] + 1):
+            again = LookAtJoint(f"Look Again {n}", ctx, joint)
+            children.append(_fallback(f"Judged {n}", [JointJudged("Joint Judged?", ctx), again]))
+        return _seq("Verify Joint", children)
+
+    def settle_joint(self, member: Member, joint: str) -> Sequence:
+        """A joint seen bad (no head, unseated, in the wrong hole) gets a new rivet, up to
+        ``verify_joints.reshots`` times: Joint Settled? or Reshoot Joint. A joint good, not
+        judged, or out of reshots is left as seen (the result reports it)."""
+        ctx = self.ctx
+        reshots = ctx.config.verify_joints["reshots"]
+        return _seq(
+            "Settle Joint",
+            [
+                _fallback(
+                    f"Settle {n}",
+                    [JointSettled("Joint Settled?", ctx, reshots), self.reshoot_joint(member, joint)],
+                )
+                for n in range(1, reshots + 1)
+            ],
+        )
+
+    def reshoot_joint(self, member: Member, joint: str) -> Sequence:
+        """A new rivet into ``joint`` of the set ``member``: Load Rivet (the gun looked into first),
+        Approach Joint, Fine Approach Joint, Settle, Count Shot, Fire Rivet Gun, Verify Joint,
+        Retreat. Nothing is recorded: the member stays as it was set, and a second shot replaces
+        the first's rivet (drilled out)."""
+        ctx = self.ctx
+        rivet = next((r for r in member.rivets if r.joint == joint), None)
+        if rivet is None:
+            raise ValueError(f"member '{member.id}' has no rivet at joint '{joint}' in the mission")
+        return _seq(
+            "Reshoot Joint",
+            [
+                self.load_rivet(rivet.dispenser, look_first=True),
+                *self._approach_joint(member, joint),
+                CountShot("Count Shot", ctx),
+                FireRivetGun("Fire Rivet Gun", ctx),
+                self.verify_joint(joint),
+                self._move("Retreat", lambda: back_out(ctx, "joint")),
+            ],
+        )
 
     def _retreat(self, kind: str, key: str) -> list[py_trees.behaviour.Behaviour]:
         ctx = self.ctx
@@ -375,26 +463,32 @@ class SubtreeBuilder:
             children.append(CommandWidth("Retract Width", ctx, "vertical"))
         return children
 
+    def _approach_joint(self, member: Member, joint: str) -> list[py_trees.behaviour.Behaviour]:
+        ctx = self.ctx
+        return [
+            self._move(
+                "Approach Joint",
+                lambda: MotionGoal(
+                    targets=rivet_targets(ctx.scene, ctx.mission, member, joint, ctx.ars),
+                    use="pre_pose",
+                    key="joint",
+                ),
+            ),
+            self._move("Fine Approach Joint", lambda: chosen(ctx, "joint", contact=True)),
+            # Nothing held to align first, so the gun would fire the moment the controller's
+            # path ends, and a near vertical's affix rivet can miss its strut end.
+            Settle("Settle", ctx),
+        ]
+
     def place_rivet(self, member: Member, joint: str, record: str) -> Sequence:
         """Fig. 40: coarse approach to the target member's joint, then the rivet as in Fig. 37,
         recording the member ``record`` (affixed, riveted)."""
-        ctx = self.ctx
+        checked = self.checked_joint(member, joint)
         return _seq(
             "Place Rivet",
             [
-                self._move(
-                    "Approach Joint",
-                    lambda: MotionGoal(
-                        targets=rivet_targets(ctx.scene, ctx.mission, member, joint, ctx.ars),
-                        use="pre_pose",
-                        key="joint",
-                    ),
-                ),
-                self._move("Fine Approach Joint", lambda: chosen(ctx, "joint", contact=True)),
-                # Nothing held to align first, so the gun would fire the moment the controller's
-                # path ends, and a near vertical's affix rivet can miss its strut end.
-                Settle("Settle", ctx),
-                self.rivet_member("rivet", record=record),
+                *self._approach_joint(member, joint),
+                self.rivet_member("rivet", record=record, member=member, joint=checked),
             ],
         )
 
@@ -442,12 +536,21 @@ class SubtreeBuilder:
                     defer=defer,
                 ),
                 later("Place Member", lambda: self.place_member(member)),
-                later("Rivet Member", lambda: self.rivet_member(member.kind)),
+                later(
+                    "Rivet Member",
+                    lambda: self.rivet_member(
+                        member.kind, member=member, joint=self.checked_joint(member, rivet.joint)
+                    ),
+                ),
             ],
         )
 
     def affix_member(self, member: Member, *, defer: bool = False) -> Sequence:
-        """Fig. 39: load a rivet and place it in the member's affix joint."""
+        """Fig. 39: load a rivet and place it in the member's affix joint. A request that names a
+        joint (an operator's retry of a failed joint) shoots that joint again instead: Reshot."""
+        request = self.ctx.data.request
+        if request is not None and request.reshot:
+            return self.reshot(member, request.joint, defer=defer)
         rivet = _rivet(member, "affix")
         return _seq(
             "Affix Member",
@@ -455,6 +558,14 @@ class SubtreeBuilder:
                 self.load_rivet(rivet.dispenser),
                 _phase(defer)("Place Rivet", lambda: self.place_rivet(member, rivet.joint, "affixed")),
             ],
+        )
+
+    def reshot(self, member: Member, joint: str, *, defer: bool = False) -> Sequence:
+        """A new rivet into ``joint`` of the set ``member`` (:meth:`reshoot_joint`), looked at
+        whether or not verification is on: the operator asked for this joint."""
+        return _seq(
+            "Reshot",
+            [_phase(defer)("Reshoot Joint", lambda: self.reshoot_joint(member, joint))],
         )
 
     def foundation_rivet(self, member: Member, *, defer: bool = False) -> Sequence:
@@ -505,11 +616,15 @@ class SubtreeBuilder:
         """What is left of ``request`` for ``member`` after the member was set: an added member let
         go of (a grasp already open stays open), the retreat from the tower along the approach its
         fine move took (and, after a diagonal, the width retracted). A Retreat that got part of the
-        way starts from where the arm stands."""
+        way starts from where the arm stands. A joint verified by this ARS and shot but never looked
+        at (the ARS killed in between) is looked at first, from where the arm stands: a view that
+        cannot judge it leaves it unverified, never good."""
         key = "joint" if request in ("affix_member", "foundation_rivet") else "place"
         kind = member.kind if request == "add_member" else ""
         let_go = [release(self.ctx)] if request == "add_member" else []
-        return _seq(_finish_name(request), [*let_go, *self._retreat(kind, key)])
+        joint = self._request_joint(request, member)
+        look = [self.verify_joint(joint)] if joint and not self.ctx.data.looks else []
+        return _seq(_finish_name(request), [*look, *let_go, *self._retreat(kind, key)])
 
     def finish_in_doubt(self, request: str, member: Member) -> Sequence:
         """What is left of ``request`` for ``member`` when the step that sets it began and was never
@@ -524,7 +639,8 @@ class SubtreeBuilder:
             again = self.let_go_at_place()
         else:
             kind = member.kind if request == "add_member" else "rivet"
-            again = self.rivet_member(kind, record=ctx.data.setting)
+            joint = self._request_joint(request, member)
+            again = self.rivet_member(kind, record=ctx.data.setting, member=member, joint=joint)
         return _seq(_finish_name(request), [ArmStillThere("Arm Still There?", ctx), again])
 
 

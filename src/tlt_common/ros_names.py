@@ -122,6 +122,7 @@ VISION_INSPECT_PART = "/vision/inspect_part"
 VISION_INSPECT_BAY = "/vision/inspect_bay"
 VISION_CHECK_ALIGNMENT = "/vision/check_alignment"
 VISION_LOCATE_TAG = "/vision/locate_tag"
+VISION_VERIFY_JOINT = "/vision/verify_joint"
 # diagnostic_msgs/DiagnosticStatus, latched (tlt_common.ros.readiness): OK once vision can place
 # every camera (it has heard the joint states of both arms and the camera mounts), else why not.
 VISION_STATUS = "/vision/status"

@@ -15,6 +15,8 @@ Every subtree has its own builder and can be built and ticked alone (the tests d
             Index Payload n               Fallback(memory)[Bay n Indexed?, [Raise, Lower, record]]
             Current Bay n
             Build Bay n                   Add Cross Frame, Far Verticals, Near Verticals, Diagonals
+                                          (each strut followed by Joints <member>: its verified
+                                          rivets, or the operator's decision)
             Test Bay n                    Fig. 26
           Add Foundation Rivets           Fig. 27
 
@@ -42,6 +44,7 @@ from tlt_crs.behaviours.actuators import Actuators
 from tlt_crs.behaviours.ars_requests import ArsRequest, AwaitArsResult, RequestScope, SendArsRequest
 from tlt_crs.behaviours.faults import NoFault, RaiseFault, WaitForHelp
 from tlt_crs.behaviours.inspection import inspection_check
+from tlt_crs.behaviours.joints import ApplyJointDecision, JointsAccepted, reshot_request
 from tlt_crs.behaviours.link_watch import LifterLinkWatch
 from tlt_crs.behaviours.model import (
     BayBuilt,
@@ -136,7 +139,7 @@ class HoldWhilePaused(py_trees.decorators.Decorator):
 
 
 # ----- ARS requests (Figs. 21, 23, 24, 25, 27) ----------------------------------------------------
-def _request(ctx: CrsContext, request: ArsRequest, inspected: bool) -> RequestScope:
+def _request(ctx: CrsContext, request: ArsRequest, inspected: bool, name: str = "") -> RequestScope:
     children: list[py_trees.behaviour.Behaviour] = [SendArsRequest(request)]
     if inspected:
         children.append(inspection_check(ctx, request))
@@ -147,7 +150,7 @@ def _request(ctx: CrsContext, request: ArsRequest, inspected: bool) -> RequestSc
         "affix_member": "Affix",
         "foundation_rivet": "Rivet",
     }
-    return RequestScope(f"{verb[request.request]} {request.member.id}", request, children)
+    return RequestScope(name or f"{verb[request.request]} {request.member.id}", request, children)
 
 
 def add_member_request(ctx: CrsContext, member: Member) -> ArsRequest:
@@ -207,6 +210,33 @@ def add_cross_frame(ctx: CrsContext, member: Member, actuators: Actuators) -> py
     )
 
 
+def member_joints(ctx: CrsContext, member: Member) -> py_trees.behaviour.Behaviour:
+    """The member's riveted joints as the ARSs verified them (:mod:`tlt_crs.behaviours.joints`):
+    accepted (each verified or confirmed, or never looked at), or the operator's decision (the
+    fault with the evidence until there is one), a retry when ordered, and the check again."""
+    retry = _request(ctx, reshot_request(ctx, member), False, name=f"Retry {member.id}")
+    return Fallback(
+        f"Joints {member.id}",
+        memory=True,
+        children=[
+            JointsAccepted(ctx, member),
+            Sequence(
+                f"Resolve Joints {member.id}",
+                memory=True,
+                children=[
+                    ApplyJointDecision(ctx, member),
+                    Fallback(
+                        f"Retry Joints {member.id}",
+                        memory=True,
+                        children=[JointsAccepted(ctx, member), retry],
+                    ),
+                    JointsAccepted(ctx, member),
+                ],
+            ),
+        ],
+    )
+
+
 def add_vertical(ctx: CrsContext, member: Member) -> py_trees.behaviour.Behaviour:
     """Fig. 23 (far: one ARS adds, the other affixes) and Fig. 24 (near: the same ARS does both)."""
     kind = "Far" if member.group == "far_vertical" else "Near"
@@ -235,8 +265,14 @@ def _group(ctx: CrsContext, bay: int, group: str) -> list[Member]:
     return [m for m in ctx.mission.bay_members(bay) if m.group == group]
 
 
+def _struts(ctx: CrsContext, bay: int, group: str, add: Any) -> list[py_trees.behaviour.Behaviour]:
+    """Each strut of ``group``'s subtree (``add``, its figure), then its joints (:func:`member_joints`)."""
+    return [node for m in _group(ctx, bay, group) for node in (add(ctx, m), member_joints(ctx, m))]
+
+
 def build_bay(ctx: CrsContext, bay: int, actuators: Actuators) -> py_trees.behaviour.Behaviour:
-    """Fig. 20: cross frame, far verticals, near verticals, diagonals."""
+    """Fig. 20: cross frame, far verticals, near verticals, diagonals; each strut's joints after
+    its figure's subtree."""
     cross_frame = _group(ctx, bay, "cross_frame")[0]
     return Sequence(
         f"Build Bay {bay}",
@@ -246,17 +282,17 @@ def build_bay(ctx: CrsContext, bay: int, actuators: Actuators) -> py_trees.behav
             Sequence(
                 f"Far Verticals {bay}",
                 memory=True,
-                children=[add_vertical(ctx, m) for m in _group(ctx, bay, "far_vertical")],
+                children=_struts(ctx, bay, "far_vertical", add_vertical),
             ),
             Sequence(
                 f"Near Verticals {bay}",
                 memory=True,
-                children=[add_vertical(ctx, m) for m in _group(ctx, bay, "near_vertical")],
+                children=_struts(ctx, bay, "near_vertical", add_vertical),
             ),
             Sequence(
                 f"Diagonals {bay}",
                 memory=True,
-                children=[add_diagonal(ctx, m) for m in _group(ctx, bay, "diagonal")],
+                children=_struts(ctx, bay, "diagonal", add_diagonal),
             ),
         ],
     )
@@ -403,4 +439,5 @@ __all__ = [
     "build_tower",
     "fault_check",
     "index_payload",
+    "member_joints",
 ]

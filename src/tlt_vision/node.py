@@ -13,6 +13,9 @@ Services (names from :mod:`tlt_common.ros_names`; paper §V.E), each answered by
   the answered pose is the tool pose that holds the part where it is seen (the ARS's convention).
 * ``VISION_LOCATE_TAG`` (``LocateTag``): the dispenser's AprilTag (cv2.aruco, IPPE square) in the
   named camera's RGB; the answered pose is the dispenser's frame in the world (the tag marks it).
+* ``VISION_VERIFY_JOINT`` (``VerifyJoint``): a riveted joint right after its shot, from one frame of
+  the named EE camera, at the joint the caller's model gives: good, no_head, unseated, wrong_hole,
+  or cannot_judge (:mod:`tlt_vision.services.verify_joint`).
 
 Each certified pose a request finds goes out on ``/tf`` (child of the camera's optical frame,
 ``vision/<camera>/<class>_<n>``) and as markers on ``VISION_MARKERS``
@@ -51,7 +54,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from tlt_interfaces.msg import EndEffectorState
-from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag
+from tlt_interfaces.srv import CheckAlignment, InspectBay, InspectPart, LocateTag, VerifyJoint
 
 from tlt_common import ros_names
 from tlt_common.config_schema import ConfigError
@@ -67,6 +70,7 @@ from tlt_common.ros.stop_signals import stop_on_signals
 from tlt_vision.apriltag import TagConfig, TagLocator
 from tlt_vision.camera_frames import FrameGrabber, SegmentationLabels
 from tlt_vision.frames import CameraRig
+from tlt_vision.inspection.rivet_joint import RivetJointLimits
 from tlt_vision.node_config import DEFAULT_CONFIG, VisionConfig, load_config
 from tlt_vision.node_config_schema import SEGMENTATION_SOURCES
 from tlt_vision.part_inspection import PartInspector
@@ -80,6 +84,7 @@ from tlt_vision.services.frame_source import FrameSource
 from tlt_vision.services.inspect_bay import InspectBayHandler
 from tlt_vision.services.inspect_part import InspectPartHandler
 from tlt_vision.services.locate_tag import LocateTagHandler
+from tlt_vision.services.verify_joint import VerifyJointHandler
 from tlt_vision.weights import WeightsError
 
 log = logging.getLogger("tlt.vision")
@@ -162,6 +167,15 @@ class VisionNode(LeanNode):
             config=config,
             logger=logger,
         )
+        self.joint_handler = VerifyJointHandler(
+            frames=self.frames,
+            detector=self.detector,
+            rig=self.rig,
+            parts=self.inspector.parts,
+            limits=RivetJointLimits(head_radius=float(self.inspector.parts["rivet_radius"])),
+            clock=self._now,
+            logger=logger,
+        )
         self.vision_services = [
             self.create_service(srv, name, cb, callback_group=MutuallyExclusiveCallbackGroup())
             for srv, name, cb in (
@@ -169,6 +183,7 @@ class VisionNode(LeanNode):
                 (InspectBay, ros_names.VISION_INSPECT_BAY, self.bay_handler),
                 (CheckAlignment, ros_names.VISION_CHECK_ALIGNMENT, self.alignment_handler),
                 (LocateTag, ros_names.VISION_LOCATE_TAG, self.tag_handler),
+                (VerifyJoint, ros_names.VISION_VERIFY_JOINT, self.joint_handler),
             )
         ]
         self.get_logger().info(

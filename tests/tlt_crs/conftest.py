@@ -56,6 +56,7 @@ class Request:
     member_id: str
     at: float
     outcome: str = "running"
+    joint: str = ""  # the joint an Affix Member names (an operator's retry)
 
 
 @dataclass
@@ -99,6 +100,9 @@ class ArsStandIn:
         self.hold_s = 0.0  # how long each request takes
         self.present_after_s = 0.0  # how long the ARS works before it presents the part
         self.fail: dict[str, str] = {}  # member id -> reason to fail with
+        # (request, member id) -> the JointCheck fields of each successive result's joints (the
+        # last repeats): how the ARS found the joints it shot.
+        self.joints: dict[tuple[str, str], list[list[dict[str, Any]]]] = {}
         self.present_parts = True
         self.call_timeout_s = 5.0  # an inspection call unanswered this long is given up, the part shown again
         self.max_parts = 3
@@ -173,7 +177,8 @@ class ArsStandIn:
     def _execute(self, handle: Any, request: str, kind: Any) -> Any:
         goal = handle.request
         member = getattr(goal, "member_id", "") or getattr(goal, "joint_id", "")
-        record = self.recorder.add(Request(self.ars, request, member, time.monotonic()))
+        joint = getattr(goal, "joint", "")
+        record = self.recorder.add(Request(self.ars, request, member, time.monotonic(), joint=joint))
         result = kind.Result()
         discarded = 0  # parts failed at inspection, of the member's dispenser, which is not named
         held = []
@@ -223,6 +228,12 @@ class ArsStandIn:
             handle.succeed()
             return result
         result.success = True
+        result_joints = self.joints.get((request, member))
+        if result_joints:
+            from tlt_interfaces.msg import JointCheck
+
+            fields = result_joints.pop(0) if len(result_joints) > 1 else result_joints[0]
+            result.joints = [JointCheck(member_id=member, **f) for f in fields]
         record.outcome = "succeeded"
         handle.succeed()
         return result

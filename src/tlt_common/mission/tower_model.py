@@ -18,6 +18,12 @@ unplaced or needing inspection only while no higher bay has a member in place; a
 is one taken from the member's dispenser and never placed; a dispenser holds at most what was
 loaded less what was discarded.
 
+Each riveted joint the ARSs looked at (joint verification) has a verification record keyed
+``<member id>@<joint>`` (:data:`JOINT_STATES`): ``verified``, ``failed``, ``unverified`` as the ARS
+reported it with the evidence (verdict, reason, figures), ``confirmed`` when the operator judged a
+failed or unverified joint good, ``retry`` while the operator's retry of it is pending. A joint
+never looked at has none. A member marked unplaced or discarded loses its joints' records.
+
 Every accepted change is persisted at once to a JSON file by an atomic, crash-safe write (temp
 file, fsync, rename, fsync of the directory), so a CRS that restarts :meth:`TowerModel.open`\\ s
 the file and resumes where it stood, never adding a member the model says is placed. A file made
@@ -44,6 +50,13 @@ STATE_NAMES = {NOT_PLACED: "NOT_PLACED", PLACED: "PLACED", RIVETED: "RIVETED", I
 _STATE_CODES = {v: k for k, v in STATE_NAMES.items()}
 # What the ground may say of a member (correct_member).
 MEMBER_MARKS = ("placed", "unplaced", "discarded", "needs_inspection")
+# A joint's verification record (record_joint, decide_joint); ACCEPTED_JOINTS need no operator.
+JOINT_STATES = ("verified", "failed", "unverified", "confirmed", "retry")
+ACCEPTED_JOINTS = ("verified", "confirmed")
+JOINT_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "state": str, "verdict": str, "reason": str, "shots": int, "looks": int, "verdicts": list,
+    "height": float, "along": float, "pixels": int, "head": (list, type(None)), "camera": str,
+}  # fmt: skip
 SEQUENCES = {
     "cross_frame": (NOT_PLACED, PLACED, INSPECTED),
     "vertical": (NOT_PLACED, PLACED, RIVETED, INSPECTED),
@@ -105,6 +118,7 @@ class TowerModel:
         self.states: dict[str, int] = dict.fromkeys(self._members, NOT_PLACED)
         self.remaining: dict[str, int] = {d.name: d.count for d in mission.dispensers.values()}
         self.discarded: dict[str, int] = dict.fromkeys(mission.dispensers, 0)
+        self.joints: dict[str, dict[str, Any]] = {}  # "<member id>@<joint>" -> verification record
         self.revision = 0
         # The tick thread and the ground-command thread both change the model.
         self.lock = threading.RLock()
@@ -123,6 +137,7 @@ class TowerModel:
             "dispensers": {
                 k: {"remaining": self.remaining[k], "discarded": self.discarded[k]} for k in self.remaining
             },
+            "joints": {k: dict(v) for k, v in self.joints.items()},
         }
 
     def _persist(self) -> None:
@@ -181,6 +196,14 @@ class TowerModel:
             if not 0 <= remaining <= capacity or not 0 <= discarded <= capacity - remaining:
                 raise TowerModelError(f"{path}: dispenser '{name}' counts impossible: {counts}")
             model.remaining[name], model.discarded[name] = remaining, discarded
+        joints = document.get("joints", {})  # files of a build without joint verification have none
+        if not isinstance(joints, dict):
+            raise TowerModelError(f"{path}: tower model joints are not a mapping")
+        for key, record in joints.items():
+            why = model._joint_problem(key, record)
+            if why:
+                raise TowerModelError(f"{path}: joint '{key}' {why}")
+            model.joints[key] = dict(record)
         revision = document.get("revision")
         if not isinstance(revision, int) or revision < 0:
             raise TowerModelError(f"{path}: tower model revision {revision!r} is not a count")
@@ -315,6 +338,60 @@ class TowerModel:
             self.discarded[dispenser] += count
             self._commit()
 
+    # ----- joints (verification) -----
+    def _joint_problem(self, key: str, record: Any) -> str | None:
+        """Why ``record`` is not a sound verification record of joint ``key``, or None."""
+        member_id, _, joint = key.partition("@")
+        member = self._members.get(member_id)
+        if member is None or joint not in dict(member.joints):
+            return "is no joint of a member of the mission"
+        if not isinstance(record, dict) or set(record) != set(JOINT_FIELDS):
+            return f"record must have exactly {', '.join(JOINT_FIELDS)}"
+        for name, kind in JOINT_FIELDS.items():
+            value = record[name]
+            if kind is float and isinstance(value, int) and not isinstance(value, bool):
+                continue
+            if not isinstance(value, kind) or isinstance(value, bool):
+                return f"{name} {value!r} is of the wrong type"
+        if record["state"] not in JOINT_STATES:
+            return f"state {record['state']!r} is not one of {', '.join(JOINT_STATES)}"
+        return None
+
+    def record_joint(self, member_id: str, joint: str, record: dict[str, Any]) -> None:
+        """Keep how the ARS found ``joint`` of ``member_id`` (``record``: :data:`JOINT_FIELDS`);
+        :class:`TransitionRefused` for a joint not of the member or a record that is not sound."""
+        key = f"{member_id}@{joint}"
+        with self.lock:
+            why = self._joint_problem(key, record)
+            if why:
+                raise TransitionRefused(f"joint '{key}' {why}")
+            self.joints[key] = dict(record)
+            self._commit()
+
+    def joints_of(self, member_id: str) -> dict[str, dict[str, Any]]:
+        """The verification records of ``member_id``'s joints, by joint name."""
+        prefix = f"{member_id}@"
+        return {k[len(prefix) :]: dict(v) for k, v in self.joints.items() if k.startswith(prefix)}
+
+    def open_joints(self, member_id: str) -> dict[str, dict[str, Any]]:
+        """``member_id``'s joints that want the operator (failed, unverified, a retry pending)."""
+        return {j: r for j, r in self.joints_of(member_id).items() if r["state"] not in ACCEPTED_JOINTS}
+
+    def decide_joint(self, member_id: str, joint: str, state: str) -> None:
+        """The operator's decision on a joint that wants one: ``confirmed`` (good as it stands) or
+        ``retry`` (shoot it again); :class:`TransitionRefused` otherwise."""
+        key = f"{member_id}@{joint}"
+        with self.lock:
+            record = self.joints.get(key)
+            if record is None or record["state"] in ACCEPTED_JOINTS:
+                raise TransitionRefused(f"joint '{key}' wants no decision")
+            if state not in ("confirmed", "retry"):
+                raise TransitionRefused(
+                    f"an operator's decision on a joint is confirmed or retry, not {state!r}"
+                )
+            self.joints[key] = {**record, "state": state}
+            self._commit()
+
     # ----- corrections from the ground -----
     def done_state(self, member_id: str) -> int:
         """The state in which ``member_id`` stands fixed in the tower (see :meth:`is_done`)."""
@@ -385,6 +462,8 @@ class TowerModel:
                 self.states[member_id] = self.done_state(member_id)
             else:
                 self.states[member_id] = NOT_PLACED
+                for key in [k for k in self.joints if k.startswith(f"{member_id}@")]:
+                    del self.joints[key]  # built again, its joints are shot and looked at anew
             if mark == "discarded":
                 self.discarded[self._members[member_id].dispenser] += 1
             self._commit()
@@ -456,7 +535,10 @@ class TowerModel:
 
 
 __all__ = [
+    "ACCEPTED_JOINTS",
     "INSPECTED",
+    "JOINT_FIELDS",
+    "JOINT_STATES",
     "MEMBER_MARKS",
     "NOT_PLACED",
     "PLACED",

@@ -18,6 +18,7 @@ from py_trees.common import Status
 from tlt_common.bt.nodes import Action, Condition
 from tlt_common.mission.schema import Member
 from tlt_common.mission.tower_model import INSPECTED, PLACED, RIVETED, STATE_NAMES, TransitionRefused
+from tlt_crs.behaviours.joints import record_joints
 from tlt_crs.context import CrsContext
 
 
@@ -189,12 +190,14 @@ def record_rivets(ctx: CrsContext, member: Member, step: str) -> None:
 
 def record_added(ctx: CrsContext, member: Member, result: Any, ok: bool) -> None:
     """After AddCrossFrame/AddMember: parts, the add-step rivets, PLACED (and RIVETED when the
-    member has no affix step, e.g. a diagonal)."""
+    member has no affix step, e.g. a diagonal), the joint the ARS verified
+    (:func:`tlt_crs.behaviours.joints.record_joints`)."""
     with ctx.model.lock:
         record_parts(ctx, member, result, ok)
         if not ok:
             return
         record_rivets(ctx, member, "add")
+        record_joints(ctx, member, result)
         if ctx.model.states[member.id] < PLACED:
             _apply(ctx, ctx.model.place, member.id)
         needs_affix = any(r.step == "affix" for r in member.rivets)
@@ -203,11 +206,12 @@ def record_added(ctx: CrsContext, member: Member, result: Any, ok: bool) -> None
 
 
 def record_affixed(ctx: CrsContext, member: Member, result: Any, ok: bool) -> None:
-    """After AffixMember: the affix-step rivets and RIVETED."""
+    """After AffixMember: the affix-step rivets, RIVETED, the joint the ARS verified."""
     if not ok:
         return
     with ctx.model.lock:
         record_rivets(ctx, member, "affix")
+        record_joints(ctx, member, result)
         if ctx.model.states[member.id] < RIVETED:
             _apply(ctx, ctx.model.rivet, member.id)
 
