@@ -8,7 +8,7 @@
 #
 # A lent machine has CUDA torch, SciPy, OpenCV and PyYAML for its own Python (3.12), but no MuJoCo
 # and no EGL loader, and reaches no network. `prepare` downloads Python 3.12 wheels of the pinned
-# MuJoCo (requirements/runtime.txt) and of glfw and PyOpenGL, and the Debian packages of the GL
+# MuJoCo (requirements/twin.txt) and of glfw and PyOpenGL, and the Debian packages of the GL
 # loaders, into .device/ (git ignores it: name it in the device call's carry, [".device"]).
 # `train` unpacks them there (pip --target, dpkg -x), renders COUNT images on the GPU and trains
 # from the shipped weights within the call; its settings are the README's and can be overridden in
@@ -24,7 +24,7 @@ GL_PACKAGES=(libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
 
 prepare() {
     local mujoco
-    mujoco=$(grep -E '^mujoco==' requirements/runtime.txt)
+    mujoco=$(grep -E '^mujoco==' requirements/twin.txt)
     rm -rf "$DEVICE_DIR" && mkdir -p "$DEVICE_DIR/wheels" "$DEVICE_DIR/debs"
     # No dependencies: the device's Python has numpy; mujoco's own pure-Python ones come by name.
     # mujoco 4's native library is a wheel of its own, mujoco-core, of the same version.

@@ -23,7 +23,7 @@ executor keeps a callback's exception to itself.
 
 They replace rclpy's ``_make_handler`` (and the multi-threaded one its ``_spin_once_impl``) and
 read entity attributes rclpy itself uses, as rclpy 7.1 (Jazzy, pinned in
-requirements/runtime.txt) has them; tests/tlt_common/ros/test_direct_executor.py holds them to that.
+requirements/ros.txt) has them; tests/tlt_common/ros/test_direct_executor.py holds them to that.
 """
 
 from __future__ import annotations
