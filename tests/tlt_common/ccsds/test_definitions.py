@@ -61,12 +61,16 @@ def test_limits_classify_values():
     assert link_ok.limits.classify(False) == "red"
 
 
-def test_an_f32_value_sent_exactly_at_its_limit_is_within_it():
-    """0.1 m travels as the f32 0.10000000149: against its red limit 0.1 as written it would be
-    red; an f32 field's limits are the nearest f32 values, so it is only yellow (above 0.09)."""
+def test_an_f32_value_sent_exactly_at_its_limit_is_within_it(raw_doc):
+    """0.1 m travels as the f32 0.10000000149: against a red limit 0.1 as written it would be red;
+    an f32 field's limits are the nearest f32 values, so it is only yellow (above 0.09)."""
     from tlt_common.ccsds.codec import encode_telemetry, parse_datagram
 
-    defs = load_definitions()
+    def tight(doc):
+        width = next(f for f in doc["telemetry"]["hk_ee"]["fields"] if f["name"] == "width")
+        width["limits"] = {"yellow": [0.0, 0.09], "red": [-0.002, 0.1]}
+
+    defs = parse_definitions(_broken(raw_doc, tight), "defs.yaml")
     values = {
         "ars": "ars_x", "grasp_left": 0.0, "grasp_right": 0.0, "width": 0.1, "max_load": 0.7,
         "calibrated": True, "part_grasped": False, "rivet_guns": 0, "fault": False,
@@ -77,6 +81,17 @@ def test_an_f32_value_sent_exactly_at_its_limit_is_within_it():
         packet.fields["width"] != 0.1 and fields["width"].limits.classify(packet.fields["width"]) == "yellow"
     )
     assert fields["width"].limits.classify(0.1001) == "red"
+
+
+def test_the_shipped_limits_leave_the_hardwares_travel_in_the_green():
+    """An end effector's width slide runs 0-0.35 m and the lifter 0-1.2 m (config/hardware): a
+    nominal build, which opens the width to 0.25 m for a diagonal and raises the Active Grippers
+    past a metre, raises no limit event."""
+    defs = load_definitions()
+    width = next(f for f in defs.packet("hk_ee").fields if f.name == "width")
+    height = next(f for f in defs.packet("hk_grippers").fields if f.name == "active_height")
+    assert width.limits.classify(0.25) is None and width.limits.classify(0.1) is None
+    assert height.limits.classify(1.05) is None and height.limits.classify(1.25) == "red"
 
 
 def _broken(raw_doc, change):
