@@ -523,3 +523,23 @@ def test_a_fittings_angle_the_fit_cannot_turn_finer_than_is_a_doubt(deg, verdict
     rep = inspect_strut("s", "vertical", LENGTH, obs, PARTS, TOL)
     got = "pass" if rep.passed else "cannot judge" if rep.cannot_judge else "fail"
     assert got == verdict, rep.reasons
+
+
+@pytest.mark.parametrize(
+    ("precision", "shift", "outcome"),
+    [(0.001, None, "pass"), (0.002, None, "refused"), (0.001, "bay1/x1_y1", "fail")],
+)
+def test_the_bays_corner_joints_the_depth_places_to_its_tolerance_are_judged(precision, shift, outcome):
+    """A metre below the lifter's ZEDs the bay's corner joints are not certified to 2 % of their
+    size; placed to 1 mm they are judged against the 5 mm tolerance (a sheared bay still fails), at
+    2 mm they are not seen well enough to judge."""
+    expected = bay_joints(MISSION, 1)
+    obs = [_depth_limited(o, precision) for o in _bay(np.random.default_rng(4), shift=shift)]
+    rep = inspect_bay(1, expected, obs, TOL, gate=0.1, min_joints=4)
+    if outcome == "pass":
+        assert rep.passed, rep.reasons
+    elif outcome == "refused":
+        assert not rep.passed and rep.reasons[0].startswith("only 0 of 8 corner joints seen"), rep.reasons
+    else:
+        assert not rep.passed and not rep.cannot_judge
+        assert any("off by" in r for r in rep.reasons), rep.reasons

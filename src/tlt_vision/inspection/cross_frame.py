@@ -11,27 +11,12 @@ from tlt_vision.inspection.report import (
     InspectionReport,
     Observation,
     Tolerances,
+    judged_by_depth,
+    noise_band,
     split_certified,
     uncertified,
 )
 from tlt_vision.inspection.rigid import rigid_residuals
-from tlt_vision.pose.estimator import PoseEstimate
-
-# A corner joint the depth placed to ``JUDGE_SIGMAS`` of its precision within the position
-# tolerance can be judged against that tolerance, though not certified to 2 % of its size.
-JUDGE_SIGMAS = 3.0
-
-
-def _precision(estimate: PoseEstimate) -> float:
-    """The fit's predicted error (m, 1 sigma) of a pose on noisy depth; 0 on exact depth."""
-    return estimate.certificate.precision
-
-
-def _judged_by_depth(o: Observation, tolerance: float) -> bool:
-    """Whether ``o`` is a corner joint refused only for the depth's noise, placed precisely enough
-    to judge against ``tolerance`` (m)."""
-    c = o.estimate.certificate if o.estimate is not None else None
-    return c is not None and c.depth_limited and 0.0 < JUDGE_SIGMAS * c.precision <= tolerance
 
 
 def inspect_cross_frame(
@@ -50,7 +35,7 @@ def inspect_cross_frame(
     image), so it is not the reference for the corners' positions.
 
     On a noisy depth camera a corner joint refused only because the depth cannot place it to 2 %
-    of its size (1.7 mm) is still judged where it is placed to ``JUDGE_SIGMAS`` of its precision
+    of its size (1.7 mm) is still judged where it is placed to three times its precision
     within the position tolerance (5 mm): a lifter ZED places a frame's far corner joints, 0.8-1
     m away, to 1-1.5 mm. Such a corner over the tolerance by less than the noise allows is a doubt
     ("cannot judge"), not a verdict.
@@ -73,7 +58,7 @@ def inspect_cross_frame(
     joints, joint_bad = split_certified(observations, "corner_joint")
     refused = uncertified(observations, "corner_joint")
     why_refused = {id(o): r for o, r in zip(refused, joint_bad, strict=True)}
-    by_depth = {id(o) for o in refused if _judged_by_depth(o, tol.position)}
+    by_depth = {id(o) for o in refused if judged_by_depth(o, tol.position)}
     joints += [o.estimate for o in refused if id(o) in by_depth and o.estimate is not None]
     others = [o for o in refused if id(o) not in by_depth]
     seen = [o for o in others if o.estimate is not None]
@@ -104,7 +89,7 @@ def inspect_cross_frame(
             square[corners], np.array([np.asarray(joints[found[i]].translation) for i in corners])
         )
         for i, r in zip(corners, residuals, strict=True):
-            noise = JUDGE_SIGMAS * _precision(joints[found[i]])
+            noise = noise_band(joints[found[i]])
             if r > tol.position + noise:
                 reasons.append(f"corner joint at corner {i} off by {r * 1000:.1f} mm")
             elif r > tol.position:

@@ -50,6 +50,25 @@ class InspectionReport:
     cannot_judge: bool = False
 
 
+# A pose the depth's noise alone kept from being certified (placed, but not to 2 % of the part's
+# size) still serves a check of a position tolerance that ``JUDGE_SIGMAS`` of its precision fit
+# within; a position over the tolerance by less than that band is a doubt, not a verdict.
+JUDGE_SIGMAS = 3.0
+
+
+def noise_band(e: PoseEstimate) -> float:
+    """How far (m) the depth's noise may have moved ``e``: ``JUDGE_SIGMAS`` times the fit's
+    predicted precision; 0 on exact depth."""
+    return JUDGE_SIGMAS * e.certificate.precision
+
+
+def judged_by_depth(o: Observation, tolerance: float) -> bool:
+    """Whether ``o`` was refused only for the depth's noise and is placed precisely enough to be
+    judged against a position ``tolerance`` (m)."""
+    e = o.estimate
+    return e is not None and e.certificate.depth_limited and 0.0 < noise_band(e) <= tolerance
+
+
 def split_certified(observations: Sequence[Observation], cls: str) -> tuple[list[PoseEstimate], list[str]]:
     """Certified estimates of a class, and the reasons its other instances were not trusted."""
     good, bad = [], []
