@@ -311,7 +311,8 @@ def test_replayed_commands_over_a_real_link_leave_the_summary_right(tmp_path):
     import socket
     import time
 
-    from tlt_common.ccsds.reasons import AckStage
+    from tlt_common.ccsds.codec import Packet
+    from tlt_common.ccsds.reasons import AckStage, Reason
     from tlt_crs.ground_link import GroundLink
     from tlt_gsw.link import GswLink
 
@@ -329,11 +330,15 @@ def test_replayed_commands_over_a_real_link_leave_the_summary_right(tmp_path):
                 assert ack is not None and ack.stage is AckStage.COMPLETED
             for command in sent:  # the captured Starts, replayed by someone else
                 attacker.sendto(command.raw, crs.address)
-            deadline = time.monotonic() + 5.0
-            while crs.stats.by_reason["replay"] < 10 and time.monotonic() < deadline:
-                gsw.poll(0.05)
-            gsw.poll(0.2)
-            assert crs.stats.by_reason["replay"] == 10
+            # Every rejection the CRS sends must be archived before the summary is read.
+            rejections = 0
+            deadline = time.monotonic() + 10.0
+            while rejections < 10 and time.monotonic() < deadline:
+                rejections += sum(
+                    isinstance(r, Packet) and r.kind == "ack" and r.fields["reason"] == Reason.REPLAY.label
+                    for r in gsw.poll(0.05)
+                )
+            assert crs.stats.by_reason["replay"] == 10 and rejections == 10
             assert all(command.final.stage is AckStage.COMPLETED for command in sent)
             assert all(len(command.acks) == 2 for command in sent)  # the rejections are not theirs
     finally:
