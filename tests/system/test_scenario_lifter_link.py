@@ -2,7 +2,7 @@
 the build resumes when the link returns.
 
 The whole system runs on the twin (config/launch/system_twin.yaml, tests/system/system_run.py)
-with a twin scenario in which the lifter firmware answers nothing from 40 s to 50 s of sim time,
+with a twin scenario in which the lifter firmware answers nothing from 28 s to 38 s of sim time,
 while ARS X works on the build's first request (the cross frame). The lifter driver reports its
 link down; the CRS raises a fault naming it (CRS_FAULT, run state fault) and holds the build as a
 Pause would: ARS X is paused and its arm stands still, its goal is not canceled. When the firmware
@@ -33,11 +33,12 @@ SystemRun = system_run.SystemRun
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
 
-# At the ARS files' arm speed (arm.velocity_scale 0.5) ARS X's AddCrossFrame runs from about 13 s
-# to 58 s of sim time here, the cross frame inspected at about 33 s: the drop comes while ARS X
-# places it. At full arm speed the placement can end before 40 s (CI saw it placed at 39.9 s), so
-# this scenario keeps the files' speed; it costs nothing, the test ends soon after the link is back.
-DROP_AT_S, DROP_FOR_S = 40.0, 10.0
+# At the ARS files' arm speed (arm.velocity_scale 0.5), with motions timed along their whole paths
+# (docs/motion-planning.md), ARS X's cross frame is inspected at about 21 s of sim time here,
+# aligned at 33-35 s and placed at about 37 s: the drop comes while ARS X carries it to its place.
+# At full arm speed the placement ends sooner, so this scenario keeps the files' speed; it costs
+# nothing, the test ends soon after the link is back.
+DROP_AT_S, DROP_FOR_S = 28.0, 10.0
 FILES_ARM_SPEED = {"TLT_ARM_VELOCITY_SCALE": ""}
 SCENARIO = {
     "name": "lifter_link_drop",
