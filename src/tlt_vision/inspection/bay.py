@@ -12,8 +12,8 @@ from tlt_vision.inspection.report import (
     InspectionReport,
     Observation,
     Tolerances,
+    joint_position_verdicts,
     judged_by_depth,
-    noise_band,
     split_certified,
 )
 from tlt_vision.inspection.rigid import rigid_residuals
@@ -80,15 +80,9 @@ def inspect_bay(
         np.array([expected[n] for n in order], dtype=float),
         np.array([np.asarray(matched[n].translation, dtype=float) for n in order]),
     )
-    reasons, unsure = [], []
-    for n, r in zip(order, residuals, strict=True):
-        if r > tol.position + noise_band(matched[n]):
-            reasons.append(f"corner joint {n} off by {r * 1000:.1f} mm")
-        elif r > tol.position:
-            unsure.append(
-                f"cannot judge the corner joint {n}: off by {r * 1000:.1f} mm, within what the "
-                f"depth's noise allows over the {tol.position * 1000:.0f} mm tolerance"
-            )
+    reasons, unsure = joint_position_verdicts(
+        [(n, r, matched[n]) for n, r in zip(order, residuals, strict=True)], tol.position
+    )
     if unsure and not reasons:
         return InspectionReport(target, "bay", False, tuple(unsure), used, cannot_judge=True)
     reasons += unsure

@@ -11,8 +11,8 @@ from tlt_vision.inspection.report import (
     InspectionReport,
     Observation,
     Tolerances,
+    joint_position_verdicts,
     judged_by_depth,
-    noise_band,
     split_certified,
     uncertified,
 )
@@ -88,15 +88,12 @@ def inspect_cross_frame(
         residuals = rigid_residuals(
             square[corners], np.array([np.asarray(joints[found[i]].translation) for i in corners])
         )
-        for i, r in zip(corners, residuals, strict=True):
-            noise = noise_band(joints[found[i]])
-            if r > tol.position + noise:
-                reasons.append(f"corner joint at corner {i} off by {r * 1000:.1f} mm")
-            elif r > tol.position:
-                unsure.append(
-                    f"cannot judge the corner joint at corner {i}: off by {r * 1000:.1f} mm, within "
-                    f"what the depth's noise allows over the {tol.position * 1000:.0f} mm tolerance"
-                )
+        wrong, doubts = joint_position_verdicts(
+            [(f"at corner {i}", r, joints[found[i]]) for i, r in zip(corners, residuals, strict=True)],
+            tol.position,
+        )
+        reasons += wrong
+        unsure += doubts
     if unsure and not reasons:
         return InspectionReport(target_id, "cross_frame", False, tuple(unsure), used, cannot_judge=True)
     reasons += unsure

@@ -69,6 +69,23 @@ def judged_by_depth(o: Observation, tolerance: float) -> bool:
     return e is not None and e.certificate.depth_limited and 0.0 < noise_band(e) <= tolerance
 
 
+def joint_position_verdicts(
+    joints: Sequence[tuple[str, float, PoseEstimate]], tolerance: float
+) -> tuple[list[str], list[str]]:
+    """For each corner joint ``(name, residual, pose)``: a reason when its residual (m) is over
+    ``tolerance`` by more than its :func:`noise_band`, a doubt when over it within the band."""
+    reasons, unsure = [], []
+    for name, r, e in joints:
+        if r > tolerance + noise_band(e):
+            reasons.append(f"corner joint {name} off by {r * 1000:.1f} mm")
+        elif r > tolerance:
+            unsure.append(
+                f"cannot judge the corner joint {name}: off by {r * 1000:.1f} mm, within what the "
+                f"depth's noise allows over the {tolerance * 1000:.0f} mm tolerance"
+            )
+    return reasons, unsure
+
+
 def split_certified(observations: Sequence[Observation], cls: str) -> tuple[list[PoseEstimate], list[str]]:
     """Certified estimates of a class, and the reasons its other instances were not trusted."""
     good, bad = [], []
