@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
 
     from tlt_common.ros.rosout_logging import init_rclpy
-    from tlt_common.ros.spin_loop import spin
+    from tlt_common.ros.spin_loop import spin_node
     from tlt_common.ros.stop_signals import stop_on_signals
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -193,14 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         f"WebSocket); layout {LAYOUT}",
         flush=True,
     )
-    executor = rclpy.executors.SingleThreadedExecutor()
-    executor.add_node(bridge)
-    try:
-        spin(executor, bridge.context, lambda: bool(stop))
-    finally:
-        executor.shutdown()
-        bridge.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(bridge, lambda: bool(stop))
     return 0
 
 

@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
 
     from tlt_common.ros.rosout_logging import init_rclpy
-    from tlt_common.ros.spin_loop import spin
+    from tlt_common.ros.spin_loop import spin_node
     from tlt_common.ros.stop_signals import stop_on_signals
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -184,14 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = stop_on_signals()
     init_rclpy(["robot_state", *argv], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = RobotStatePublisher(urdf, tuple(args.topics))
-    executor = rclpy.executors.SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        spin(executor, node.context, lambda: bool(stop))
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(node, lambda: bool(stop))
     return 0
 
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+import rclpy.executors
 from rclpy._rclpy_pybind11 import InvalidHandle, RCLError
 
 
@@ -24,4 +25,17 @@ def spin(executor: Any, context: Any = None, stop: Callable[[], bool] | None = N
             continue
 
 
-__all__ = ["spin"]
+def spin_node(node: Any, stop: Callable[[], bool]) -> None:
+    """Spin ``node`` alone on a single-threaded executor until ``stop()`` or its context ends,
+    then destroy it and shut rclpy down: the whole life of a one-node process."""
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        spin(executor, node.context, stop)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+__all__ = ["spin", "spin_node"]
